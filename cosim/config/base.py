@@ -1,0 +1,41 @@
+"""Base record type for scenario configuration.
+
+Every scenario section is a frozen, typed pydantic model that mirrors the YAML one to one. Unknown keys are
+errors, values are never coerced from strings ("2" is not a float), and derived values are properties, not
+stored defaults.
+"""
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+__all__ = ["Model", "Vec3", "Mount", "Entity", "PosFloat", "NonNegFloat", "Fraction", "Angle"]
+
+
+class Model(BaseModel):
+    """Frozen, strict record: unknown keys are rejected, no silent type coercion."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, validate_default=True)
+
+
+PosFloat = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+NonNegFloat = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
+Fraction = Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)]
+Angle = Annotated[float, Field(ge=-360.0, le=360.0, allow_inf_nan=False)]
+Vec3 = tuple[float, float, float]
+
+Entity = Literal["world", "combine", "tractor", "cart"]
+
+
+class Mount(Model):
+    """Pose of a rigid attachment (sensor, camera) relative to an entity's body frame.
+
+    Body frames are x forward, y left, z up with the origin on the ground (DESIGN.md section 3). ``rpy_deg`` is
+    roll, pitch, yaw applied as R = Rz(yaw) Ry(pitch) Rx(roll). With y left, positive pitch tips the forward axis
+    down (nose down) and positive yaw turns it to the left.
+    """
+
+    parent: Entity = "combine"
+    xyz_m: Vec3 = (0.0, 0.0, 0.0)
+    rpy_deg: Vec3 = (0.0, 0.0, 0.0)

@@ -1,0 +1,138 @@
+"""Scenario sections for the machines and the grain: crop, combine, auger, tractor, cart, Machine Sync.
+
+Owned by dynamics_proc (issue 3). Fields used by other packages (cart geometry, auger geometry, entity
+dimensions, mesh files) keep their names; others may be added. Defaults describe the paper's machines
+(DESIGN.md section 5): S660-class combine, 8345R-class tractor, Brandt 1020XR-class cart, corn.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field
+
+from .base import Model, NonNegFloat, PosFloat
+
+__all__ = ["Crop", "Combine", "Auger", "Tractor", "Cart", "MachineSync", "CROP_PRESETS"]
+
+#: crop name -> (bulk density kg/m^3, angle of repose deg)
+CROP_PRESETS: dict[str, tuple[float, float]] = {
+    "corn": (720.0, 23.0),
+    "soybeans": (772.0, 25.0),
+    "wheat": (772.0, 25.0),
+}
+
+
+class Crop(Model):
+    """Grain being offloaded. Density and repose default to the named crop's preset."""
+
+    name: Literal["corn", "soybeans", "wheat"] = "corn"
+    density_kgpm3: PosFloat | None = None
+    repose_deg: float | None = Field(default=None, gt=0.0, lt=60.0)
+
+    @property
+    def density(self) -> float:
+        """Bulk density, kg/m^3."""
+        return self.density_kgpm3 if self.density_kgpm3 is not None else CROP_PRESETS[self.name][0]
+
+    @property
+    def repose_rad(self) -> float:
+        """Angle of repose, rad."""
+        deg = self.repose_deg if self.repose_deg is not None else CROP_PRESETS[self.name][1]
+        return math.radians(deg)
+
+
+class Combine(Model):
+    """Combine harvester: path, speed and the box dimensions used to draw it."""
+
+    speed_mps: NonNegFloat = 2.0
+    path: Literal["straight", "arc"] = "straight"
+    path_radius_m: PosFloat = 400.0
+    start_xy_m: tuple[float, float] = (0.0, 0.0)
+    heading_deg: float = 0.0
+    length_m: PosFloat = 8.5
+    width_m: PosFloat = 3.5
+    height_m: PosFloat = 3.9
+    header_width_m: PosFloat = 7.6
+    mesh_file: Path | None = None
+
+
+class Auger(Model):
+    """Unloading auger on the combine's left side. Geometry in the combine body frame."""
+
+    pivot_xyz_m: tuple[float, float, float] = (-2.0, 1.5, 3.8)
+    length_m: PosFloat = 6.0
+    swing_deg: float = 90.0
+    elevation_deg: float = 8.0
+    tube_radius_m: PosFloat = 0.2
+    flow_m3ps: NonNegFloat = 0.125
+    spool_up_s: NonNegFloat = 1.0
+    run_out_s: NonNegFloat = 1.0
+    exit_speed_mps: NonNegFloat = 3.0
+    exit_down_deg: float = 60.0
+    stream_radius_m: PosFloat = 0.15
+
+
+class Tractor(Model):
+    """Tractor towing the cart: kinematic bicycle with drivetrain and steering lags and limits."""
+
+    wheelbase_m: PosFloat = 3.0
+    hitch_offset_m: PosFloat = 1.5
+    drivetrain_tau_s: PosFloat = 0.5
+    accel_max_mps2: PosFloat = 1.0
+    brake_max_mps2: PosFloat = 3.0
+    steer_tau_s: PosFloat = 0.2
+    steer_max_deg: PosFloat = 35.0
+    steer_rate_max_degps: PosFloat = 30.0
+    length_m: PosFloat = 6.0
+    width_m: PosFloat = 2.6
+    height_m: PosFloat = 3.3
+    mesh_file: Path | None = None
+
+
+class Cart(Model):
+    """Grain cart: open-top box on a single axle, towed by a tongue from the tractor hitch.
+
+    Cart body frame: origin on the ground under the centre of the interior footprint, x forward (towing
+    direction), y left, z up. Interior box: |x| <= L/2, |y| <= W/2, floor_height <= z <= floor_height + D.
+    The cart grid frame (height map, sections) is derived in ``cosim.geometry``.
+    """
+
+    interior_length_m: PosFloat = 6.0
+    interior_width_m: PosFloat = 3.0
+    interior_depth_m: PosFloat = 2.0
+    floor_height_m: PosFloat = 1.0
+    wall_thickness_m: PosFloat = 0.08
+    rim_width_m: PosFloat = 0.12
+    rim_height_m: PosFloat = 0.06
+    tongue_length_m: PosFloat = 5.0
+    mesh_file: Path | None = None
+
+    @property
+    def rim_top_m(self) -> float:
+        """Height of the rim top above the ground, m."""
+        return self.floor_height_m + self.interior_depth_m + self.rim_height_m
+
+    @property
+    def volume_m3(self) -> float:
+        """Interior volume to the wall top, m^3."""
+        return self.interior_length_m * self.interior_width_m * self.interior_depth_m
+
+
+class MachineSync(Model):
+    """Machine Sync: the combine holds the cart at an offset; the offloading controller nudges the setpoint.
+
+    Offsets are of the spout-over-cart geometry: ``lateral_offset_m`` is the lateral distance between the
+    combine and cart body origins (cart to the combine's left); ``longitudinal_offset_m`` is the cart body
+    origin's distance ahead (+) or behind (-) the combine body origin at the start.
+    """
+
+    longitudinal_offset_m: float = -2.0
+    lateral_offset_m: float = 7.4
+    kp_long: PosFloat = 0.8
+    kp_lat: PosFloat = 0.6
+    nudge_m: PosFloat = 0.3
+    nudge_min_interval_s: NonNegFloat = 1.0
+    initial_long_error_m: float = 0.0
+    initial_lat_error_m: float = 0.0

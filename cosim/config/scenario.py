@@ -1,0 +1,117 @@
+"""The top-level scenario record: timing, mode, and every section. Owned by cosim (issue 2)."""
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from .base import Model, NonNegFloat, PosFloat
+from .control import Controller, Grain, Integrator
+from .machines import Auger, Cart, Combine, Crop, MachineSync, Tractor
+from .rendering import Render
+from .sensing import Perception, Sensor
+
+__all__ = ["Timing", "Outputs", "Scenario", "FORMAT_VERSION", "RATIO_TOLERANCE"]
+
+FORMAT_VERSION = 1
+#: relative tolerance when checking that a rate ratio is an integer
+RATIO_TOLERANCE = 1e-9
+
+
+def _integer_ratio(num: float, den: float) -> int | None:
+    """num / den as an int when it is one to RATIO_TOLERANCE, else None."""
+    r = num / den
+    n = round(r)
+    return n if n >= 1 and abs(r - n) <= RATIO_TOLERANCE * max(1.0, r) else None
+
+
+class Timing(Model):
+    """Co-simulation clock: one sensor frame per ring turn, an integer number of dynamics steps in it."""
+
+    sensor_period_s: PosFloat = 0.1
+    dynamics_dt_s: PosFloat = 0.01
+    latency_frames: int = Field(default=1, ge=0, le=100)
+    handoff_timeout_s: PosFloat = 30.0
+    startup_timeout_s: PosFloat = 120.0
+
+    @model_validator(mode="after")
+    def _ratio(self) -> "Timing":
+        if _integer_ratio(self.sensor_period_s, self.dynamics_dt_s) is None:
+            raise ValueError(
+                f"sensor_period_s / dynamics_dt_s = {self.sensor_period_s / self.dynamics_dt_s:g} is not an "
+                "integer >= 1; choose a dynamics step that divides the sensor period"
+            )
+        return self
+
+    @property
+    def steps_per_frame(self) -> int:
+        """Dynamics steps per sensor frame (validated integer)."""
+        n = _integer_ratio(self.sensor_period_s, self.dynamics_dt_s)
+        assert n is not None
+        return n
+
+
+class Outputs(Model):
+    """What a run writes beside summary.json and timeseries.csv."""
+
+    figures: bool = True
+    report: bool = False
+
+
+class Scenario(Model):
+    """A whole scenario, as loaded from YAML and validated before anything starts."""
+
+    format_version: Literal[1]
+    name: str = Field(default="scenario", pattern=r"^[A-Za-z0-9_.-]{1,64}$")
+    description: str = ""
+    seed: int = Field(default=0, ge=0, le=2**63 - 1)
+    duration_s: PosFloat = 60.0
+    feedback: Literal["ground_truth", "perception"] = "perception"
+    renderer: Literal["gl", "mock", "none"] = "gl"
+    viewer: bool = False
+    timing: Timing = Timing()
+    crop: Crop = Crop()
+    combine: Combine = Combine()
+    auger: Auger = Auger()
+    tractor: Tractor = Tractor()
+    cart: Cart = Cart()
+    machine_sync: MachineSync = MachineSync()
+    grain: Grain = Grain()
+    controller: Controller = Controller()
+    integrator: Integrator = Integrator()
+    sensor: Sensor = Sensor()
+    render: Render = Render()
+    perception: Perception = Perception()
+    outputs: Outputs = Outputs()
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "Scenario":
+        if self.feedback == "perception" and self.renderer == "none":
+            raise ValueError("feedback 'perception' needs a renderer ('gl' or 'mock'), not 'none'")
+        return self
+
+    @property
+    def frames(self) -> int:
+        """Sensor frames in the run (ring turns after the initial frame 0)."""
+        return max(1, math.ceil(self.duration_s / self.timing.sensor_period_s - RATIO_TOLERANCE))
+
+    @property
+    def needs_renderer(self) -> bool:
+        """Whether the renderer takes part: perception feedback or a viewer needs images."""
+        return self.renderer != "none" and (self.feedback == "perception" or self.viewer)
+
+    @property
+    def needs_perception(self) -> bool:
+        """Whether perception takes part: perception feedback, or a viewer that shows its outputs."""
+        return self.needs_renderer
+
+    @property
+    def participants(self) -> tuple[str, ...]:
+        """Ring order of the participants this scenario needs (dynamics always first)."""
+        ring = ["dynamics"]
+        if self.needs_renderer:
+            ring.append("renderer")
+        if self.needs_perception:
+            ring.append("perception")
+        return tuple(ring)

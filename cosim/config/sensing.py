@@ -1,0 +1,110 @@
+"""Scenario sections for the LiDAR, the depth codec and the perception algorithms.
+
+Owned by perception_proc (issue 5); ``Codec`` is shared with renderer_proc (the shader encodes, perception
+decodes) and ``Sensor.mount`` / ``Sensor.pattern`` with the renderer's rig planner.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from .base import Fraction, Model, Mount, NonNegFloat, PosFloat
+
+__all__ = ["Codec", "Pattern", "Noise", "Sensor", "Perception"]
+
+
+class Codec(Model):
+    """Depth-in-colour codec of the paper's Eqs 1-3 (d in cm). DESIGN.md section 4.
+
+    ``gamma_mode``: ``linear`` stores linear bytes (the shader writes x^gamma and the inverse gamma is undone
+    before 8-bit storage, as in Unreal); ``mishandled`` quantises in the gamma domain, for the error study.
+    """
+
+    alpha_cm: PosFloat = 5000.0
+    beta_cm: PosFloat = 100.0
+    gamma: PosFloat = 2.2
+    gamma_mode: Literal["linear", "mishandled"] = "linear"
+
+    @model_validator(mode="after")
+    def _ratio(self) -> "Codec":
+        if self.alpha_cm <= self.beta_cm:
+            raise ValueError(f"alpha_cm ({self.alpha_cm}) must be larger than beta_cm ({self.beta_cm})")
+        if self.alpha_cm / self.beta_cm > 255.0:
+            raise ValueError(
+                f"alpha_cm / beta_cm = {self.alpha_cm / self.beta_cm:g} exceeds 255: the period count in R "
+                "can no longer be recovered (DESIGN.md section 4); raise beta_cm or lower alpha_cm"
+            )
+        return self
+
+    @property
+    def max_depth_m(self) -> float:
+        """Largest encodable planar depth, m (pixels at or beyond it are invalid)."""
+        return self.alpha_cm / 100.0
+
+    @property
+    def bound_m(self) -> float:
+        """Worst-case quantisation error beta/510, m."""
+        return self.beta_cm / 510.0 / 100.0
+
+
+class Pattern(Model):
+    """Beam pattern: a preset grid, a Honeycomb-like unit, or a CSV table (elevation_deg, azimuth_deg per row).
+
+    Angles are in the LiDAR frame (aligned with the camera frame: X right, Y up, Z forward). Azimuth is measured
+    from the forward axis towards the left (positive yaw) ... see perception_proc.patterns for the exact
+    convention and the conversion to the paper's (theta, phi).
+    """
+
+    preset: Literal["grid", "honeycomb", "csv"] = "honeycomb"
+    csv_file: Path | None = None
+    azimuth_min_deg: float = Field(default=-45.0, ge=-180.0, le=180.0)
+    azimuth_max_deg: float = Field(default=45.0, ge=-180.0, le=180.0)
+    elevation_min_deg: float = Field(default=-47.5, ge=-90.0, le=90.0)
+    elevation_max_deg: float = Field(default=47.5, ge=-90.0, le=90.0)
+    azimuth_count: int = Field(default=240, ge=1, le=100_000)
+    elevation_count: int = Field(default=160, ge=1, le=10_000)
+
+    @model_validator(mode="after")
+    def _ranges(self) -> "Pattern":
+        if self.azimuth_max_deg <= self.azimuth_min_deg:
+            raise ValueError("azimuth_max_deg must be larger than azimuth_min_deg")
+        if self.elevation_max_deg <= self.elevation_min_deg:
+            raise ValueError("elevation_max_deg must be larger than elevation_min_deg")
+        if self.preset == "csv" and self.csv_file is None:
+            raise ValueError("preset 'csv' needs csv_file")
+        return self
+
+
+class Noise(Model):
+    """Range noise (Gaussian, m) and independent random dropout per beam, seeded from the scenario seed."""
+
+    range_sigma_m: NonNegFloat = 0.0
+    dropout: Fraction = 0.0
+
+
+class Sensor(Model):
+    """The LiDAR: where it is, what it samples, its range limits and noise, the codec its images use."""
+
+    mount: Mount = Mount(parent="combine", xyz_m=(-2.0, 1.9, 4.6), rpy_deg=(0.0, 35.0, 90.0))
+    pattern: Pattern = Pattern()
+    range_min_m: NonNegFloat = 0.0
+    range_max_m: PosFloat = 40.0
+    noise: Noise = Noise()
+    codec: Codec = Codec()
+    max_angular_error_deg: PosFloat = 0.1
+
+    @model_validator(mode="after")
+    def _limits(self) -> "Sensor":
+        if self.range_max_m <= self.range_min_m:
+            raise ValueError("range_max_m must be larger than range_min_m")
+        return self
+
+
+class Perception(Model):
+    """Offloading perception: cart boundary, height map, impact location."""
+
+    min_points_per_cell: int = Field(default=1, ge=1)
+    rim_ransac_iterations: int = Field(default=200, ge=1)
+    impact_search_radius_m: PosFloat = 0.6
