@@ -1,0 +1,74 @@
+"""The exception hierarchy, split by phase (STYLE.md 9).
+
+* before the run: :class:`ScenarioError` (with every problem found, each ``file:line:col: path: message``);
+* at attach: :class:`shm_schema.SchemaMismatch` (lives in shm_schema, which does not import cosim);
+* during the run: :class:`RunError` and its subclasses, whose messages name the process, the frame and the cause.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = [
+    "CosimError", "Problem", "ScenarioError", "RunError", "HandoffTimeout", "FrameMismatch",
+    "ParticipantCrashed", "ParticipantDied", "RunInterrupted", "RendererUnavailable",
+]
+
+
+class CosimError(Exception):
+    """Base of every error this platform raises on purpose."""
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One scenario problem: where it is and what is wrong. ``line``/``col`` are 1-based, 0 when unknown."""
+
+    file: str
+    line: int
+    col: int
+    path: str
+    message: str
+
+    def __str__(self) -> str:
+        return f"{self.file}:{self.line}:{self.col}: {self.path or '<root>'}: {self.message}"
+
+
+class ScenarioError(CosimError):
+    """The scenario is invalid. ``problems`` lists every problem found, in file order."""
+
+    def __init__(self, problems: list[Problem]):
+        self.problems = list(problems)
+        super().__init__("\n".join(str(p) for p in self.problems) or "invalid scenario")
+
+
+class RunError(CosimError):
+    """A run stopped before its last frame. ``process`` and ``frame`` say where."""
+
+    def __init__(self, message: str, *, process: str = "", frame: int = -1, detail: str = ""):
+        self.process = process
+        self.frame = frame
+        self.detail = detail
+        super().__init__(message)
+
+
+class HandoffTimeout(RunError):
+    """A lockstep hand-off did not arrive in time (a participant hangs or is far too slow)."""
+
+
+class FrameMismatch(RunError):
+    """A hand-off carried another frame id than the receiver expected (out-of-order call)."""
+
+
+class ParticipantCrashed(RunError):
+    """A participant raised; ``detail`` holds its traceback."""
+
+
+class ParticipantDied(RunError):
+    """A participant process ended without reporting (killed by a signal, os._exit, ...)."""
+
+
+class RunInterrupted(RunError):
+    """The run was stopped by SIGINT or SIGTERM."""
+
+
+class RendererUnavailable(CosimError):
+    """No OpenGL context can be made here; the message suggests ``--renderer mock``."""
