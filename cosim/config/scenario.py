@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from .base import Model, NonNegFloat, PosFloat
 from .control import Controller, Grain, Integrator
@@ -85,11 +85,14 @@ class Scenario(Model):
     perception: Perception = Perception()
     outputs: Outputs = Outputs()
 
-    @model_validator(mode="after")
-    def _consistent(self) -> "Scenario":
-        if self.feedback == "perception" and self.renderer == "none":
+    @field_validator("renderer")
+    @classmethod
+    def _renderer_for_feedback(cls, renderer: str, info: ValidationInfo) -> str:
+        # a field validator (not a model validator) so that the problem is reported at the renderer's line, and
+        # also when other sections of the scenario are invalid
+        if renderer == "none" and info.data.get("feedback") == "perception":
             raise ValueError("feedback 'perception' needs a renderer ('gl' or 'mock'), not 'none'")
-        return self
+        return renderer
 
     @property
     def frames(self) -> int:

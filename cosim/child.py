@@ -1,0 +1,111 @@
+"""Entry point of a participant's OS process (spawn context): attach, start, run the ring, report failures.
+
+The child ignores SIGINT (the launcher coordinates a clean stop), turns SIGTERM into SystemExit so that
+``close`` runs, asks the kernel to SIGTERM it if the launcher dies (PR_SET_PDEATHSIG), and appends its logs and
+stray stdout/stderr to the run's log.txt. Any exception is written with its traceback into the process's
+error slot in the segment header before the process exits with status 1.
+"""
+from __future__ import annotations
+
+import ctypes
+import logging
+import os
+import signal
+import sys
+import traceback
+from dataclasses import dataclass
+from typing import Mapping
+
+from shm_schema import Phase, Segment
+
+from .config import Scenario
+from .errors import RunError
+from .lockstep import RingPlan, Token, member_loop
+from .logs import configure_logging
+from .specs import ParticipantSpec
+
+__all__ = ["ChildArgs", "child_main"]
+
+_PR_SET_PDEATHSIG = 1
+
+
+@dataclass(frozen=True)
+class ChildArgs:
+    """Everything a child needs; picklable for the spawn start method."""
+
+    spec: ParticipantSpec
+    scenario_json: str
+    segment: str
+    fingerprint: str
+    plan: RingPlan
+    semaphores: Mapping[str, object]
+    log_path: str
+    parent_pid: int
+    startup_timeout_s: float
+    handoff_timeout_s: float
+
+
+def _die_with_parent() -> None:
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+    except (OSError, AttributeError):
+        pass
+
+
+def _on_sigterm(signum, frame) -> None:
+    raise SystemExit(143)
+
+
+def child_main(args: ChildArgs) -> None:
+    """Run one participant in this process until the last frame, a failure or a stop."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _on_sigterm)
+    _die_with_parent()
+    name = args.spec.name
+    fd = os.open(args.log_path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    os.dup2(fd, 1)
+    os.dup2(fd, 2)
+    os.close(fd)
+    configure_logging(args.log_path, console=False)
+    log = logging.getLogger(f"cosim.{name}")
+    seg = Segment.attach(args.segment, expect=args.fingerprint)
+    slot = seg.slot(name)
+    slot["pid"] = os.getpid()
+    slot["phase"] = Phase.STARTING
+    participant = None
+    code = 0
+
+    def check() -> None:
+        if os.getppid() != args.parent_pid:
+            raise RunError(f"{name}: the launcher (pid {args.parent_pid}) is gone", process=name,
+                           frame=int(slot["frame"]))
+
+    try:
+        scenario = Scenario.model_validate_json(args.scenario_json)
+        participant = args.spec.create(scenario)
+        participant.start(seg)
+        log.info("started (pid %d)", os.getpid())
+        member_loop(name, participant, seg, Token(seg, args.semaphores), args.plan,
+                    startup_timeout_s=args.startup_timeout_s, handoff_timeout_s=args.handoff_timeout_s, check=check)
+        log.info("finished %d frames", args.plan.frames + 1)
+    except BaseException as exc:  # noqa: BLE001 - every failure must reach the launcher with its traceback
+        code = 143 if isinstance(exc, SystemExit) else 1
+        slot["phase"] = Phase.FAILED
+        if not isinstance(exc, SystemExit):
+            seg.report_error(name, int(slot["frame"]), type(exc).__name__, str(exc), traceback.format_exc())
+            log.error("failed at frame %d: %s: %s", int(slot["frame"]), type(exc).__name__, exc)
+    finally:
+        if participant is not None:
+            try:
+                participant.close()
+            except Exception:  # noqa: BLE001
+                log.exception("close failed")
+        if code == 0:
+            slot["phase"] = Phase.CLOSED
+        seg.close()
+        logging.shutdown()
+        sys.stdout.flush()
+        sys.stderr.flush()
+    if code:
+        os._exit(code)

@@ -1,0 +1,474 @@
+"""Scenario loading: YAML with line/col marks -> overrides -> path resolution -> strict validation.
+
+A scenario is validated whole before anything starts (DESIGN.md section 7). Every problem found (YAML syntax,
+duplicate keys, ``--set`` overrides, missing files, every pydantic error) is collected and raised once as a
+:class:`cosim.errors.ScenarioError`, each problem as ``file:line:col: dotted.path: message`` (1-based).
+
+YAML scalars follow the YAML 1.2 core schema: ``1e-8`` is a number, ``on``/``yes`` are strings, only
+``true``/``false`` are booleans, dates stay strings. Values are then validated by ``Scenario.model_validate_json``
+(strict JSON mode: ``"10"`` is not a float, ``1`` is not a bool).
+
+Overrides: ``--set a.b.c=value`` (value parsed as YAML, e.g. ``[1, 2, 3]``) reported as file ``<--set>`` (line =
+position of the override, col = column inside it); ``extra`` (from CLI options such as ``--renderer``) as file
+``<options>``. Relative paths (every field typed ``Path``) are resolved against the scenario file's directory,
+or the working directory for values given on the command line.
+"""
+from __future__ import annotations
+
+import difflib
+import json
+import os
+import re
+import types
+import typing
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+from pydantic import BaseModel, ValidationError
+
+from .config import FORMAT_VERSION, Scenario
+from .errors import Problem, ScenarioError
+
+__all__ = [
+    "SCENARIO_DIR", "SET_FILE", "OPTIONS_FILE", "load_scenario", "load_scenario_text", "packaged_scenarios",
+    "resolve_scenario_arg", "dump_resolved", "path_fields",
+]
+
+#: directory of the scenarios shipped with the package
+SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+#: pseudo file name of problems in ``--set`` overrides
+SET_FILE = "<--set>"
+#: pseudo file name of problems in options passed as ``extra``
+OPTIONS_FILE = "<options>"
+
+_KEY = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_MAX_SHOWN = 60  # characters of an offending input value quoted in a message
+
+_BOOL_12 = re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$")
+_INT_12 = re.compile(r"^(?:[-+]?(?:0|[1-9][0-9]*)|0x[0-9a-fA-F]+|0o[0-7]+)$")
+_FLOAT_12 = re.compile(
+    r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$"
+)
+_REPLACED = {"tag:yaml.org,2002:bool", "tag:yaml.org,2002:int", "tag:yaml.org,2002:float",
+             "tag:yaml.org,2002:timestamp"}
+
+
+class _Loader(yaml.SafeLoader):
+    """SafeLoader with YAML 1.2 core-schema scalars (no yes/no/on/off booleans, no dates, 1e-8 is a float)."""
+
+
+_Loader.yaml_implicit_resolvers = {
+    ch: [r for r in rs if r[0] not in _REPLACED] for ch, rs in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
+_Loader.add_implicit_resolver("tag:yaml.org,2002:bool", _BOOL_12, list("tTfF"))
+_Loader.add_implicit_resolver("tag:yaml.org,2002:int", _INT_12, list("-+0123456789"))
+_Loader.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT_12, list("-+0123456789."))
+
+
+class _Dumper(yaml.SafeDumper):
+    """SafeDumper that also quotes strings a YAML 1.2 reader would take for numbers (so both readers agree)."""
+
+
+_Dumper.add_implicit_resolver("tag:yaml.org,2002:int", _INT_12, list("-+0123456789"))
+_Dumper.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT_12, list("-+0123456789."))
+
+Loc = tuple  # path into the data: str keys and int list indices
+
+
+@dataclass(frozen=True)
+class _Mark:
+    file: str
+    line: int
+    col: int
+
+
+@dataclass
+class _Doc:
+    """Plain data plus the marks of every mapping key and value node, by path."""
+
+    data: object = None
+    keys: dict[Loc, _Mark] = field(default_factory=dict)
+    values: dict[Loc, _Mark] = field(default_factory=dict)
+    problems: list[Problem] = field(default_factory=list)
+
+    def problem(self, mark: _Mark, loc: Loc, message: str) -> None:
+        self.problems.append(Problem(mark.file, mark.line, mark.col, _dotted(loc), message))
+
+
+def _dotted(loc: Loc) -> str:
+    out = ""
+    for part in loc:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out
+
+
+def _show(value: object) -> str:
+    text = repr(value) if isinstance(value, str) else json.dumps(value, default=str)
+    return text if len(text) <= _MAX_SHOWN else text[: _MAX_SHOWN - 3] + "..."
+
+
+# ---------------------------------------------------------------------------------------------------- YAML
+def _parse(text: str, file: str, line0: int = 0, col0: int = 0) -> _Doc:
+    """Compose ``text`` and build plain data with marks. ``line0``/``col0`` shift marks (for ``--set`` values)."""
+    doc = _Doc()
+
+    def mark(m: yaml.Mark) -> _Mark:
+        return _Mark(file, line0 + m.line + 1, col0 + m.column + 1) if line0 == 0 else _Mark(file, line0, col0 + m.column + 1)
+
+    loader = _Loader(text)
+    try:
+        try:
+            node = loader.get_single_node()
+        except yaml.MarkedYAMLError as e:
+            m = e.problem_mark or e.context_mark
+            what = " ".join(s for s in (e.context, e.problem) if s)
+            doc.problems.append(Problem(file, *((mark(m).line, mark(m).col) if m else (0, 0)), "",
+                                        f"YAML syntax error: {what}"))
+            return doc
+        doc.values[()] = doc.keys[()] = mark(node.start_mark) if node else _Mark(file, max(line0, 1), 1)
+        doc.data = _build(node, (), doc, loader, mark, set()) if node is not None else None
+    finally:
+        loader.dispose()
+    return doc
+
+
+def _build(node, loc: Loc, doc: _Doc, loader: _Loader, mark, stack: set[int]):
+    here = mark(node.start_mark)
+    if isinstance(node, yaml.ScalarNode):
+        try:
+            value = loader.construct_object(node, deep=True)
+        except yaml.YAMLError as e:
+            doc.problem(here, loc, f"cannot read value: {getattr(e, 'problem', e)}")
+            return None
+        if value is not None and not isinstance(value, (str, int, float, bool)):
+            doc.problem(here, loc, f"unsupported YAML value of type {type(value).__name__} (tag {node.tag})")
+            return None
+        return value
+    if id(node) in stack:
+        doc.problem(here, loc, "recursive alias")
+        return None
+    stack = stack | {id(node)}
+    if isinstance(node, yaml.SequenceNode):
+        out_list = []
+        for i, item in enumerate(node.value):
+            doc.keys[loc + (i,)] = doc.values[loc + (i,)] = mark(item.start_mark)
+            out_list.append(_build(item, loc + (i,), doc, loader, mark, stack))
+        return out_list
+    out: dict[str, object] = {}
+    first: dict[str, _Mark] = {}
+    for knode, vnode in node.value:
+        kmark = mark(knode.start_mark)
+        if knode.tag == "tag:yaml.org,2002:merge":
+            doc.problem(kmark, loc, "merge keys ('<<') are not supported; write the keys out")
+            continue
+        key = _build(knode, loc, doc, loader, mark, stack) if isinstance(knode, yaml.ScalarNode) else None
+        if not isinstance(key, str):
+            doc.problem(kmark, loc, f"keys must be strings, got {_show(key) if key is not None else knode.tag}")
+            continue
+        if key in first:
+            doc.problem(kmark, loc + (key,), f"duplicate key '{key}' (first defined at line {first[key].line})")
+            continue
+        first[key] = kmark
+        doc.keys[loc + (key,)] = kmark
+        doc.values[loc + (key,)] = mark(vnode.start_mark)
+        out[key] = _build(vnode, loc + (key,), doc, loader, mark, stack)
+    return out
+
+
+# --------------------------------------------------------------------------------------------- model walk
+def _model_of(annotation) -> type[BaseModel] | None:
+    """The record class behind an annotation (``Model``, ``Model | None``), else None."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    if typing.get_origin(annotation) in (typing.Union, types.UnionType):
+        found = [m for m in map(_model_of, typing.get_args(annotation)) if m is not None]
+        return found[0] if len(found) == 1 else None
+    return None
+
+
+def _is_path(annotation) -> bool:
+    if annotation is Path:
+        return True
+    return typing.get_origin(annotation) in (typing.Union, types.UnionType) and Path in typing.get_args(annotation)
+
+
+def path_fields(model: type[BaseModel] = Scenario, prefix: Loc = ()) -> list[Loc]:
+    """Every field typed ``Path`` (or ``Path | None``) under ``model``, as key tuples, e.g. ``('cart', 'mesh_file')``."""
+    out: list[Loc] = []
+    for name, info in model.model_fields.items():
+        sub = _model_of(info.annotation)
+        if sub is not None:
+            out += path_fields(sub, prefix + (name,))
+        elif _is_path(info.annotation):
+            out.append(prefix + (name,))
+    return out
+
+
+def _model_at(loc: Loc) -> type[BaseModel] | None:
+    model: type[BaseModel] | None = Scenario
+    for part in loc:
+        if model is None or part not in model.model_fields:
+            return None
+        model = _model_of(model.model_fields[part].annotation)
+    return model
+
+
+def _unknown_key(key: str, model: type[BaseModel] | None) -> str:
+    message = f"unknown key '{key}'"
+    if model is not None:
+        close = difflib.get_close_matches(key, list(model.model_fields), n=1)
+        message += f" (did you mean '{close[0]}'?)" if close else f"; allowed: {', '.join(model.model_fields)}"
+    return message
+
+
+def _check_override_path(loc: Loc) -> str | None:
+    """Why ``loc`` names no field of the scenario, or None when it does."""
+    for i, part in enumerate(loc):
+        model = _model_at(loc[:i])
+        if model is None:
+            return f"'{_dotted(loc[:i])}' is a value, not a section: it has no key '{part}'"
+        if part not in model.model_fields:
+            where = f" in '{_dotted(loc[:i])}'" if i else ""
+            return _unknown_key(part, model) + where
+    return None
+
+
+# -------------------------------------------------------------------------------------------- overrides
+def _assign(doc: _Doc, loc: Loc, value, vdoc: _Doc, rel: Loc, key_mark: _Mark) -> str | None:
+    """Put ``value`` at ``loc`` (mappings merge key by key); copy its marks from ``vdoc`` at ``rel``."""
+    parent = doc.data
+    for i, part in enumerate(loc[:-1]):
+        if part not in parent:
+            parent[part] = {}
+            doc.keys[loc[: i + 1]] = doc.values[loc[: i + 1]] = key_mark
+        parent = parent[part]
+        if not isinstance(parent, dict):
+            return f"cannot set a key inside '{_dotted(loc[: i + 1])}': it is not a mapping in the scenario"
+    old = parent.get(loc[-1])
+    if isinstance(old, dict) and isinstance(value, dict):
+        for k, v in value.items():
+            err = _assign(doc, loc + (k,), v, vdoc, rel + (k,), vdoc.keys.get(rel + (k,), key_mark))
+            if err:
+                return err
+        return None
+    for marks in (doc.keys, doc.values):
+        for stale in [p for p in marks if p[: len(loc)] == loc]:
+            del marks[stale]
+    parent[loc[-1]] = value
+    doc.keys[loc] = key_mark
+    n = len(rel)
+    for src, dst in ((vdoc.keys, doc.keys), (vdoc.values, doc.values)):
+        dst.update({loc + p[n:]: m for p, m in src.items() if p[:n] == rel and (p != rel or dst is doc.values)})
+    return None
+
+
+def _apply_set(doc: _Doc, text: str, index: int) -> None:
+    head = _Mark(SET_FILE, index, 1)
+    key, sep, raw = text.partition("=")
+    parts = tuple(key.strip().split("."))
+    if not sep or not all(_KEY.match(p) for p in parts):
+        doc.problem(head, (), f"malformed override {text!r}: expected PATH=VALUE, e.g. timing.sensor_period_s=0.05")
+        return
+    reason = _check_override_path(parts)
+    if reason:
+        doc.problem(head, parts, reason)
+        return
+    vdoc = _parse(raw, SET_FILE, index, len(key) + 1)
+    if vdoc.problems:
+        doc.problems += [Problem(p.file, p.line, p.col, _dotted(parts), p.message) for p in vdoc.problems]
+        return
+    err = _assign(doc, parts, vdoc.data, vdoc, (), head)
+    if err:
+        doc.problem(head, parts, err)
+
+
+def _plain(value):
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return str(value) if isinstance(value, os.PathLike) else value
+
+
+def _apply_extra(doc: _Doc, extra: Mapping) -> None:
+    mark = _Mark(OPTIONS_FILE, 0, 0)
+    for key, value in extra.items():
+        if value is None:
+            continue
+        parts = tuple(str(key).split("."))
+        value = _plain(value)
+        reason = _check_override_path(parts)
+        if reason is None and not _jsonable(value):
+            reason = f"option value {value!r} is not a plain YAML value"
+        if reason is None:
+            marks = {loc: mark for loc in _locs(value)}
+            vdoc = _Doc(data=value, keys=marks, values=dict(marks))
+            reason = _assign(doc, parts, value, vdoc, (), mark)
+        if reason:
+            doc.problem(mark, parts, reason)
+
+
+def _locs(value, loc: Loc = ()) -> list[Loc]:
+    """Every path inside ``value`` (``()`` included)."""
+    items = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(value, list) else ()
+    return [loc] + [sub for k, v in items for sub in _locs(v, loc + (k,))]
+
+
+def _jsonable(value) -> bool:
+    if isinstance(value, dict):
+        return all(_jsonable(v) for v in value.values())
+    if isinstance(value, list):
+        return all(_jsonable(v) for v in value)
+    return value is None or isinstance(value, (str, int, float, bool))
+
+
+# ------------------------------------------------------------------------------------------------ paths
+def _resolve_paths(doc: _Doc, base_dir: Path) -> None:
+    for loc in path_fields():
+        parent = doc.data
+        for part in loc[:-1]:
+            parent = parent.get(part) if isinstance(parent, dict) else None
+        if not isinstance(parent, dict) or not isinstance(parent.get(loc[-1]), str):
+            continue
+        mark = doc.values.get(loc, doc.values[()])
+        base = Path.cwd() if mark.file in (SET_FILE, OPTIONS_FILE) else base_dir
+        path = (base / Path(parent[loc[-1]]).expanduser()).resolve()
+        parent[loc[-1]] = str(path)
+        if not path.is_file():
+            what = "is not a file" if path.exists() else "does not exist"
+            doc.problem(mark, loc, f"file {str(path)!r} {what} (relative paths are resolved against {str(base)!r})")
+
+
+# ------------------------------------------------------------------------------------------- validation
+def _existing(data, loc: Loc) -> Loc:
+    """The longest prefix of ``loc`` that names a node present in ``data``."""
+    node, found = data, ()
+    for part in loc:
+        if isinstance(node, dict) and isinstance(part, str) and part in node:
+            node = node[part]
+        elif isinstance(node, list) and isinstance(part, int) and 0 <= part < len(node):
+            node = node[part]
+        else:
+            break
+        found += (part,)
+    return found
+
+
+def _at(data, loc: Loc):
+    for part in loc:
+        data = data[part]
+    return data
+
+
+def _error_problem(err: dict, doc: _Doc) -> Problem:
+    kind, msg = err["type"], err["msg"]
+    loc = tuple(p for p in err["loc"] if isinstance(p, int) or _KEY.match(p))
+    found = _existing(doc.data, loc)
+    node = _at(doc.data, found)
+    root = doc.values[()]
+    if kind == "extra_forbidden":
+        mark, msg = doc.keys.get(found, root), _unknown_key(str(loc[-1]), _model_at(loc[:-1]))
+    elif kind == "missing":
+        mark = doc.keys.get(found, root) if isinstance(node, dict) else doc.values.get(found, root)
+        msg = f"missing required key '{loc[-1]}'" if isinstance(loc[-1], str) else f"{msg} (too few items)"
+        if loc == ("format_version",):
+            msg += f"; this version of graincosim reads format_version: {FORMAT_VERSION}"
+    elif msg.startswith(("Value error, ", "Assertion failed, ")):
+        mark, msg = doc.keys.get(found, root), msg.split(", ", 1)[1]
+    else:
+        mark = doc.values.get(found, root)
+        msg = msg.replace("an object", "a mapping").replace("a valid dictionary", "a mapping")
+        if loc == ("format_version",):
+            msg = f"unsupported format_version {_show(err.get('input'))}; this version reads format_version: " \
+                  f"{FORMAT_VERSION}"
+        elif "input" in err and not isinstance(err["input"], dict):
+            msg += f", got {_show(err['input'])}"
+    return Problem(mark.file, mark.line, mark.col, _dotted(loc), msg)
+
+
+def _finish(doc: _Doc, filename: str) -> None:
+    """Raise the collected problems, deduplicated, in file order (the file, then ``--set``, then options)."""
+    if not doc.problems:
+        return
+    rank = {filename: 0, SET_FILE: 1, OPTIONS_FILE: 2}
+    unique = sorted(set(doc.problems), key=lambda p: (rank.get(p.file, 3), p.file, p.line, p.col, p.path))
+    raise ScenarioError(unique)
+
+
+def load_scenario_text(
+    text: str,
+    filename: str = "<string>",
+    overrides: Sequence[str] = (),
+    *,
+    extra: Mapping | None = None,
+    base_dir: str | os.PathLike | None = None,
+) -> Scenario:
+    """Parse, override, resolve and validate scenario ``text``; raise ScenarioError with every problem.
+
+    ``base_dir``: directory that relative paths are resolved against (default: the directory of ``filename`` if
+    it names a file, else the working directory).
+    """
+    if isinstance(overrides, str):
+        raise TypeError("overrides must be a sequence of 'PATH=VALUE' strings, not one string")
+    doc = _parse(text, filename)
+    if doc.problems and not doc.values:  # YAML syntax error: nothing to go on
+        _finish(doc, filename)
+    if not isinstance(doc.data, dict):
+        got = "an empty document" if doc.data is None else f"a {type(doc.data).__name__}"
+        doc.problem(doc.values[()], (), f"the top level of a scenario must be a mapping, got {got}")
+        _finish(doc, filename)
+    for i, text_i in enumerate(overrides, start=1):
+        _apply_set(doc, text_i, i)
+    _apply_extra(doc, extra or {})
+    if base_dir is None:
+        base_dir = Path(filename).parent if Path(filename).is_file() else Path.cwd()
+    _resolve_paths(doc, Path(base_dir).resolve())
+    version = doc.data.get("format_version")
+    if isinstance(version, int) and not isinstance(version, bool) and version != FORMAT_VERSION:
+        mark = doc.values.get(("format_version",), doc.values[()])
+        doc.problem(mark, ("format_version",), f"unsupported format_version {version}; this version of graincosim "
+                    f"reads format_version: {FORMAT_VERSION} (nothing else was checked)")
+        _finish(doc, filename)
+    try:
+        scenario = Scenario.model_validate_json(json.dumps(doc.data))
+    except ValidationError as e:
+        doc.problems += [_error_problem(err, doc) for err in e.errors(include_url=False)]
+        scenario = None
+    _finish(doc, filename)
+    return scenario
+
+
+def load_scenario(path: str | os.PathLike, overrides: Sequence[str] = (), *, extra: Mapping | None = None) -> Scenario:
+    """Load and validate the scenario file ``path`` (see :func:`load_scenario_text`)."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        raise ScenarioError([Problem(str(path), 0, 0, "", f"cannot read scenario file: {e}")]) from None
+    return load_scenario_text(text, str(path), overrides, extra=extra, base_dir=Path(path).resolve().parent)
+
+
+# -------------------------------------------------------------------------------------- packaged, dump
+def packaged_scenarios() -> dict[str, Path]:
+    """Scenarios shipped with the package, name (file stem) -> path."""
+    return {p.stem: p for p in sorted(SCENARIO_DIR.glob("*.yaml"))}
+
+
+def resolve_scenario_arg(arg: str | os.PathLike) -> Path:
+    """A scenario argument as a file: an existing file path, or the name of a packaged scenario ("default")."""
+    path = Path(arg)
+    if path.is_file():
+        return path
+    packaged = packaged_scenarios()
+    if str(arg) in packaged:
+        return packaged[str(arg)]
+    raise ScenarioError([Problem(str(arg), 0, 0, "", "no such scenario file or packaged scenario (packaged: "
+                                 f"{', '.join(packaged) or 'none'})")])
+
+
+def dump_resolved(scenario: Scenario) -> str:
+    """The fully resolved scenario (every field, defaults included) as YAML; loading it gives an equal Scenario."""
+    body = yaml.dump(scenario.model_dump(mode="json"), Dumper=_Dumper, sort_keys=False, allow_unicode=True,
+                     default_flow_style=None, width=120)
+    return f"# fully resolved scenario '{scenario.name}' (every field, defaults included)\n{body}"

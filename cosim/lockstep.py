@@ -1,0 +1,129 @@
+"""The lockstep token ring (DESIGN.md section 1, STYLE.md 5).
+
+One turn per frame: dynamics -> renderer -> perception -> supervisor -> dynamics ... Each member blocks on its
+own semaphore; the sender writes the frame id into the receiver's header slot before releasing it, and the
+receiver checks it. Every wait has a deadline and raises a named error. Waits are sliced (``POLL_S``) only to
+check liveness between slices; nothing spins and nothing sleeps to synchronise.
+
+The same member code runs over OS processes (:class:`Token` over multiprocessing semaphores) or in one process
+(:func:`run_inprocess`, the ring unrolled into a loop).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Callable, Mapping, Sequence
+
+from shm_schema import Phase, Segment
+
+from .errors import FrameMismatch, HandoffTimeout
+
+__all__ = ["POLL_S", "RingPlan", "Token", "member_loop", "describe_stall", "run_inprocess"]
+
+#: slice of every blocking wait, s: bounds how late a dead peer or a stop request is noticed
+POLL_S = 0.05
+
+
+@dataclass(frozen=True)
+class RingPlan:
+    """Ring order and length. ``members`` are the participants in ring order; the supervisor closes the ring."""
+
+    members: tuple[str, ...]
+    frames: int
+    supervisor: str = "supervisor"
+
+    def next_of(self, name: str) -> str:
+        """Who receives the token after ``name``."""
+        if name == self.supervisor:
+            return self.members[0]
+        i = self.members.index(name)
+        return self.members[i + 1] if i + 1 < len(self.members) else self.supervisor
+
+
+class Token:
+    """Hand-offs over one semaphore per receiver; the frame id rides in the receiver's header slot."""
+
+    def __init__(self, segment: Segment, semaphores: Mapping[str, object]):
+        self._seg = segment
+        self._sems = dict(semaphores)
+
+    def give(self, to: str, frame: int) -> None:
+        self._seg.slot(to)["token"] = frame
+        self._sems[to].release()
+
+    def take(self, me: str, frame: int, timeout_s: float, check: Callable[[], None] | None = None) -> None:
+        """Block until ``me`` holds the token for ``frame``.
+
+        ``check`` runs between wait slices and raises to abort (a dead peer, a stop request). Raises
+        :class:`HandoffTimeout` after ``timeout_s`` and :class:`FrameMismatch` for a token of another frame.
+        """
+        sem = self._sems[me]
+        deadline = time.monotonic() + timeout_s
+        while not sem.acquire(timeout=min(POLL_S, max(0.0, deadline - time.monotonic()))):
+            if check is not None:
+                check()
+            if time.monotonic() >= deadline:
+                raise HandoffTimeout(
+                    f"{me} waited {timeout_s:g} s for the token of frame {frame}: "
+                    + describe_stall(self._seg, exclude=me),
+                    process=me, frame=frame)
+        got = int(self._seg.slot(me)["token"])
+        if got != frame:
+            raise FrameMismatch(f"{me} expected the token of frame {frame} but received frame {got}",
+                                process=me, frame=frame)
+
+
+def describe_stall(seg: Segment, exclude: str = "") -> str:
+    """Say which process holds up the ring, from the header slots (phase, frame, heartbeat age)."""
+    now = time.monotonic_ns()
+    parts = []
+    for name in seg.schema.participants:
+        if name == exclude:
+            continue
+        s = seg.slot(name)
+        phase = int(s["phase"])
+        age = (now - int(s["heartbeat_ns"])) / 1e9 if int(s["heartbeat_ns"]) else float("nan")
+        label = Phase.NAMES[phase] if 0 <= phase < len(Phase.NAMES) else str(phase)
+        parts.append(f"{name} is {label} frame {int(s['frame'])} (pid {int(s['pid'])}, for {age:.2f} s)")
+    stuck = [p for p in parts if " is stepping " in p or " is starting " in p]
+    return "; ".join(stuck or parts)
+
+
+def member_loop(name: str, participant, seg: Segment, token: Token, plan: RingPlan, *,
+                startup_timeout_s: float, handoff_timeout_s: float, check: Callable[[], None] | None = None) -> None:
+    """Run one ring member for frames 0..plan.frames: take the token, step, pass it on."""
+    slot = seg.slot(name)
+    nxt = plan.next_of(name)
+    for frame in range(plan.frames + 1):
+        slot["phase"] = Phase.WAITING
+        token.take(name, frame, startup_timeout_s if frame == 0 else handoff_timeout_s, check)
+        slot["frame"] = frame
+        slot["phase"] = Phase.STEPPING
+        t0 = time.monotonic_ns()
+        slot["heartbeat_ns"] = t0
+        participant.step(frame)
+        t1 = time.monotonic_ns()
+        slot["step_ns"] = t1 - t0
+        slot["heartbeat_ns"] = t1
+        token.give(nxt, frame)
+    slot["phase"] = Phase.DONE
+
+
+def run_inprocess(seg: Segment, participants: Sequence, frames: int,
+                  on_frame: Callable[[int], None] | None = None) -> None:
+    """The ring unrolled in one process: for each frame, step every participant in order, then ``on_frame``.
+
+    Participants must already be started. Header slots are kept as in the OS-process ring so that recorders
+    and diagnostics read the same fields.
+    """
+    slots = [seg.slot(p.name) for p in participants]
+    for frame in range(frames + 1):
+        for p, slot in zip(participants, slots):
+            slot["frame"] = frame
+            slot["phase"] = Phase.STEPPING
+            t0 = time.monotonic_ns()
+            p.step(frame)
+            slot["step_ns"] = time.monotonic_ns() - t0
+            slot["phase"] = Phase.WAITING
+        if on_frame is not None:
+            on_frame(frame)

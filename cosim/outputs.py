@@ -1,0 +1,121 @@
+"""The run directory (DESIGN.md section 6): scenario.yaml, log.txt, summary.json, timeseries.csv, final maps.
+
+Written by the launcher from what the recorder holds, so a failed or stopped run still writes everything up to
+its last completed frame, with ``completed: false`` and the error.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import math
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import yaml
+
+from .config import Scenario
+from .errors import RunError
+from .recorder import Recorder
+from .specs import ParticipantSpec, load_callable
+
+__all__ = ["default_run_dir", "write_scenario", "write_outputs", "STAGE_KEYS"]
+
+log = logging.getLogger("cosim.outputs")
+
+#: participant name -> timing_ms key in summary.json
+STAGE_KEYS = {"dynamics": "dynamics", "renderer": "render", "perception": "perception"}
+
+
+def default_run_dir(scenario: Scenario, root: Path = Path("runs")) -> Path:
+    """``runs/<scenario>-<UTC timestamp>``, made unique with a counter if needed."""
+    stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
+    base = root / f"{scenario.name}-{stamp}"
+    path, n = base, 1
+    while path.exists():
+        n += 1
+        path = base.with_name(f"{base.name}-{n}")
+    return path
+
+
+def write_scenario(run_dir: Path, scenario: Scenario) -> None:
+    """scenario.yaml: the fully resolved scenario (every field, defaults included)."""
+    data = scenario.model_dump(mode="json")
+    (run_dir / "scenario.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+
+
+def _clean(obj):
+    """JSON-safe copy: numpy scalars to Python, NaN/inf to None."""
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _clean(obj.tolist())
+    if isinstance(obj, (np.floating, float)):
+        f = float(obj)
+        return f if math.isfinite(f) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
+
+
+def write_outputs(run_dir: Path, scenario: Scenario, recorder: Recorder | None, ring: Sequence[ParticipantSpec],
+                  *, wall_time_s: float, error: RunError | None) -> dict:
+    """Write timeseries.csv, the final arrays and summary.json; return the summary."""
+    completed_frames = len(recorder.frames) if recorder else 0
+    last = recorder.frames[-1] if recorder and recorder.frames else -1
+    sim_time = max(0, last) * scenario.timing.sensor_period_s
+    members = [s.name for s in ring]
+    summary: dict = {
+        "scenario": scenario.name,
+        "feedback": scenario.feedback,
+        "renderer": scenario.renderer if "renderer" in members else "none",
+        "participants": members,
+        "seed": scenario.seed,
+        "latency_frames": scenario.timing.latency_frames,
+        "sensor_period_s": scenario.timing.sensor_period_s,
+        "sim_time_s": sim_time,
+        "wall_time_s": wall_time_s,
+        "real_time_factor": sim_time / wall_time_s if wall_time_s > 0 else None,
+        "frames": completed_frames,
+        "frames_planned": scenario.frames + 1,
+        "completed": error is None and last == scenario.frames,
+        "written_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+    }
+    if error is not None:
+        summary["error"] = {"type": type(error).__name__, "message": str(error), "process": error.process,
+                            "frame": error.frame, "traceback": error.detail}
+    if recorder is not None:
+        recorder.write_csv(run_dir / "timeseries.csv")
+        for name in ("heightmap_truth", "heightmap_perceived"):
+            if name in recorder.arrays and recorder.array_frames.get(name, -1) >= 0:
+                np.save(run_dir / f"{name}.npy", recorder.arrays[name])
+        med = recorder.timing_medians_ms()
+        summary["timing_ms"] = {STAGE_KEYS.get(m, m): med[m] for m in members}
+        summary["timing_ms"]["handoff"] = med["handoff"]
+        if recorder.frames:
+            series = recorder.series()
+            for spec in ring:
+                if not spec.summary:
+                    continue
+                try:
+                    t0 = time.perf_counter()
+                    part = _summarize(spec, scenario, series, recorder)
+                    summary.update(part)
+                    log.info("%s summary in %.1f ms", spec.name, (time.perf_counter() - t0) * 1e3)
+                except Exception as exc:  # noqa: BLE001 - a summary bug must not lose the run's other outputs
+                    log.exception("summary of %s failed", spec.name)
+                    summary.setdefault("summary_errors", {})[spec.name] = f"{type(exc).__name__}: {exc}"
+    (run_dir / "summary.json").write_text(json.dumps(_clean(summary), indent=2) + "\n")
+    return summary
+
+
+def _summarize(spec: ParticipantSpec, scenario: Scenario, series: dict, recorder: Recorder) -> dict:
+    fn = load_callable(spec.summary)
+    truth = recorder.arrays.get("heightmap_truth")
+    if spec.name == "perception":
+        return fn(scenario, series, truth, recorder.arrays.get("heightmap_perceived"))
+    return fn(scenario, series, truth)

@@ -1,0 +1,73 @@
+"""Which code plays which ring role: participant specs, resolved by import path so children can spawn them."""
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping
+
+from shm_schema import Schema
+
+from .config import Scenario
+from .participant import PARTICIPANTS
+
+__all__ = ["ParticipantSpec", "DEFAULT_SPECS", "SUPERVISOR", "load_callable", "build_schema", "ring_specs"]
+
+#: header slot name of the launcher process, which closes the ring by recording each completed frame
+SUPERVISOR = "supervisor"
+
+
+@dataclass(frozen=True)
+class ParticipantSpec:
+    """A ring role: ``factory(scenario, **kwargs) -> Participant``, ``blocks(scenario) -> list[Block]`` and an
+    optional ``summary`` function, each given as an import path ``"package.module:function"``."""
+
+    name: str
+    factory: str
+    blocks: str
+    summary: str | None = None
+    kwargs: Mapping[str, Any] = field(default_factory=dict)
+
+    def create(self, scenario: Scenario):
+        return load_callable(self.factory)(scenario, **dict(self.kwargs))
+
+    def declare_blocks(self, scenario: Scenario) -> list:
+        return list(load_callable(self.blocks)(scenario))
+
+
+DEFAULT_SPECS: dict[str, ParticipantSpec] = {
+    "dynamics": ParticipantSpec("dynamics", "dynamics_proc.participant:create", "dynamics_proc.blocks:declare_blocks",
+                                "dynamics_proc.summary:summarize"),
+    "renderer": ParticipantSpec("renderer", "renderer_proc.participant:create", "renderer_proc.blocks:declare_blocks"),
+    "perception": ParticipantSpec("perception", "perception_proc.participant:create",
+                                  "perception_proc.blocks:declare_blocks", "perception_proc.summary:summarize"),
+}
+
+
+def load_callable(path: str) -> Callable:
+    """Import ``"package.module:attr"`` and return the attribute."""
+    module, _, attr = path.partition(":")
+    if not module or not attr:
+        raise ValueError(f"import path {path!r} must look like 'package.module:function'")
+    return getattr(importlib.import_module(module), attr)
+
+
+def ring_specs(scenario: Scenario, specs: Mapping[str, ParticipantSpec] | None = None) -> list[ParticipantSpec]:
+    """The specs of the participants this scenario needs, in ring order (``Scenario.participants``)."""
+    table = dict(DEFAULT_SPECS) if specs is None else dict(specs)
+    order = [n for n in scenario.participants if n in table] if specs is None else list(table)
+    if specs is None:
+        missing = [n for n in scenario.participants if n not in table]
+        if missing:
+            raise KeyError(f"no participant spec for {missing}")
+    for n in order:
+        if specs is None and n not in PARTICIPANTS:
+            raise KeyError(f"unknown participant {n!r}")
+    return [table[n] for n in order]
+
+
+def build_schema(scenario: Scenario, ring: list[ParticipantSpec]) -> Schema:
+    """The run's schema: every ring member's blocks (only members the scene needs are asked)."""
+    blocks = []
+    for spec in ring:
+        blocks.extend(spec.declare_blocks(scenario))
+    return Schema(blocks, [s.name for s in ring] + [SUPERVISOR])

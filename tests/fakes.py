@@ -1,0 +1,105 @@
+"""Stand-in ring members for runtime tests: tiny, deterministic, with fault injection.
+
+Each role writes a struct, a trace array (frame, monotonic ns) and, for the renderer, an image. Faults are
+chosen per role with keyword arguments: ``crash_at`` (raise), ``kill_at`` (SIGKILL itself), ``exit_at``
+(os._exit without report), ``hang_at`` (block far longer than any timeout).
+"""
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+
+import numpy as np
+
+from cosim.specs import ParticipantSpec
+from shm_schema import ArrayBlock, Field, StructBlock, image_block
+
+IMG_H, IMG_W = 48, 64
+
+
+def blocks_dynamics(scenario):
+    return [StructBlock("fake_dyn", "dynamics", (Field("t_s", "s"), Field("x_m", "m"),
+                                                 Field("perc_frame", "", "i8"))),
+            ArrayBlock("trace_dynamics", "dynamics", "i8", (scenario.frames + 1, 2)),
+            ArrayBlock("heightmap_truth", "dynamics", "f4", (6, 3))]
+
+
+def blocks_renderer(scenario):
+    return [StructBlock("fake_ren", "renderer", (Field("dyn_frame", "", "i8"), Field("x_seen_m", "m"))),
+            ArrayBlock("trace_renderer", "renderer", "i8", (scenario.frames + 1, 2)),
+            image_block("cam0_depth", "renderer", IMG_H, IMG_W)]
+
+
+def blocks_perception(scenario):
+    return [StructBlock("fake_perc", "perception", (Field("img_frame", "", "i8"), Field("checksum", ""))),
+            ArrayBlock("trace_perception", "perception", "i8", (scenario.frames + 1, 2))]
+
+
+class Fake:
+    """One stand-in role; the fault keywords pick the frame at which it misbehaves (-1: never)."""
+
+    def __init__(self, scenario, role, crash_at=-1, kill_at=-1, exit_at=-1, hang_at=-1, start_delay_s=0.0):
+        self.name = role
+        self.scenario = scenario
+        self.faults = dict(crash_at=crash_at, kill_at=kill_at, exit_at=exit_at, hang_at=hang_at)
+        self.start_delay_s = start_delay_s
+        self.seg = None
+
+    def start(self, segment):
+        self.seg = segment
+        if self.start_delay_s:
+            time.sleep(self.start_delay_s)
+
+    def _faults(self, frame):
+        if frame == self.faults["crash_at"]:
+            raise ValueError(f"injected crash in {self.name} at frame {frame}")
+        if frame == self.faults["kill_at"]:
+            os.kill(os.getpid(), signal.SIGKILL)
+        if frame == self.faults["exit_at"]:
+            os._exit(3)
+        if frame == self.faults["hang_at"]:
+            threading.Event().wait(3600.0)
+
+    def step(self, frame):
+        self._faults(frame)
+        seg = self.seg
+        with seg.write(f"trace_{self.name}", frame) as tr:
+            tr[frame] = (frame, time.monotonic_ns())
+        dt = self.scenario.timing.sensor_period_s
+        if self.name == "dynamics":
+            with seg.write("fake_dyn", frame) as v:
+                v.t_s = frame * dt
+                v.x_m = 2.0 * frame * dt + 0.1 * np.sin(frame)
+                v.perc_frame = seg.frame_of("fake_perc") if seg.has("fake_perc") else -1
+            with seg.write("heightmap_truth", frame) as h:
+                h[...] = frame * 0.01
+        elif self.name == "renderer":
+            x = seg.view("fake_dyn").x_m
+            with seg.write("cam0_depth", frame) as img:
+                img[...] = frame % 251
+            with seg.write("fake_ren", frame) as v:
+                v.dyn_frame = seg.frame_of("fake_dyn")
+                v.x_seen_m = x
+        else:
+            img = seg.view("cam0_depth")
+            with seg.write("fake_perc", frame) as v:
+                v.img_frame = seg.frame_of("cam0_depth")
+                v.checksum = float(img[..., 0].astype(np.int64).sum())
+
+    def close(self):
+        self.seg = None
+
+
+def make(scenario, role="dynamics", **faults):
+    return Fake(scenario, role, **faults)
+
+
+def specs(**faults_by_role):
+    """Stand-in specs for the three roles; ``faults_by_role={'renderer': {'crash_at': 3}}``."""
+    out = {}
+    for role in ("dynamics", "renderer", "perception"):
+        out[role] = ParticipantSpec(role, "fakes:make", f"fakes:blocks_{role}",
+                                    kwargs={"role": role, **faults_by_role.get(role, {})})
+    return out
