@@ -53,6 +53,8 @@ class RunResult:
     segment_name: str = ""
     exit_code: int = EXIT_OK
     children: dict[str, int | None] = field(default_factory=dict)
+    #: last completed frame's copy of every recorded (non-image) array block
+    arrays: dict = field(default_factory=dict)
 
     @property
     def completed(self) -> bool:
@@ -127,10 +129,13 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
         recorder = Recorder(seg, plan.members)
         finished: set[str] = set()
 
-        def check() -> None:
+        def check_stop() -> None:
             if flag.signum is not None:
                 raise RunInterrupted(f"stopped by {signal.Signals(flag.signum).name} at frame {int(sup['frame'])}",
                                      process=SUPERVISOR, frame=int(sup["frame"]))
+
+        def check() -> None:
+            check_stop()
             for n, p in procs.items():
                 if p.exitcode is None or n in finished:
                     continue
@@ -153,6 +158,7 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
             sup["frame"] = frame
             sup["phase"] = Phase.STEPPING
             recorder.record(frame, turn if frame > 0 else None)
+            check_stop()
             sup["heartbeat_ns"] = time.monotonic_ns()
             if progress is not None:
                 progress(frame, plan.frames, frame * scenario.timing.sensor_period_s, time.perf_counter() - t_start)
@@ -182,7 +188,8 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
         seg.unlink()
     code = EXIT_OK if error is None else EXIT_INTERRUPTED if isinstance(error, RunInterrupted) else EXIT_RUN_ERROR
     log.info("run %s %s in %.2f s (exit %d)", run_dir.name, "completed" if error is None else "stopped", wall, code)
-    return RunResult(run_dir, summary, error, name, code, {n: p.exitcode for n, p in procs.items()})
+    return RunResult(run_dir, summary, error, name, code, {n: p.exitcode for n, p in procs.items()},
+                     dict(recorder.arrays) if recorder is not None else {})
 
 
 def _stop_children(procs: Mapping[str, mp.process.BaseProcess], *, graceful: bool) -> None:

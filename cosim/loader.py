@@ -75,6 +75,7 @@ _Dumper.add_implicit_resolver("tag:yaml.org,2002:int", _INT_12, list("-+01234567
 _Dumper.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT_12, list("-+0123456789."))
 
 Loc = tuple  # path into the data: str keys and int list indices
+_INVALID = object()  # a node already reported as a problem: left out of the data (its field keeps its default)
 
 
 @dataclass(frozen=True)
@@ -114,21 +115,24 @@ def _parse(text: str, file: str, line0: int = 0, col0: int = 0) -> _Doc:
     """Compose ``text`` and build plain data with marks. ``line0``/``col0`` shift marks (for ``--set`` values)."""
     doc = _Doc()
 
-    def mark(m: yaml.Mark) -> _Mark:
-        return _Mark(file, line0 + m.line + 1, col0 + m.column + 1) if line0 == 0 else _Mark(file, line0, col0 + m.column + 1)
+    def mark(m: yaml.Mark) -> _Mark:  # 1-based; an override is one line: its position in the list of overrides
+        return _Mark(file, line0 or m.line + 1, col0 + m.column + 1)
 
     loader = _Loader(text)
     try:
         try:
             node = loader.get_single_node()
         except yaml.MarkedYAMLError as e:
-            m = e.problem_mark or e.context_mark
-            what = " ".join(s for s in (e.context, e.problem) if s)
+            m, cm = e.problem_mark or e.context_mark, e.context_mark
+            what = e.problem or e.context or "invalid YAML"
+            if e.context and e.problem and cm is not None:
+                what += f" ({e.context} started at {mark(cm).line}:{mark(cm).col})"
             doc.problems.append(Problem(file, *((mark(m).line, mark(m).col) if m else (0, 0)), "",
                                         f"YAML syntax error: {what}"))
             return doc
         doc.values[()] = doc.keys[()] = mark(node.start_mark) if node else _Mark(file, max(line0, 1), 1)
         doc.data = _build(node, (), doc, loader, mark, set()) if node is not None else None
+        doc.data = None if doc.data is _INVALID else doc.data
     finally:
         loader.dispose()
     return doc
@@ -141,20 +145,21 @@ def _build(node, loc: Loc, doc: _Doc, loader: _Loader, mark, stack: set[int]):
             value = loader.construct_object(node, deep=True)
         except yaml.YAMLError as e:
             doc.problem(here, loc, f"cannot read value: {getattr(e, 'problem', e)}")
-            return None
+            return _INVALID
         if value is not None and not isinstance(value, (str, int, float, bool)):
             doc.problem(here, loc, f"unsupported YAML value of type {type(value).__name__} (tag {node.tag})")
-            return None
+            return _INVALID
         return value
     if id(node) in stack:
         doc.problem(here, loc, "recursive alias")
-        return None
+        return _INVALID
     stack = stack | {id(node)}
     if isinstance(node, yaml.SequenceNode):
         out_list = []
         for i, item in enumerate(node.value):
             doc.keys[loc + (i,)] = doc.values[loc + (i,)] = mark(item.start_mark)
-            out_list.append(_build(item, loc + (i,), doc, loader, mark, stack))
+            value = _build(item, loc + (i,), doc, loader, mark, stack)
+            out_list.append(None if value is _INVALID else value)
         return out_list
     out: dict[str, object] = {}
     first: dict[str, _Mark] = {}
@@ -164,6 +169,8 @@ def _build(node, loc: Loc, doc: _Doc, loader: _Loader, mark, stack: set[int]):
             doc.problem(kmark, loc, "merge keys ('<<') are not supported; write the keys out")
             continue
         key = _build(knode, loc, doc, loader, mark, stack) if isinstance(knode, yaml.ScalarNode) else None
+        if key is _INVALID:
+            continue
         if not isinstance(key, str):
             doc.problem(kmark, loc, f"keys must be strings, got {_show(key) if key is not None else knode.tag}")
             continue
@@ -173,7 +180,9 @@ def _build(node, loc: Loc, doc: _Doc, loader: _Loader, mark, stack: set[int]):
         first[key] = kmark
         doc.keys[loc + (key,)] = kmark
         doc.values[loc + (key,)] = mark(vnode.start_mark)
-        out[key] = _build(vnode, loc + (key,), doc, loader, mark, stack)
+        value = _build(vnode, loc + (key,), doc, loader, mark, stack)
+        if value is not _INVALID:
+            out[key] = value
     return out
 
 
@@ -215,12 +224,22 @@ def _model_at(loc: Loc) -> type[BaseModel] | None:
     return model
 
 
-def _unknown_key(key: str, model: type[BaseModel] | None) -> str:
-    message = f"unknown key '{key}'"
+def _unknown_key(key: str, model: type[BaseModel] | None, where: str = "") -> str:
+    message = f"unknown key '{key}'" + (f" in '{where}'" if where else "")
     if model is not None:
         close = difflib.get_close_matches(key, list(model.model_fields), n=1)
         message += f" (did you mean '{close[0]}'?)" if close else f"; allowed: {', '.join(model.model_fields)}"
     return message
+
+
+def _tuple_len(loc: Loc) -> int | None:
+    """Length of the fixed-length tuple field at ``loc``, None when it is not one."""
+    model = _model_at(loc[:-1]) if loc else None
+    if model is None or loc[-1] not in model.model_fields:
+        return None
+    ann = model.model_fields[loc[-1]].annotation
+    args = typing.get_args(ann)
+    return len(args) if typing.get_origin(ann) is tuple and Ellipsis not in args else None
 
 
 def _check_override_path(loc: Loc) -> str | None:
@@ -230,8 +249,7 @@ def _check_override_path(loc: Loc) -> str | None:
         if model is None:
             return f"'{_dotted(loc[:i])}' is a value, not a section: it has no key '{part}'"
         if part not in model.model_fields:
-            where = f" in '{_dotted(loc[:i])}'" if i else ""
-            return _unknown_key(part, model) + where
+            return _unknown_key(part, model, _dotted(loc[:i]))
     return None
 
 
@@ -372,19 +390,27 @@ def _error_problem(err: dict, doc: _Doc) -> Problem:
         mark, msg = doc.keys.get(found, root), _unknown_key(str(loc[-1]), _model_at(loc[:-1]))
     elif kind == "missing":
         mark = doc.keys.get(found, root) if isinstance(node, dict) else doc.values.get(found, root)
-        msg = f"missing required key '{loc[-1]}'" if isinstance(loc[-1], str) else f"{msg} (too few items)"
+        if isinstance(loc[-1], int):  # a short list for a fixed-length tuple: report once, at the list
+            loc, size = found, _tuple_len(found)
+            msg = f"expected {size or 'more'} items, got {len(node)}"
+        else:
+            msg = f"missing required key '{loc[-1]}'"
         if loc == ("format_version",):
             msg += f"; this version of graincosim reads format_version: {FORMAT_VERSION}"
     elif msg.startswith(("Value error, ", "Assertion failed, ")):
-        mark, msg = doc.keys.get(found, root), msg.split(", ", 1)[1]
+        # a model validator names its section (report the section's key), a field validator its value
+        mark = doc.keys.get(found, root) if isinstance(node, dict) else doc.values.get(found, root)
+        msg = msg.split(", ", 1)[1]
     else:
         mark = doc.values.get(found, root)
         msg = msg.replace("an object", "a mapping").replace("a valid dictionary", "a mapping")
         if loc == ("format_version",):
-            msg = f"unsupported format_version {_show(err.get('input'))}; this version reads format_version: " \
-                  f"{FORMAT_VERSION}"
+            msg = f"unsupported format_version {_show(err.get('input'))}; this version of graincosim reads " \
+                  f"format_version: {FORMAT_VERSION}"
         elif "input" in err and not isinstance(err["input"], dict):
             msg += f", got {_show(err['input'])}"
+            if kind == "model_type" and err["input"] is None:
+                msg += " (an empty section: remove the key, or give it at least one entry)"
     return Problem(mark.file, mark.line, mark.col, _dotted(loc), msg)
 
 
@@ -472,3 +498,4 @@ def dump_resolved(scenario: Scenario) -> str:
     body = yaml.dump(scenario.model_dump(mode="json"), Dumper=_Dumper, sort_keys=False, allow_unicode=True,
                      default_flow_style=None, width=120)
     return f"# fully resolved scenario '{scenario.name}' (every field, defaults included)\n{body}"
+

@@ -15,7 +15,11 @@ __all__ = ["Grain", "Controller", "Integrator"]
 
 
 class Grain(Model):
-    """Grain fill model: height map over the cart floor."""
+    """Grain fill model: height map over the cart floor.
+
+    ``cell_m`` must divide the cart interior length and width. ``deposit_radius_m`` is the radius of the flat
+    top of the heap the stream builds around its impact point.
+    """
 
     cell_m: PosFloat = 0.1
     initial_fill_m: NonNegFloat = 1.0
@@ -23,7 +27,15 @@ class Grain(Model):
 
 
 class Controller(Model):
-    """Offloading controller: operator inputs and the section grid."""
+    """Offloading controller: operator inputs and the section grid.
+
+    A section is full when its estimated peak height reaches ``full_fraction * target_fill_m``. The auger only
+    runs while the predicted impact lies at least ``safe_margin_m`` inside every inner wall (it stops when it
+    comes closer than ``safe_margin_m - safety_hysteresis_m``). A target section that gives no valid
+    measurement for ``stale_timeout_s`` while it is being filled is treated as full (so nothing overfills
+    blind). ``estimator``: ``paper`` takes the per-section peak of the 3 x 3 median-filtered map; ``fused``
+    first fills holes with each cell's last valid value.
+    """
 
     target_fill_m: PosFloat = 1.9
     strategy: Literal["front_to_back", "back_to_front", "lowest_first"] = "front_to_back"
@@ -31,10 +43,17 @@ class Controller(Model):
     grid_cell_m: PosFloat = 0.1
     full_fraction: Fraction = 0.98
     estimator: Literal["paper", "fused"] = "paper"
+    safe_margin_m: NonNegFloat = 0.3
+    safety_hysteresis_m: NonNegFloat = 0.1
+    stale_timeout_s: PosFloat = 10.0
 
 
 class Integrator(Model):
-    """Integration of the continuous vehicle states inside one sensor frame."""
+    """Integration of the continuous vehicle states inside one sensor frame.
+
+    ``rk4``: classic fixed-step RK4; ``exponential``: the lags solved exactly (rate limits included) and the
+    kinematics by RK4 on them; ``radau`` / ``bdf``: scipy ``solve_ivp`` with ``rtol`` / ``atol`` (reference).
+    """
 
     method: Literal["rk4", "exponential", "radau", "bdf"] = "exponential"
     rtol: PosFloat = 1e-8

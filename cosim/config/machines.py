@@ -75,7 +75,13 @@ class Auger(Model):
 
 
 class Tractor(Model):
-    """Tractor towing the cart: kinematic bicycle with drivetrain and steering lags and limits."""
+    """Tractor towing the cart: kinematic bicycle with drivetrain and steering lags and limits.
+
+    The tractor body origin is the centre of its drawn box; the bicycle model runs about the rear axle at body
+    x = ``rear_axle_x_m``; the hitch is ``hitch_offset_m`` behind the rear axle. The drivetrain is a first-order
+    lag (``drivetrain_tau_s``) with acceleration / braking limits; the steering a first-order lag
+    (``steer_tau_s``) with angle and rate limits. The tractor does not reverse (speed command >= 0).
+    """
 
     wheelbase_m: PosFloat = 3.0
     hitch_offset_m: PosFloat = 1.5
@@ -85,6 +91,8 @@ class Tractor(Model):
     steer_tau_s: PosFloat = 0.2
     steer_max_deg: PosFloat = 35.0
     steer_rate_max_degps: PosFloat = 30.0
+    max_speed_mps: PosFloat = 12.0
+    rear_axle_x_m: float = -2.0
     length_m: PosFloat = 6.0
     width_m: PosFloat = 2.6
     height_m: PosFloat = 3.3
@@ -125,13 +133,20 @@ class MachineSync(Model):
 
     Offsets are of the spout-over-cart geometry: ``lateral_offset_m`` is the lateral distance between the
     combine and cart body origins (cart to the combine's left); ``longitudinal_offset_m`` is the cart body
-    origin's distance ahead (+) or behind (-) the combine body origin at the start.
+    origin's distance ahead (+) or behind (-) the combine body origin at the start. The default puts the spout
+    of the default auger over the middle of the cart's first section (grid x = 0.35 m).
+
+    Feedback law (``dynamics_proc.machine_sync``): the tractor's wanted velocity is the velocity of its setpoint
+    plus ``kp_long`` / ``kp_lat`` (1/s) times the position error in combine axes; the heading follows that
+    velocity's direction with gain ``heading_gain_ps`` (1/s). ``initial_*_error_m`` displace the tractor from
+    its setpoint at t = 0 (combine axes, m).
     """
 
-    longitudinal_offset_m: float = -2.0
+    longitudinal_offset_m: float = -4.65
     lateral_offset_m: float = 7.4
     kp_long: PosFloat = 0.8
     kp_lat: PosFloat = 0.6
+    heading_gain_ps: PosFloat = 2.0
     nudge_m: PosFloat = 0.3
     nudge_min_interval_s: NonNegFloat = 1.0
     initial_long_error_m: float = 0.0

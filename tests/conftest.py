@@ -1,0 +1,35 @@
+"""Shared fixtures. ``tests/`` is put on sys.path so spawned children can import the stand-ins in fakes.py."""
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+TESTS = Path(__file__).resolve().parent
+if str(TESTS) not in sys.path:
+    sys.path.insert(0, str(TESTS))
+
+SHM = Path("/dev/shm")
+
+
+def _ours() -> set[str]:
+    if not SHM.exists():
+        return set()
+    return {p.name for p in SHM.iterdir() if p.name.startswith(("cosim-", "cosimtest-"))}
+
+
+@pytest.fixture
+def shm_clean():
+    """Fails the test if it leaves a project segment in /dev/shm."""
+    before = _ours()
+    yield
+    left = _ours() - before
+    assert not left, f"segments left in /dev/shm: {sorted(left)}"
+
+
+@pytest.fixture
+def shm_name(request):
+    """A unique segment name for one test."""
+    return f"cosimtest-{os.getpid()}-{abs(hash(request.node.nodeid)) % 10**8}"

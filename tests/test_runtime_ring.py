@@ -1,0 +1,219 @@
+"""The lockstep ring over OS processes with stand-in participants: order, outputs, faults, signals."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fakes
+from cosim.config import Scenario
+from cosim.errors import FrameMismatch, HandoffTimeout, ParticipantCrashed, ParticipantDied
+from cosim.inprocess import simulate
+from cosim.launcher import EXIT_INTERRUPTED, EXIT_RUN_ERROR, launch
+from cosim.lockstep import RingPlan, Token
+from shm_schema import Schema, Segment, StructBlock, Field
+
+ROLES = ("dynamics", "renderer", "perception")
+#: the promise: a dead or hung child ends the run within this long after it happens
+STOP_WITHIN_S = 2.0
+
+
+def scenario(duration_s=1.0, handoff_timeout_s=30.0) -> Scenario:
+    sc = Scenario(format_version=1, duration_s=duration_s, renderer="mock")
+    return sc.model_copy(update={"timing": sc.timing.model_copy(update={"handoff_timeout_s": handoff_timeout_s})})
+
+
+def children_of(pid: int) -> list[int]:
+    """Spawned worker processes of ``pid`` (not its resource tracker)."""
+    out = subprocess.run(["ps", "-o", "pid=,args=", "--ppid", str(pid)], capture_output=True, text=True).stdout
+    return [int(line.split()[0]) for line in out.splitlines() if "multiprocessing.spawn" in line]
+
+
+def test_ring_order_is_the_recorded_trace(tmp_path, shm_clean):
+    res = launch(scenario(), tmp_path / "run", specs=fakes.specs(), console_log=False)
+    assert res.exit_code == 0 and res.completed
+    n = scenario().frames + 1
+    assert res.summary["frames"] == n
+    ts = (tmp_path / "run" / "timeseries.csv").read_text().splitlines()
+    assert len(ts) == n + 1
+    header = ts[0].split(",")
+    rows = [dict(zip(header, line.split(","))) for line in ts[1:]]
+    for k, row in enumerate(rows):
+        # each role saw the previous role's output of the same frame, and dynamics saw perception's of k-1
+        assert int(row["frame"]) == k
+        assert int(row["fake_ren.dyn_frame"]) == k
+        assert int(row["fake_perc.img_frame"]) == k
+        assert int(row["fake_dyn.perc_frame"]) == k - 1
+        assert float(row["fake_ren.x_seen_m"]) == float(row["fake_dyn.x_m"])
+    assert not children_of(os.getpid())
+
+
+def test_inprocess_trace_matches_order():
+    run = simulate(scenario(), fakes.specs())
+    seg = run.segment
+    t = np.stack([seg.view(f"trace_{r}")[:, 1] for r in ROLES], axis=1)  # (frames, roles) monotonic ns
+    flat = t.reshape(-1)
+    assert np.all(np.diff(flat) > 0), "steps must follow dynamics -> renderer -> perception, frame by frame"
+    s = run.recorder.series()
+    assert np.array_equal(s["fake_perc.img_frame"], s["frame"])
+
+
+def test_os_ring_trace_is_strictly_ordered(tmp_path, shm_clean):
+    """Each role stamps CLOCK_MONOTONIC (system-wide) per frame: across processes they interleave in ring order."""
+    res = launch(scenario(), tmp_path / "run", specs=fakes.specs(), console_log=False)
+    assert res.completed
+    frames = np.stack([res.arrays[f"trace_{r}"][:, 0] for r in ROLES], axis=1)
+    stamps = np.stack([res.arrays[f"trace_{r}"][:, 1] for r in ROLES], axis=1)
+    assert np.array_equal(frames, np.repeat(np.arange(scenario().frames + 1)[:, None], 3, axis=1))
+    assert np.all(np.diff(stamps.reshape(-1)) > 0), "dynamics -> renderer -> perception, frame after frame"
+    assert set(res.summary["timing_ms"]) == {"dynamics", "render", "perception", "handoff"}
+    assert all(v >= 0 for v in res.summary["timing_ms"].values())
+
+
+@pytest.mark.parametrize("role", ROLES)
+def test_crash_comes_back_with_traceback(role, tmp_path, shm_clean):
+    t0 = time.monotonic()
+    res = launch(scenario(), tmp_path / "run", specs=fakes.specs(**{role: {"crash_at": 4}}), console_log=False)
+    assert time.monotonic() - t0 < 15
+    assert res.exit_code == EXIT_RUN_ERROR and not res.completed
+    assert isinstance(res.error, ParticipantCrashed)
+    assert res.error.process == role and res.error.frame == 4
+    assert "injected crash" in str(res.error) and "Traceback" in res.error.detail and "fakes.py" in res.error.detail
+    assert res.summary["frames"] == 4 and res.summary["completed"] is False
+    assert res.summary["error"]["process"] == role
+    log = (tmp_path / "run" / "log.txt").read_text()
+    assert "injected crash" in log and f"cosim-{role}" in log
+    assert len((tmp_path / "run" / "timeseries.csv").read_text().splitlines()) == 1 + 4
+    assert not children_of(os.getpid())
+
+
+@pytest.mark.parametrize("role", ROLES)
+def test_kill9_is_named_and_stops_fast(role, tmp_path, shm_clean):
+    res = launch(scenario(), tmp_path / "run", specs=fakes.specs(**{role: {"kill_at": 3}}), console_log=False)
+    assert isinstance(res.error, ParticipantDied)
+    assert res.error.process == role and res.error.frame == 3
+    assert "SIGKILL" in str(res.error) and "frame 3" in str(res.error)
+    assert res.summary["frames"] == 3
+    assert res.summary["wall_time_s"] < 10
+    assert not children_of(os.getpid())
+
+
+@pytest.mark.parametrize("role", ROLES)
+def test_hang_times_out_naming_the_stuck_process(role, tmp_path, shm_clean):
+    timeout = 1.0
+    t0 = time.monotonic()
+    res = launch(scenario(handoff_timeout_s=timeout), tmp_path / "run",
+                 specs=fakes.specs(**{role: {"hang_at": 2}}), console_log=False)
+    took = time.monotonic() - t0
+    assert isinstance(res.error, HandoffTimeout)
+    assert f"{role} is stepping frame 2" in str(res.error)
+    assert res.summary["frames"] == 2
+    # start-up (3 interpreters) + 2 frames + the timeout + at most STOP_WITHIN_S to stop
+    assert took < timeout + STOP_WITHIN_S + 8
+    assert not children_of(os.getpid())
+
+
+def test_silent_exit_is_a_death(tmp_path, shm_clean):
+    res = launch(scenario(), tmp_path / "run", specs=fakes.specs(renderer={"exit_at": 1}), console_log=False)
+    assert isinstance(res.error, ParticipantDied) and "exit status 3" in str(res.error)
+
+
+def test_detection_latency_after_death(tmp_path, shm_clean):
+    """From the kill to the launcher's return (children gone, outputs written) stays under 2 s."""
+    sc = scenario(duration_s=5.0)
+    res = launch(sc, tmp_path / "run", specs=fakes.specs(perception={"kill_at": 40}), console_log=False)
+    assert isinstance(res.error, ParticipantDied)
+    per_frame = res.summary["wall_time_s"] / max(res.summary["frames"], 1)
+    assert per_frame < 1.0
+    log = (tmp_path / "run" / "log.txt").read_text()
+    assert "died with signal SIGKILL during frame 40" in log
+
+
+def test_token_checks_frame_ids():
+    schema = Schema([StructBlock("s", "a", [Field("x")])], ["a", "b"])
+    seg = Segment.local(schema)
+
+    class Sem:
+        def __init__(self):
+            self.n = 0
+
+        def release(self):
+            self.n += 1
+
+        def acquire(self, timeout=None):
+            if self.n:
+                self.n -= 1
+                return True
+            return False
+
+    tok = Token(seg, {"a": Sem(), "b": Sem()})
+    tok.give("b", 3)
+    with pytest.raises(FrameMismatch, match="b expected the token of frame 4 but received frame 3"):
+        tok.take("b", 4, 1.0)
+    with pytest.raises(HandoffTimeout, match="b waited 0.1 s for the token of frame 5"):
+        tok.take("b", 5, 0.1)
+    assert RingPlan(("a", "b"), 3).next_of("b") == "supervisor"
+
+
+def test_same_scenario_and_seed_give_identical_timeseries(tmp_path, shm_clean):
+    a = launch(scenario(), tmp_path / "a", specs=fakes.specs(), console_log=False)
+    b = launch(scenario(), tmp_path / "b", specs=fakes.specs(), console_log=False)
+    assert a.completed and b.completed
+    assert (tmp_path / "a" / "timeseries.csv").read_bytes() == (tmp_path / "b" / "timeseries.csv").read_bytes()
+
+
+SIGNAL_SCRIPT = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, {tests!r})
+    import fakes
+    from cosim.config import Scenario
+    from cosim.launcher import launch
+    if __name__ == "__main__":
+        sc = Scenario(format_version=1, duration_s=3600.0, renderer="mock")
+        res = launch(sc, {out!r}, specs=fakes.specs(), console_log=False)
+        sys.exit(res.exit_code)
+""")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_signal_stops_cleanly(sig, tmp_path, shm_clean):
+    out = tmp_path / "run"
+    script = tmp_path / "run_it.py"
+    script.write_text(SIGNAL_SCRIPT.format(tests=str(Path(__file__).parent), out=str(out)))
+    proc = subprocess.Popen([sys.executable, str(script)], cwd=Path(__file__).parent.parent)
+    # wait until the ring has turned a few frames, reading the run's own segment (self-describing)
+    deadline = time.monotonic() + 60
+    frame = -1
+    while time.monotonic() < deadline and frame < 5:
+        time.sleep(0.1)
+        names = [p.name for p in Path("/dev/shm").glob(f"cosim-{proc.pid}-*")]
+        if names:
+            try:
+                seg = Segment.attach(names[0])
+                frame = int(seg.slot("supervisor")["frame"])
+                seg.close()
+            except FileNotFoundError:
+                pass
+    assert frame >= 5, "the ring did not start turning"
+    kids = children_of(proc.pid)
+    assert kids, "the launcher should have children by now"
+    t0 = time.monotonic()
+    proc.send_signal(sig)
+    code = proc.wait(timeout=10)
+    assert time.monotonic() - t0 < STOP_WITHIN_S
+    assert code == EXIT_INTERRUPTED
+    import json
+
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["completed"] is False and summary["frames"] > 1
+    assert signal.Signals(sig).name in summary["error"]["message"]
+    time.sleep(0.2)
+    alive = [k for k in kids if Path(f"/proc/{k}").exists() and "Z" not in Path(f"/proc/{k}/stat").read_text().split()[2]]
+    assert not alive, f"orphans left: {alive}"
