@@ -96,6 +96,11 @@ def write_outputs(run_dir: Path, scenario: Scenario, recorder: Recorder | None, 
         med = recorder.timing_medians_ms()
         summary["timing_ms"] = {STAGE_KEYS.get(m, m): med[m] for m in members}
         summary["timing_ms"]["handoff"] = med["handoff"]
+        if recorder.turn_ms:
+            turns = np.asarray(recorder.turn_ms)
+            summary["ring"] = {"turn_median_ms": float(np.median(turns)),
+                               "turn_p99_ms": float(np.percentile(turns, 99)),
+                               "handoff_median_ms": med["handoff"]}
         if recorder.frames:
             series = recorder.series()
             for spec in ring:
