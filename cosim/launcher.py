@@ -8,6 +8,7 @@ running and the segment is unlinked; the run directory holds everything up to th
 """
 from __future__ import annotations
 
+import json
 import logging
 import multiprocessing as mp
 import os
@@ -17,7 +18,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Mapping
+from typing import Callable, Mapping, Sequence
 
 from shm_schema import Phase, Segment
 
@@ -30,7 +31,7 @@ from .outputs import default_run_dir, write_outputs, write_scenario
 from .recorder import Recorder
 from .specs import SUPERVISOR, ParticipantSpec, build_schema, ring_specs
 
-__all__ = ["RunResult", "launch", "EXIT_OK", "EXIT_RUN_ERROR", "EXIT_INTERRUPTED", "JOIN_TIMEOUT_S"]
+__all__ = ["RunResult", "ObserverSpec", "launch", "EXIT_OK", "EXIT_RUN_ERROR", "EXIT_INTERRUPTED", "JOIN_TIMEOUT_S"]
 
 log = logging.getLogger("cosim.launcher")
 
@@ -41,6 +42,26 @@ JOIN_TIMEOUT_S = 10.0
 TERMINATE_GRACE_S = 0.5
 
 Progress = Callable[[int, int, float, float], None]
+
+
+@dataclass(frozen=True)
+class ObserverSpec:
+    """A process outside the ring that attaches read-only by segment name (a viewer).
+
+    ``target`` is an import path ``"package.module:function"`` called as ``function(segment_name, **kwargs)``
+    in a spawned process. It never takes part in the lockstep; if it dies the run logs a warning and goes on;
+    it is terminated when the run ends.
+    """
+
+    name: str
+    target: str
+    kwargs: Mapping = field(default_factory=dict)
+
+
+#: a per-frame sink, called by the supervisor after each completed frame as ``sink(segment, frame)``; created by
+#: ``factory(scenario, run_dir, segment) -> sink`` with an optional ``close()``. Sinks run inside the ring turn
+#: (they see every frame, consistently) so they must be cheap; a sink's exception ends the run.
+SinkFactory = Callable[..., Callable]
 
 
 @dataclass
@@ -94,8 +115,14 @@ def _child_failure(name: str, proc, seg: Segment) -> RunError:
 
 def launch(scenario: Scenario, out_dir: Path | None = None, *,
            specs: Mapping[str, ParticipantSpec] | None = None, progress: Progress | None = None,
-           console_log: bool = True) -> RunResult:
-    """Run ``scenario`` over OS processes and write its run directory. Never raises for run failures."""
+           console_log: bool = True, observers: Sequence[ObserverSpec] = (),
+           sinks: Sequence[SinkFactory] = ()) -> RunResult:
+    """Run ``scenario`` over OS processes and write its run directory. Never raises for run failures.
+
+    ``observers`` are started after the segment exists and stopped at the end; ``sinks`` are called with each
+    completed frame (see :data:`SinkFactory`). The run directory's ``run.json`` names the segment while the run
+    lives, so that ``python -m cosim.viewer --attach RUN_DIR`` can find it.
+    """
     run_dir = Path(out_dir) if out_dir is not None else default_run_dir(scenario)
     run_dir.mkdir(parents=True, exist_ok=True)
     log_path = run_dir / "log.txt"
@@ -116,9 +143,22 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
     t_start = time.perf_counter()
     log.info("run %s: segment %s (%d bytes, fingerprint %s), ring %s, %d frames", run_dir.name, name,
              schema.total_nbytes, schema.fingerprint[:12], " -> ".join(plan.members), scenario.frames + 1)
+    (run_dir / "run.json").write_text(json.dumps({"segment": name, "launcher_pid": os.getpid(),
+                                                   "fingerprint": schema.fingerprint,
+                                                   "participants": list(plan.members), "ended": False},
+                                                  indent=2) + "\n")
+    watchers: dict[str, mp.process.BaseProcess] = {}
+    frame_sinks: list = []
     try:
         sup = seg.slot(SUPERVISOR)
         sup["pid"] = os.getpid()
+        for obs in observers:
+            w = ctx.Process(target=_observer_main, args=(obs, name, str(log_path)), name=f"cosim-{obs.name}",
+                            daemon=True)
+            w.start()
+            watchers[obs.name] = w
+        for make_sink in sinks:
+            frame_sinks.append(make_sink(scenario, run_dir, seg))
         scenario_json = scenario.model_dump_json()
         for spec in ring:
             args = ChildArgs(spec, scenario_json, name, schema.fingerprint, plan, sems, str(log_path), os.getpid(),
@@ -158,6 +198,9 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
             sup["frame"] = frame
             sup["phase"] = Phase.STEPPING
             recorder.record(frame, turn if frame > 0 else None)
+            for sink in frame_sinks:
+                sink(seg, frame)
+            _warn_dead_observers(watchers)
             check_stop()
             sup["heartbeat_ns"] = time.monotonic_ns()
             if progress is not None:
@@ -174,7 +217,15 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
         log.exception("supervisor failure")
     finally:
         wall = time.perf_counter() - t_start
+        for sink in frame_sinks:
+            close = getattr(sink, "close", None)
+            if close is not None:
+                try:
+                    close()
+                except Exception:  # noqa: BLE001 - a sink's close must not hide the run's outcome
+                    log.exception("closing a frame sink failed")
         _stop_children(procs, graceful=error is None)
+        _stop_children(watchers, graceful=False)
         for s, h in old_handlers.items():
             signal.signal(s, h)
     if error is not None:
@@ -186,10 +237,32 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
     finally:
         seg.close()
         seg.unlink()
+        info = json.loads((run_dir / "run.json").read_text())
+        info["ended"] = True
+        (run_dir / "run.json").write_text(json.dumps(info, indent=2) + "\n")
     code = EXIT_OK if error is None else EXIT_INTERRUPTED if isinstance(error, RunInterrupted) else EXIT_RUN_ERROR
     log.info("run %s %s in %.2f s (exit %d)", run_dir.name, "completed" if error is None else "stopped", wall, code)
     return RunResult(run_dir, summary, error, name, code, {n: p.exitcode for n, p in procs.items()},
                      dict(recorder.arrays) if recorder is not None else {})
+
+
+def _observer_main(obs: ObserverSpec, segment: str, log_path: str) -> None:
+    """Entry of an observer process: log to the run's log, ignore Ctrl-C (the launcher stops it)."""
+    from .specs import load_callable
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    configure_logging(log_path, console=False)
+    load_callable(obs.target)(segment, **dict(obs.kwargs))
+
+
+_warned: set[int] = set()
+
+
+def _warn_dead_observers(watchers: Mapping[str, mp.process.BaseProcess]) -> None:
+    for n, w in watchers.items():
+        if w.exitcode is not None and w.pid not in _warned:
+            _warned.add(w.pid)
+            log.warning("observer %s ended (exit %s); the run goes on without it", n, w.exitcode)
 
 
 def _stop_children(procs: Mapping[str, mp.process.BaseProcess], *, graceful: bool) -> None:
