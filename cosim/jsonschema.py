@@ -30,7 +30,6 @@ def scenario_json_schema() -> dict:
     body = Scenario.model_json_schema(mode="validation")
     head = {
         "$schema": SCHEMA_DIALECT,
-        "$id": "https://graincosim.invalid/schema/scenario.schema.json",
         "title": "graincosim scenario",
         "description": (
             "A co-simulation scenario for perception-in-the-loop grain offloading (combine -> tractor-pulled "

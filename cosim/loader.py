@@ -73,6 +73,7 @@ class _Dumper(yaml.SafeDumper):
 
 _Dumper.add_implicit_resolver("tag:yaml.org,2002:int", _INT_12, list("-+0123456789"))
 _Dumper.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT_12, list("-+0123456789."))
+_Dumper.add_representer(list, lambda dumper, seq: dumper.represent_sequence("tag:yaml.org,2002:seq", seq, flow_style=True))
 
 Loc = tuple  # path into the data: str keys and int list indices
 _INVALID = object()  # a node already reported as a problem: left out of the data (its field keeps its default)
@@ -374,6 +375,22 @@ def _existing(data, loc: Loc) -> Loc:
     return found
 
 
+def _clean_loc(data, loc: Loc) -> Loc:
+    """``loc`` without pydantic's union-member tags (e.g. ``function-after[...]``): keep the parts that exist in
+    ``data``, identifier-like names and the last part (a missing or unknown key)."""
+    out: Loc = ()
+    node = data
+    for i, part in enumerate(loc):
+        if isinstance(node, (dict, list)) and _existing(node, (part,)):
+            node = node[part]
+        elif isinstance(part, str) and not _KEY.match(part) and i < len(loc) - 1:
+            continue
+        else:
+            node = None
+        out += (part,)
+    return out
+
+
 def _at(data, loc: Loc):
     for part in loc:
         data = data[part]
@@ -382,7 +399,7 @@ def _at(data, loc: Loc):
 
 def _error_problem(err: dict, doc: _Doc) -> Problem:
     kind, msg = err["type"], err["msg"]
-    loc = tuple(p for p in err["loc"] if isinstance(p, int) or _KEY.match(p))
+    loc = _clean_loc(doc.data, tuple(err["loc"]))
     found = _existing(doc.data, loc)
     node = _at(doc.data, found)
     root = doc.values[()]
@@ -445,18 +462,19 @@ def load_scenario_text(
         got = "an empty document" if doc.data is None else f"a {type(doc.data).__name__}"
         doc.problem(doc.values[()], (), f"the top level of a scenario must be a mapping, got {got}")
         _finish(doc, filename)
+    version = doc.data.get("format_version")
+    if isinstance(version, int) and not isinstance(version, bool) and version != FORMAT_VERSION:
+        # another format: its keys may mean other things, so checking them against this one only misleads
+        mark = doc.values.get(("format_version",), doc.values[()])
+        doc.problem(mark, ("format_version",), f"unsupported format_version {version}; this version of graincosim "
+                    f"reads format_version: {FORMAT_VERSION} (nothing else was checked)")
+        _finish(doc, filename)
     for i, text_i in enumerate(overrides, start=1):
         _apply_set(doc, text_i, i)
     _apply_extra(doc, extra or {})
     if base_dir is None:
         base_dir = Path(filename).parent if Path(filename).is_file() else Path.cwd()
     _resolve_paths(doc, Path(base_dir).resolve())
-    version = doc.data.get("format_version")
-    if isinstance(version, int) and not isinstance(version, bool) and version != FORMAT_VERSION:
-        mark = doc.values.get(("format_version",), doc.values[()])
-        doc.problem(mark, ("format_version",), f"unsupported format_version {version}; this version of graincosim "
-                    f"reads format_version: {FORMAT_VERSION} (nothing else was checked)")
-        _finish(doc, filename)
     try:
         scenario = Scenario.model_validate_json(json.dumps(doc.data))
     except ValidationError as e:
@@ -496,6 +514,6 @@ def resolve_scenario_arg(arg: str | os.PathLike) -> Path:
 def dump_resolved(scenario: Scenario) -> str:
     """The fully resolved scenario (every field, defaults included) as YAML; loading it gives an equal Scenario."""
     body = yaml.dump(scenario.model_dump(mode="json"), Dumper=_Dumper, sort_keys=False, allow_unicode=True,
-                     default_flow_style=None, width=120)
+                     default_flow_style=False, width=120)
     return f"# fully resolved scenario '{scenario.name}' (every field, defaults included)\n{body}"
 

@@ -33,15 +33,15 @@ class Controller(Model):
     runs while the predicted impact lies at least ``safe_margin_m`` inside every inner wall (it stops when it
     comes closer than ``safe_margin_m - safety_hysteresis_m``). A target section that gives no valid
     measurement for ``stale_timeout_s`` while it is being filled is treated as full (so nothing overfills
-    blind). ``estimator``: ``paper`` takes the per-section peak of the 3 x 3 median-filtered map; ``fused``
-    first fills holes with each cell's last valid value.
+    blind). ``estimator``: ``paper`` takes the per-section robust peak (highest 2 x 2 block minimum) of the
+    map; ``fused`` first fills holes with each cell's last valid value.
     """
 
     target_fill_m: PosFloat = 1.9
     strategy: Literal["front_to_back", "back_to_front", "lowest_first"] = "front_to_back"
     sections: int = Field(default=9, ge=1, le=64)
     grid_cell_m: PosFloat = 0.1
-    full_fraction: Fraction = 0.98
+    full_fraction: Fraction = 0.995
     estimator: Literal["paper", "fused"] = "paper"
     safe_margin_m: NonNegFloat = 0.3
     safety_hysteresis_m: NonNegFloat = 0.1

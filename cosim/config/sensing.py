@@ -103,8 +103,14 @@ class Sensor(Model):
 
 
 class Perception(Model):
-    """Offloading perception: cart boundary, height map, impact location."""
+    """Offloading perception: LiDAR resampling, cart boundary, height map, impact location, accuracy.
+
+    ``sampler``: ``planar`` interpolates inverse depth inside continuous 2 x 2 pixel patches (exact on planes,
+    never across an edge); ``nearest`` is the paper's nearest pixel. ``accuracy_every_frames``: compare with
+    an exact ray cast of the same scene every that many frames (0: never); truth never feeds the estimates.
+    """
 
     min_points_per_cell: int = Field(default=1, ge=1)
-    rim_ransac_iterations: int = Field(default=200, ge=1)
     impact_search_radius_m: PosFloat = 0.6
+    sampler: Literal["planar", "nearest"] = "planar"
+    accuracy_every_frames: int = Field(default=10, ge=0, le=1_000_000)

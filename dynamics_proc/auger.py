@@ -1,0 +1,180 @@
+"""Unloading auger: spout pose, flow with spool-up / run-out, the ballistic stream and its first surface.
+
+Spout (combine body frame): pivot + length * (cos e cos s, cos e sin s, sin e), s = swing (from +x towards
++y), e = elevation. Grain leaves the spout at ``exit_speed_mps`` relative to the combine, horizontally along
+the swing direction and ``exit_down_deg`` below the horizontal. A particle released s seconds ago sits at
+spout + v_exit s + g s^2 / 2 in a frame moving with the combine: that parabola is the stream's instantaneous
+shape, and where it first meets a surface at the cart's current pose is where grain lands now.
+
+Surfaces, in the cart grid frame (z up from the floor): inside the interior the grain surface h(x, y) (the
+floor where h = 0); a band ``max(wall_thickness, rim_width)`` wide around the interior at the rim top; the
+ground at z = -floor_height beyond. Impacts on the band or the ground are spill.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from cosim.config import Scenario
+
+__all__ = ["GRAVITY_MPS2", "STREAM_ROWS", "SURFACE_NONE", "SURFACE_GRAIN", "SURFACE_WALL", "SURFACE_GROUND",
+           "AugerParams", "spout_world", "exit_velocity_world", "flow_advance", "Impact", "first_surface",
+           "stream_rows", "landing_point"]
+
+GRAVITY_MPS2 = 9.80665
+#: rows of the ``stream`` block (CONTRACTS.md)
+STREAM_ROWS = 64
+#: coarse samples along the parabola, then two refinements of the crossing interval with this many each
+_COARSE, _FINE = 128, 64
+SURFACE_NONE, SURFACE_GRAIN, SURFACE_WALL, SURFACE_GROUND = 0, 1, 2, 3
+
+
+@dataclass(frozen=True)
+class AugerParams:
+    """Auger geometry (combine body frame, m, rad), flow (m^3/s) and the cart surfaces the stream can hit."""
+
+    pivot: tuple[float, float, float]
+    arm: tuple[float, float, float]          # pivot -> spout, combine body frame, m
+    exit_dir: tuple[float, float, float]     # unit exit direction, combine body frame
+    exit_speed_mps: float
+    flow_m3ps: float
+    spool_up_s: float
+    run_out_s: float
+    stream_radius_m: float
+    length_m: float                          # cart interior, m
+    width_m: float
+    band_m: float                            # wall / rim band width around the interior, m
+    rim_top_m: float                         # rim top above the floor, m
+    floor_height_m: float                    # floor above the ground, m
+
+    @classmethod
+    def from_scenario(cls, s: Scenario) -> "AugerParams":
+        a, c = s.auger, s.cart
+        sw, el, dn = math.radians(a.swing_deg), math.radians(a.elevation_deg), math.radians(a.exit_down_deg)
+        arm = (a.length_m * math.cos(el) * math.cos(sw), a.length_m * math.cos(el) * math.sin(sw),
+               a.length_m * math.sin(el))
+        ed = (math.cos(dn) * math.cos(sw), math.cos(dn) * math.sin(sw), -math.sin(dn))
+        return cls(tuple(a.pivot_xyz_m), arm, ed, a.exit_speed_mps, a.flow_m3ps, a.spool_up_s, a.run_out_s,
+                   a.stream_radius_m, c.interior_length_m, c.interior_width_m,
+                   max(c.wall_thickness_m, c.rim_width_m), c.interior_depth_m + c.rim_height_m, c.floor_height_m)
+
+
+def spout_world(cx: float, cy: float, cyaw: float, a: AugerParams) -> np.ndarray:
+    """Spout position (3,) float64, world m, for the combine body pose (cx m, cy m, cyaw rad)."""
+    bx, by, bz = (a.pivot[i] + a.arm[i] for i in range(3))
+    c, s = math.cos(cyaw), math.sin(cyaw)
+    return np.array([cx + c * bx - s * by, cy + s * bx + c * by, bz])
+
+
+def exit_velocity_world(cyaw: float, a: AugerParams) -> np.ndarray:
+    """Exit velocity relative to the combine (3,) float64, world axes, m/s."""
+    ex, ey, ez = a.exit_dir
+    c, s = math.cos(cyaw), math.sin(cyaw)
+    return a.exit_speed_mps * np.array([c * ex - s * ey, s * ex + c * ey, ez])
+
+
+def flow_advance(level: float, on: bool, dt: float, a: AugerParams) -> tuple[float, float]:
+    """Advance the flow level (0..1, fraction of ``flow_m3ps``) over ``dt`` s: a linear ramp up over
+    ``spool_up_s`` while on, down over ``run_out_s`` while off. Returns (new level, delivered volume m^3),
+    the volume being the exact integral of flow_m3ps * level(t) over the step."""
+    ramp = a.spool_up_s if on else a.run_out_s
+    bound = 1.0 if on else 0.0
+    if ramp <= 0.0:
+        return bound, a.flow_m3ps * bound * dt
+    rate = (1.0 if on else -1.0) / ramp
+    t_b = min(dt, (bound - level) / rate)                    # time to reach the bound (>= 0)
+    integral = level * t_b + 0.5 * rate * t_b * t_b + bound * (dt - t_b)
+    new = level + rate * t_b if t_b < dt else bound
+    return new, a.flow_m3ps * integral
+
+
+@dataclass(frozen=True)
+class Impact:
+    """Where the stream meets the first surface: world point (3,) m, grid point (3,) m, time of flight s,
+    surface code (SURFACE_*)."""
+
+    world: np.ndarray
+    grid: np.ndarray
+    time_s: float
+    surface: int
+
+
+def _surface(pts: np.ndarray, h: np.ndarray, cell: float, a: AugerParams) -> tuple[np.ndarray, np.ndarray]:
+    """Surface height (n,) m (grid frame) under grid points (n, 3) and its code (n,) int."""
+    x, y = pts[:, 0], pts[:, 1]
+    inside = (x >= 0.0) & (x < a.length_m) & (y >= 0.0) & (y < a.width_m)
+    band = (x >= -a.band_m) & (x < a.length_m + a.band_m) & (y >= -a.band_m) & (y < a.width_m + a.band_m)
+    z = np.where(band, a.rim_top_m, -a.floor_height_m)
+    code = np.where(band, SURFACE_WALL, SURFACE_GROUND)
+    if inside.any():
+        i = (x[inside] / cell).astype(np.int64)
+        j = (y[inside] / cell).astype(np.int64)
+        np.minimum(i, h.shape[0] - 1, out=i)
+        np.minimum(j, h.shape[1] - 1, out=j)
+        z[inside] = h[i, j]
+        code[inside] = SURFACE_GRAIN
+    return z, code
+
+
+def _points(spout: np.ndarray, vel: np.ndarray, s: np.ndarray) -> np.ndarray:
+    p = spout[None, :] + vel[None, :] * s[:, None]
+    p[:, 2] -= 0.5 * GRAVITY_MPS2 * s * s
+    return p
+
+
+def first_surface(spout: np.ndarray, vel: np.ndarray, grid_from_world: np.ndarray, h: np.ndarray, cell: float,
+                  a: AugerParams) -> Impact:
+    """First crossing of the parabola spout + vel s + g s^2/2 (world, m, m/s) with the surfaces.
+
+    ``grid_from_world`` (4, 4): cart grid frame from world. ``h`` (nx, ny) grain heights m. The crossing is
+    bracketed on a coarse sampling down to the ground and refined once (time resolution ~1e-4 of the fall).
+    """
+    vz = float(vel[2])
+    z0 = float(spout[2])
+    t_ground = (vz + math.sqrt(vz * vz + 2.0 * GRAVITY_MPS2 * max(z0, 0.0))) / GRAVITY_MPS2
+    r, t = grid_from_world[:3, :3], grid_from_world[:3, 3]
+    lo, hi = 0.0, t_ground * 1.0001
+    for n in (_COARSE, _FINE):
+        s = np.linspace(lo, hi, n)
+        g = _points(spout, vel, s) @ r.T + t
+        z, _ = _surface(g, h, cell, a)
+        below = np.nonzero(g[:, 2] <= z)[0]
+        if below.size == 0:          # only possible through round-off at the ground: take the end
+            k = n - 1
+        else:
+            k = int(below[0])
+        if k == 0:
+            lo = hi = float(s[0])
+            break
+        lo, hi = float(s[k - 1]), float(s[k])
+    s_hit = np.array([hi])
+    g = _points(spout, vel, s_hit) @ r.T + t
+    # put the grid point on the surface it crossed (the bracket makes this a sub-millimetre correction)
+    z, code = _surface(g, h, cell, a)
+    g[0, 2] = z[0]
+    w = (g[0] - t) @ r
+    return Impact(world=w, grid=g[0], time_s=hi, surface=int(code[0]))
+
+
+def stream_rows(spout: np.ndarray, vel: np.ndarray, t_impact: float, radius_m: float,
+                out: np.ndarray | None = None) -> np.ndarray:
+    """The stream centreline from the spout to the impact: (STREAM_ROWS, 4) float32 rows [x, y, z, radius]
+    (world m). Written into ``out`` when given (zero copy)."""
+    s = np.linspace(0.0, t_impact, STREAM_ROWS)
+    out = np.empty((STREAM_ROWS, 4), np.float32) if out is None else out
+    out[:, :3] = _points(spout, vel, s)
+    out[:, 3] = radius_m
+    return out
+
+
+def landing_point(spout: np.ndarray, vel: np.ndarray, z_plane: float) -> np.ndarray:
+    """Where the parabola descends through the horizontal plane z = ``z_plane`` (same frame as the inputs;
+    gravity along -z), (3,) float64 m. Below the spout only; a plane above it gives the spout itself."""
+    dz = float(spout[2]) - z_plane
+    if dz <= 0.0:
+        return spout.copy()
+    vz = float(vel[2])
+    s = (vz + math.sqrt(vz * vz + 2.0 * GRAVITY_MPS2 * dz)) / GRAVITY_MPS2
+    return _points(spout, vel, np.array([s]))[0]

@@ -1,0 +1,197 @@
+"""Offloading controller: section fullness from a (possibly perceived) height map, target section, desired
+auger location, nudges of the Machine Sync setpoint, auger on/off.
+
+Runs once per sensor frame on the measurement the latency rule gives it (or none). Positions are along the
+cart grid x axis (m from the front inner wall, increasing to the rear). The four signals of the paper's
+Fig 9, all in that coordinate:
+
+* desired auger location: the target section's centre, less the predicted ballistic drift of the impact
+  along x, clipped to the safe range;
+* control effort (continuous): desired + b, where b is the slowly filtered steady-state difference between
+  where the setpoint should put the spout and where it is (zero on a straight path; compensates off-tracking);
+* nudge (actuating) signal: the spout location the nudged setpoint implies; it moves in steps of ``nudge_m``
+  no more often than ``nudge_min_interval_s``, towards the control effort, never into the unsafe range;
+* actual auger location: the spout, measured.
+
+Measurements: a height map (nxc, nyc) m on the controller grid, NaN where invalid, or None. Section heights
+are the highest NaN-ignoring 2 x 2 block minimum (a robust peak: one noisy cell cannot fake it); sections without a valid cell keep their last
+value. The auger runs only while there is a target, the predicted impact is safely inside the cart, and a
+measurement has been seen.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from cosim.config import Scenario
+
+from .grainfill import section_rows
+from .strategies import get_strategy
+
+__all__ = ["BIAS_TAU_S", "SETTLE_S", "ControllerParams", "ControllerState", "ControllerOutput",
+           "min2x2", "section_heights", "initial_controller", "controller_step"]
+
+#: time constant of the steady-state bias filter, s
+BIAS_TAU_S = 5.0
+#: the bias is only learnt this long after the last nudge (transients excluded), s
+SETTLE_S = 6.0
+#: slack on the nudge threshold (half a nudge) so that an exactly half-way error does not chatter, m
+NUDGE_SLACK_M = 1e-9
+
+
+@dataclass(frozen=True)
+class ControllerParams:
+    """Controller constants (SI), derived from the scenario."""
+
+    target_m: float
+    full_level_m: float
+    sections: int
+    length_m: float
+    width_m: float
+    grid_cell_m: float
+    nx: int
+    ny: int
+    section_start_rows: tuple[int, ...]
+    centres_m: tuple[float, ...]
+    safe_margin_m: float
+    off_margin_m: float
+    nudge_m: float
+    nudge_interval_s: float
+    stale_timeout_s: float
+    estimator: str
+    strategy: str
+    frame_dt_s: float
+
+    @classmethod
+    def from_scenario(cls, s: Scenario) -> "ControllerParams":
+        c, k = s.controller, s.cart
+        cell = c.grid_cell_m
+        nx, ny = max(1, round(k.interior_length_m / cell)), max(1, round(k.interior_width_m / cell))
+        rows = section_rows(nx, cell, k.interior_length_m, c.sections)
+        counts = np.bincount(rows, minlength=c.sections)
+        if np.any(counts == 0):
+            raise ValueError(f"controller grid ({nx} cells of {cell} m along x) leaves sections without a cell; "
+                             f"use fewer than {c.sections} sections or a finer controller.grid_cell_m")
+        get_strategy(c.strategy)
+        sl = k.interior_length_m / c.sections
+        return cls(c.target_fill_m, c.full_fraction * c.target_fill_m, c.sections, k.interior_length_m,
+                   k.interior_width_m, cell, nx, ny, tuple(int(np.searchsorted(rows, i)) for i in range(c.sections)),
+                   tuple((i + 0.5) * sl for i in range(c.sections)), c.safe_margin_m,
+                   max(c.safe_margin_m - c.safety_hysteresis_m, 0.0), s.machine_sync.nudge_m,
+                   s.machine_sync.nudge_min_interval_s, c.stale_timeout_s, c.estimator, c.strategy,
+                   s.timing.sensor_period_s)
+
+
+@dataclass(frozen=True)
+class ControllerState:
+    """Controller memory between frames."""
+
+    heights: np.ndarray          # (N,) m, last estimate per section, NaN never measured
+    last_valid_t: np.ndarray     # (N,) s, time of the last valid cell per section (-inf never)
+    forced_full: np.ndarray      # (N,) bool, sections given up as stale
+    memory: np.ndarray | None    # (nx, ny) m, last valid value per cell ("fused"), NaN never
+    target: int                  # 0-based section being filled, -1 none
+    last_nudge_t: float          # s
+    bias_m: float
+    auger_cmd: bool
+    seen: bool                   # a measurement has arrived
+    all_full: bool
+    nudges: int
+
+
+@dataclass(frozen=True)
+class ControllerOutput:
+    """What one controller step decides. ``nudge`` is -1, 0 or +1 (steps of nudge_m along grid x)."""
+
+    nudge: int
+    auger_cmd: bool
+    desired_m: float
+    effort_m: float
+    fullness: np.ndarray         # (N,) estimated height / target, NaN unknown
+
+
+def min2x2(m: np.ndarray) -> np.ndarray:
+    """NaN-ignoring minimum over each 2 x 2 block of cells (the map's last row / column repeated), (nx, ny)
+    float64 m; NaN only where the whole block is NaN. A single noisy cell cannot raise it."""
+    nx, ny = m.shape
+    q = np.empty((nx + 1, ny + 1))
+    q[:nx, :ny] = m
+    q[nx, :ny] = m[-1]
+    q[:, ny] = q[:, ny - 1]
+    return np.fmin(np.fmin(q[:-1, :-1], q[1:, :-1]), np.fmin(q[:-1, 1:], q[1:, 1:]))
+
+
+def section_heights(m: np.ndarray, p: ControllerParams) -> np.ndarray:
+    """Robust peak per section: the highest 2 x 2 block minimum, (N,) float64 m; NaN where a section has no
+    valid cell. Exact for a heap whose flat top spans 2 x 2 cells; spikes of single cells are rejected."""
+    rowmax = np.fmax.reduce(min2x2(m), axis=1)               # NaN only for all-NaN rows
+    return np.fmax.reduceat(rowmax, np.asarray(p.section_start_rows))
+
+
+def initial_controller(p: ControllerParams) -> ControllerState:
+    """State before the first measurement: nothing known, auger off."""
+    n = p.sections
+    mem = np.full((p.nx, p.ny), np.nan) if p.estimator == "fused" else None
+    return ControllerState(np.full(n, np.nan), np.full(n, -np.inf), np.zeros(n, bool), mem, -1, -np.inf, 0.0,
+                           False, False, False, 0)
+
+
+def _inside(x: float, y: float, margin: float, p: ControllerParams) -> bool:
+    return margin <= x <= p.length_m - margin and margin <= y <= p.width_m - margin
+
+
+def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np.ndarray | None,
+                    actual_x: float, impacts: tuple[tuple[float, float], ...], drift_x: float,
+                    nudge_signal: float) -> tuple[ControllerState, ControllerOutput]:
+    """One controller decision at time ``t`` s.
+
+    ``meas`` (nx, ny) m or None; ``actual_x`` spout grid x m; ``impacts`` predicted impact points (grid
+    x, y m, from the known geometry; the auger runs only while all are safely inside); ``drift_x`` predicted impact x minus spout x m; ``nudge_signal`` the spout grid x m
+    the current setpoint implies.
+    """
+    heights, last_valid, memory, seen = st.heights, st.last_valid_t, st.memory, st.seen
+    if meas is not None:
+        m = np.asarray(meas, dtype=np.float64)
+        if memory is not None:
+            memory = np.where(np.isnan(m), memory, m)
+            m = memory
+        new = section_heights(m, p)
+        ok = ~np.isnan(new)
+        heights = np.where(ok, new, heights)
+        last_valid = np.where(ok, t, last_valid)
+        seen = True
+    forced = st.forced_full
+    if (seen and st.target >= 0 and st.auger_cmd and t - last_valid[st.target] > p.stale_timeout_s
+            and not forced[st.target]):
+        forced = forced.copy()
+        forced[st.target] = True
+    with np.errstate(invalid="ignore"):
+        full = (heights >= p.full_level_m) | forced      # NaN (unknown) is not full
+    target = get_strategy(p.strategy)(full, heights, st.target) if seen else -1
+    all_full = seen and target < 0
+    lo, hi = p.safe_margin_m, p.length_m - p.safe_margin_m
+    if target >= 0:
+        desired = min(max(p.centres_m[target] - drift_x, lo - drift_x), hi - drift_x)
+    else:
+        desired = actual_x
+    bias = st.bias_m
+    if t - st.last_nudge_t >= SETTLE_S:
+        bias += (p.frame_dt_s / BIAS_TAU_S) * ((nudge_signal - actual_x) - bias)
+    effort = desired + bias
+    nudge, last_nudge, count = 0, st.last_nudge_t, st.nudges
+    err = effort - nudge_signal
+    if target >= 0 and t - st.last_nudge_t >= p.nudge_interval_s and abs(err) >= 0.5 * p.nudge_m - NUDGE_SLACK_M:
+        step = 1 if err > 0 else -1
+        landing = nudge_signal + step * p.nudge_m - bias + drift_x        # predicted impact x after the nudge
+        if lo <= landing <= hi:
+            nudge, last_nudge, count = step, t, count + 1
+    margin = p.off_margin_m if st.auger_cmd else p.safe_margin_m
+    safe = all(_inside(ix, iy, margin, p) for ix, iy in impacts)
+    auger = bool(seen and target >= 0 and safe)
+    with np.errstate(invalid="ignore"):
+        fullness = heights / p.target_m
+    new_state = replace(st, heights=heights, last_valid_t=last_valid, forced_full=forced, memory=memory,
+                        target=target, last_nudge_t=last_nudge, bias_m=bias, auger_cmd=auger, seen=seen,
+                        all_full=all_full, nudges=count)
+    return new_state, ControllerOutput(nudge, auger, desired, effort, fullness)

@@ -1,0 +1,196 @@
+"""The system model's frame step: controller -> Machine Sync + vehicles -> auger and stream -> grain fill.
+
+``World`` is the whole ground truth after a frame; :func:`step_frame` maps (world, measurement) to the next
+world over one sensor period (``steps_per_frame`` held-input steps of ``dynamics_dt_s``), and
+:func:`signals` flattens a world into the ``dyn_state`` fields. Pure: no segment, no I/O, deterministic.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from cosim.config import Scenario
+from cosim.geometry import cart_grid_from_body, invert, vehicle_pose
+
+from . import auger as ag
+from .controller import ControllerOutput, ControllerParams, ControllerState, controller_step, initial_controller
+from .grainfill import GrainGrid, deposit, initial_heights, resample, volume
+from .integrators import integrate
+from .machine_sync import SyncGains, cart_offset, sync_command
+from .vehicles import CX, CY, CYAW, DELTA, V, VehicleParams, cart_pose, initial_state, tractor_pose
+
+__all__ = ["ModelParams", "World", "initial_world", "step_frame", "truth_measurement", "signals",
+           "spout_grid", "SECTION_FIELD"]
+
+#: dyn_state field name of section k's fullness (k = 1..N)
+SECTION_FIELD = "section{k}_fullness"
+
+
+@dataclass(frozen=True)
+class ModelParams:
+    """Everything the frame step needs, derived once from the scenario."""
+
+    vehicles: VehicleParams
+    gains: SyncGains
+    auger: ag.AugerParams
+    grid: GrainGrid
+    control: ControllerParams
+    cap: np.ndarray
+    grid_from_cart_body: np.ndarray
+    method: str
+    rtol: float
+    atol: float
+    dt_s: float
+    steps: int
+    frame_dt_s: float
+    lateral_offset_m: float
+    signal_offset_m: float           # nudge signal = setpoint long + this (spout grid x at the setpoint)
+    density_kgpm3: float
+
+    @classmethod
+    def from_scenario(cls, s: Scenario) -> "ModelParams":
+        a = ag.AugerParams.from_scenario(s)
+        spout_x = a.pivot[0] + a.arm[0]
+        return cls(VehicleParams.from_scenario(s), SyncGains.from_scenario(s), a, GrainGrid.from_scenario(s),
+                   ControllerParams.from_scenario(s), GrainGrid.from_scenario(s).cap(), cart_grid_from_body(s.cart),
+                   s.integrator.method, s.integrator.rtol, s.integrator.atol, s.timing.dynamics_dt_s,
+                   s.timing.steps_per_frame, s.timing.sensor_period_s, s.machine_sync.lateral_offset_m,
+                   s.cart.interior_length_m / 2.0 - spout_x, s.crop.density)
+
+
+@dataclass(frozen=True)
+class World:
+    """Ground truth after frame ``frame`` (time ``t_s``)."""
+
+    frame: int
+    t_s: float
+    x: np.ndarray                    # (9,) vehicle state, see vehicles.py
+    flow_level: float                # 0..1
+    heights: np.ndarray              # (nx, ny) float64 m, grain grid
+    initial_m3: float
+    delivered_m3: float
+    spilled_m3: float
+    spilled_ground_m3: float         # part of the spill that never reached the interior
+    setpoint: tuple[float, float]    # Machine Sync cart offset (long, lat), m
+    ctrl: ControllerState
+    out: ControllerOutput
+    impact: ag.Impact
+    stream: np.ndarray               # (64, 4) float32 world rows [x, y, z, radius]
+    stream_points: int
+
+
+def _grid_from_world(x: np.ndarray, p: ModelParams) -> np.ndarray:
+    return p.grid_from_cart_body @ invert(vehicle_pose(*cart_pose(x, p.vehicles)))
+
+
+def spout_grid(x: np.ndarray, p: ModelParams) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(spout world (3,), exit velocity world (3,), spout grid (3,), grid_from_world (4, 4)) for state x."""
+    sp = ag.spout_world(float(x[CX]), float(x[CY]), float(x[CYAW]), p.auger)
+    vel = ag.exit_velocity_world(float(x[CYAW]), p.auger)
+    g = _grid_from_world(x, p)
+    return sp, vel, g[:3, :3] @ sp + g[:3, 3], g
+
+
+def _stream(x: np.ndarray, h: np.ndarray, level: float, active: bool,
+            p: ModelParams) -> tuple[ag.Impact, np.ndarray, int]:
+    sp, vel, _, g = spout_grid(x, p)
+    imp = ag.first_surface(sp, vel, g, h, p.grid.cell_m, p.auger)
+    rows = ag.stream_rows(sp, vel, imp.time_s, p.auger.stream_radius_m * math.sqrt(max(level, 0.0)))
+    return imp, rows, (ag.STREAM_ROWS if active else 0)
+
+
+def initial_world(s: Scenario, p: ModelParams | None = None) -> World:
+    """Frame 0: vehicles at their setpoint (plus initial errors), flat initial fill, auger off."""
+    p = p or ModelParams.from_scenario(s)
+    x = initial_state(s, p.vehicles)
+    h = initial_heights(p.grid, s.grain.initial_fill_m)
+    setpoint = (s.machine_sync.longitudinal_offset_m, s.machine_sync.lateral_offset_m)
+    imp, rows, n = _stream(x, h, 0.0, False, p)
+    _, _, spg, _ = spout_grid(x, p)
+    out = ControllerOutput(0, False, float(spg[0]), float(spg[0]), np.full(p.control.sections, np.nan))
+    return World(0, 0.0, x, 0.0, h, volume(h, p.grid), 0.0, 0.0, 0.0, setpoint, initial_controller(p.control), out,
+                 imp, rows, n)
+
+
+def truth_measurement(h: np.ndarray, p: ModelParams) -> np.ndarray:
+    """Ground-truth height map resampled to the controller grid, (nxc, nyc) float64 m."""
+    return resample(h, p.grid.cell_m, p.control.grid_cell_m, p.grid.length_m, p.grid.width_m)
+
+
+def _predicted_impacts(x: np.ndarray, p: ModelParams) -> tuple[float, tuple[float, float], tuple[float, float]]:
+    """From the known geometry: (drift along grid x m, landing grid xy at the target height, on the floor)."""
+    sp, vel, spg, g = spout_grid(x, p)
+    vg = g[:3, :3] @ vel
+    top = ag.landing_point(spg, vg, p.control.target_m)
+    floor = ag.landing_point(spg, vg, 0.0)
+    drift = 0.5 * (top[0] + floor[0]) - float(spg[0])
+    return drift, (float(top[0]), float(top[1])), (float(floor[0]), float(floor[1]))
+
+
+def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
+    """Advance the world by one sensor frame acting on ``meas`` (controller grid heights m, NaN holes) or None."""
+    x = w.x
+    _, _, spg, _ = spout_grid(x, p)
+    drift, top, floor = _predicted_impacts(x, p)
+    signal = w.setpoint[0] + p.signal_offset_m
+    # the stream lands between these two points: both must be safely inside
+    ctrl, out = controller_step(w.ctrl, p.control, w.t_s, meas, float(spg[0]), (top, floor), drift, signal)
+    setpoint = (w.setpoint[0] + out.nudge * p.control.nudge_m, w.setpoint[1])
+    level, vol = w.flow_level, 0.0
+    for _ in range(p.steps):
+        u = sync_command(x, setpoint, p.vehicles, p.gains)
+        x = integrate(p.method, x, u, p.vehicles, p.dt_s, 1, p.rtol, p.atol)
+        level, dv = ag.flow_advance(level, out.auger_cmd, p.dt_s, p.auger)
+        vol += dv
+    imp, rows, n = _stream(x, w.heights, level, vol > 0.0 or level > 0.0, p)
+    h, spill, spill_ground = w.heights, 0.0, 0.0
+    if vol > 0.0:
+        if imp.surface == ag.SURFACE_GRAIN:
+            h, spill = deposit(h, float(imp.grid[0]), float(imp.grid[1]), vol, p.grid, p.cap)
+        else:
+            spill_ground = vol
+    return replace(w, frame=w.frame + 1, t_s=(w.frame + 1) * p.frame_dt_s, x=x, flow_level=level, heights=h,
+                   delivered_m3=w.delivered_m3 + vol, spilled_m3=w.spilled_m3 + spill + spill_ground,
+                   spilled_ground_m3=w.spilled_ground_m3 + spill_ground, setpoint=setpoint, ctrl=ctrl, out=out,
+                   impact=imp, stream=rows, stream_points=n)
+
+
+def signals(w: World, p: ModelParams) -> dict[str, float]:
+    """The ``dyn_state`` fields of world ``w`` (names carry units; see blocks.py)."""
+    x, vp = w.x, p.vehicles
+    tx, ty, tyaw = tractor_pose(x, vp)
+    px, py, pyaw = cart_pose(x, vp)
+    sp, _, spg, _ = spout_grid(x, p)
+    long_m, lat_m = cart_offset(x, vp)
+    in_cart = volume(w.heights, p.grid) - w.initial_m3
+    d = {
+        "t_s": w.t_s, "frame": w.frame,
+        "combine_x_m": float(x[CX]), "combine_y_m": float(x[CY]), "combine_yaw_rad": float(x[CYAW]),
+        "combine_speed_mps": vp.combine_speed_mps,
+        "tractor_x_m": tx, "tractor_y_m": ty, "tractor_yaw_rad": tyaw, "tractor_speed_mps": float(x[V]),
+        "tractor_steer_rad": float(x[DELTA]),
+        "cart_x_m": px, "cart_y_m": py, "cart_yaw_rad": pyaw,
+        "spout_x_m": float(sp[0]), "spout_y_m": float(sp[1]), "spout_z_m": float(sp[2]),
+        "auger_on": int(w.out.auger_cmd), "flow_level": w.flow_level,
+        "flow_m3ps": w.flow_level * p.auger.flow_m3ps,
+        "impact_x_m": float(w.impact.world[0]), "impact_y_m": float(w.impact.world[1]),
+        "impact_z_m": float(w.impact.world[2]), "impact_valid": int(w.stream_points > 0),
+        "impact_surface": w.impact.surface, "impact_gx_m": float(w.impact.grid[0]),
+        "impact_gy_m": float(w.impact.grid[1]), "impact_gz_m": float(w.impact.grid[2]),
+        "stream_points": w.stream_points,
+        "desired_auger_x_m": w.out.desired_m, "control_effort_m": w.out.effort_m,
+        "nudge_m": w.setpoint[0] + p.signal_offset_m, "actual_auger_x_m": float(spg[0]),
+        "actual_auger_y_m": float(spg[1]), "nudge_cmd": w.out.nudge, "nudge_count": w.ctrl.nudges,
+        "setpoint_long_m": w.setpoint[0], "setpoint_lat_m": w.setpoint[1],
+        "offset_long_err_m": long_m - w.setpoint[0], "offset_lat_err_m": lat_m - w.setpoint[1],
+        "target_section": w.ctrl.target + 1, "all_full": int(w.ctrl.all_full),
+        "measurement_seen": int(w.ctrl.seen), "control_bias_m": w.ctrl.bias_m,
+        "delivered_m3": w.delivered_m3, "in_cart_m3": in_cart, "spilled_m3": w.spilled_m3,
+        "spilled_ground_m3": w.spilled_ground_m3, "cart_grain_m3": w.initial_m3 + in_cart,
+        "peak_height_m": float(w.heights.max()),
+    }
+    for k in range(p.control.sections):
+        d[SECTION_FIELD.format(k=k + 1)] = float(w.out.fullness[k])
+    return d

@@ -1,0 +1,158 @@
+"""Continuous vehicle model: combine on its path, tractor (kinematic bicycle with lags) towing the cart.
+
+State vector ``x`` (9,) float64, world frame (x forward at t = 0, y left, z up), SI units:
+
+====  ==========  =======================================================================
+ idx  name        meaning
+====  ==========  =======================================================================
+  0   cx          combine body origin x, m
+  1   cy          combine body origin y, m
+  2   cyaw        combine heading, rad
+  3   tx          tractor rear-axle centre x, m
+  4   ty          tractor rear-axle centre y, m
+  5   tyaw        tractor heading, rad
+  6   v           tractor speed along its heading, m/s (drivetrain lag state)
+  7   delta       tractor front steering angle, rad (steering lag state)
+  8   pyaw        cart heading, rad (single-axle trailer, axle under the interior centre)
+====  ==========  =======================================================================
+
+Input ``u`` = (v_cmd m/s, delta_cmd rad), held constant over a step (zero-order hold).
+The combine drives at constant speed on a straight line or an arc turning left (yaw rate v / R).
+Drivetrain: dv/dt = clip((v_cmd - v) / tau_d, -brake_max, accel_max); steering:
+d delta/dt = clip((delta_cmd - delta) / tau_s, -rate_max, rate_max). Trailer (hitch at distance h behind the
+rear axle, hitch-to-cart-axle distance Lt): d pyaw/dt = (v sin(tyaw - pyaw) - h r cos(tyaw - pyaw)) / Lt with
+r = v tan(delta) / wheelbase the tractor yaw rate.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from cosim.config import Scenario
+
+__all__ = [
+    "N_STATES", "CX", "CY", "CYAW", "TX", "TY", "TYAW", "V", "DELTA", "PYAW", "VehicleParams",
+    "derivative", "kinematic_derivative", "lag_exact", "cart_pose", "tractor_pose", "hitch_point",
+    "initial_state",
+]
+
+N_STATES = 9
+CX, CY, CYAW, TX, TY, TYAW, V, DELTA, PYAW = range(N_STATES)
+
+
+@dataclass(frozen=True)
+class VehicleParams:
+    """Plain-float parameters of the vehicle model (SI units), derived once from the scenario."""
+
+    combine_speed_mps: float
+    combine_yaw_rate_radps: float
+    wheelbase_m: float
+    hitch_offset_m: float
+    tow_length_m: float
+    rear_axle_x_m: float
+    drivetrain_tau_s: float
+    accel_max_mps2: float
+    brake_max_mps2: float
+    steer_tau_s: float
+    steer_max_rad: float
+    steer_rate_max_radps: float
+    max_speed_mps: float
+
+    @classmethod
+    def from_scenario(cls, s: Scenario) -> "VehicleParams":
+        c, t, k = s.combine, s.tractor, s.cart
+        yaw_rate = c.speed_mps / c.path_radius_m if c.path == "arc" else 0.0
+        return cls(
+            combine_speed_mps=c.speed_mps, combine_yaw_rate_radps=yaw_rate,
+            wheelbase_m=t.wheelbase_m, hitch_offset_m=t.hitch_offset_m,
+            tow_length_m=k.interior_length_m / 2.0 + k.wall_thickness_m + k.tongue_length_m,
+            rear_axle_x_m=t.rear_axle_x_m, drivetrain_tau_s=t.drivetrain_tau_s,
+            accel_max_mps2=t.accel_max_mps2, brake_max_mps2=t.brake_max_mps2, steer_tau_s=t.steer_tau_s,
+            steer_max_rad=math.radians(t.steer_max_deg), steer_rate_max_radps=math.radians(t.steer_rate_max_degps),
+            max_speed_mps=t.max_speed_mps,
+        )
+
+
+def _clip(a: float, lo: float, hi: float) -> float:
+    return lo if a < lo else hi if a > hi else a
+
+
+def kinematic_derivative(k: list[float], v: float, delta: float, p: VehicleParams) -> tuple[float, ...]:
+    """Time derivative of the seven kinematic states ``k`` = (cx, cy, cyaw, tx, ty, tyaw, pyaw) at the given
+    speed v (m/s) and steering angle delta (rad)."""
+    cyaw, tyaw, pyaw = k[2], k[5], k[6]
+    vc = p.combine_speed_mps
+    r = v * math.tan(delta) / p.wheelbase_m
+    rel = tyaw - pyaw
+    dp = (v * math.sin(rel) - p.hitch_offset_m * r * math.cos(rel)) / p.tow_length_m
+    return (vc * math.cos(cyaw), vc * math.sin(cyaw), p.combine_yaw_rate_radps,
+            v * math.cos(tyaw), v * math.sin(tyaw), r, dp)
+
+
+def derivative(x: np.ndarray, u: tuple[float, float], p: VehicleParams) -> np.ndarray:
+    """dx/dt (9,) float64 for state ``x`` (9,) and held input ``u`` = (v_cmd m/s, delta_cmd rad)."""
+    xs = x.tolist()
+    v, d = xs[V], xs[DELTA]
+    k = kinematic_derivative([xs[0], xs[1], xs[2], xs[3], xs[4], xs[5], xs[8]], v, d, p)
+    dv = _clip((u[0] - v) / p.drivetrain_tau_s, -p.brake_max_mps2, p.accel_max_mps2)
+    dd = _clip((u[1] - d) / p.steer_tau_s, -p.steer_rate_max_radps, p.steer_rate_max_radps)
+    return np.array([k[0], k[1], k[2], k[3], k[4], k[5], dv, dd, k[6]])
+
+
+def lag_exact(x0: float, target: float, tau: float, rate_up: float, rate_down: float, t: float) -> float:
+    """Exact solution at time ``t`` >= 0 of dx/dt = clip((target - x) / tau, -rate_down, rate_up), x(0) = x0.
+
+    While |target - x| > tau * rate the state ramps at the limiting rate; from then on it decays as
+    exp(-t / tau). Same units as x; ``tau`` s, rates in units of x per s.
+    """
+    e0 = target - x0
+    rate = rate_up if e0 >= 0.0 else rate_down
+    sign = 1.0 if e0 >= 0.0 else -1.0
+    band = tau * rate
+    ae = abs(e0)
+    if ae > band:
+        t1 = (ae - band) / rate
+        if t <= t1:
+            return x0 + sign * rate * t
+        return target - sign * band * math.exp(-(t - t1) / tau)
+    return target - e0 * math.exp(-t / tau)
+
+
+def tractor_pose(x: np.ndarray, p: VehicleParams) -> tuple[float, float, float]:
+    """Tractor body origin (x m, y m, yaw rad), world: the rear axle moved forward by -rear_axle_x_m."""
+    yaw = float(x[TYAW])
+    return (float(x[TX]) - p.rear_axle_x_m * math.cos(yaw), float(x[TY]) - p.rear_axle_x_m * math.sin(yaw), yaw)
+
+
+def hitch_point(x: np.ndarray, p: VehicleParams) -> tuple[float, float]:
+    """Hitch (x m, y m), world: ``hitch_offset_m`` behind the tractor's rear axle."""
+    yaw = float(x[TYAW])
+    return (float(x[TX]) - p.hitch_offset_m * math.cos(yaw), float(x[TY]) - p.hitch_offset_m * math.sin(yaw))
+
+
+def cart_pose(x: np.ndarray, p: VehicleParams) -> tuple[float, float, float]:
+    """Cart body origin (x m, y m, yaw rad), world: ``tow_length_m`` behind the hitch along the cart heading."""
+    hx, hy = hitch_point(x, p)
+    yaw = float(x[PYAW])
+    return (hx - p.tow_length_m * math.cos(yaw), hy - p.tow_length_m * math.sin(yaw), yaw)
+
+
+def initial_state(s: Scenario, p: VehicleParams | None = None) -> np.ndarray:
+    """State (9,) at t = 0: combine at its start pose and speed; tractor aligned with it at the Machine Sync
+    setpoint plus ``initial_*_error_m``, at combine speed, wheels straight; cart straight behind."""
+    p = p or VehicleParams.from_scenario(s)
+    cx, cy = s.combine.start_xy_m
+    yaw = math.radians(s.combine.heading_deg)
+    ms = s.machine_sync
+    # tractor rear axle offset in combine axes when the cart sits exactly at the setpoint
+    ax = ms.longitudinal_offset_m + p.tow_length_m + p.hitch_offset_m + ms.initial_long_error_m
+    ay = ms.lateral_offset_m + ms.initial_lat_error_m
+    c, sn = math.cos(yaw), math.sin(yaw)
+    x = np.zeros(N_STATES)
+    x[CX], x[CY], x[CYAW] = cx, cy, yaw
+    x[TX], x[TY], x[TYAW] = cx + c * ax - sn * ay, cy + sn * ax + c * ay, yaw
+    x[V] = p.combine_speed_mps
+    x[PYAW] = yaw
+    return x

@@ -1,0 +1,111 @@
+"""Grain height map on the controller's grid from LiDAR points and the perceived cart pose.
+
+Points go from the level frame to the cart grid frame through the perceived pose (``CartEstimate``); the
+height above the floor is z in that frame. Points within :data:`WALL_CLEAR_M` (plus 3 sigma of range noise) of
+an inner wall are dropped: they lie on the wall, not on the grain.
+
+Per cell the statistic is the *median of the lower cluster*: the median of the returns within
+:data:`CLUSTER_GAP_M` of the cell's lowest return. Why: the grain surface is single-valued, and the only
+returns above it in a cell are the falling stream's (and spill in the air). The maximum or the plain median
+would count them as grain; the bare minimum is biased low by range noise (by about 1-2 sigma for a handful of
+returns). The median of the lowest cluster rejects the stream and averages the noise.
+
+A cell whose only returns are the stream's (the stream hides the pile beneath it) has no lower cluster on the
+grain; it is found as a cell standing more than :data:`STREAM_STEP_M` above the median of its neighbourhood
+(:data:`NEIGHBOURHOOD` cells square; a grain pile at the angle of repose cannot rise that fast) and is left
+NaN: no answer rather than the stream's height. Returns more than :data:`STREAM_MIN_HEIGHT_M` above their
+cell's surface, or in such cells, are returned as stream returns for the impact search.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+
+from cosim.config import Cart
+
+__all__ = ["HeightMap", "height_map", "grid_shape", "WALL_CLEAR_M", "CLUSTER_GAP_M", "STREAM_STEP_M",
+           "STREAM_MIN_HEIGHT_M"]
+
+#: returns closer than this to an inner wall are wall returns, m
+WALL_CLEAR_M = 0.03
+#: returns within this of a cell's lowest return form its lower cluster, m
+CLUSTER_GAP_M = 0.10
+#: a cell more than this above its neighbourhood median holds only stream returns, m
+STREAM_STEP_M = 0.35
+#: a return more than this above its cell's grain surface is a stream return, m
+STREAM_MIN_HEIGHT_M = 0.15
+#: side of the square neighbourhood used for the stream-cell test, cells (odd)
+NEIGHBOURHOOD = 7
+#: returns more than this above the rim top are discarded as not grain (air, auger), m
+ABOVE_RIM_MAX_M = 3.0
+
+
+@dataclass(frozen=True)
+class HeightMap:
+    """``heights`` (nx, ny) float32 m above the cart floor, NaN where no answer; ``counts`` (nx, ny) int32
+    returns per cell; ``grid_points`` (M, 3) float64 interior points in the grid frame; ``stream`` (M,) bool
+    which of them are stream returns; ``coverage`` fraction of cells with a height."""
+
+    heights: np.ndarray
+    counts: np.ndarray
+    grid_points: np.ndarray
+    stream: np.ndarray
+    coverage: float
+
+
+def grid_shape(cart: Cart, cell_m: float) -> tuple[int, int]:
+    """(nx, ny) cells of a grid of ``cell_m`` over the cart interior (nx = round(L / cell))."""
+    return max(1, round(cart.interior_length_m / cell_m)), max(1, round(cart.interior_width_m / cell_m))
+
+
+def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart, cell_m: float,
+               min_points: int = 1, noise_sigma_m: float = 0.0, out: np.ndarray | None = None) -> HeightMap:
+    """Height map from level-frame points (N, 3) float (NaN rows invalid) and the perceived 4 x 4 pose.
+
+    ``out``: optional (nx, ny) float32 destination for the heights (filled and returned inside the result).
+    """
+    nx, ny = grid_shape(cart, cell_m)
+    L, W = cart.interior_length_m, cart.interior_width_m
+    p = np.asarray(points_level, dtype=np.float64)
+    p = p[np.isfinite(p).all(axis=1)]
+    r, t = level_from_grid[:3, :3], level_from_grid[:3, 3]
+    g = (p - t) @ r                                             # grid_from_level applied (r orthonormal)
+    clear = WALL_CLEAR_M + 3.0 * noise_sigma_m
+    top = cart.interior_depth_m + cart.rim_height_m
+    inside = ((g[:, 0] > clear) & (g[:, 0] < L - clear) & (g[:, 1] > clear) & (g[:, 1] < W - clear)
+              & (g[:, 2] > -clear) & (g[:, 2] < top + ABOVE_RIM_MAX_M))
+    g = g[inside]
+    heights = np.full((nx, ny), np.nan, np.float32) if out is None else out
+    heights.fill(np.nan)
+    counts = np.zeros((nx, ny), np.int32)
+    if g.shape[0] == 0:
+        return HeightMap(heights, counts, g, np.zeros(0, bool), 0.0)
+    i = np.minimum((g[:, 0] * (nx / L)).astype(np.int64), nx - 1)
+    j = np.minimum((g[:, 1] * (ny / W)).astype(np.int64), ny - 1)
+    cell = i * ny + j
+    order = np.lexsort((g[:, 2], cell))
+    cs, zs = cell[order], g[order, 2]
+    uniq, start, cnt = np.unique(cs, return_index=True, return_counts=True)
+    zmin = zs[start]
+    lower = zs <= np.repeat(zmin, cnt) + CLUSTER_GAP_M
+    k = np.add.reduceat(lower.astype(np.int64), start)          # lower cluster is a prefix of each cell
+    med = 0.5 * (zs[start + (k - 1) // 2] + zs[start + k // 2])
+    enough = k >= min_points
+    flat = heights.reshape(-1)
+    flat[uniq[enough]] = med[enough]
+    np.add.at(counts.reshape(-1), cell, 1)
+    # cells holding only stream returns stand far above their neighbourhood
+    half = NEIGHBOURHOOD // 2
+    pad = np.pad(heights, half, constant_values=np.nan)
+    with np.errstate(invalid="ignore"), np.testing.suppress_warnings() as sup:
+        sup.filter(RuntimeWarning)
+        neigh = np.nanmedian(sliding_window_view(pad, (NEIGHBOURHOOD, NEIGHBOURHOOD)), axis=(-2, -1))
+        stream_cell = heights > neigh + STREAM_STEP_M
+    heights[stream_cell] = np.nan
+    surface = heights.reshape(-1)[cell]
+    with np.errstate(invalid="ignore"):
+        stream = stream_cell.reshape(-1)[cell] | (g[:, 2] > surface + STREAM_MIN_HEIGHT_M)
+    coverage = float(np.count_nonzero(np.isfinite(heights)) / heights.size)
+    return HeightMap(heights, counts, g, stream, coverage)

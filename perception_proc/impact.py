@@ -1,0 +1,77 @@
+"""Impact location of the grain stream on the grain surface, from stream returns and the height map.
+
+All in the cart grid frame (m). The stream returns (``HeightMap.stream``) are clustered top-down around their
+median; the lowest :data:`FIT_SPAN_M` of the stream is fitted with a straight line x(z), y(z) (least squares;
+the stream is near vertical there). The surface height at the stream is the highest grain cell within
+``search_radius`` of the stream's foot (the pile peaks under the stream, and the cell right under it is hidden
+by the stream), capped by the lowest stream return (the stream cannot be seen below the surface). The impact
+is the fitted line at that height. No stream returns (auger off), too few, or no grain cell near the foot:
+no answer.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Impact", "find_impact", "MIN_STREAM_POINTS", "FIT_SPAN_M", "CLUSTER_RADIUS_M"]
+
+#: fewest stream returns for an answer
+MIN_STREAM_POINTS = 6
+#: height of the lowest part of the stream used for the line fit, m
+FIT_SPAN_M = 1.0
+#: stream returns farther than this (top-down) from their median are not the stream, m
+CLUSTER_RADIUS_M = 1.0
+#: below this vertical spread the stream is taken as vertical through its mean, m
+MIN_FIT_SPREAD_M = 0.2
+
+
+@dataclass(frozen=True)
+class Impact:
+    """``valid``; ``xyz`` (3,) float64 m in the grid frame (NaN when not valid); ``n_points`` stream returns
+    used; ``reason`` why there is no answer ('' when valid)."""
+
+    valid: bool
+    xyz: np.ndarray
+    n_points: int
+    reason: str
+
+
+def _none(reason: str, n: int = 0) -> Impact:
+    return Impact(False, np.full(3, np.nan), n, reason)
+
+
+def find_impact(grid_points: np.ndarray, stream: np.ndarray, heights: np.ndarray, cell_m: tuple[float, float],
+                search_radius_m: float) -> Impact:
+    """Impact point from ``grid_points`` (M, 3) grid frame, their ``stream`` flags (M,) bool, the height map
+    ``heights`` (nx, ny) m (NaN holes) with cell sizes ``cell_m`` (dx, dy) m."""
+    s = np.asarray(grid_points, dtype=np.float64)[np.asarray(stream, bool)]
+    if s.shape[0] < MIN_STREAM_POINTS:
+        return _none(f"{s.shape[0]} stream returns, need {MIN_STREAM_POINTS}", s.shape[0])
+    med = np.median(s[:, :2], axis=0)
+    s = s[np.hypot(*(s[:, :2] - med).T) <= CLUSTER_RADIUS_M]
+    if s.shape[0] < MIN_STREAM_POINTS:
+        return _none("stream returns too scattered", s.shape[0])
+    z_low = float(s[:, 2].min())
+    low = s[s[:, 2] <= z_low + FIT_SPAN_M]
+    z = low[:, 2]
+    if np.ptp(z) < MIN_FIT_SPREAD_M or low.shape[0] < 3:
+        coef_x, coef_y = (0.0, float(low[:, 0].mean())), (0.0, float(low[:, 1].mean()))
+    else:
+        coef_x = tuple(np.polyfit(z, low[:, 0], 1))
+        coef_y = tuple(np.polyfit(z, low[:, 1], 1))
+    foot = np.array([np.polyval(coef_x, z_low), np.polyval(coef_y, z_low)])
+    nx, ny = heights.shape
+    dx, dy = cell_m
+    cx = (np.arange(nx) + 0.5) * dx
+    cy = (np.arange(ny) + 0.5) * dy
+    near = (cx[:, None] - foot[0]) ** 2 + (cy[None, :] - foot[1]) ** 2 <= search_radius_m**2
+    vals = heights[near & np.isfinite(heights)]
+    if vals.size == 0:
+        return _none("no grain height near the stream foot", s.shape[0])
+    z_imp = min(float(vals.max()), z_low)
+    xyz = np.array([np.polyval(coef_x, z_imp), np.polyval(coef_y, z_imp), z_imp])
+    if not np.all(np.isfinite(xyz)) or math.isnan(z_imp):
+        return _none("fit failed", s.shape[0])
+    return Impact(True, xyz, int(s.shape[0]), "")

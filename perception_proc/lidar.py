@@ -1,0 +1,50 @@
+"""Range limits, the noise model and the point-cloud record of the simulated LiDAR.
+
+Noise (``cosim.config.Noise``): every valid return gets Gaussian range noise of ``range_sigma_m`` along its
+beam, and each beam independently drops out with probability ``dropout``. The generator is seeded from the
+scenario seed and the frame id (:func:`frame_generator`), so a run is reproducible frame by frame whatever
+order frames are computed in. Limits (``Sensor.range_min_m`` / ``range_max_m``) apply to the noisy range;
+returns outside them are invalid (NaN), never clamped.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from cosim.config import Sensor
+
+__all__ = ["frame_generator", "apply_noise_and_limits", "to_points", "NOISE_STREAM"]
+
+#: fixed third seed word that separates the LiDAR noise stream from any other use of (seed, frame)
+NOISE_STREAM = 0x4C494441  # "LIDA"
+
+
+def frame_generator(seed: int, frame: int) -> np.random.Generator:
+    """The noise generator of one frame: PCG64 seeded by (seed, frame, NOISE_STREAM)."""
+    if frame < 0:
+        raise ValueError(f"frame must be >= 0, got {frame}")
+    return np.random.default_rng([int(seed), int(frame), NOISE_STREAM])
+
+
+def apply_noise_and_limits(ranges: np.ndarray, sensor: Sensor, gen: np.random.Generator | None) -> np.ndarray:
+    """Noisy, range-limited ranges (N,) float32, m, NaN where invalid; ``ranges`` (N,) float32 is updated in
+    place and returned. ``gen`` None applies the limits only (no noise, no dropout)."""
+    r = ranges
+    noise = sensor.noise
+    if gen is not None and noise.range_sigma_m > 0.0:
+        r += gen.standard_normal(r.shape[0], dtype=np.float32) * np.float32(noise.range_sigma_m)
+    if gen is not None and noise.dropout > 0.0:
+        r[gen.random(r.shape[0], dtype=np.float32) < np.float32(noise.dropout)] = np.nan
+    with np.errstate(invalid="ignore"):
+        out = (r < np.float32(sensor.range_min_m)) | (r > np.float32(sensor.range_max_m))
+    r[out] = np.nan
+    return r
+
+
+def to_points(directions: np.ndarray, ranges: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """The ``lidar_points`` record: (N, 4) float32 rows x, y, z (sensor frame, m), range (m); NaN rows where
+    the range is NaN. ``directions`` (N, 3) unit beams, sensor frame; ``out`` optional (N, 4) float32."""
+    n = ranges.shape[0]
+    res = np.empty((n, 4), np.float32) if out is None else out
+    np.multiply(directions, ranges[:, None], out=res[:, :3], casting="unsafe")
+    res[:, 3] = ranges
+    return res

@@ -1,0 +1,118 @@
+"""The perception stage as pure functions over one frame: images -> LiDAR -> cart, height map, impact.
+
+``Perception(scenario, rig)`` precomputes everything that depends only on the rig and the pattern (beam table,
+beam-to-pixel tables, the sensor mount). ``lidar(images, frame)`` makes the frame's ranges (decode, resample,
+noise, limits); ``perceive(ranges, heading_xy)`` runs the three offloading algorithms. The participant is a thin
+shell around these two calls; tests and benchmarks call them directly.
+
+Frames: ranges and ``lidar_points`` are in the sensor frame (X right, Y up, Z forward). The algorithms work in
+the *level frame*, the sensor's parent body frame (x forward, y left, z up from flat ground):
+``level_from_sensor = mount_transform(mount) @ body_from_camera_axes()``.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from cosim.camera import Rig, beam_directions
+from cosim.config import Scenario
+from cosim.geometry import body_from_camera_axes, mount_transform
+
+from .heightmap import HeightMap, grid_shape, height_map
+from .impact import Impact, find_impact
+from .lidar import apply_noise_and_limits, frame_generator, to_points
+from .patterns import beam_table, pattern_shape
+from .resample import build_table, resample
+from .resample_offset import build_offset_table, is_offset, resample_offset
+from .rim import CartEstimate, border_beams, find_cart
+
+__all__ = ["Perception", "FrameResult"]
+
+
+@dataclass
+class FrameResult:
+    """One frame's perception. ``points`` (N, 4) float32 lidar_points record (sensor frame); ``cart``,
+    ``heightmap`` (None when there was no cart), ``impact``; ``timing_ms`` stage name -> wall ms."""
+
+    points: np.ndarray
+    cart: CartEstimate
+    heightmap: HeightMap | None
+    impact: Impact
+    timing_ms: dict[str, float] = field(default_factory=dict)
+
+
+class Perception:
+    """Per-rig precomputation and the per-frame pure pipeline."""
+
+    def __init__(self, scenario: Scenario, rig: Rig):
+        self.scenario = scenario
+        self.rig = rig
+        sensor = scenario.sensor
+        self.elevation, self.azimuth = beam_table(sensor.pattern)
+        self.directions = beam_directions(self.elevation, self.azimuth)
+        self.shape = pattern_shape(sensor.pattern)
+        self.offset = is_offset(rig)
+        if self.offset:
+            self.table = build_offset_table(rig, self.elevation, self.azimuth, self.shape)
+        else:
+            self.table = build_table(rig, self.directions)
+        self.level_from_sensor = mount_transform(sensor.mount) @ body_from_camera_axes()
+        self.grid = grid_shape(scenario.cart, scenario.controller.grid_cell_m)
+        self.cell_xy = (scenario.cart.interior_length_m / self.grid[0],
+                        scenario.cart.interior_width_m / self.grid[1])
+
+    @property
+    def n_beams(self) -> int:
+        return int(self.directions.shape[0])
+
+    def lidar(self, images: Sequence[np.ndarray], frame: int | None, out: np.ndarray | None = None) -> np.ndarray:
+        """Ranges (N,) float32 m, NaN invalid, from one depth image per rig camera (rig order). ``frame`` seeds
+        the noise (None: no noise, limits only)."""
+        codec = self.scenario.sensor.codec
+        if self.offset:
+            r = resample_offset(images, self.table, codec)
+            if out is not None:
+                out[:] = r
+                r = out
+        else:
+            r = resample(images, self.table, codec, self.scenario.perception.sampler, out=out)
+        gen = None if frame is None else frame_generator(self.scenario.seed, frame)
+        return apply_noise_and_limits(r, self.scenario.sensor, gen)
+
+    def level_points(self, ranges: np.ndarray) -> np.ndarray:
+        """Level-frame points (N, 3) float64 m of the ranges (NaN rows where invalid)."""
+        p = self.directions * ranges[:, None].astype(np.float64)
+        t = self.level_from_sensor
+        return p @ t[:3, :3].T + t[:3, 3]
+
+    def perceive(self, ranges: np.ndarray, heading_xy=(1.0, 0.0), points_out: np.ndarray | None = None,
+                 heights_out: np.ndarray | None = None) -> FrameResult:
+        """Cart, height map and impact from the frame's ranges (N,) float32. ``heading_xy``: the towing
+        direction in the level frame. ``points_out`` (N, 4) / ``heights_out`` (nx, ny): optional destinations."""
+        sc = self.scenario
+        sigma = sc.sensor.noise.range_sigma_m
+        tm: dict[str, float] = {}
+        t0 = time.perf_counter()
+        pts = to_points(self.directions, ranges, out=points_out)
+        lvl = self.level_points(ranges)
+        border = border_beams(ranges, self.shape)
+        t1 = time.perf_counter()
+        cart = find_cart(lvl, border, sc.cart, heading_xy, sigma)
+        t2 = time.perf_counter()
+        tm["points"], tm["cart"] = 1e3 * (t1 - t0), 1e3 * (t2 - t1)
+        if not cart.valid:
+            if heights_out is not None:
+                heights_out.fill(np.nan)
+            tm["heightmap"] = tm["impact"] = 0.0
+            return FrameResult(pts, cart, None, Impact(False, np.full(3, np.nan), 0, "no cart"), tm)
+        hm = height_map(lvl, cart.level_from_grid, sc.cart, sc.controller.grid_cell_m,
+                        sc.perception.min_points_per_cell, sigma, out=heights_out)
+        t3 = time.perf_counter()
+        imp = find_impact(hm.grid_points, hm.stream, hm.heights, self.cell_xy, sc.perception.impact_search_radius_m)
+        t4 = time.perf_counter()
+        tm["heightmap"], tm["impact"] = 1e3 * (t3 - t2), 1e3 * (t4 - t3)
+        return FrameResult(pts, cart, hm, imp, tm)
+

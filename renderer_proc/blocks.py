@@ -1,0 +1,48 @@
+"""The renderer's shared-memory blocks (CONTRACTS.md): one set per camera of the planned rig.
+
+* ``<cam>_depth`` image (H, W, 4) uint8: depth-encoded RGBA8 (Eqs 1-2, linear bytes), A = 255 valid;
+* ``<cam>_rgb`` image (H, W, 4) uint8: shaded image, only when something consumes it;
+* ``<cam>_zf`` array (H, W) float32: planar depth m, NaN invalid, only with ``render.float_depth``;
+* ``render_state`` struct: the frame's simulation time, render wall time and valid-pixel fraction.
+
+Sizes follow the renderer actually used (``plan_rig`` applies ``render.mock_scale`` for the mock).
+"""
+from __future__ import annotations
+
+from cosim.config.scenario import Scenario
+from shm_schema import ArrayBlock, Block, Field, StructBlock, image_block
+
+from .rig import plan_rig
+
+__all__ = ["declare_blocks", "wants_rgb", "WRITER", "STATE_BLOCK"]
+
+#: writer name of every renderer block
+WRITER = "renderer"
+#: name of the renderer's status struct
+STATE_BLOCK = "render_state"
+
+
+def wants_rgb(scenario: Scenario) -> bool:
+    """Whether the shaded image is rendered: ``render.rgb == "on"``, or ``"auto"`` with a viewer."""
+    return scenario.render.rgb == "on" or (scenario.render.rgb == "auto" and scenario.viewer)
+
+
+def declare_blocks(scenario: Scenario) -> list[Block]:
+    """The renderer's blocks for ``scenario`` (empty when the scenario runs no renderer)."""
+    if not scenario.needs_renderer:
+        return []
+    blocks: list[Block] = [StructBlock(STATE_BLOCK, WRITER, (
+        Field("t_s", "s", doc="simulation time of the rendered state"),
+        Field("render_ms", "ms", doc="wall time of the frame: scene update, every camera, reads"),
+        Field("valid_fraction", "", doc="fraction of depth pixels with a valid hit, all cameras"),
+    ), doc="renderer status per frame")]
+    rgb = wants_rgb(scenario)
+    for cam in plan_rig(scenario).cameras:
+        h, w = cam.intrinsics.height, cam.intrinsics.width
+        blocks.append(image_block(f"{cam.name}_depth", WRITER, h, w, doc="depth-encoded RGBA8, Eqs 1-2"))
+        if rgb:
+            blocks.append(image_block(f"{cam.name}_rgb", WRITER, h, w, doc="shaded RGBA8"))
+        if scenario.render.float_depth:
+            blocks.append(ArrayBlock(f"{cam.name}_zf", WRITER, "f4", (h, w), unit="m",
+                                     doc="planar depth, NaN invalid"))
+    return blocks

@@ -1,0 +1,252 @@
+"""The OpenGL renderer (moderngl, headless EGL): the paper's Unreal side.
+
+Importing this module does not touch GL: moderngl is imported inside :func:`create_gl_context`. Per camera it
+owns one framebuffer of renderbuffers (no textures, so nothing can mipmap or filter them, and no MSAA):
+
+* attachment 0: RGBA8UI, the encoded depth bytes written by ``shaders/encode.frag``;
+* optional RGBA8 shaded image (``rgb``) and R32F planar depth (``float_depth``, NaN where invalid);
+* a depth renderbuffer for visibility only (the encoded value comes from view-space z, never from it).
+
+The image is flipped in the projection (``renderer_proc.projection``), so ``read_into`` fills a top-down
+(H, W, 4) destination, e.g. a shared-memory view, directly.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cosim.camera import Rig
+from cosim.config.sensing import Codec
+from cosim.errors import RendererUnavailable
+
+from .heightfield import grid_triangles, grid_vertices, padded_heights
+from .meshes import INSTANCE_FLOATS, box_instances, cylinder_instances, pack_instances, unit_cube, unit_cylinder
+from .projection import NEAR_M, far_plane_m, gl_projection, gl_view
+from .scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
+
+__all__ = ["create_gl_context", "GLRenderer", "SHADER_DIR", "GL_REQUIRE"]
+
+#: directory of the GLSL sources
+SHADER_DIR = Path(__file__).with_name("shaders")
+#: minimum OpenGL version (x 100)
+GL_REQUIRE = 330
+_MUTE = "Run with --renderer mock (scenario key renderer: mock) to use the numpy ray caster instead."
+
+
+def create_gl_context(backend: str = "egl") -> Any:
+    """A standalone headless moderngl context; :class:`RendererUnavailable` naming the cause if none."""
+    try:
+        import moderngl
+    except ImportError as exc:  # pragma: no cover - moderngl is a dependency
+        raise RendererUnavailable(f"moderngl cannot be imported ({exc}). {_MUTE}") from exc
+    try:
+        return moderngl.create_context(standalone=True, backend=backend, require=GL_REQUIRE)
+    except Exception as exc:  # moderngl raises plain Exception subclasses for every driver failure
+        raise RendererUnavailable(
+            f"no OpenGL >= {GL_REQUIRE / 100:.1f} context could be made (standalone, backend {backend!r}): "
+            f"{exc}. {_MUTE}") from exc
+
+
+def _source(name: str) -> str:
+    return (SHADER_DIR / name).read_text()
+
+
+def _fragment_source(rgb: bool, float_depth: bool) -> str:
+    head, body = _source("encode.frag").split("\n", 1)
+    defines = []
+    loc = 1
+    if rgb:
+        defines.append(f"#define OUT_RGB {loc}")
+        loc += 1
+    if float_depth:
+        defines.append(f"#define OUT_ZF {loc}")
+    return "\n".join([head, *defines, body])
+
+
+def _mat(m: np.ndarray) -> bytes:
+    """A numpy 4 x 4 as GLSL column-major float32 bytes."""
+    return np.asarray(m, dtype=np.float32).T.tobytes()
+
+
+@dataclass
+class _Target:
+    """One camera's framebuffers: ``draw`` has every attachment; ``clears`` pairs a framebuffer with its
+    clear colour (integer, float and unorm attachments are cleared separately)."""
+
+    draw: Any
+    clears: list
+    size: tuple[int, int]
+    proj: bytes
+    rgb_attachment: int
+    zf_attachment: int
+
+
+class GLRenderer:
+    """Renders :class:`Scene` frames for every camera of ``rig``. ``set_scene`` uploads a frame (instance
+    buffers, grain heights), ``draw(k, world_from_camera)`` renders camera k, ``read_*`` read it out."""
+
+    def __init__(self, rig: Rig, codec: Codec, *, rgb: bool = False, float_depth: bool = False,
+                 context: Any = None):
+        import moderngl
+
+        self.rig, self.codec, self.rgb, self.float_depth = rig, codec, rgb, float_depth
+        self.ctx = context if context is not None else create_gl_context()
+        ctx = self.ctx
+        frag = _fragment_source(rgb, float_depth)
+        self.prog_inst = ctx.program(vertex_shader=_source("instanced.vert"), fragment_shader=frag)
+        self.prog_hf = ctx.program(vertex_shader=_source("heightfield.vert"), fragment_shader=frag)
+        for prog in (self.prog_inst, self.prog_hf):
+            self._set(prog, "u_alpha_cm", codec.alpha_cm)
+            self._set(prog, "u_beta_cm", codec.beta_cm)
+            self._set(prog, "u_gamma", codec.gamma)
+            self._set(prog, "u_mishandled", int(codec.gamma_mode == "mishandled"))
+        self._set(self.prog_hf, "u_colour", GRAIN_COLOUR)
+        self._unit = {}
+        for key, (v, f) in {"box": unit_cube(), "cyl": unit_cylinder()}.items():
+            vbo, ibo = ctx.buffer(v.tobytes()), ctx.buffer(f.tobytes())
+            inst = ctx.buffer(reserve=64 * INSTANCE_FLOATS * 4, dynamic=True)
+            vao = ctx.vertex_array(self.prog_inst, [(vbo, "3f", "in_pos"), self._instance_format(inst)],
+                                   index_buffer=ibo, index_element_size=4)
+            self._unit[key] = [vao, inst, 0]
+        self._meshes: dict[str, list] = {}
+        self._mesh_names: list[str] = []
+        self._hf = None
+        far = far_plane_m(codec.max_depth_m)
+        self.targets = [self._target(c.intrinsics, far) for c in rig.cameras]
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.BLEND)
+        # the projection flips the image vertically, which turns counter-clockwise (outward) faces clockwise
+        ctx.front_face = "cw"
+        self._cull = moderngl.CULL_FACE
+
+    def _instance_format(self, buf) -> tuple:
+        """Instance attribute binding; the colour is skipped when the shader has optimised it out (no rgb)."""
+        if "in_colour" in self.prog_inst:
+            return (buf, "16f 3f/i", "in_model", "in_colour")
+        return (buf, "16f 12x/i", "in_model")
+
+    @staticmethod
+    def _set(prog, name: str, value) -> None:
+        if name in prog:
+            prog[name].value = value
+
+    def _target(self, cam, far: float) -> _Target:
+        ctx, size = self.ctx, (cam.width, cam.height)
+        depth = ctx.depth_renderbuffer(size)
+        enc = ctx.renderbuffer(size, 4, dtype="u1")
+        atts, clears = [enc], [(ctx.framebuffer([enc], depth), (0.0, 0.0, 0.0, 0.0))]
+        rgb_at = zf_at = -1
+        if self.rgb:
+            rb = ctx.renderbuffer(size, 4, dtype="f1")
+            rgb_at = len(atts)
+            atts.append(rb)
+            clears.append((ctx.framebuffer([rb]), SKY_RGBA))
+        if self.float_depth:
+            rb = ctx.renderbuffer(size, 1, dtype="f4")
+            zf_at = len(atts)
+            atts.append(rb)
+            clears.append((ctx.framebuffer([rb]), (float("nan"),) * 4))
+        return _Target(ctx.framebuffer(atts, depth), clears, size, _mat(gl_projection(cam, NEAR_M, far)),
+                       rgb_at, zf_at)
+
+    def _upload(self, key: str, records: np.ndarray) -> None:
+        vao, buf, _ = self._unit[key]
+        data = np.ascontiguousarray(records, dtype=np.float32)
+        if data.nbytes > buf.size:
+            buf.orphan(data.nbytes)
+        if data.nbytes:
+            buf.write(data)
+        self._unit[key][2] = len(data)
+
+    def _heightfield(self, scene: Scene) -> None:
+        hf = scene.heightfield
+        hp = padded_heights(np.asarray(hf.heights, dtype=np.float32))
+        if self._hf is None or self._hf[2] != hp.shape:
+            nx, ny = hf.heights.shape
+            xy = self.ctx.buffer(grid_vertices(nx, ny, hf.cell_m, hf.length_m, hf.width_m).tobytes())
+            hbuf = self.ctx.buffer(reserve=hp.nbytes, dynamic=True)
+            ibo = self.ctx.buffer(grid_triangles(nx, ny).tobytes())
+            vao = self.ctx.vertex_array(self.prog_hf, [(xy, "2f", "in_xy"), (hbuf, "1f", "in_h")],
+                                        index_buffer=ibo, index_element_size=4)
+            self._hf = (vao, hbuf, hp.shape)
+        self._hf[1].write(np.ascontiguousarray(hp))
+        self.prog_hf["u_model"].write(_mat(hf.world_from_grid))
+
+    def _mesh(self, mesh) -> None:
+        if mesh.name not in self._meshes:
+            vbo = self.ctx.buffer(mesh.vertices.astype(np.float32).tobytes())
+            ibo = self.ctx.buffer(mesh.faces.astype(np.int32).tobytes())
+            inst = self.ctx.buffer(reserve=INSTANCE_FLOATS * 4, dynamic=True)
+            vao = self.ctx.vertex_array(self.prog_inst, [(vbo, "3f", "in_pos"), self._instance_format(inst)],
+                                        index_buffer=ibo, index_element_size=4)
+            self._meshes[mesh.name] = [vao, inst]
+        self._meshes[mesh.name][1].write(pack_instances(mesh.world_from_mesh[None], np.array([mesh.colour])))
+
+    def set_scene(self, scene: Scene) -> None:
+        """Upload one frame: box / cylinder instance records, mesh poses, the grain heights (a buffer write)."""
+        self._upload("box", box_instances(scene.boxes))
+        self._upload("cyl", cylinder_instances(scene.cylinders))
+        self._heightfield(scene)
+        for mesh in scene.meshes:
+            self._mesh(mesh)
+        self._mesh_names = [m.name for m in scene.meshes]
+
+    def draw(self, k: int, world_from_camera: np.ndarray) -> None:
+        """Render camera ``k`` of the rig at pose ``world_from_camera`` (4 x 4) into its framebuffer."""
+        t = self.targets[k]
+        for fbo, colour in t.clears:
+            fbo.clear(*colour, depth=1.0)
+        t.draw.use()
+        view = gl_view(world_from_camera)
+        for prog in (self.prog_inst, self.prog_hf):
+            prog["u_view"].write(_mat(view))
+            prog["u_proj"].write(t.proj)
+            self._set(prog, "u_light", tuple(view[:3, :3] @ SUN_WORLD))
+        # closed, outward-wound solids and the height field (seen from above only) cull their back faces;
+        # mesh files have unknown winding and are drawn two-sided
+        self.ctx.enable(self._cull)
+        for vao, _, n in self._unit.values():
+            if n:
+                vao.render(instances=n)
+        if self._hf is not None:
+            self._hf[0].render()
+        self.ctx.disable(self._cull)
+        for name in self._mesh_names:
+            self._meshes[name][0].render(instances=1)
+
+    @staticmethod
+    def _check(out: np.ndarray, shape: tuple, dtype) -> None:
+        if out.shape != shape or out.dtype != np.dtype(dtype) or not out.flags.c_contiguous:
+            raise ValueError(f"destination must be C-contiguous {shape} {np.dtype(dtype)}, got {out.shape} "
+                             f"{out.dtype} (contiguous: {out.flags.c_contiguous})")
+
+    def read_depth(self, k: int, out: np.ndarray) -> None:
+        """Read camera k's encoded bytes into ``out`` (H, W, 4) uint8 in place (e.g. a shared-memory view)."""
+        t = self.targets[k]
+        self._check(out, (t.size[1], t.size[0], 4), np.uint8)
+        t.draw.read_into(out, components=4, attachment=0, alignment=1, dtype="u1")
+
+    def read_rgb(self, k: int, out: np.ndarray) -> None:
+        """Read camera k's shaded image into ``out`` (H, W, 4) uint8 in place."""
+        t = self.targets[k]
+        if t.rgb_attachment < 0:
+            raise ValueError("this renderer was made without the rgb output")
+        self._check(out, (t.size[1], t.size[0], 4), np.uint8)
+        t.draw.read_into(out, components=4, attachment=t.rgb_attachment, alignment=1, dtype="f1")
+
+    def read_zf(self, k: int, out: np.ndarray) -> None:
+        """Read camera k's planar depth into ``out`` (H, W) float32 m (NaN invalid) in place."""
+        t = self.targets[k]
+        if t.zf_attachment < 0:
+            raise ValueError("this renderer was made without the float depth output")
+        self._check(out, (t.size[1], t.size[0]), np.float32)
+        t.draw.read_into(out, components=1, attachment=t.zf_attachment, alignment=1, dtype="f4")
+
+    def close(self) -> None:
+        """Release the GL context and everything made in it."""
+        if self.ctx is not None:
+            self.ctx.release()
+            self.ctx = None

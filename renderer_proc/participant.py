@@ -1,0 +1,125 @@
+"""The renderer ring member: reads the dynamics state, renders every camera, writes the image blocks.
+
+Thin shell (STYLE.md 3): ``start`` makes the backend (GL context or the numpy mock) and binds the segment's
+views; ``step(frame)`` checks the state's frame stamp, rebuilds the :class:`~renderer_proc.scene.Scene`,
+uploads it (poses as instance records, grain heights as a buffer write), then per camera draws and reads
+straight into the shared-memory blocks under their seqlocks.
+"""
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from cosim.config.scenario import Scenario
+from cosim.errors import FrameMismatch
+
+from .blocks import STATE_BLOCK, WRITER, wants_rgb
+from .projection import camera_poses
+from .rig import plan_rig
+from .scene import scene_from_state
+
+if TYPE_CHECKING:
+    from shm_schema.segment import Segment
+
+__all__ = ["RendererParticipant", "create", "make_backend", "INPUT_BLOCKS"]
+
+#: blocks the renderer reads (written by dynamics)
+INPUT_BLOCKS = ("dyn_state", "heightmap_truth", "stream")
+_MS_PER_S = 1000.0
+
+
+def make_backend(scenario: Scenario, rig, context: Any = None):
+    """The backend ``scenario.renderer`` names: ``GLRenderer`` ("gl", imports moderngl now) or ``MockRenderer``
+    ("mock", no GL). Raises RendererUnavailable when no GL context can be made."""
+    opts = dict(rgb=wants_rgb(scenario), float_depth=scenario.render.float_depth)
+    if scenario.renderer == "gl":
+        from .gl_backend import GLRenderer
+
+        return GLRenderer(rig, scenario.sensor.codec, context=context, **opts)
+    if scenario.renderer == "mock":
+        from .mock_backend import MockRenderer
+
+        return MockRenderer(rig, scenario.sensor.codec, **opts)
+    raise ValueError(f"scenario.renderer is {scenario.renderer!r}: this scenario runs no renderer")
+
+
+class RendererParticipant:
+    """Ring member ``renderer``. Create with :func:`create`; the ring calls start, step, close."""
+
+    name = WRITER
+
+    def __init__(self, scenario: Scenario):
+        self.scenario = scenario
+        self.rig = plan_rig(scenario)
+        self.backend = None
+        self.segment: "Segment | None" = None
+        self.rgb = wants_rgb(scenario)
+        self.last_ms = float("nan")
+
+    def start(self, segment: "Segment") -> None:
+        """Bind the input and output views, then make the backend (GL context creation happens here)."""
+        for name in INPUT_BLOCKS:
+            if not segment.has(name):
+                raise KeyError(f"renderer needs block {name!r} (written by dynamics), absent from this run")
+        self.segment = segment
+        self._state = segment.view("dyn_state")
+        self._heights = segment.view("heightmap_truth")
+        self._stream = segment.view("stream")
+        self._outputs = []
+        for cam in self.rig.cameras:
+            outs = {"depth": f"{cam.name}_depth"}
+            if self.rgb:
+                outs["rgb"] = f"{cam.name}_rgb"
+            if self.scenario.render.float_depth:
+                outs["zf"] = f"{cam.name}_zf"
+            for block in outs.values():
+                segment.view(block)            # raises KeyError naming the missing block
+            self._outputs.append(outs)
+        self.backend = make_backend(self.scenario, self.rig)
+
+    def step(self, frame: int) -> None:
+        """Render frame ``frame``: the dynamics state S(frame) into the images I(frame)."""
+        seg = self.segment
+        if seg is None or self.backend is None:
+            raise RuntimeError("renderer stepped before start")
+        got = seg.frame_of("dyn_state")
+        if got != frame:
+            raise FrameMismatch(f"renderer expected dyn_state of frame {frame}, found frame {got}",
+                                process=WRITER, frame=frame)
+        t0 = time.perf_counter()
+        state = self._state.as_dict()
+        scene = scene_from_state(self.scenario, state, self._heights, self._stream)
+        self.backend.set_scene(scene)
+        valid = total = 0
+        for k, pose in enumerate(camera_poses(self.scenario, state, self.rig)):
+            self.backend.draw(k, pose)
+            outs = self._outputs[k]
+            with seg.write(outs["depth"], frame) as img:
+                self.backend.read_depth(k, img)
+                valid += int(np.count_nonzero(img[..., 3]))
+                total += img.shape[0] * img.shape[1]
+            if "rgb" in outs:
+                with seg.write(outs["rgb"], frame) as img:
+                    self.backend.read_rgb(k, img)
+            if "zf" in outs:
+                with seg.write(outs["zf"], frame) as zf:
+                    self.backend.read_zf(k, zf)
+        self.last_ms = (time.perf_counter() - t0) * _MS_PER_S
+        if seg.has(STATE_BLOCK):
+            with seg.write(STATE_BLOCK, frame) as st:
+                st.t_s = float(state.get("t_s", 0.0))
+                st.render_ms = self.last_ms
+                st.valid_fraction = valid / max(total, 1)
+
+    def close(self) -> None:
+        """Release the backend (the GL context). Safe to call more than once, also after a failed start."""
+        if self.backend is not None:
+            self.backend.close()
+            self.backend = None
+
+
+def create(scenario: Scenario) -> RendererParticipant:
+    """The renderer participant for ``scenario`` (backend chosen by ``scenario.renderer`` at ``start``)."""
+    return RendererParticipant(scenario)

@@ -1,0 +1,50 @@
+#version 330
+// Depth-in-colour encoding of the paper's Eqs 1-2 (DESIGN.md section 4), bit-for-bit the numpy reference
+// renderer_proc.codec.encode_depth. The encoded target is an integer RGBA8 (RGBA8UI) renderbuffer: the shader
+// writes the bytes themselves, so no float->unorm conversion, filtering or blending can touch them.
+// Linear mode: the paper's x^gamma followed by the engine's inverse gamma cancel exactly, the stored bytes are
+// round(255 x). Mishandled mode: nothing undoes the gamma, bytes are round(255 x^gamma).
+// Optional outputs are switched on by the #defines the renderer prepends (OUT_RGB, OUT_ZF with locations).
+uniform float u_alpha_cm;
+uniform float u_beta_cm;
+uniform float u_gamma;
+uniform int u_mishandled;
+uniform vec3 u_light;      // unit vector towards the light, GL view space
+in vec3 v_view;
+in vec3 v_colour;
+layout(location = 0) out uvec4 o_encoded;
+#ifdef OUT_RGB
+layout(location = OUT_RGB) out vec4 o_rgb;
+#endif
+#ifdef OUT_ZF
+layout(location = OUT_ZF) out float o_zf;
+#endif
+
+const float CM_PER_M = 100.0;
+
+uint to_byte(float x) {
+    if (u_mishandled != 0) x = pow(x, u_gamma);
+    return uint(floor(x * 255.0 + 0.5));
+}
+
+void main() {
+    float z_m = -v_view.z;            // planar camera Z, m
+    float d = z_m * CM_PER_M;         // cm
+    bool valid = d > 0.0 && d < u_alpha_cm;
+    if (valid) {
+        float x_r = min(d / u_alpha_cm, 1.0);
+        float x_b = mod(d, u_beta_cm) / u_beta_cm;
+        uint r = to_byte(x_r);
+        o_encoded = uvec4(r, r, to_byte(x_b), 255u);
+    } else {
+        o_encoded = uvec4(0u);
+    }
+#ifdef OUT_RGB
+    vec3 n = normalize(cross(dFdx(v_view), dFdy(v_view)));
+    float lambert = abs(dot(n, u_light));
+    o_rgb = vec4(v_colour * (0.35 + 0.65 * lambert), 1.0);
+#endif
+#ifdef OUT_ZF
+    o_zf = valid ? z_m : uintBitsToFloat(0x7fc00000u);
+#endif
+}

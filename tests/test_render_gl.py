@@ -1,0 +1,192 @@
+"""The GL renderer against closed forms and against the mock (numpy ray caster) on the cart scene."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cosim.camera import Pinhole, Rig, RigCamera
+from cosim.config import Scenario
+from cosim.config.sensing import Codec
+from cosim.errors import RendererUnavailable
+from cosim.geometry import make_transform, rot_x, rot_y
+from renderer_proc.codec import decode_depth, encode_depth
+from renderer_proc.mock_backend import MockRenderer
+from renderer_proc.projection import camera_poses
+from renderer_proc.sample import sample_frame
+from renderer_proc.scene import Boxes, Cylinders, HeightField, Scene, scene_from_state
+
+pytestmark = pytest.mark.gl
+CODEC = Codec()
+#: float32 interpolation of view-space z, m: far below the codec bound
+Z_TOL_M = 2e-5
+
+
+@pytest.fixture(scope="module")
+def ctx():
+    from renderer_proc.gl_backend import create_gl_context
+    try:
+        c = create_gl_context()
+    except RendererUnavailable as exc:
+        pytest.skip(str(exc))
+    yield c
+    c.release()
+
+
+def renderer(ctx, rig, codec=CODEC, **kw):
+    from renderer_proc.gl_backend import GLRenderer
+    return GLRenderer(rig, codec, context=ctx, **kw)
+
+
+def one_cam(w=96, h=64, hfov_deg=60.0) -> Rig:
+    return Rig((RigCamera("cam0", Pinhole(w, h, math.radians(hfov_deg)), np.eye(4)),))
+
+
+def box_scene(world_from_box, half) -> Scene:
+    """A single box in an otherwise empty scene (the grain field is far away and tiny)."""
+    hf = HeightField(make_transform(np.eye(3), (1e4, 1e4, 0.0)), np.zeros((2, 2), np.float32), 0.1, 0.2, 0.2)
+    return Scene(Boxes(world_from_box[None], np.array([half], float), np.ones((1, 3), np.float32)),
+                 Cylinders(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3), np.float32)), hf)
+
+
+def render(r, scene, pose=np.eye(4), k=0):
+    cam = r.rig.cameras[k].intrinsics
+    out = np.zeros((cam.height, cam.width, 4), np.uint8)
+    r.set_scene(scene)
+    r.draw(k, pose)
+    r.read_depth(k, out)
+    return out
+
+
+@pytest.mark.parametrize("dist", [0.7, 3.3, 12.0, 41.7])
+def test_fronto_parallel_plane_decodes_to_distance(ctx, dist):
+    """Camera identity pose: camera Z is world z here. A box face at z = dist fills the view."""
+    r = renderer(ctx, one_cam(), float_depth=True)
+    scene = box_scene(make_transform(np.eye(3), (0.0, 0.0, dist + 100.0)), (1e3, 1e3, 100.0))
+    img = render(r, scene)
+    assert np.all(img[..., 3] == 255)
+    d = decode_depth(img, CODEC)
+    assert np.abs(d - dist).max() <= CODEC.bound_m + Z_TOL_M
+    zf = np.zeros((64, 96), np.float32)
+    r.read_zf(0, zf)
+    np.testing.assert_allclose(zf, dist, rtol=2e-6)
+    r.close()
+
+
+@pytest.mark.parametrize("tilt_deg,axis", [(30.0, "x"), (-50.0, "y"), (65.0, "x")])
+def test_tilted_plane_matches_planar_depth_at_pixel_centres(ctx, tilt_deg, axis):
+    """Plane n . P = c (camera frame): planar depth at pixel (u, v) is Z = c / (n . ((u - w/2)/f, (h/2 - v)/f, 1)),
+    which checks the projection at the centre, edges and corners at once."""
+    cam = Pinhole(96, 64, math.radians(70.0))
+    r = renderer(ctx, Rig((RigCamera("cam0", cam, np.eye(4)),)))
+    rot = rot_x(math.radians(tilt_deg)) if axis == "x" else rot_y(math.radians(tilt_deg))
+    n = rot @ np.array([0.0, 0.0, 1.0])
+    c = 4.0
+    thick = 50.0
+    centre = n * (c + thick)
+    img = render(r, box_scene(make_transform(rot, centre), (1e3, 1e3, thick)))
+    uu, vv = cam.pixel_centres()
+    ray = np.stack([(uu - 48.0) / cam.f, (32.0 - vv) / cam.f, np.ones_like(uu)], axis=-1)
+    z = c / (ray @ n)
+    valid = (z > 0) & (z < CODEC.max_depth_m)
+    d = decode_depth(img, CODEC)
+    np.testing.assert_array_equal(np.isfinite(d), valid)
+    assert np.abs(d - z)[valid].max() <= CODEC.bound_m + Z_TOL_M * max(1.0, z[valid].max() / 10.0)
+    # the corner pixels are checked too
+    for j, i in [(0, 0), (0, 95), (63, 0), (63, 95), (32, 48)]:
+        if valid[j, i]:
+            assert abs(d[j, i] - z[j, i]) <= CODEC.bound_m + Z_TOL_M
+    r.close()
+
+
+def test_box_edges_at_projected_corners(ctx):
+    """A box seen face-on: its face covers exactly the pixels whose centres project inside it."""
+    cam = Pinhole(80, 60, math.radians(60.0))
+    r = renderer(ctx, Rig((RigCamera("cam0", cam, np.eye(4)),)))
+    img = render(r, box_scene(make_transform(np.eye(3), (0.37, -0.21, 6.5)), (0.8, 0.5, 0.5)))
+    uu, vv = cam.pixel_centres()
+    x, y = (uu - 40.0) / cam.f * 6.0, (30.0 - vv) / cam.f * 6.0
+    inside = (np.abs(x - 0.37) < 0.8) & (np.abs(y + 0.21) < 0.5)
+    np.testing.assert_array_equal(img[..., 3] == 255, inside)
+    np.testing.assert_allclose(decode_depth(img, CODEC)[inside], 6.0, atol=CODEC.bound_m + Z_TOL_M)
+    assert np.all(img[~inside] == 0)
+    r.close()
+
+
+def test_out_of_range_and_background_are_invalid(ctx):
+    r = renderer(ctx, one_cam())
+    img = render(r, box_scene(make_transform(np.eye(3), (0.0, 0.0, 150.0)), (1e3, 1e3, 100.0)))
+    assert np.all(img == 0)                           # face at 50 m = alpha: out of range, never a depth
+    r.close()
+
+
+def test_bytes_equal_numpy_encoder_both_gamma_modes(ctx):
+    for codec in (CODEC, Codec(gamma_mode="mishandled")):
+        r = renderer(ctx, one_cam(), codec=codec, float_depth=True)
+        rot = rot_x(math.radians(40.0))
+        img = render(r, box_scene(make_transform(rot, rot @ np.array([0.0, 0.0, 53.0])), (1e3, 1e3, 50.0)))
+        zf = np.zeros((64, 96), np.float32)
+        r.read_zf(0, zf)
+        ref = encode_depth(zf.astype(np.float64), codec)
+        # float32 z on a byte boundary may round either way: allow 1 in B on a handful of pixels
+        diff = np.abs(img.astype(int) - ref.astype(int))
+        assert np.all(diff[..., [0, 1, 3]] == 0)
+        assert np.mean(diff[..., 2] > 0) < 0.01 and diff[..., 2].max() <= 1
+        r.close()
+
+
+def test_read_into_fills_destination_in_place(ctx):
+    r = renderer(ctx, one_cam())
+    buf = bytearray(64 * 96 * 4 + 64)
+    dest = np.frombuffer(buf, np.uint8, 64 * 96 * 4, 64).reshape(64, 96, 4)
+    before = dest.__array_interface__["data"][0]
+    r.set_scene(box_scene(make_transform(np.eye(3), (0.0, 0.0, 105.0)), (1e3, 1e3, 100.0)))
+    r.draw(0, np.eye(4))
+    r.read_depth(0, dest)
+    assert dest.__array_interface__["data"][0] == before
+    assert np.shares_memory(dest, np.frombuffer(buf, np.uint8))
+    assert np.all(np.frombuffer(buf, np.uint8, 64 * 96 * 4, 64).reshape(64, 96, 4)[..., 3] == 255)
+    with pytest.raises(ValueError, match="C-contiguous"):
+        r.read_depth(0, np.zeros((96, 64, 4), np.uint8))
+    with pytest.raises(ValueError, match="without the rgb output"):
+        r.read_rgb(0, np.zeros((64, 96, 4), np.uint8))
+    r.close()
+
+
+def test_gl_and_mock_agree_on_cart_scene(ctx):
+    """>= 99 % of the pixels valid in both decode within 1 cm of each other (depth edges excepted), and both
+    mark the same pixels invalid: same geometry, same conventions."""
+    s = Scenario(format_version=1)
+    state, h, stream = sample_frame(s)
+    scene = scene_from_state(s, state, h, stream)
+    rig = Rig((RigCamera("cam0", Pinhole(200, 150, math.radians(70.0)), np.eye(4)),))
+    pose = camera_poses(s, state, rig)[0]
+    gl, mock = renderer(ctx, rig, rgb=True), MockRenderer(rig, CODEC)
+    a, b = np.zeros((150, 200, 4), np.uint8), np.zeros((150, 200, 4), np.uint8)
+    for rr, out in ((gl, a), (mock, b)):
+        rr.set_scene(scene)
+        rr.draw(0, pose)
+        rr.read_depth(0, out)
+    da, db = decode_depth(a, CODEC), decode_depth(b, CODEC)
+    assert np.mean(np.isfinite(da) == np.isfinite(db)) >= 0.995
+    both = np.isfinite(da) & np.isfinite(db)
+    assert both.mean() > 0.5
+    assert np.mean(np.abs(da - db)[both] <= 0.01) >= 0.99
+    rgb = np.zeros((150, 200, 4), np.uint8)
+    gl.read_rgb(0, rgb)
+    assert rgb[..., :3].std() > 10                   # a shaded picture, not a blank
+    gl.close()
+
+
+def test_no_context_error_suggests_mock(monkeypatch):
+    import moderngl
+
+    from renderer_proc.gl_backend import create_gl_context
+
+    def fail(**kw):
+        raise Exception("eglGetDisplay failed")
+
+    monkeypatch.setattr(moderngl, "create_context", fail)
+    with pytest.raises(RendererUnavailable, match=r"eglGetDisplay failed.*--renderer mock"):
+        create_gl_context()

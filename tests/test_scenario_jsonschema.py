@@ -1,0 +1,55 @@
+"""The exported JSON Schema: the committed copy is current, and it accepts and rejects what the loader does."""
+from __future__ import annotations
+
+import json
+
+import pytest
+import yaml
+
+from cosim.jsonschema import SCHEMA_DIALECT, SCHEMA_PATH, scenario_json_schema, schema_text, write_json_schema
+from cosim.loader import _Loader, packaged_scenarios
+
+
+def test_committed_schema_is_current():
+    assert SCHEMA_PATH.read_text(encoding="utf-8") == schema_text(), \
+        "cosim/schema/scenario.schema.json is stale: run `python -m cosim.jsonschema`"
+
+
+def test_schema_header_and_shape():
+    schema = scenario_json_schema()
+    assert schema["$schema"] == SCHEMA_DIALECT == "https://json-schema.org/draft/2020-12/schema"
+    assert schema["title"] == "graincosim scenario" and "format_version" in schema["description"]
+    assert schema["required"] == ["format_version"]
+    assert schema["additionalProperties"] is False
+    assert schema["properties"]["format_version"]["const"] == 1
+    assert schema["$defs"]["Timing"]["additionalProperties"] is False
+    assert schema["$defs"]["Controller"]["properties"]["strategy"]["enum"] == [
+        "front_to_back", "back_to_front", "lowest_first"]
+
+
+def test_write_json_schema(tmp_path):
+    out = write_json_schema(tmp_path / "sub" / "s.json")
+    assert json.loads(out.read_text(encoding="utf-8")) == scenario_json_schema()
+
+
+def test_packaged_scenarios_validate_against_the_schema():
+    jsonschema = pytest.importorskip("jsonschema")
+    validator = jsonschema.Draft202012Validator(scenario_json_schema())
+    validator.check_schema(validator.schema)
+    for name, path in packaged_scenarios().items():
+        data = yaml.load(path.read_text(encoding="utf-8"), Loader=_Loader)
+        assert list(validator.iter_errors(data)) == [], name
+
+
+@pytest.mark.parametrize("doc, path, fragment", [
+    ({"format_version": 1, "timing": {"sensor_rate_hz": 10}}, ["timing"], "'sensor_rate_hz' was unexpected"),
+    ({"format_version": 2}, ["format_version"], "1 was expected"),
+    ({"format_version": 1, "controller": {"strategy": "random"}}, ["controller", "strategy"], "is not one of"),
+    ({"format_version": 1, "duration_s": "10"}, ["duration_s"], "is not of type 'number'"),
+    ({"format_version": 1, "sensor": {"mount": {"xyz_m": [1, 2]}}}, ["sensor", "mount", "xyz_m"], "too short"),
+    ({"duration_s": 10.0}, [], "'format_version' is a required property"),
+])
+def test_schema_rejects_bad_documents(doc, path, fragment):
+    jsonschema = pytest.importorskip("jsonschema")
+    errors = list(jsonschema.Draft202012Validator(scenario_json_schema()).iter_errors(doc))
+    assert [(list(e.absolute_path), fragment in e.message) for e in errors] == [(path, True)], errors
