@@ -16,7 +16,7 @@ from .errors import ScenarioError
 
 __all__ = ["main", "build_parser", "VERBS"]
 
-VERBS = ("run", "validate", "schema")
+VERBS = ("run", "validate", "schema", "compare")
 EXIT_SCENARIO = 2
 
 
@@ -42,6 +42,10 @@ def build_parser() -> argparse.ArgumentParser:
     val = sub.add_parser("validate", help="validate a scenario and print the resolved result")
     _scenario_options(val)
     val.add_argument("--print", action="store_true", help="print the fully resolved scenario as YAML")
+    cmp_ = sub.add_parser("compare", help="run with ground-truth and with perception feedback; write one report")
+    _scenario_options(cmp_)
+    cmp_.add_argument("--out", type=Path, help="report directory (default runs/compare-<scenario>-<timestamp>)")
+    cmp_.add_argument("--quiet", action="store_true", help="no progress output")
     sch = sub.add_parser("schema", help="write the scenario JSON Schema")
     sch.add_argument("--out", type=Path, help="output file (default: stdout)")
     return parser
@@ -120,8 +124,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             sys.stdout.write(f"{args.scenario}: valid ({scenario.frames + 1} frames, ring "
                              f"{' -> '.join(scenario.participants)})\n")
         return 0
-    from .launcher import launch
     from .progress import ProgressPrinter
+
+    if args.verb == "compare":
+        from .compare import compare
+        from .outputs import default_run_dir
+
+        out = args.out or default_run_dir(scenario.model_copy(update={"name": f"compare-{scenario.name}"}))
+        report = compare(scenario, out, None if args.quiet else ProgressPrinter())
+        sys.stdout.write(f"report: {report}\n")
+        return 0
+    from .launcher import launch
 
     progress = None if args.quiet else ProgressPrinter()
     result = launch(scenario, args.out, progress=progress)
