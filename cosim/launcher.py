@@ -240,6 +240,13 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
         info = json.loads((run_dir / "run.json").read_text())
         info["ended"] = True
         (run_dir / "run.json").write_text(json.dumps(info, indent=2) + "\n")
+    if scenario.outputs.figures and "dyn_state" in schema and recorder is not None and recorder.frames:
+        try:
+            from .report import load_run, write_run_figures
+
+            write_run_figures(load_run(run_dir))
+        except Exception:  # noqa: BLE001 - figures are a convenience; the run's data is already written
+            log.exception("writing the run's figures failed")
     code = EXIT_OK if error is None else EXIT_INTERRUPTED if isinstance(error, RunInterrupted) else EXIT_RUN_ERROR
     log.info("run %s %s in %.2f s (exit %d)", run_dir.name, "completed" if error is None else "stopped", wall, code)
     return RunResult(run_dir, summary, error, name, code, {n: p.exitcode for n, p in procs.items()},
