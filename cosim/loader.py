@@ -8,9 +8,10 @@ YAML scalars follow the YAML 1.2 core schema: ``1e-8`` is a number, ``on``/``yes
 ``true``/``false`` are booleans, dates stay strings. Values are then validated by ``Scenario.model_validate_json``
 (strict JSON mode: ``"10"`` is not a float, ``1`` is not a bool).
 
-Overrides: ``--set a.b.c=value`` (value parsed as YAML, e.g. ``[1, 2, 3]``) reported as file ``<--set>`` (line =
-position of the override, col = column inside it); ``extra`` (from CLI options such as ``--renderer``) as file
-``<options>``. Relative paths (every field typed ``Path``) are resolved against the scenario file's directory,
+Overrides, applied in order after the file: ``--set a.b.c=value`` (value parsed as YAML, e.g. ``[1, 2, 3]``; a
+mapping value merges key by key, anything else replaces), reported as file ``<--set>`` (line = position of the
+override, col = column inside it); then ``extra`` (from CLI options such as ``--renderer``: dotted keys, plain
+values, ``None`` skipped), reported as file ``<options>``. Relative paths (every field typed ``Path``) are resolved against the scenario file's directory,
 or the working directory for values given on the command line.
 """
 from __future__ import annotations
@@ -450,8 +451,9 @@ def load_scenario_text(
 ) -> Scenario:
     """Parse, override, resolve and validate scenario ``text``; raise ScenarioError with every problem.
 
-    ``base_dir``: directory that relative paths are resolved against (default: the directory of ``filename`` if
-    it names a file, else the working directory).
+    ``overrides``: ``"PATH=VALUE"`` strings (``--set``); ``extra``: ``{"dotted.path": value}`` from other options,
+    entries whose value is None are skipped. ``base_dir``: directory that relative paths in the text are resolved
+    against (default: the directory of ``filename`` if it names a file, else the working directory).
     """
     if isinstance(overrides, str):
         raise TypeError("overrides must be a sequence of 'PATH=VALUE' strings, not one string")

@@ -20,13 +20,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import warnings
+
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from cosim.config import Cart
 
 __all__ = ["HeightMap", "height_map", "grid_shape", "WALL_CLEAR_M", "CLUSTER_GAP_M", "STREAM_STEP_M",
-           "STREAM_MIN_HEIGHT_M"]
+           "STREAM_MIN_HEIGHT_M", "HEAP_MAX_M", "STREAM_TOP_M"]
 
 #: returns closer than this to an inner wall are wall returns, m
 WALL_CLEAR_M = 0.03
@@ -38,8 +40,10 @@ STREAM_STEP_M = 0.35
 STREAM_MIN_HEIGHT_M = 0.15
 #: side of the square neighbourhood used for the stream-cell test, cells (odd)
 NEIGHBOURHOOD = 7
-#: returns more than this above the rim top are discarded as not grain (air, auger), m
-ABOVE_RIM_MAX_M = 3.0
+#: grain can heap at most this far above the rim top (a 3 m wide cart at 23-25 deg repose heaps ~0.7 m), m
+HEAP_MAX_M = 0.8
+#: stream returns are looked for up to this far above the rim top; the auger tube lies higher, m
+STREAM_TOP_M = 1.2
 
 
 @dataclass(frozen=True)
@@ -75,8 +79,9 @@ def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart
     clear = WALL_CLEAR_M + 3.0 * noise_sigma_m
     top = cart.interior_depth_m + cart.rim_height_m
     inside = ((g[:, 0] > clear) & (g[:, 0] < L - clear) & (g[:, 1] > clear) & (g[:, 1] < W - clear)
-              & (g[:, 2] > -clear) & (g[:, 2] < top + ABOVE_RIM_MAX_M))
+              & (g[:, 2] > -clear) & (g[:, 2] < top + STREAM_TOP_M))
     g = g[inside]
+    high = g[:, 2] > top + HEAP_MAX_M                           # above any heap: stream (or spill) only
     heights = np.full((nx, ny), np.nan, np.float32) if out is None else out
     heights.fill(np.nan)
     counts = np.zeros((nx, ny), np.int32)
@@ -85,7 +90,8 @@ def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart
     i = np.minimum((g[:, 0] * (nx / L)).astype(np.int64), nx - 1)
     j = np.minimum((g[:, 1] * (ny / W)).astype(np.int64), ny - 1)
     cell = i * ny + j
-    order = np.lexsort((g[:, 2], cell))
+    low = np.flatnonzero(~high)
+    order = low[np.lexsort((g[low, 2], cell[low]))]
     cs, zs = cell[order], g[order, 2]
     uniq, start, cnt = np.unique(cs, return_index=True, return_counts=True)
     zmin = zs[start]
@@ -95,17 +101,17 @@ def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart
     enough = k >= min_points
     flat = heights.reshape(-1)
     flat[uniq[enough]] = med[enough]
-    np.add.at(counts.reshape(-1), cell, 1)
+    np.add.at(counts.reshape(-1), cell[low], 1)
     # cells holding only stream returns stand far above their neighbourhood
     half = NEIGHBOURHOOD // 2
     pad = np.pad(heights, half, constant_values=np.nan)
-    with np.errstate(invalid="ignore"), np.testing.suppress_warnings() as sup:
-        sup.filter(RuntimeWarning)
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)          # all-NaN neighbourhoods give NaN: fine
         neigh = np.nanmedian(sliding_window_view(pad, (NEIGHBOURHOOD, NEIGHBOURHOOD)), axis=(-2, -1))
         stream_cell = heights > neigh + STREAM_STEP_M
     heights[stream_cell] = np.nan
     surface = heights.reshape(-1)[cell]
     with np.errstate(invalid="ignore"):
-        stream = stream_cell.reshape(-1)[cell] | (g[:, 2] > surface + STREAM_MIN_HEIGHT_M)
+        stream = high | stream_cell.reshape(-1)[cell] | (g[:, 2] > surface + STREAM_MIN_HEIGHT_M)
     coverage = float(np.count_nonzero(np.isfinite(heights)) / heights.size)
     return HeightMap(heights, counts, g, stream, coverage)

@@ -93,11 +93,13 @@ class GLRenderer:
         import moderngl
 
         self.rig, self.codec, self.rgb, self.float_depth = rig, codec, rgb, float_depth
+        self._own_ctx = context is None
+        self._made: list = []
         self.ctx = context if context is not None else create_gl_context()
         ctx = self.ctx
         frag = _fragment_source(rgb, float_depth)
-        self.prog_inst = ctx.program(vertex_shader=_source("instanced.vert"), fragment_shader=frag)
-        self.prog_hf = ctx.program(vertex_shader=_source("heightfield.vert"), fragment_shader=frag)
+        self.prog_inst = self._m(ctx.program(vertex_shader=_source("instanced.vert"), fragment_shader=frag))
+        self.prog_hf = self._m(ctx.program(vertex_shader=_source("heightfield.vert"), fragment_shader=frag))
         for prog in (self.prog_inst, self.prog_hf):
             self._set(prog, "u_alpha_cm", codec.alpha_cm)
             self._set(prog, "u_beta_cm", codec.beta_cm)
@@ -106,21 +108,25 @@ class GLRenderer:
         self._set(self.prog_hf, "u_colour", GRAIN_COLOUR)
         self._unit = {}
         for key, (v, f) in {"box": unit_cube(), "cyl": unit_cylinder()}.items():
-            vbo, ibo = ctx.buffer(v.tobytes()), ctx.buffer(f.tobytes())
-            inst = ctx.buffer(reserve=64 * INSTANCE_FLOATS * 4, dynamic=True)
-            vao = ctx.vertex_array(self.prog_inst, [(vbo, "3f", "in_pos"), self._instance_format(inst)],
-                                   index_buffer=ibo, index_element_size=4)
+            vbo, ibo = self._m(ctx.buffer(v.tobytes())), self._m(ctx.buffer(f.tobytes()))
+            inst = self._m(ctx.buffer(reserve=64 * INSTANCE_FLOATS * 4, dynamic=True))
+            vao = self._m(ctx.vertex_array(self.prog_inst, [(vbo, "3f", "in_pos"), self._instance_format(inst)],
+                                           index_buffer=ibo, index_element_size=4))
             self._unit[key] = [vao, inst, 0]
         self._meshes: dict[str, list] = {}
         self._mesh_names: list[str] = []
+        self._origin = np.zeros(3)
         self._hf = None
         far = far_plane_m(codec.max_depth_m)
         self.targets = [self._target(c.intrinsics, far) for c in rig.cameras]
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.BLEND)
-        # the projection flips the image vertically, which turns counter-clockwise (outward) faces clockwise
-        ctx.front_face = "cw"
         self._cull = moderngl.CULL_FACE
+
+    def _m(self, obj):
+        """Remember a GL object made here, to release it when the context is not ours."""
+        self._made.append(obj)
+        return obj
 
     def _instance_format(self, buf) -> tuple:
         """Instance attribute binding; the colour is skipped when the shader has optimised it out (no rgb)."""
@@ -135,21 +141,21 @@ class GLRenderer:
 
     def _target(self, cam, far: float) -> _Target:
         ctx, size = self.ctx, (cam.width, cam.height)
-        depth = ctx.depth_renderbuffer(size)
-        enc = ctx.renderbuffer(size, 4, dtype="u1")
-        atts, clears = [enc], [(ctx.framebuffer([enc], depth), (0.0, 0.0, 0.0, 0.0))]
+        depth = self._m(ctx.depth_renderbuffer(size))
+        enc = self._m(ctx.renderbuffer(size, 4, dtype="u1"))
+        atts, clears = [enc], [(self._m(ctx.framebuffer([enc], depth)), (0.0, 0.0, 0.0, 0.0))]
         rgb_at = zf_at = -1
         if self.rgb:
-            rb = ctx.renderbuffer(size, 4, dtype="f1")
+            rb = self._m(ctx.renderbuffer(size, 4, dtype="f1"))
             rgb_at = len(atts)
             atts.append(rb)
-            clears.append((ctx.framebuffer([rb]), SKY_RGBA))
+            clears.append((self._m(ctx.framebuffer([rb])), SKY_RGBA))
         if self.float_depth:
-            rb = ctx.renderbuffer(size, 1, dtype="f4")
+            rb = self._m(ctx.renderbuffer(size, 1, dtype="f4"))
             zf_at = len(atts)
             atts.append(rb)
-            clears.append((ctx.framebuffer([rb]), (float("nan"),) * 4))
-        return _Target(ctx.framebuffer(atts, depth), clears, size, _mat(gl_projection(cam, NEAR_M, far)),
+            clears.append((self._m(ctx.framebuffer([rb])), (float("nan"),) * 4))
+        return _Target(self._m(ctx.framebuffer(atts, depth)), clears, size, _mat(gl_projection(cam, NEAR_M, far)),
                        rgb_at, zf_at)
 
     def _upload(self, key: str, records: np.ndarray) -> None:
@@ -166,29 +172,34 @@ class GLRenderer:
         hp = padded_heights(np.asarray(hf.heights, dtype=np.float32))
         if self._hf is None or self._hf[2] != hp.shape:
             nx, ny = hf.heights.shape
-            xy = self.ctx.buffer(grid_vertices(nx, ny, hf.cell_m, hf.length_m, hf.width_m).tobytes())
-            hbuf = self.ctx.buffer(reserve=hp.nbytes, dynamic=True)
-            ibo = self.ctx.buffer(grid_triangles(nx, ny).tobytes())
-            vao = self.ctx.vertex_array(self.prog_hf, [(xy, "2f", "in_xy"), (hbuf, "1f", "in_h")],
-                                        index_buffer=ibo, index_element_size=4)
+            xy = self._m(self.ctx.buffer(grid_vertices(nx, ny, hf.cell_m, hf.length_m, hf.width_m).tobytes()))
+            hbuf = self._m(self.ctx.buffer(reserve=hp.nbytes, dynamic=True))
+            ibo = self._m(self.ctx.buffer(grid_triangles(nx, ny).tobytes()))
+            vao = self._m(self.ctx.vertex_array(self.prog_hf, [(xy, "2f", "in_xy"), (hbuf, "1f", "in_h")],
+                                                index_buffer=ibo, index_element_size=4))
             self._hf = (vao, hbuf, hp.shape)
         self._hf[1].write(np.ascontiguousarray(hp))
-        self.prog_hf["u_model"].write(_mat(hf.world_from_grid))
+        local = hf.world_from_grid.copy()
+        local[:3, 3] -= self._origin
+        self.prog_hf["u_model"].write(_mat(local))
 
     def _mesh(self, mesh) -> None:
         if mesh.name not in self._meshes:
-            vbo = self.ctx.buffer(mesh.vertices.astype(np.float32).tobytes())
-            ibo = self.ctx.buffer(mesh.faces.astype(np.int32).tobytes())
-            inst = self.ctx.buffer(reserve=INSTANCE_FLOATS * 4, dynamic=True)
-            vao = self.ctx.vertex_array(self.prog_inst, [(vbo, "3f", "in_pos"), self._instance_format(inst)],
-                                        index_buffer=ibo, index_element_size=4)
+            vbo = self._m(self.ctx.buffer(mesh.vertices.astype(np.float32).tobytes()))
+            ibo = self._m(self.ctx.buffer(mesh.faces.astype(np.int32).tobytes()))
+            inst = self._m(self.ctx.buffer(reserve=INSTANCE_FLOATS * 4, dynamic=True))
+            vao = self._m(self.ctx.vertex_array(self.prog_inst, [(vbo, "3f", "in_pos"), self._instance_format(inst)],
+                                                index_buffer=ibo, index_element_size=4))
             self._meshes[mesh.name] = [vao, inst]
-        self._meshes[mesh.name][1].write(pack_instances(mesh.world_from_mesh[None], np.array([mesh.colour])))
+        self._meshes[mesh.name][1].write(pack_instances(mesh.world_from_mesh[None], np.array([mesh.colour]),
+                                                           self._origin))
 
     def set_scene(self, scene: Scene) -> None:
         """Upload one frame: box / cylinder instance records, mesh poses, the grain heights (a buffer write)."""
-        self._upload("box", box_instances(scene.boxes))
-        self._upload("cyl", cylinder_instances(scene.cylinders))
+        # GPU coordinates are relative to the cart grid origin (float64 here, float32 there)
+        self._origin = scene.heightfield.world_from_grid[:3, 3].copy()
+        self._upload("box", box_instances(scene.boxes, self._origin))
+        self._upload("cyl", cylinder_instances(scene.cylinders, self._origin))
         self._heightfield(scene)
         for mesh in scene.meshes:
             self._mesh(mesh)
@@ -201,6 +212,10 @@ class GLRenderer:
             fbo.clear(*colour, depth=1.0)
         t.draw.use()
         view = gl_view(world_from_camera)
+        view[:3, 3] += view[:3, :3] @ self._origin          # view @ world_from_local, in float64
+        # the projection flips the image vertically, which turns counter-clockwise (outward) faces clockwise;
+        # a pose with right-handed camera axes (det +1, e.g. in tests) mirrors them back
+        self.ctx.front_face = "cw" if np.linalg.det(view[:3, :3]) > 0.0 else "ccw"
         for prog in (self.prog_inst, self.prog_hf):
             prog["u_view"].write(_mat(view))
             prog["u_proj"].write(t.proj)
@@ -246,7 +261,13 @@ class GLRenderer:
         t.draw.read_into(out, components=1, attachment=t.zf_attachment, alignment=1, dtype="f4")
 
     def close(self) -> None:
-        """Release the GL context and everything made in it."""
-        if self.ctx is not None:
+        """Release the GL context (when this renderer made it), else every object made in it."""
+        if self.ctx is None:
+            return
+        if self._own_ctx:
             self.ctx.release()
-            self.ctx = None
+        else:
+            for obj in reversed(self._made):
+                obj.release()
+        self._made.clear()
+        self.ctx = None

@@ -42,18 +42,24 @@ def unit_cylinder(sides: int = CYLINDER_SIDES) -> tuple[np.ndarray, np.ndarray]:
     return v.astype(np.float32), np.concatenate([side, caps]).astype(np.int32)
 
 
-def pack_instances(world_from_unit: np.ndarray, colour: np.ndarray) -> np.ndarray:
-    """(N, 4, 4) matrices and (N, 3) colours -> (N, 19) float32 records (matrix column-major)."""
+def pack_instances(world_from_unit: np.ndarray, colour: np.ndarray, origin=None) -> np.ndarray:
+    """(N, 4, 4) matrices and (N, 3) colours -> (N, 19) float32 records (matrix column-major).
+
+    ``origin`` (3,) m, optional: subtracted from the translations in float64 before the cast to float32, so
+    the GPU works in coordinates near the scene (float32 keeps ~1 um at 10 m, only ~15 um at 200 m)."""
+    world_from_unit = np.array(world_from_unit, dtype=np.float64)
+    if origin is not None:
+        world_from_unit[:, :3, 3] -= np.asarray(origin, dtype=np.float64)
     m = np.transpose(world_from_unit, (0, 2, 1)).reshape(-1, 16)
     return np.concatenate([m, np.asarray(colour).reshape(-1, 3)], axis=1).astype(np.float32)
 
 
-def box_instances(boxes: Boxes) -> np.ndarray:
-    """(N, 19) float32 instance records of the unit cube for ``boxes``."""
+def box_instances(boxes: Boxes, origin=None) -> np.ndarray:
+    """(N, 19) float32 instance records of the unit cube for ``boxes`` (relative to ``origin``, m)."""
     scale = np.zeros((len(boxes), 4, 4))
     scale[:, [0, 1, 2], [0, 1, 2]] = boxes.half_extents
     scale[:, 3, 3] = 1.0
-    return pack_instances(boxes.world_from_box @ scale, boxes.colour)
+    return pack_instances(boxes.world_from_box @ scale, boxes.colour, origin)
 
 
 def orthonormal_frames(axis: np.ndarray) -> np.ndarray:
@@ -65,8 +71,8 @@ def orthonormal_frames(axis: np.ndarray) -> np.ndarray:
     return np.stack([x, np.cross(z, x), z], axis=2)
 
 
-def cylinder_instances(cyl: Cylinders) -> np.ndarray:
-    """(M, 19) float32 instance records of the unit cylinder for ``cyl``."""
+def cylinder_instances(cyl: Cylinders, origin=None) -> np.ndarray:
+    """(M, 19) float32 instance records of the unit cylinder for ``cyl`` (relative to ``origin``, m)."""
     m = len(cyl)
     if m == 0:
         return np.zeros((0, INSTANCE_FLOATS), np.float32)
@@ -76,4 +82,4 @@ def cylinder_instances(cyl: Cylinders) -> np.ndarray:
         [cyl.radius, cyl.radius, np.linalg.norm(axis, axis=1)], axis=1)[:, None, :]
     t[:, :3, 3] = cyl.p0
     t[:, 3, 3] = 1.0
-    return pack_instances(t, cyl.colour)
+    return pack_instances(t, cyl.colour, origin)

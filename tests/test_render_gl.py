@@ -21,6 +21,9 @@ pytestmark = pytest.mark.gl
 CODEC = Codec()
 #: float32 interpolation of view-space z, m: far below the codec bound
 Z_TOL_M = 2e-5
+#: relative float32 error of perspective-correct interpolation across triangles hundreds of metres wide
+#: (the ground slab); measured 1.1e-5 on a 2 km face, 1e-6 on a 200 m face
+Z_TOL_REL = 2e-5
 
 
 @pytest.fixture(scope="module")
@@ -44,8 +47,8 @@ def one_cam(w=96, h=64, hfov_deg=60.0) -> Rig:
 
 
 def box_scene(world_from_box, half) -> Scene:
-    """A single box in an otherwise empty scene (the grain field is far away and tiny)."""
-    hf = HeightField(make_transform(np.eye(3), (1e4, 1e4, 0.0)), np.zeros((2, 2), np.float32), 0.1, 0.2, 0.2)
+    """A single box in an otherwise empty scene (the grain field is tiny and behind the camera)."""
+    hf = HeightField(make_transform(np.eye(3), (0.0, 0.0, -5.0)), np.zeros((2, 2), np.float32), 0.1, 0.2, 0.2)
     return Scene(Boxes(world_from_box[None], np.array([half], float), np.ones((1, 3), np.float32)),
                  Cylinders(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3), np.float32)), hf)
 
@@ -70,7 +73,7 @@ def test_fronto_parallel_plane_decodes_to_distance(ctx, dist):
     assert np.abs(d - dist).max() <= CODEC.bound_m + Z_TOL_M
     zf = np.zeros((64, 96), np.float32)
     r.read_zf(0, zf)
-    np.testing.assert_allclose(zf, dist, rtol=2e-6)
+    np.testing.assert_allclose(zf, dist, atol=Z_TOL_M)
     r.close()
 
 
@@ -85,14 +88,14 @@ def test_tilted_plane_matches_planar_depth_at_pixel_centres(ctx, tilt_deg, axis)
     c = 4.0
     thick = 50.0
     centre = n * (c + thick)
-    img = render(r, box_scene(make_transform(rot, centre), (1e3, 1e3, thick)))
+    img = render(r, box_scene(make_transform(rot, centre), (400.0, 400.0, thick)))
     uu, vv = cam.pixel_centres()
     ray = np.stack([(uu - 48.0) / cam.f, (32.0 - vv) / cam.f, np.ones_like(uu)], axis=-1)
     z = c / (ray @ n)
     valid = (z > 0) & (z < CODEC.max_depth_m)
     d = decode_depth(img, CODEC)
     np.testing.assert_array_equal(np.isfinite(d), valid)
-    assert np.abs(d - z)[valid].max() <= CODEC.bound_m + Z_TOL_M * max(1.0, z[valid].max() / 10.0)
+    assert np.all(np.abs(d - z)[valid] <= CODEC.bound_m + Z_TOL_M + Z_TOL_REL * z[valid])
     # the corner pixels are checked too
     for j, i in [(0, 0), (0, 95), (63, 0), (63, 95), (32, 48)]:
         if valid[j, i]:

@@ -38,11 +38,15 @@ def test_problems_are_sorted_by_line_then_overrides():
     ]
 
 
-def test_missing_nested_key_points_at_parent_section():
-    # a tuple field given as a mapping-less list is checked item by item; a missing key in a section that is
-    # given reports the section's key line
+def test_short_tuple_is_reported_once_at_the_list():
     got = problems("format_version: 1\nsensor:\n  mount:\n    xyz_m: [1.0]\n")
     assert [(p.line, p.col, p.path, p.message) for p in got] == [(4, 12, "sensor.mount.xyz_m", "expected 3 items, got 1")]
+
+
+def test_missing_key_points_at_its_mapping():
+    got = problems("# a comment first\n\n  name: x\n  seed: 1\n")
+    assert [(p.line, p.col, p.path) for p in got] == [(3, 3, "format_version")]
+    assert got[0].message.startswith("missing required key 'format_version'")
 
 
 def test_duplicate_key_inside_a_list_of_mappings_and_deep_nesting():

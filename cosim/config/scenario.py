@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-from pydantic import Field, ValidationInfo, field_validator, model_validator
+from pydantic import Field, ValidationInfo, field_validator
 
 from .base import Model, NonNegFloat, PosFloat
 from .control import Controller, Grain, Integrator
@@ -35,14 +35,17 @@ class Timing(Model):
     handoff_timeout_s: PosFloat = 30.0
     startup_timeout_s: PosFloat = 120.0
 
-    @model_validator(mode="after")
-    def _ratio(self) -> "Timing":
-        if _integer_ratio(self.sensor_period_s, self.dynamics_dt_s) is None:
+    @field_validator("dynamics_dt_s")
+    @classmethod
+    def _ratio(cls, dt: float, info: ValidationInfo) -> float:
+        # a field validator (after sensor_period_s) so the loader reports it at the dynamics_dt_s line
+        period = info.data.get("sensor_period_s")
+        if period is not None and _integer_ratio(period, dt) is None:
             raise ValueError(
-                f"sensor_period_s / dynamics_dt_s = {self.sensor_period_s / self.dynamics_dt_s:g} is not an "
-                "integer >= 1; choose a dynamics step that divides the sensor period"
+                f"sensor_period_s / dynamics_dt_s = {period / dt:g} is not an integer >= 1; choose a dynamics "
+                "step that divides the sensor period"
             )
-        return self
+        return dt
 
     @property
     def steps_per_frame(self) -> int:
@@ -93,6 +96,33 @@ class Scenario(Model):
         if renderer == "none" and info.data.get("feedback") == "perception":
             raise ValueError("feedback 'perception' needs a renderer ('gl' or 'mock'), not 'none'")
         return renderer
+
+    # cross-section checks are field validators on the later section (cart comes before grain and controller),
+    # so that each is reported at that section's line and even when unrelated sections are invalid
+    @field_validator("grain")
+    @classmethod
+    def _grain_fits_cart(cls, grain: Grain, info: ValidationInfo) -> Grain:
+        cart = info.data.get("cart")
+        if cart is not None and grain.initial_fill_m > cart.interior_depth_m:
+            raise ValueError(f"initial_fill_m ({grain.initial_fill_m:g}) is above the wall top "
+                             f"(cart.interior_depth_m = {cart.interior_depth_m:g}): the cart would already overflow")
+        return grain
+
+    @field_validator("controller")
+    @classmethod
+    def _controller_fits_cart(cls, controller: Controller, info: ValidationInfo) -> Controller:
+        cart = info.data.get("cart")
+        if cart is None:
+            return controller
+        if controller.target_fill_m > cart.interior_depth_m:
+            raise ValueError(f"target_fill_m ({controller.target_fill_m:g}) is above the wall top "
+                             f"(cart.interior_depth_m = {cart.interior_depth_m:g}): grain that high spills")
+        cells = max(1, round(cart.interior_length_m / controller.grid_cell_m))  # as the controller grids the cart
+        if cells < controller.sections:
+            raise ValueError(f"{controller.sections} sections need at least one grid cell each, but "
+                             f"cart.interior_length_m / grid_cell_m gives {cells}; use fewer sections or a finer "
+                             "grid_cell_m")
+        return controller
 
     @property
     def frames(self) -> int:

@@ -1,0 +1,149 @@
+"""Cart boundary, height map and impact on synthetic point clouds with known answers (exact ray casts)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cosim.camera import beam_directions
+from cosim.config import Cart, Mount, Noise, Pattern, Sensor
+from cosim.geometry import apply, body_from_camera_axes, cart_body_from_grid, mount_transform, vehicle_pose
+from perception_proc.heightmap import grid_shape, height_map
+from perception_proc.impact import find_impact
+from perception_proc.lidar import apply_noise_and_limits, frame_generator
+from perception_proc.patterns import beam_table, pattern_shape
+from perception_proc.rim import border_beams, find_cart
+from perception_proc.synthetic import Box, cart_shapes, raycast
+
+CART = Cart()
+CELL = 0.1
+POSE = vehicle_pose(0.5, 7.4, 0.06)                 # level_from_cartbody of the true cart
+MOUNT = Mount(parent="combine", xyz_m=(0.0, 3.0, 8.0), rpy_deg=(0.0, 55.0, 90.0))
+PATTERN = Pattern(preset="grid", elevation_min_deg=-40, elevation_max_deg=30, azimuth_min_deg=-55,
+                  azimuth_max_deg=55, elevation_count=110, azimuth_count=160)
+L, W = CART.interior_length_m, CART.interior_width_m
+
+
+def heap(peak_m, gx0=3.0, gy0=1.5, base_m=0.8, slope=math.tan(math.radians(23.0))):
+    """Cone of repose on a flat bed: h = max(base, peak - slope * distance), grid frame, m."""
+    return lambda gx, gy: np.maximum(base_m, peak_m - slope * np.hypot(gx - gx0, gy - gy0))
+
+
+def scan(shapes, pattern=PATTERN, mount=MOUNT, sensor_noise=Noise(), frame=0):
+    """Ranges (N,) float32 of an exact scan, with the sensor's noise; plus the level points and border."""
+    e, a = beam_table(pattern)
+    d = beam_directions(e, a)
+    lfs = mount_transform(mount) @ body_from_camera_axes()
+    t = raycast(shapes, lfs[:3, 3], d @ lfs[:3, :3].T)
+    r = np.where(np.isfinite(t), t, np.nan).astype(np.float32)
+    sensor = Sensor(mount=mount, pattern=pattern, noise=sensor_noise, range_max_m=60.0)
+    r = apply_noise_and_limits(r, sensor, frame_generator(7, frame))
+    lvl = (d * r[:, None].astype(np.float64)) @ lfs[:3, :3].T + lfs[:3, 3]
+    return r, lvl, border_beams(r, pattern_shape(pattern))
+
+
+def true_corners(pose=POSE):
+    zr = CART.interior_depth_m + CART.rim_height_m
+    g = np.array([[0, 0, zr], [L, 0, zr], [L, W, zr], [0, W, zr]], float)
+    return apply(pose @ cart_body_from_grid(CART), g)
+
+
+def truth_grid(fn):
+    nx, ny = grid_shape(CART, CELL)
+    gx, gy = np.meshgrid((np.arange(nx) + 0.5) * CELL, (np.arange(ny) + 0.5) * CELL, indexing="ij")
+    return fn(gx, gy)
+
+
+def run(shapes, **kw):
+    r, lvl, border = scan(shapes, **kw)
+    sigma = kw.get("sensor_noise", Noise()).range_sigma_m
+    cart = find_cart(lvl, border, CART, (1.0, 0.0), sigma)
+    hm = height_map(lvl, cart.level_from_grid, CART, CELL, 1, sigma) if cart.valid else None
+    return cart, hm
+
+
+def test_empty_cart_found_and_floor_at_zero():
+    cart, hm = run(cart_shapes(CART, POSE))
+    assert cart.valid and not cart.partial
+    assert np.max(np.linalg.norm(cart.corners - true_corners(), axis=1)) < 0.03
+    assert cart.yaw_rad == pytest.approx(0.06, abs=0.01)
+    h = hm.heights
+    assert hm.coverage > 0.35                      # the near wall hides the near part of the floor
+    assert np.nanmax(np.abs(h)) < 0.03
+    imp = find_impact(hm.grid_points, hm.stream, h, (CELL, CELL), 0.6)
+    assert not imp.valid and "stream returns" in imp.reason
+
+
+def test_heaped_cart_heights_match_truth():
+    fn = heap(2.35)                                   # peak above the rim top (2.06 m above the floor)
+    cart, hm = run(cart_shapes(CART, POSE, grain_height=fn))
+    assert cart.valid
+    assert np.max(np.linalg.norm(cart.corners - true_corners(), axis=1)) < 0.05
+    truth = truth_grid(fn)
+    ok = np.isfinite(hm.heights)
+    assert ok.mean() > 0.6
+    err = hm.heights[ok] - truth[ok]
+    # cell statistic vs cell-centre truth: the cone's slope over half a cell bounds the difference
+    assert np.sqrt(np.mean(err**2)) < 0.03
+    assert np.max(np.abs(err)) < 0.12
+
+
+def test_stream_occluding_the_pile_gives_impact_and_no_stream_heights():
+    fn = heap(1.6, gx0=2.2, gy0=1.4)
+    shapes = cart_shapes(CART, POSE, grain_height=fn, stream_xy_grid=(2.2, 1.4), stream_top_m=4.8)
+    cart, hm = run(shapes)
+    assert cart.valid
+    truth = truth_grid(fn)
+    ok = np.isfinite(hm.heights)
+    assert np.max(np.abs(hm.heights[ok] - truth[ok])) < 0.15     # no stream height passed off as grain
+    imp = find_impact(hm.grid_points, hm.stream, hm.heights, (CELL, CELL), 0.6)
+    assert imp.valid
+    assert np.hypot(imp.xyz[0] - 2.2, imp.xyz[1] - 1.4) < 0.15
+    assert imp.xyz[2] == pytest.approx(1.6, abs=0.2)
+
+
+def test_noise_and_dropout_degrade_gracefully():
+    fn = heap(1.8)
+    noise = Noise(range_sigma_m=0.02, dropout=0.3)
+    cart, hm = run(cart_shapes(CART, POSE, grain_height=fn), sensor_noise=noise)
+    assert cart.valid
+    assert np.max(np.linalg.norm(cart.corners - true_corners(), axis=1)) < 0.12
+    truth = truth_grid(fn)
+    ok = np.isfinite(hm.heights)
+    assert ok.mean() > 0.4
+    assert np.sqrt(np.mean((hm.heights[ok] - truth[ok]) ** 2)) < 0.05
+
+
+def test_partly_visible_cart_is_anchored_on_the_seen_end():
+    # a narrow azimuth window cuts the cart's rear (right of the view) off
+    pat = PATTERN.model_copy(update={"azimuth_min_deg": -20.0})
+    cart, _ = run(cart_shapes(CART, POSE), pattern=pat)
+    assert cart.valid and cart.partial
+    assert np.max(np.linalg.norm(cart.corners - true_corners(), axis=1)) < 0.08
+
+
+def test_cart_cut_at_both_ends_says_no_answer():
+    pat = PATTERN.model_copy(update={"azimuth_min_deg": -12.0, "azimuth_max_deg": 12.0, "azimuth_count": 60})
+    cart, _ = run(cart_shapes(CART, POSE), pattern=pat)
+    assert not cart.valid
+    assert "no answer" in cart.reason or "rim" in cart.reason
+    assert np.isnan(cart.corners).all()
+
+
+def test_no_cart_in_view_says_no_answer():
+    cart, _ = run(cart_shapes(CART, vehicle_pose(40.0, 7.4, 0.0)))
+    assert not cart.valid and np.isnan(cart.level_from_grid).all()
+
+
+def test_roofed_box_beside_the_cart_is_not_taken_for_it():
+    # a tractor-sized box ahead of the cart whose roof is above the rim: its walls cross the rim band
+    tractor = Box((6.5, 6.1, 0.5), (11.0, 8.7, 3.3))
+    cart, _ = run(cart_shapes(CART, POSE) + [tractor])
+    assert cart.valid
+    assert np.max(np.linalg.norm(cart.corners - true_corners(), axis=1)) < 0.05
+
+
+def test_height_map_rejects_bad_pose_input_shapes():
+    hm = height_map(np.full((5, 3), np.nan), np.eye(4), CART, CELL)
+    assert hm.coverage == 0.0 and np.isnan(hm.heights).all() and hm.heights.shape == grid_shape(CART, CELL)

@@ -1,0 +1,142 @@
+"""The renderer participant over an in-process segment (mock and GL), its blocks, and GL-free imports."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from cosim.config import Scenario
+from cosim.errors import FrameMismatch, RendererUnavailable
+from renderer_proc.blocks import declare_blocks
+from renderer_proc.codec import decode_depth
+from renderer_proc.participant import create
+from renderer_proc.rig import plan_rig
+from renderer_proc.sample import sample_frame
+from shm_schema import ArrayBlock, Field, Schema, Segment, StructBlock
+
+SMALL = {"rig": "fixed", "cameras": 2, "width_px": 64, "height_px": 48, "hfov_deg": 60.0}
+
+
+def scenario(**kw) -> Scenario:
+    return Scenario.model_validate({"format_version": 1, **kw})
+
+
+def dynamics_blocks(state, heights):
+    """The dynamics blocks the renderer reads, declared with the CONTRACTS.md names."""
+    fields = tuple(Field(k, "", "i8" if k == "stream_points" else "f8") for k in state)
+    return [StructBlock("dyn_state", "dynamics", fields), ArrayBlock("heightmap_truth", "dynamics", "f4", heights.shape),
+            ArrayBlock("stream", "dynamics", "f4", (64, 4))]
+
+
+def segment_for(s: Scenario, frame: int = 0):
+    state, heights, stream = sample_frame(s)
+    seg = Segment.local(Schema(dynamics_blocks(state, heights) + declare_blocks(s), ["dynamics", "renderer"]))
+    publish(seg, state, heights, stream, frame)
+    return seg, state
+
+
+def publish(seg, state, heights, stream, frame):
+    with seg.write("dyn_state", frame) as v:
+        v.update({k: int(x) if k == "stream_points" else x for k, x in state.items()})
+    with seg.write("heightmap_truth", frame) as v:
+        v[...] = heights
+    with seg.write("stream", frame) as v:
+        v[...] = stream
+
+
+def test_blocks_follow_rig_and_options():
+    s = scenario(render={**SMALL, "float_depth": True, "rgb": "auto"}, viewer=False)
+    names = {b.name: b for b in declare_blocks(s)}
+    assert set(names) == {"render_state", "cam0_depth", "cam1_depth", "cam0_zf", "cam1_zf"}
+    assert names["cam0_depth"].shape == (48, 64, 4) and names["cam0_depth"].dtype == "|u1"
+    assert names["cam1_zf"].shape == (48, 64) and names["cam1_zf"].dtype == "<f4"
+    with_viewer = {b.name for b in declare_blocks(scenario(render=SMALL, viewer=True))}
+    assert {"cam0_rgb", "cam1_rgb"} <= with_viewer
+    assert not any(n.endswith("_rgb") for n in
+                   (b.name for b in declare_blocks(scenario(render={**SMALL, "rgb": "off"}, viewer=True))))
+    mock = scenario(renderer="mock", render={**SMALL, "mock_scale": 0.5})
+    assert {b.name: b for b in declare_blocks(mock)}["cam0_depth"].shape == (24, 32, 4)
+    assert declare_blocks(scenario(renderer="none", feedback="ground_truth")) == []
+    auto = Scenario(format_version=1)
+    cams = plan_rig(auto).cameras
+    assert [b.name for b in declare_blocks(auto) if b.name.endswith("_depth")] == [f"{c.name}_depth" for c in cams]
+
+
+@pytest.mark.parametrize("backend", ["mock", "gl"])
+def test_participant_renders_into_blocks(backend):
+    s = scenario(renderer=backend, render={**SMALL, "float_depth": True, "rgb": "on"})
+    seg, state = segment_for(s)
+    views = {n: seg.view(n) for n in ("cam0_depth", "cam1_depth", "cam0_zf", "cam0_rgb")}
+    p = create(s)
+    assert p.name == "renderer"
+    try:
+        p.start(seg)
+    except RendererUnavailable as exc:
+        pytest.skip(str(exc))
+    try:
+        p.step(0)
+        for name, v in views.items():
+            assert seg.view(name) is v                  # written in place, no new array
+            assert seg.frame_of(name) == 0
+        depth = decode_depth(views["cam0_depth"], s.sensor.codec)
+        zf = views["cam0_zf"]
+        assert np.isfinite(depth).mean() > 0.5
+        np.testing.assert_array_equal(np.isfinite(depth), np.isfinite(zf))
+        assert np.nanmax(np.abs(depth - zf)) <= s.sensor.codec.bound_m + 1e-4
+        st = seg.view("render_state")
+        assert st.render_ms > 0 and 0.5 < st.valid_fraction <= 1.0
+        with pytest.raises(FrameMismatch, match="expected dyn_state of frame 1, found frame 0"):
+            p.step(1)
+    finally:
+        p.close()
+        p.close()
+
+
+def test_gl_and_mock_participants_agree():
+    base = {"render": {**SMALL, "cameras": 1, "width_px": 120, "height_px": 90}}
+    out = {}
+    for backend in ("mock", "gl"):
+        s = scenario(renderer=backend, **base)
+        seg, _ = segment_for(s)
+        p = create(s)
+        try:
+            p.start(seg)
+        except RendererUnavailable as exc:
+            pytest.skip(str(exc))
+        p.step(0)
+        p.close()
+        out[backend] = decode_depth(seg.view("cam0_depth"), s.sensor.codec)
+    both = np.isfinite(out["gl"]) & np.isfinite(out["mock"])
+    assert np.mean(np.abs(out["gl"] - out["mock"])[both] <= 0.01) >= 0.99
+
+
+def test_missing_input_block_is_named():
+    s = scenario(renderer="mock", render=SMALL)
+    seg = Segment.local(Schema(declare_blocks(s), ["renderer"]))
+    with pytest.raises(KeyError, match="dyn_state"):
+        create(s).start(seg)
+
+
+def test_gl_unavailable_names_cause_and_mock(monkeypatch):
+    import moderngl
+
+    def fail(**kw):
+        raise Exception("libEGL not found")
+
+    monkeypatch.setattr(moderngl, "create_context", fail)
+    s = scenario(renderer="gl", render=SMALL)
+    seg, _ = segment_for(s)
+    p = create(s)
+    with pytest.raises(RendererUnavailable, match=r"libEGL not found.*--renderer mock"):
+        p.start(seg)
+    p.close()
+
+
+def test_import_never_touches_gl():
+    code = ("import sys, renderer_proc, renderer_proc.participant, renderer_proc.blocks, renderer_proc.rig, "
+            "renderer_proc.scene, renderer_proc.raycast, renderer_proc.mock_backend, renderer_proc.gl_backend\n"
+            "assert 'moderngl' not in sys.modules, 'moderngl imported'\n"
+            "assert not any(m.startswith('glcontext') for m in sys.modules)\n")
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=str(__import__("pathlib").Path(__file__).parents[1]))
