@@ -7,7 +7,6 @@ Verbs: ``run [SCENARIO]`` (the default verb; no scenario runs the packaged defau
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Sequence
@@ -99,9 +98,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         argv.insert(0, "run")
     args = build_parser().parse_args(argv)
     if args.verb == "schema":
-        from .jsonschema import scenario_json_schema
+        from .jsonschema import schema_text
 
-        text = json.dumps(scenario_json_schema(), indent=2) + "\n"
+        text = schema_text()
         if args.out:
             args.out.write_text(text)
         else:

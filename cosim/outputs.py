@@ -14,7 +14,6 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
-import yaml
 
 from .config import Scenario
 from .errors import RunError
@@ -42,8 +41,9 @@ def default_run_dir(scenario: Scenario, root: Path = Path("runs")) -> Path:
 
 def write_scenario(run_dir: Path, scenario: Scenario) -> None:
     """scenario.yaml: the fully resolved scenario (every field, defaults included)."""
-    data = scenario.model_dump(mode="json")
-    (run_dir / "scenario.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    from .loader import dump_resolved
+
+    (run_dir / "scenario.yaml").write_text(dump_resolved(scenario))
 
 
 def _clean(obj):

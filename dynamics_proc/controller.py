@@ -15,8 +15,7 @@ Fig 9, all in that coordinate:
 
 Measurements: a height map (nxc, nyc) m on the controller grid, NaN where invalid, or None. Section heights
 are the highest NaN-ignoring 2 x 2 block minimum (a robust peak: one noisy cell cannot fake it); sections without a valid cell keep their last
-value. A section counts as full once its estimate plus its measured rise rate times ``lookahead_s`` (the
-feedback delay plus half the run-out) reaches the full level. The auger runs only while there is a target
+value. A section counts as full once its estimate reaches the full level. The auger runs only while there is a target
 within one section length of the predicted impact (it travels with the auger off), the predicted impact is
 safely inside the cart, and a measurement has been seen.
 """
@@ -38,8 +37,6 @@ __all__ = ["BIAS_TAU_S", "SETTLE_S", "ControllerParams", "ControllerState", "Con
 BIAS_TAU_S = 5.0
 #: the bias is only learnt this long after the last nudge (transients excluded), s
 SETTLE_S = 6.0
-#: window over which each section's rise rate is measured, s
-RATE_WINDOW_S = 1.0
 #: slack on the nudge threshold (half a nudge) so that an exactly half-way error does not chatter, m
 NUDGE_SLACK_M = 1e-9
 
@@ -66,7 +63,6 @@ class ControllerParams:
     estimator: str
     strategy: str
     frame_dt_s: float
-    lookahead_s: float
 
     @classmethod
     def from_scenario(cls, s: Scenario) -> "ControllerParams":
@@ -85,8 +81,7 @@ class ControllerParams:
                    tuple((i + 0.5) * sl for i in range(c.sections)), c.safe_margin_m,
                    max(c.safe_margin_m - c.safety_hysteresis_m, 0.0), s.machine_sync.nudge_m,
                    s.machine_sync.nudge_min_interval_s, c.stale_timeout_s, c.estimator, c.strategy,
-                   s.timing.sensor_period_s, c.lookahead(s.timing.latency_frames, s.timing.sensor_period_s,
-                                                         s.auger.run_out_s))
+                   s.timing.sensor_period_s)
 
 
 @dataclass(frozen=True)
@@ -94,9 +89,6 @@ class ControllerState:
     """Controller memory between frames."""
 
     heights: np.ndarray          # (N,) m, last estimate per section, NaN never measured
-    rate: np.ndarray             # (N,) m/s, rise rate of each estimate over the last window (>= 0)
-    window_heights: np.ndarray   # (N,) m, estimates at the start of the current rate window
-    window_t: float              # s, start of the current rate window
     last_valid_t: np.ndarray     # (N,) s, time of the last valid cell per section (-inf never)
     forced_full: np.ndarray      # (N,) bool, sections given up as stale
     memory: np.ndarray | None    # (nx, ny) m, last valid value per cell ("fused"), NaN never
@@ -142,7 +134,7 @@ def initial_controller(p: ControllerParams) -> ControllerState:
     """State before the first measurement: nothing known, auger off."""
     n = p.sections
     mem = np.full((p.nx, p.ny), np.nan) if p.estimator == "fused" else None
-    return ControllerState(np.full(n, np.nan), np.zeros(n), np.full(n, np.nan), -np.inf, np.full(n, -np.inf), np.zeros(n, bool), mem, -1, -np.inf, 0.0,
+    return ControllerState(np.full(n, np.nan), np.full(n, -np.inf), np.zeros(n, bool), mem, -1, -np.inf, 0.0,
                            False, False, False, 0)
 
 
@@ -170,20 +162,13 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
         heights = np.where(ok, new, heights)
         last_valid = np.where(ok, t, last_valid)
         seen = True
-    rate, wh, wt = st.rate, st.window_heights, st.window_t
-    if t - wt >= RATE_WINDOW_S:
-        with np.errstate(invalid="ignore"):
-            r = (heights - wh) / (t - wt)
-        rate = np.where(np.isfinite(r), np.maximum(r, 0.0), 0.0)
-        wh, wt = heights, t
     forced = st.forced_full
     if (seen and st.target >= 0 and st.auger_cmd and t - last_valid[st.target] > p.stale_timeout_s
             and not forced[st.target]):
         forced = forced.copy()
         forced[st.target] = True
     with np.errstate(invalid="ignore"):
-        # full once the estimate, run ahead by its rise rate over the lookahead, reaches the level
-        full = (heights + rate * p.lookahead_s >= p.full_level_m) | forced      # NaN (unknown) is not full
+        full = (heights >= p.full_level_m) | forced      # NaN (unknown) is not full
     target = get_strategy(p.strategy)(full, heights, st.target) if seen else -1
     all_full = seen and target < 0
     lo, hi = p.safe_margin_m, p.length_m - p.safe_margin_m
@@ -209,7 +194,7 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
     auger = bool(seen and target >= 0 and safe and near)
     with np.errstate(invalid="ignore"):
         fullness = heights / p.target_m
-    new_state = replace(st, heights=heights, rate=rate, window_heights=wh, window_t=wt, last_valid_t=last_valid, forced_full=forced, memory=memory,
+    new_state = replace(st, heights=heights, last_valid_t=last_valid, forced_full=forced, memory=memory,
                         target=target, last_nudge_t=last_nudge, bias_m=bias, auger_cmd=auger, seen=seen,
                         all_full=all_full, nudges=count)
     return new_state, ControllerOutput(nudge, auger, desired, effort, fullness)

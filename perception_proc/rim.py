@@ -4,8 +4,10 @@ Works in the *level frame* (the sensor's parent vehicle body frame: x forward, y
 ``body_from_sensor`` is the mount, known like the GNSS pose). The cart's dimensions are known; its pose is not.
 
 1. Rim candidates: valid points within :data:`RIM_BAND_M` (plus 3 sigma of range noise) of the rim-top height.
-2. Top-down occupancy raster (:data:`RASTER_M` cells), closed morphologically so the rim ring is connected;
-   connected components (OpenCV); each gets ``cv2.minAreaRect`` of its points.
+2. Top-down occupancy raster (:data:`RASTER_M` cells), dilated so that points closer than :data:`CLOSE_M`
+   connect; connected components (OpenCV); each gets ``cv2.minAreaRect`` of its points. The rim ring still
+   breaks into pieces where the auger or the stream hides it, so pieces are merged greedily while the union
+   stays cart-sized.
 3. A component is a cart candidate when its rectangle is no larger than the cart's outer rim (plus
    :data:`SIZE_TOL_M`), spans at least :data:`MIN_SPAN_FRACTION` of the cart length, and few points inside it
    lie well above the rim (a tractor cab or roof would). The candidate with most rim points wins.
@@ -34,8 +36,8 @@ __all__ = ["CartEstimate", "find_cart", "border_beams", "RIM_BAND_M", "RASTER_M"
 RIM_BAND_M = 0.10
 #: top-down raster cell for the component search, m
 RASTER_M = 0.05
-#: closing kernel that joins rim points across small gaps, m
-CLOSE_M = 0.60
+#: dilation kernel that joins rim points across small gaps, m
+CLOSE_M = 0.40
 #: slack on the known outer rim size, m
 SIZE_TOL_M = 0.30
 #: a span within this of the known outer size counts as fully seen, m
@@ -45,7 +47,7 @@ MIN_SPAN_FRACTION = 0.35
 #: width of the strip at each end examined for border/occlusion points, m
 END_STRIP_M = 0.20
 #: fraction of end-strip points from border beams that marks the end as cut
-CUT_FRACTION = 0.3
+CUT_FRACTION = 0.15
 #: points this far above the rim top inside a rectangle count against it (a cab roof, not a stream), m
 ABOVE_RIM_M = 0.20
 #: largest fraction of inside points allowed above the rim
@@ -114,8 +116,10 @@ def _components(xy: np.ndarray) -> list[np.ndarray]:
     h, w = int(ij[:, 1].max()) + int(3 * CLOSE_M / RASTER_M), int(ij[:, 0].max()) + int(3 * CLOSE_M / RASTER_M)
     img = np.zeros((h, w), np.uint8)
     img[ij[:, 1], ij[:, 0]] = 255
+    # dilation (not closing: a disc's rim slips into one-pixel gaps of a dotted line) joins points closer
+    # than CLOSE_M; labels are read back at the points themselves
     k = max(3, int(round(CLOSE_M / RASTER_M)) | 1)
-    img = cv2.morphologyEx(img, cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
+    img = cv2.dilate(img, np.ones((k, k), np.uint8))
     n, labels = cv2.connectedComponents(img, connectivity=8)
     lab = labels[ij[:, 1], ij[:, 0]]
     order = np.argsort(lab, kind="stable")

@@ -222,12 +222,17 @@ class GLRenderer:
             self._set(prog, "u_light", tuple(view[:3, :3] @ SUN_WORLD))
         # closed, outward-wound solids and the height field (seen from above only) cull their back faces;
         # mesh files have unknown winding and are drawn two-sided
+        # drawn roughly front to back (stream and auger, grain, then boxes with the ground slab last) so that
+        # early depth rejection skips most hidden fragments
         self.ctx.enable(self._cull)
-        for vao, _, n in self._unit.values():
-            if n:
-                vao.render(instances=n)
+        vao, _, n = self._unit["cyl"]
+        if n:
+            vao.render(instances=n)
         if self._hf is not None:
             self._hf[0].render()
+        vao, _, n = self._unit["box"]
+        if n:
+            vao.render(instances=n)
         self.ctx.disable(self._cull)
         for name in self._mesh_names:
             self._meshes[name][0].render(instances=1)

@@ -88,6 +88,15 @@ def test_yaml_12_scalars():
     assert s.render.rgb == "on" and s.name == "2024-01-01" and s.description == "yes" and s.seed == 16
 
 
+def test_rate_ratio_is_reported_with_other_problems_of_its_section():
+    got = problems("format_version: 1\ntiming:\n  sensor_period_s: 0.1\n  dynamics_dt_s: 0.04\n  latency_frames: x\n")
+    assert [(p.line, p.col, p.path) for p in got] == [(4, 18, "timing.dynamics_dt_s"), (5, 19, "timing.latency_frames")]
+    assert "= 2.5 is not an integer >= 1" in got[0].message
+    # the default dynamics step against a period it does not divide: reported at the section
+    got = problems("format_version: 1\ntiming:\n  sensor_period_s: 0.015\n")
+    assert [(p.line, p.col, p.path) for p in got] == [(2, 1, "timing.dynamics_dt_s")]
+
+
 def test_strict_json_mode_types():
     got = problems("format_version: 1\nduration_s: '30'\nviewer: 0\nseed: 1.0\ncombine: {start_xy_m: 5}\n")
     assert [p.path for p in got] == ["duration_s", "viewer", "seed", "combine.start_xy_m"]
@@ -114,7 +123,7 @@ def test_later_overrides_win_and_mappings_merge():
 
 def test_set_value_error_reports_the_override_position():
     got = problems("format_version: 1\n", ["timing={sensor_period_s: 0.1, dynamics_dt_s: 0.03}"])
-    assert [(p.file, p.line, p.col, p.path) for p in got] == [(SET_FILE, 1, 1, "timing")]
+    assert [(p.file, p.line, p.col, p.path) for p in got] == [(SET_FILE, 1, 46, "timing.dynamics_dt_s")]
     got = problems("format_version: 1\n", ["seed=1", "timing={sensor_period_s: -1}"])
     assert [(p.file, p.line, p.col, p.path) for p in got] == [(SET_FILE, 2, 26, "timing.sensor_period_s")]
 

@@ -46,14 +46,6 @@ class Controller(Model):
     safe_margin_m: NonNegFloat = 0.3
     safety_hysteresis_m: NonNegFloat = 0.1
     stale_timeout_s: PosFloat = 10.0
-    lookahead_s: NonNegFloat | None = None
-
-    def lookahead(self, latency_frames: int, sensor_period_s: float, run_out_s: float) -> float:
-        """Prediction horizon of the full test, s: ``lookahead_s``, or by default the age of the measurement
-        ((latency + 1) sensor periods) plus half the auger run-out (its grain at full flow)."""
-        if self.lookahead_s is not None:
-            return self.lookahead_s
-        return (latency_frames + 1) * sensor_period_s + 0.5 * run_out_s
 
 
 class Integrator(Model):

@@ -1,0 +1,102 @@
+"""Renderer throughput: render plus read into shared memory, per frame, on the default scene.
+
+Runs the renderer participant in-process over ``Segment.local`` (the same code path as a run: scene from the
+dynamics blocks, upload, draw, ``read_into`` the image blocks under their seqlocks) on the sample frame of
+the default scenario, for 640 x 480 and 1024 x 768, one and two cameras, plus the auto-planned rig and the
+mock renderer. Prints a Markdown table. Usage: ``python bench/render_fps.py [--frames N]``.
+"""
+from __future__ import annotations
+
+import argparse
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np  # noqa: E402
+
+from cosim.config import Scenario  # noqa: E402
+from renderer_proc.blocks import declare_blocks  # noqa: E402
+from renderer_proc.meshes import unit_cube, unit_cylinder  # noqa: E402
+from renderer_proc.participant import create  # noqa: E402
+from renderer_proc.rig import plan_rig  # noqa: E402
+from renderer_proc.sample import sample_frame  # noqa: E402
+from renderer_proc.scene import scene_from_state  # noqa: E402
+from shm_schema import ArrayBlock, Field, Schema, Segment, StructBlock  # noqa: E402
+
+#: untimed frames before timing (shader compilation, first allocation)
+WARMUP_FRAMES = 5
+
+
+def triangles(s: Scenario) -> int:
+    """Triangles drawn for the default scene's sample frame."""
+    state, h, stream = sample_frame(s)
+    sc = scene_from_state(s, state, h, stream)
+    nx, ny = h.shape
+    return (len(sc.boxes) * len(unit_cube()[1]) + len(sc.cylinders) * len(unit_cylinder()[1])
+            + 2 * (nx + 1) * (ny + 1) + sum(len(m.faces) for m in sc.meshes))
+
+
+def measure(s: Scenario, frames: int) -> tuple[float, float, str]:
+    """(median ms per frame, p90 ms, rig description) for scenario ``s``."""
+    state, heights, stream = sample_frame(s)
+    dyn = [StructBlock("dyn_state", "dynamics", tuple(Field(k, "", "i8" if k == "stream_points" else "f8")
+                                                      for k in state)),
+           ArrayBlock("heightmap_truth", "dynamics", "f4", heights.shape),
+           ArrayBlock("stream", "dynamics", "f4", (64, 4))]
+    seg = Segment.local(Schema(dyn + declare_blocks(s), ["dynamics", "renderer"]))
+    p = create(s)
+    p.start(seg)
+    times = []
+    try:
+        for k in range(frames + WARMUP_FRAMES):
+            state, heights, stream = sample_frame(s, t_s=0.1 * k)
+            with seg.write("dyn_state", k) as v:
+                v.update({n: int(x) if n == "stream_points" else x for n, x in state.items()})
+            with seg.write("heightmap_truth", k) as v:
+                v[...] = heights
+            t0 = time.perf_counter()
+            p.step(k)
+            if k >= WARMUP_FRAMES:
+                times.append((time.perf_counter() - t0) * 1e3)
+    finally:
+        p.close()
+    rig = plan_rig(s)
+    desc = " + ".join(f"{c.intrinsics.width}x{c.intrinsics.height}" for c in rig.cameras)
+    return statistics.median(times), float(np.percentile(times, 90)), desc
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=60)
+    args = ap.parse_args()
+    base = Scenario(format_version=1)
+    rows = []
+    for backend, w, h, n, extra in [("gl", 640, 480, 1, {}), ("gl", 640, 480, 2, {}), ("gl", 1024, 768, 1, {}),
+                                    ("gl", 1024, 768, 2, {}), ("gl", 640, 480, 1, {"rgb": "on"}),
+                                    ("gl", 640, 480, 1, {"float_depth": True}), ("gl", 0, 0, 0, {}),
+                                    ("mock", 320, 240, 1, {})]:
+        render = {"rig": "auto"} if n == 0 else {"rig": "fixed", "cameras": n, "width_px": w, "height_px": h,
+                                                   "hfov_deg": 60.0}
+        s = Scenario.model_validate({"format_version": 1, "renderer": backend, "render": {**render, **extra}})
+        frames = args.frames if backend == "gl" else max(3, args.frames // 20)
+        med, p90, desc = measure(s, frames)
+        label = ", ".join(f"{k}={v}" for k, v in extra.items()) or "depth only"
+        rows.append((backend, desc + (" (auto rig)" if n == 0 else ""), label, med, p90, 1e3 / med))
+    print(f"Renderer benchmark: default scene ({triangles(base)} triangles), render + read into shared memory; "
+          f"{platform.machine()}, {frames_note(args.frames)}\n")
+    print("| backend | cameras | outputs | ms/frame (median) | ms/frame (p90) | frames/s |")
+    print("|---|---|---|---:|---:|---:|")
+    for b, d, label, med, p90, fps in rows:
+        print(f"| {b} | {d} | {label} | {med:.2f} | {p90:.2f} | {fps:.0f} |")
+
+
+def frames_note(n: int) -> str:
+    return f"{n} timed frames per GL row after {WARMUP_FRAMES} warm-up frames"
+
+
+if __name__ == "__main__":
+    main()
