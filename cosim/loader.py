@@ -23,7 +23,6 @@ import re
 import types
 import typing
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
@@ -31,6 +30,8 @@ from pydantic import BaseModel, ValidationError
 
 from .config import FORMAT_VERSION, Scenario
 from .errors import Problem, ScenarioError
+from .yamlmarks import (Doc as _Doc, Dumper as _Dumper, Loc, Mark as _Mark,
+                        dotted as _dotted, parse as _parse, show as _show)
 
 __all__ = [
     "SCENARIO_DIR", "SET_FILE", "OPTIONS_FILE", "load_scenario", "load_scenario_text", "packaged_scenarios",
@@ -45,150 +46,7 @@ SET_FILE = "<--set>"
 OPTIONS_FILE = "<options>"
 
 _KEY = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
-_MAX_SHOWN = 60  # characters of an offending input value quoted in a message
 
-_BOOL_12 = re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$")
-_INT_12 = re.compile(r"^(?:[-+]?(?:0|[1-9][0-9]*)|0x[0-9a-fA-F]+|0o[0-7]+)$")
-_FLOAT_12 = re.compile(
-    r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$"
-)
-_REPLACED = {"tag:yaml.org,2002:bool", "tag:yaml.org,2002:int", "tag:yaml.org,2002:float",
-             "tag:yaml.org,2002:timestamp"}
-
-
-class _Loader(yaml.SafeLoader):
-    """SafeLoader with YAML 1.2 core-schema scalars (no yes/no/on/off booleans, no dates, 1e-8 is a float)."""
-
-
-_Loader.yaml_implicit_resolvers = {
-    ch: [r for r in rs if r[0] not in _REPLACED] for ch, rs in yaml.SafeLoader.yaml_implicit_resolvers.items()
-}
-_Loader.add_implicit_resolver("tag:yaml.org,2002:bool", _BOOL_12, list("tTfF"))
-_Loader.add_implicit_resolver("tag:yaml.org,2002:int", _INT_12, list("-+0123456789"))
-_Loader.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT_12, list("-+0123456789."))
-
-
-class _Dumper(yaml.SafeDumper):
-    """SafeDumper that also quotes strings a YAML 1.2 reader would take for numbers (so both readers agree)."""
-
-
-_Dumper.add_implicit_resolver("tag:yaml.org,2002:int", _INT_12, list("-+0123456789"))
-_Dumper.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT_12, list("-+0123456789."))
-_Dumper.add_representer(list, lambda dumper, seq: dumper.represent_sequence("tag:yaml.org,2002:seq", seq, flow_style=True))
-
-Loc = tuple  # path into the data: str keys and int list indices
-_INVALID = object()  # a node already reported as a problem: left out of the data (its field keeps its default)
-
-
-@dataclass(frozen=True)
-class _Mark:
-    file: str
-    line: int
-    col: int
-
-
-@dataclass
-class _Doc:
-    """Plain data plus the marks of every mapping key and value node, by path."""
-
-    data: object = None
-    keys: dict[Loc, _Mark] = field(default_factory=dict)
-    values: dict[Loc, _Mark] = field(default_factory=dict)
-    problems: list[Problem] = field(default_factory=list)
-
-    def problem(self, mark: _Mark, loc: Loc, message: str) -> None:
-        self.problems.append(Problem(mark.file, mark.line, mark.col, _dotted(loc), message))
-
-
-def _dotted(loc: Loc) -> str:
-    out = ""
-    for part in loc:
-        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
-    return out
-
-
-def _show(value: object) -> str:
-    text = repr(value) if isinstance(value, str) else json.dumps(value, default=str)
-    return text if len(text) <= _MAX_SHOWN else text[: _MAX_SHOWN - 3] + "..."
-
-
-# ---------------------------------------------------------------------------------------------------- YAML
-def _parse(text: str, file: str, line0: int = 0, col0: int = 0) -> _Doc:
-    """Compose ``text`` and build plain data with marks. ``line0``/``col0`` shift marks (for ``--set`` values)."""
-    doc = _Doc()
-
-    def mark(m: yaml.Mark) -> _Mark:  # 1-based; an override is one line: its position in the list of overrides
-        return _Mark(file, line0 or m.line + 1, col0 + m.column + 1)
-
-    loader = _Loader(text)
-    try:
-        try:
-            node = loader.get_single_node()
-        except yaml.MarkedYAMLError as e:
-            m, cm = e.problem_mark or e.context_mark, e.context_mark
-            what = e.problem or e.context or "invalid YAML"
-            if e.context and e.problem and cm is not None:
-                what += f" ({e.context} started at {mark(cm).line}:{mark(cm).col})"
-            doc.problems.append(Problem(file, *((mark(m).line, mark(m).col) if m else (0, 0)), "",
-                                        f"YAML syntax error: {what}"))
-            return doc
-        doc.values[()] = doc.keys[()] = mark(node.start_mark) if node else _Mark(file, max(line0, 1), 1)
-        doc.data = _build(node, (), doc, loader, mark, set()) if node is not None else None
-        doc.data = None if doc.data is _INVALID else doc.data
-    finally:
-        loader.dispose()
-    return doc
-
-
-def _build(node, loc: Loc, doc: _Doc, loader: _Loader, mark, stack: set[int]):
-    here = mark(node.start_mark)
-    if isinstance(node, yaml.ScalarNode):
-        try:
-            value = loader.construct_object(node, deep=True)
-        except yaml.YAMLError as e:
-            doc.problem(here, loc, f"cannot read value: {getattr(e, 'problem', e)}")
-            return _INVALID
-        if value is not None and not isinstance(value, (str, int, float, bool)):
-            doc.problem(here, loc, f"unsupported YAML value of type {type(value).__name__} (tag {node.tag})")
-            return _INVALID
-        return value
-    if id(node) in stack:
-        doc.problem(here, loc, "recursive alias")
-        return _INVALID
-    stack = stack | {id(node)}
-    if isinstance(node, yaml.SequenceNode):
-        out_list = []
-        for i, item in enumerate(node.value):
-            doc.keys[loc + (i,)] = doc.values[loc + (i,)] = mark(item.start_mark)
-            value = _build(item, loc + (i,), doc, loader, mark, stack)
-            out_list.append(None if value is _INVALID else value)
-        return out_list
-    out: dict[str, object] = {}
-    first: dict[str, _Mark] = {}
-    for knode, vnode in node.value:
-        kmark = mark(knode.start_mark)
-        if knode.tag == "tag:yaml.org,2002:merge":
-            doc.problem(kmark, loc, "merge keys ('<<') are not supported; write the keys out")
-            continue
-        key = _build(knode, loc, doc, loader, mark, stack) if isinstance(knode, yaml.ScalarNode) else None
-        if key is _INVALID:
-            continue
-        if not isinstance(key, str):
-            doc.problem(kmark, loc, f"keys must be strings, got {_show(key) if key is not None else knode.tag}")
-            continue
-        if key in first:
-            doc.problem(kmark, loc + (key,), f"duplicate key '{key}' (first defined at line {first[key].line})")
-            continue
-        first[key] = kmark
-        doc.keys[loc + (key,)] = kmark
-        doc.values[loc + (key,)] = mark(vnode.start_mark)
-        value = _build(vnode, loc + (key,), doc, loader, mark, stack)
-        if value is not _INVALID:
-            out[key] = value
-    return out
-
-
-# --------------------------------------------------------------------------------------------- model walk
 def _model_of(annotation) -> type[BaseModel] | None:
     """The record class behind an annotation (``Model``, ``Model | None``), else None."""
     if isinstance(annotation, type) and issubclass(annotation, BaseModel):

@@ -7,7 +7,8 @@ import yaml
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from cosim.config import Scenario
-from cosim.loader import _Loader, dump_resolved, load_scenario, load_scenario_text, resolve_scenario_arg
+from cosim.loader import dump_resolved, load_scenario, load_scenario_text, resolve_scenario_arg
+from cosim.yamlmarks import Loader as _Loader
 
 
 def roundtrip(scenario: Scenario) -> Scenario:

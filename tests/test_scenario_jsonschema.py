@@ -7,7 +7,8 @@ import pytest
 import yaml
 
 from cosim.jsonschema import SCHEMA_DIALECT, SCHEMA_PATH, scenario_json_schema, schema_text, write_json_schema
-from cosim.loader import _Loader, packaged_scenarios
+from cosim.loader import packaged_scenarios
+from cosim.yamlmarks import Loader as _Loader
 
 
 def test_committed_schema_is_current():

@@ -6,7 +6,7 @@ from typing import Literal
 
 from pydantic import Field, ValidationInfo, field_validator
 
-from .base import Model, NonNegFloat, PosFloat
+from .base import Model, PosFloat
 from .control import Controller, Grain, Integrator
 from .machines import Auger, Cart, Combine, Crop, MachineSync, Tractor
 from .rendering import Render

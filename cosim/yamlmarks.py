@@ -1,0 +1,163 @@
+"""YAML with positions: plain data plus the 1-based line/col of every key and value, YAML 1.2 scalars.
+
+``parse(text, file)`` composes one document and returns a :class:`Doc` (data, key marks, value marks, problems).
+YAML 1.2 core schema: ``1e-8`` is a number, ``yes``/``on`` are strings, only ``true``/``false`` are booleans,
+dates stay strings. Duplicate keys are reported at their second occurrence; merge keys, non-string keys and
+unknown tags are problems, never silently accepted.
+"""
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass, field
+
+import yaml
+
+from .errors import Problem
+
+__all__ = ["Loader", "Dumper", "Mark", "Doc", "Loc", "INVALID", "parse", "build", "dotted", "show",
+           "INT_12", "FLOAT_12", "BOOL_12"]
+
+MAX_SHOWN = 60  # characters of an offending input value quoted in a message
+
+BOOL_12 = re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$")
+INT_12 = re.compile(r"^(?:[-+]?(?:0|[1-9][0-9]*)|0x[0-9a-fA-F]+|0o[0-7]+)$")
+FLOAT_12 = re.compile(
+    r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$"
+)
+_REPLACED = {"tag:yaml.org,2002:bool", "tag:yaml.org,2002:int", "tag:yaml.org,2002:float",
+             "tag:yaml.org,2002:timestamp"}
+
+
+class Loader(yaml.SafeLoader):
+    """SafeLoader with YAML 1.2 core-schema scalars (no yes/no/on/off booleans, no dates, 1e-8 is a float)."""
+
+
+Loader.yaml_implicit_resolvers = {
+    ch: [r for r in rs if r[0] not in _REPLACED] for ch, rs in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
+Loader.add_implicit_resolver("tag:yaml.org,2002:bool", BOOL_12, list("tTfF"))
+Loader.add_implicit_resolver("tag:yaml.org,2002:int", INT_12, list("-+0123456789"))
+Loader.add_implicit_resolver("tag:yaml.org,2002:float", FLOAT_12, list("-+0123456789."))
+
+
+class Dumper(yaml.SafeDumper):
+    """SafeDumper that also quotes strings a YAML 1.2 reader would take for numbers (so both readers agree)."""
+
+
+Dumper.add_implicit_resolver("tag:yaml.org,2002:int", INT_12, list("-+0123456789"))
+Dumper.add_implicit_resolver("tag:yaml.org,2002:float", FLOAT_12, list("-+0123456789."))
+Dumper.add_representer(list, lambda dumper, seq: dumper.represent_sequence("tag:yaml.org,2002:seq", seq, flow_style=True))
+
+Loc = tuple  # path into the data: str keys and int list indices
+INVALID = object()  # a node already reported as a problem: left out of the data (its field keeps its default)
+
+
+@dataclass(frozen=True)
+class Mark:
+    file: str
+    line: int
+    col: int
+
+
+@dataclass
+class Doc:
+    """Plain data plus the marks of every mapping key and value node, by path."""
+
+    data: object = None
+    keys: dict[Loc, Mark] = field(default_factory=dict)
+    values: dict[Loc, Mark] = field(default_factory=dict)
+    problems: list[Problem] = field(default_factory=list)
+
+    def problem(self, mark: Mark, loc: Loc, message: str) -> None:
+        self.problems.append(Problem(mark.file, mark.line, mark.col, dotted(loc), message))
+
+
+def dotted(loc: Loc) -> str:
+    out = ""
+    for part in loc:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out
+
+
+def show(value: object) -> str:
+    text = repr(value) if isinstance(value, str) else json.dumps(value, default=str)
+    return text if len(text) <= MAX_SHOWN else text[: MAX_SHOWN - 3] + "..."
+
+
+def parse(text: str, file: str, line0: int = 0, col0: int = 0) -> Doc:
+    """Compose ``text`` and build plain data with marks. ``line0``/``col0`` shift marks (for ``--set`` values)."""
+    doc = Doc()
+
+    def mark(m: yaml.Mark) -> Mark:  # 1-based; an override is one line: its position in the list of overrides
+        return Mark(file, line0 or m.line + 1, col0 + m.column + 1)
+
+    loader = Loader(text)
+    try:
+        try:
+            node = loader.get_single_node()
+        except yaml.MarkedYAMLError as e:
+            m, cm = e.problem_mark or e.context_mark, e.context_mark
+            what = e.problem or e.context or "invalid YAML"
+            if e.context and e.problem and cm is not None:
+                what += f" ({e.context} started at {mark(cm).line}:{mark(cm).col})"
+            doc.problems.append(Problem(file, *((mark(m).line, mark(m).col) if m else (0, 0)), "",
+                                        f"YAML syntax error: {what}"))
+            return doc
+        doc.values[()] = doc.keys[()] = mark(node.start_mark) if node else Mark(file, max(line0, 1), 1)
+        doc.data = build(node, (), doc, loader, mark, set()) if node is not None else None
+        doc.data = None if doc.data is INVALID else doc.data
+    finally:
+        loader.dispose()
+    return doc
+
+
+def build(node, loc: Loc, doc: Doc, loader: Loader, mark, stack: set[int]):
+    here = mark(node.start_mark)
+    if isinstance(node, yaml.ScalarNode):
+        try:
+            value = loader.construct_object(node, deep=True)
+        except yaml.YAMLError as e:
+            doc.problem(here, loc, f"cannot read value: {getattr(e, 'problem', e)}")
+            return INVALID
+        if value is not None and not isinstance(value, (str, int, float, bool)):
+            doc.problem(here, loc, f"unsupported YAML value of type {type(value).__name__} (tag {node.tag})")
+            return INVALID
+        return value
+    if id(node) in stack:
+        doc.problem(here, loc, "recursive alias")
+        return INVALID
+    stack = stack | {id(node)}
+    if isinstance(node, yaml.SequenceNode):
+        out_list = []
+        for i, item in enumerate(node.value):
+            doc.keys[loc + (i,)] = doc.values[loc + (i,)] = mark(item.start_mark)
+            value = build(item, loc + (i,), doc, loader, mark, stack)
+            out_list.append(None if value is INVALID else value)
+        return out_list
+    out: dict[str, object] = {}
+    first: dict[str, Mark] = {}
+    for knode, vnode in node.value:
+        kmark = mark(knode.start_mark)
+        if knode.tag == "tag:yaml.org,2002:merge":
+            doc.problem(kmark, loc, "merge keys ('<<') are not supported; write the keys out")
+            continue
+        key = build(knode, loc, doc, loader, mark, stack) if isinstance(knode, yaml.ScalarNode) else None
+        if key is INVALID:
+            continue
+        if not isinstance(key, str):
+            doc.problem(kmark, loc, f"keys must be strings, got {show(key) if key is not None else knode.tag}")
+            continue
+        if key in first:
+            doc.problem(kmark, loc + (key,), f"duplicate key '{key}' (first defined at line {first[key].line})")
+            continue
+        first[key] = kmark
+        doc.keys[loc + (key,)] = kmark
+        doc.values[loc + (key,)] = mark(vnode.start_mark)
+        value = build(vnode, loc + (key,), doc, loader, mark, stack)
+        if value is not INVALID:
+            out[key] = value
+    return out
+
+
+# --------------------------------------------------------------------------------------------- model walk
