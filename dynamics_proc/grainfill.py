@@ -132,11 +132,15 @@ def relax(h: np.ndarray, grid: GrainGrid, tol_slope: float = 1e-4, max_iter: int
     """Relax an arbitrary non-negative map to the angle of repose, conserving volume; walls bound it.
 
     Pairwise exchange: each 4-neighbour pair steeper than tan(repose) moves EXCHANGE_FACTOR of its excess
-    difference from the high cell to the low one (all pairs at once), then cells above the cap lose the excess
-    as spill. Iterates until every pair is within ``tol_slope`` (dimensionless) of tan(repose). Returns
+    difference from the high cell to the low one (all pairs at once), then wall cells above the cap lose the
+    excess as spill (the cap of inner cells follows from the slopes). Iterates until every pair is within ``tol_slope`` (dimensionless) of tan(repose). Returns
     (relaxed heights (nx, ny) float64, spilled m^3). Raises RuntimeError if it does not converge.
     """
     cap = grid.cap() if cap is None else cap
+    edge = np.zeros(cap.shape, bool)                     # grain leaves over a wall top from the wall cells only
+    edge[[0, -1], :] = True
+    edge[:, [0, -1]] = True
+    cap = np.where(edge, cap, np.inf)
     h = np.array(h, dtype=np.float64)
     if np.any(h < 0.0) or not np.all(np.isfinite(h)):
         raise ValueError("heights must be finite and non-negative")

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Impact", "find_impact", "MIN_STREAM_POINTS", "FIT_SPAN_M", "CLUSTER_RADIUS_M"]
+__all__ = ["Impact", "find_impact", "blank_under_stream", "MIN_STREAM_POINTS", "FIT_SPAN_M", "CLUSTER_RADIUS_M"]
 
 #: fewest stream returns for an answer
 MIN_STREAM_POINTS = 6
@@ -30,16 +30,35 @@ MIN_FIT_SPREAD_M = 0.2
 @dataclass(frozen=True)
 class Impact:
     """``valid``; ``xyz`` (3,) float64 m in the grid frame (NaN when not valid); ``n_points`` stream returns
-    used; ``reason`` why there is no answer ('' when valid)."""
+    used; ``reason`` why there is no answer ('' when valid); ``radius_m`` the stream's visible half-width (the
+    90th percentile distance of its low returns from the fitted axis), NaN when there is no stream."""
 
     valid: bool
     xyz: np.ndarray
     n_points: int
     reason: str
+    radius_m: float = math.nan
 
 
 def _none(reason: str, n: int = 0) -> Impact:
     return Impact(False, np.full(3, np.nan), n, reason)
+
+
+def blank_under_stream(heights: np.ndarray, impact: Impact, cell_m: tuple[float, float]) -> int:
+    """Set to NaN (in place) the cells the stream hides: centres within 2 radius + half a cell diagonal of
+    the impact point (the fitted axis runs through the stream's visible face, up to a radius off its centre).
+    ``heights`` (nx, ny) m. Returns the number of cells blanked (0 without a valid impact)."""
+    if not impact.valid or not math.isfinite(impact.radius_m):
+        return 0
+    nx, ny = heights.shape
+    dx, dy = cell_m
+    reach = 2.0 * impact.radius_m + 0.5 * math.hypot(dx, dy)
+    cx = (np.arange(nx) + 0.5) * dx
+    cy = (np.arange(ny) + 0.5) * dy
+    hide = (cx[:, None] - impact.xyz[0]) ** 2 + (cy[None, :] - impact.xyz[1]) ** 2 <= reach**2
+    hide &= np.isfinite(heights)
+    heights[hide] = np.nan
+    return int(np.count_nonzero(hide))
 
 
 def find_impact(grid_points: np.ndarray, stream: np.ndarray, heights: np.ndarray, cell_m: tuple[float, float],
@@ -74,4 +93,6 @@ def find_impact(grid_points: np.ndarray, stream: np.ndarray, heights: np.ndarray
     xyz = np.array([np.polyval(coef_x, z_imp), np.polyval(coef_y, z_imp), z_imp])
     if not np.all(np.isfinite(xyz)) or math.isnan(z_imp):
         return _none("fit failed", s.shape[0])
-    return Impact(True, xyz, int(s.shape[0]), "")
+    axis = np.stack([np.polyval(coef_x, z), np.polyval(coef_y, z)], axis=1)
+    radius = float(np.percentile(np.hypot(*(low[:, :2] - axis).T), 90))
+    return Impact(True, xyz, int(s.shape[0]), "", radius)

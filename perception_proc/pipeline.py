@@ -12,7 +12,7 @@ the *level frame*, the sensor's parent body frame (x forward, y left, z up from 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import numpy as np
@@ -22,7 +22,7 @@ from cosim.config import Scenario
 from cosim.geometry import body_from_camera_axes, mount_transform
 
 from .heightmap import HeightMap, grid_shape, height_map
-from .impact import Impact, find_impact
+from .impact import Impact, blank_under_stream, find_impact
 from .lidar import apply_noise_and_limits, frame_generator, to_points
 from .patterns import beam_table, pattern_shape
 from .resample import build_table, resample
@@ -68,19 +68,27 @@ class Perception:
     def n_beams(self) -> int:
         return int(self.directions.shape[0])
 
-    def lidar(self, images: Sequence[np.ndarray], frame: int | None, out: np.ndarray | None = None) -> np.ndarray:
-        """Ranges (N,) float32 m, NaN invalid, from one depth image per rig camera (rig order). ``frame`` seeds
-        the noise (None: no noise, limits only)."""
+    def resample(self, images: Sequence[np.ndarray], out: np.ndarray | None = None) -> np.ndarray:
+        """Noise-free ranges (N,) float32 m, NaN where no return, from one depth image per rig camera (rig
+        order): decode and resample only, no range limits."""
         codec = self.scenario.sensor.codec
         if self.offset:
             r = resample_offset(images, self.table, codec)
             if out is not None:
                 out[:] = r
-                r = out
-        else:
-            r = resample(images, self.table, codec, self.scenario.perception.sampler, out=out)
+                return out
+            return r
+        return resample(images, self.table, codec, self.scenario.perception.sampler, out=out)
+
+    def noisy(self, ranges: np.ndarray, frame: int | None) -> np.ndarray:
+        """Apply the noise model (seeded by scenario seed and ``frame``; None: none) and the range limits, in
+        place on ``ranges`` (N,) float32; returns it."""
         gen = None if frame is None else frame_generator(self.scenario.seed, frame)
-        return apply_noise_and_limits(r, self.scenario.sensor, gen)
+        return apply_noise_and_limits(ranges, self.scenario.sensor, gen)
+
+    def lidar(self, images: Sequence[np.ndarray], frame: int | None, out: np.ndarray | None = None) -> np.ndarray:
+        """The frame's LiDAR ranges (N,) float32 m, NaN invalid: :meth:`resample` then :meth:`noisy`."""
+        return self.noisy(self.resample(images, out=out), frame)
 
     def level_points(self, ranges: np.ndarray) -> np.ndarray:
         """Level-frame points (N, 3) float64 m of the ranges (NaN rows where invalid)."""
@@ -112,6 +120,8 @@ class Perception:
                         sc.perception.min_points_per_cell, sigma, out=heights_out)
         t3 = time.perf_counter()
         imp = find_impact(hm.grid_points, hm.stream, hm.heights, self.cell_xy, sc.perception.impact_search_radius_m)
+        if blank_under_stream(hm.heights, imp, self.cell_xy):
+            hm = replace(hm, coverage=float(np.count_nonzero(np.isfinite(hm.heights)) / hm.heights.size))
         t4 = time.perf_counter()
         tm["heightmap"], tm["impact"] = 1e3 * (t3 - t2), 1e3 * (t4 - t3)
         return FrameResult(pts, cart, hm, imp, tm)

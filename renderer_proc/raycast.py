@@ -19,10 +19,12 @@ __all__ = ["raycast", "ray_boxes", "ray_cylinders", "ray_heightfield", "ray_mesh
 
 #: hits closer than this along the ray are ignored (self-intersection guard), m
 T_MIN_M = 1e-9
-#: cylinders per bounding-sphere group in the two-level cull
-_CYL_GROUP = 8
+#: primitives per bounding-sphere group in the two-level cull
+_GROUP = 8
 #: triangles per chunk in the mesh intersector
 _TRI_CHUNK = 256
+#: rays per chunk in the height-field intersector
+_HF_CHUNK = 4096
 
 
 def _first_positive(t_lo: np.ndarray, t_hi: np.ndarray, hit: np.ndarray) -> np.ndarray:
@@ -31,40 +33,13 @@ def _first_positive(t_lo: np.ndarray, t_hi: np.ndarray, hit: np.ndarray) -> np.n
     return np.where(hit & (t > T_MIN_M), t, np.inf)
 
 
-def ray_boxes(o: np.ndarray, d: np.ndarray, boxes: Boxes) -> np.ndarray:
-    """Distance to the nearest oriented box (slab test in each box frame). o, d (N, 3) -> t (N,)."""
-    if len(boxes) == 0:
-        return np.full(len(o), np.inf)
-    nb = len(boxes)
-    r = boxes.world_from_box[:, :3, :3]                                 # (B, 3, 3)
-    c = boxes.world_from_box[:, :3, 3]                                  # (B, 3)
-    r_all = np.transpose(r, (1, 0, 2)).reshape(3, 3 * nb)               # [R_0 | R_1 | ...]
-    ob = (o @ r_all).reshape(-1, nb, 3) - np.einsum("bj,bji->bi", c, r)[None]   # (N, B, 3) box frame
-    db = (d @ r_all).reshape(-1, nb, 3)
-    h = boxes.half_extents[None]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / db
-        t1, t2 = (-h - ob) * inv, (h - ob) * inv
-    t_lo = np.nanmax(np.minimum(t1, t2), axis=2)
-    t_hi = np.nanmin(np.maximum(t1, t2), axis=2)
-    return _first_positive(t_lo, t_hi, t_hi >= t_lo).min(axis=1)
+def _convex_pairs(ol, dl, normals, offsets) -> np.ndarray:
+    """Ray vs convex polyhedron {p : n_j . p <= offset_j}, in its local frame, for paired rows.
 
-
-def _prism_pairs(o, d, p0, p1, radius) -> np.ndarray:
-    """Exact distance to the capped regular prism the GL renderer draws for each cylinder (CYLINDER_SIDES
-    facets, vertices on the circle, local frame from ``orthonormal_frames``), for paired rows: o, d, p0, p1
-    (K, 3), radius (K,) -> t (K,). Convex: the ray is inside every facet's half-space between t_lo and t_hi."""
-    axis = p1 - p0
-    length = np.linalg.norm(axis, axis=1)
-    rot = orthonormal_frames(axis)                                   # (K, 3, 3), columns x, y, axis
-    ol = np.einsum("kji,kj->ki", rot, o - p0)
-    dl = np.einsum("kji,kj->ki", rot, d)
-    phi = 2.0 * np.pi * (np.arange(CYLINDER_SIDES) + 0.5) / CYLINDER_SIDES
-    nrm = np.stack([np.cos(phi), np.sin(phi)], axis=1)               # (S, 2) facet normals
-    num = (radius * np.cos(np.pi / CYLINDER_SIDES))[:, None] - ol[:, :2] @ nrm.T   # (K, S)
-    den = dl[:, :2] @ nrm.T
-    num = np.concatenate([num, (length - ol[:, 2])[:, None], ol[:, 2:3]], axis=1)
-    den = np.concatenate([den, dl[:, 2:3], -dl[:, 2:3]], axis=1)
+    ``ol``, ``dl`` (K, 3) local ray origins and directions; ``normals`` (P, 3) outward unit normals;
+    ``offsets`` (K, P) m. Returns t (K,): entry (or exit when inside), inf on a miss."""
+    num = offsets - ol @ normals.T
+    den = dl @ normals.T
     with np.errstate(divide="ignore", invalid="ignore"):
         t = num / den
     t_lo = np.max(np.where(den < 0.0, t, -np.inf), axis=1)
@@ -81,45 +56,113 @@ def _sphere_hit(o, d, centre, rad) -> np.ndarray:
     return (dist2 <= rad[None] ** 2) & (tc + rad[None] > 0.0)
 
 
-def ray_cylinders(o: np.ndarray, d: np.ndarray, cyl: Cylinders) -> np.ndarray:
-    """Distance to the nearest capped cylinder, culled by group then per-cylinder bounding spheres."""
-    n, m = len(o), len(cyl)
-    best = np.full(n, np.inf)
-    if m == 0:
-        return best
-    centre = 0.5 * (cyl.p0 + cyl.p1)
-    rad = np.sqrt((0.5 * np.linalg.norm(cyl.p1 - cyl.p0, axis=1)) ** 2 + cyl.radius**2)
-    for g0 in range(0, m, _CYL_GROUP):
-        sl = slice(g0, min(g0 + _CYL_GROUP, m))
+def _candidate_pairs(o, d, centre, rad) -> tuple[np.ndarray, np.ndarray]:
+    """(ray index, primitive index) pairs whose bounding spheres the rays pass, culled first by groups of
+    ``_GROUP`` consecutive primitives (the stream's segments are consecutive, hence close together)."""
+    ris, cis = [], []
+    for g0 in range(0, len(rad), _GROUP):
+        sl = slice(g0, min(g0 + _GROUP, len(rad)))
         gc = centre[sl].mean(axis=0)
         gr = np.max(np.linalg.norm(centre[sl] - gc, axis=1) + rad[sl])
         rays = np.nonzero(_sphere_hit(o, d, gc[None], np.array([gr]))[:, 0])[0]
-        if len(rays) == 0:
-            continue
-        ri, ci = np.nonzero(_sphere_hit(o[rays], d[rays], centre[sl], rad[sl]))
-        if len(ri) == 0:
-            continue
-        ri, ci = rays[ri], ci + g0
-        t = _prism_pairs(o[ri], d[ri], cyl.p0[ci], cyl.p1[ci], cyl.radius[ci])
-        np.minimum.at(best, ri, t)
+        if len(rays):
+            ri, ci = np.nonzero(_sphere_hit(o[rays], d[rays], centre[sl], rad[sl]))
+            ris.append(rays[ri])
+            cis.append(ci + g0)
+    if not ris:
+        return np.zeros(0, np.intp), np.zeros(0, np.intp)
+    return np.concatenate(ris), np.concatenate(cis)
+
+
+def _nearest(n: int, ri: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(n,) smallest t per ray index ``ri`` (inf where a ray has none)."""
+    best = np.full(n, np.inf)
+    np.minimum.at(best, ri, t)
     return best
 
 
-def _grid_breaks(ox, oy, dx, dy, hf: HeightField, nx: int, ny: int) -> np.ndarray:
-    """(K, L) ray parameters where the ray crosses the grid lines and diagonals of the triangulation."""
-    c = hf.cell_m
-    xs = (np.arange(1, nx + 1) - 0.5) * c
-    ys = (np.arange(1, ny + 1) - 0.5) * c
-    ks = np.arange(-ny - 1, nx + 2) * c
+_BOX_NORMALS = np.array([[1.0, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]])
+
+
+def ray_boxes(o: np.ndarray, d: np.ndarray, boxes: Boxes) -> np.ndarray:
+    """Distance to the nearest oriented box (slab test in each box frame). o, d (N, 3) -> t (N,)."""
+    if len(boxes) == 0:
+        return np.full(len(o), np.inf)
+    rot, centre = boxes.world_from_box[:, :3, :3], boxes.world_from_box[:, :3, 3]
+    ri, bi = _candidate_pairs(o, d, centre, np.linalg.norm(boxes.half_extents, axis=1))
+    ol = np.einsum("kji,kj->ki", rot[bi], o[ri] - centre[bi])
+    dl = np.einsum("kji,kj->ki", rot[bi], d[ri])
+    return _nearest(len(o), ri, _convex_pairs(ol, dl, _BOX_NORMALS, np.repeat(boxes.half_extents[bi], 2, axis=1)))
+
+
+def ray_cylinders(o: np.ndarray, d: np.ndarray, cyl: Cylinders) -> np.ndarray:
+    """Distance to the nearest cylinder, drawn and cast as a capped regular prism (CYLINDER_SIDES facets,
+    vertices on the circle, local frame from ``orthonormal_frames``: x, y across, z along p0 -> p1)."""
+    if len(cyl) == 0:
+        return np.full(len(o), np.inf)
+    axis = cyl.p1 - cyl.p0
+    length = np.linalg.norm(axis, axis=1)
+    rot = orthonormal_frames(axis)
+    centre = 0.5 * (cyl.p0 + cyl.p1)
+    ri, ci = _candidate_pairs(o, d, centre, np.sqrt((0.5 * length) ** 2 + cyl.radius**2))
+    ol = np.einsum("kji,kj->ki", rot[ci], o[ri] - cyl.p0[ci])
+    dl = np.einsum("kji,kj->ki", rot[ci], d[ri])
+    phi = 2.0 * np.pi * (np.arange(CYLINDER_SIDES) + 0.5) / CYLINDER_SIDES
+    normals = np.concatenate([np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], axis=1),
+                              [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]])
+    flat = cyl.radius[ci] * np.cos(np.pi / CYLINDER_SIDES)
+    offsets = np.concatenate([np.repeat(flat[:, None], CYLINDER_SIDES, axis=1), length[ci][:, None],
+                              np.zeros((len(ci), 1))], axis=1)
+    return _nearest(len(o), ri, _convex_pairs(ol, dl, normals, offsets))
+
+
+def _line_crossings(q0, dq, a, b) -> tuple[np.ndarray, np.ndarray]:
+    """For the line family q(t) = q0 + t dq crossing integers: first integer crossed in (a, b) and the count."""
+    qa, qb = q0 + a * dq, q0 + b * dq
+    first = np.ceil(np.minimum(qa, qb))
+    count = np.maximum(np.floor(np.maximum(qa, qb)) - first + 1.0, 0.0)
+    return first, count.astype(np.intp)
+
+
+def _hf_chunk(og, dg, a, b, hp: np.ndarray, cell: float) -> np.ndarray:
+    """First crossing of the surface for rays (K,) with windows [a, b]; inf where none.
+
+    The height along a ray is linear between the crossings of the lines x / c + 1/2 = integer,
+    y / c + 1/2 = integer and (x - y) / c = integer (``renderer_proc.heightfield``), so the ray's height above
+    the surface is evaluated at those crossings only, and the first sign change is solved linearly (exact)."""
+    fams = [(og[:, 0] / cell + 0.5, dg[:, 0] / cell), (og[:, 1] / cell + 0.5, dg[:, 1] / cell),
+            ((og[:, 0] - og[:, 1]) / cell, (dg[:, 0] - dg[:, 1]) / cell)]
+    cols = [a[:, None], b[:, None]]
+    for q0, dq in fams:
+        first, count = _line_crossings(q0, dq, a, b)
+        m = int(count.max()) if len(count) else 0
+        if m == 0:
+            continue
+        j = np.arange(m)[None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (first[:, None] + j - q0[:, None]) / dq[:, None]
+        use = (j < count[:, None]) & np.isfinite(t)       # a ray along a line (dq = 0) crosses none of it
+        cols.append(np.where(use, np.clip(t, a[:, None], b[:, None]), b[:, None]))
+    ts = np.sort(np.concatenate(cols, axis=1), axis=1)
+    px = og[:, 0:1] + ts * dg[:, 0:1]
+    py = og[:, 1:2] + ts * dg[:, 1:2]
+    g = og[:, 2:3] + ts * dg[:, 2:3] - surface_height(hp, cell, px, py)
+    below = g <= 0.0
+    k = np.argmax(below, axis=1)
+    rows = np.arange(len(og))
+    km = np.maximum(k - 1, 0)
+    g0, g1 = g[rows, km], g[rows, k]
+    t0, t1 = ts[rows, km], ts[rows, k]
     with np.errstate(divide="ignore", invalid="ignore"):
-        tx = (xs[None] - ox[:, None]) / dx[:, None]
-        ty = (ys[None] - oy[:, None]) / dy[:, None]
-        tk = (ks[None] - (ox - oy)[:, None]) / (dx - dy)[:, None]
-    return np.concatenate([tx, ty, tk], axis=1)
+        t = np.where(k == 0, t0, t0 + g0 * (t1 - t0) / (g0 - g1))
+    return np.where(below.any(axis=1) & (t > T_MIN_M), t, np.inf)
 
 
 def ray_heightfield(o: np.ndarray, d: np.ndarray, hf: HeightField) -> np.ndarray:
-    """Distance to the triangulated grain surface (exact: the surface is linear between breakpoints)."""
+    """Distance to the triangulated grain surface (exact: the surface is linear between breakpoints).
+
+    Rays are clipped to the box [0, L] x [0, W] x [min h, max h] (grid frame), then processed in chunks
+    sorted by how many grid lines they cross, so each chunk's arrays are only as wide as it needs."""
     n = len(o)
     best = np.full(n, np.inf)
     g_from_w = np.linalg.inv(hf.world_from_grid)
@@ -130,29 +173,19 @@ def ray_heightfield(o: np.ndarray, d: np.ndarray, hf: HeightField) -> np.ndarray
     hi = np.array([hf.length_m, hf.width_m, float(h.max())])
     with np.errstate(divide="ignore", invalid="ignore"):
         t1, t2 = (lo - og) / dg, (hi - og) / dg
-    t_lo = np.maximum(np.nanmax(np.minimum(t1, t2), axis=1), 0.0)
-    t_hi = np.nanmin(np.maximum(t1, t2), axis=1)
+    t_lo = np.maximum(np.fmax.reduce(np.minimum(t1, t2), axis=1), 0.0)
+    t_hi = np.fmin.reduce(np.maximum(t1, t2), axis=1)
     cand = np.nonzero(t_hi >= t_lo)[0]
     if len(cand) == 0:
         return best
     oc, dc, a, b = og[cand], dg[cand], t_lo[cand], t_hi[cand]
-    nx, ny = h.shape
-    brk = _grid_breaks(oc[:, 0], oc[:, 1], dc[:, 0], dc[:, 1], hf, nx, ny)
-    brk = np.where(np.isfinite(brk), np.clip(brk, a[:, None], b[:, None]), b[:, None])
-    ts = np.sort(np.concatenate([a[:, None], brk, b[:, None]], axis=1), axis=1)   # (K, L + 2)
-    px = oc[:, 0:1] + ts * dc[:, 0:1]
-    py = oc[:, 1:2] + ts * dc[:, 1:2]
-    g = oc[:, 2:3] + ts * dc[:, 2:3] - surface_height(padded_heights(h), hf.cell_m, px, py)
-    below = g <= 0.0
-    hit = below.any(axis=1)
-    k = np.argmax(below, axis=1)
-    rows = np.arange(len(cand))
-    km = np.maximum(k - 1, 0)
-    g0, g1 = g[rows, km], g[rows, k]
-    t0, t1_ = ts[rows, km], ts[rows, k]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(k == 0, t0, t0 + g0 * (t1_ - t0) / (g0 - g1))
-    best[cand] = np.where(hit & (t > T_MIN_M), t, np.inf)
+    c = hf.cell_m
+    span = np.abs(dc[:, 0]) + np.abs(dc[:, 1])            # line crossings grow with the xy path length
+    order = np.argsort(span * (b - a))
+    hp = padded_heights(h)
+    for s0 in range(0, len(order), _HF_CHUNK):
+        sel = order[s0:s0 + _HF_CHUNK]
+        best[cand[sel]] = _hf_chunk(oc[sel], dc[sel], a[sel], b[sel], hp, c)
     return best
 
 

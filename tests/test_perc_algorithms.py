@@ -10,7 +10,7 @@ from cosim.camera import beam_directions
 from cosim.config import Cart, Mount, Noise, Pattern, Sensor
 from cosim.geometry import apply, body_from_camera_axes, cart_body_from_grid, mount_transform, vehicle_pose
 from perception_proc.heightmap import grid_shape, height_map
-from perception_proc.impact import find_impact
+from perception_proc.impact import blank_under_stream, find_impact
 from perception_proc.lidar import apply_noise_and_limits, frame_generator
 from perception_proc.patterns import beam_table, pattern_shape
 from perception_proc.rim import border_beams, find_cart
@@ -95,12 +95,17 @@ def test_stream_occluding_the_pile_gives_impact_and_no_stream_heights():
     cart, hm = run(shapes)
     assert cart.valid
     truth = truth_grid(fn)
-    ok = np.isfinite(hm.heights)
-    assert np.max(np.abs(hm.heights[ok] - truth[ok])) < 0.15     # no stream height passed off as grain
     imp = find_impact(hm.grid_points, hm.stream, hm.heights, (CELL, CELL), 0.6)
     assert imp.valid
     assert np.hypot(imp.xyz[0] - 2.2, imp.xyz[1] - 1.4) < 0.15
     assert imp.xyz[2] == pytest.approx(1.6, abs=0.2)
+    assert imp.radius_m == pytest.approx(0.15, abs=0.1)
+    before = np.isfinite(hm.heights).sum()
+    assert blank_under_stream(hm.heights, imp, (CELL, CELL)) > 0
+    assert np.isfinite(hm.heights).sum() < before
+    ok = np.isfinite(hm.heights)
+    assert ok.mean() > 0.3
+    assert np.max(np.abs(hm.heights[ok] - truth[ok])) < 0.08     # no stream height passed off as grain
 
 
 def test_noise_and_dropout_degrade_gracefully():

@@ -1,0 +1,136 @@
+"""Accuracy of the perception stage against truth (DESIGN.md sections 4 and 6).
+
+Pure functions. Range errors compare each beam's noise-free range with the exact range of the same beam from
+the LiDAR origin (an exact ray cast of the same scene: ``renderer_proc.raycast``); a beam counts when both
+are valid and within the sensor's range limits. The other measures compare the perceived rim corners, height
+map and impact with the dynamics' ground truth. Truth never feeds the estimates: these functions are called
+after the frame's outputs are computed.
+"""
+from __future__ import annotations
+
+import math
+from typing import Mapping
+
+import numpy as np
+
+from cosim.config import Cart, Scenario
+from cosim.geometry import apply, cart_body_from_grid, invert, vehicle_pose
+
+from .blocks import RANGE_BANDS_M, band_name
+
+__all__ = ["range_error_stats", "exact_ranges", "true_corners_sensor", "corner_error", "truth_on_grid",
+           "heightmap_error", "impact_error", "world_from_parent", "ABOVE_M", "WORKING_RANGE_M"]
+
+#: the "large error" threshold of the range statistics, m
+ABOVE_M = 0.05
+#: the working range inside which the accuracy target applies, m
+WORKING_RANGE_M = (2.0, 15.0)
+
+
+def range_error_stats(ranges: np.ndarray, exact: np.ndarray, range_min_m: float, range_max_m: float) -> dict:
+    """Statistics of |ranges - exact| per beam. ``ranges`` (N,) m NaN invalid; ``exact`` (N,) m, inf on a miss.
+
+    Returns the ``perc_state`` accuracy fields for ranges (NaN where a band holds no beam)."""
+    r = np.asarray(ranges, np.float64)
+    x = np.asarray(exact, np.float64)
+    truth_ok = np.isfinite(x) & (x >= range_min_m) & (x <= range_max_m)
+    ours_ok = np.isfinite(r)
+    both = truth_ok & ours_ok
+    err = np.abs(r[both] - x[both])
+    dist = x[both]
+    out: dict[str, float] = {
+        "range_beams": float(both.sum()),
+        "beam_missing_frac": float(np.count_nonzero(truth_ok & ~ours_ok) / max(truth_ok.sum(), 1)),
+        "beam_spurious_frac": float(np.count_nonzero(ours_ok & ~truth_ok) / max(ours_ok.sum(), 1)),
+    }
+    nan = math.nan
+
+    def stats(e: np.ndarray) -> tuple[float, float, float, float, float]:
+        if e.size == 0:
+            return nan, nan, nan, nan, nan
+        return (float(e.mean()), float(np.median(e)), float(np.percentile(e, 99)), float(e.max()),
+                float(np.mean(e > ABOVE_M)))
+
+    out["range_err_mean_m"], out["range_err_median_m"], out["range_err_p99_m"], out["range_err_max_m"], \
+        out["frac_above_5cm"] = stats(err)
+    lo, hi = WORKING_RANGE_M
+    w = stats(err[(dist >= lo) & (dist < hi)])
+    out["range_err_mean_2_15_m"], out["frac_above_5cm_2_15"] = w[0], w[4]
+    for lo, hi in RANGE_BANDS_M:
+        e = err[(dist >= lo) & (dist < hi)]
+        mean, _, p99, _, above = stats(e)
+        b = band_name(lo, hi)
+        out[f"rerr_{b}_n"] = float(e.size)
+        out[f"rerr_{b}_mean_m"], out[f"rerr_{b}_p99_m"], out[f"rerr_{b}_above5_frac"] = mean, p99, above
+    return out
+
+
+def world_from_parent(scenario: Scenario, state: Mapping[str, float]) -> np.ndarray:
+    """world_from_body (4 x 4) of the sensor's parent entity from dyn_state fields (identity for 'world')."""
+    parent = scenario.sensor.mount.parent
+    if parent == "world":
+        return np.eye(4)
+    return vehicle_pose(float(state[f"{parent}_x_m"]), float(state[f"{parent}_y_m"]),
+                        float(state[f"{parent}_yaw_rad"]))
+
+
+def exact_ranges(scenario: Scenario, state: Mapping[str, float], heightmap_truth: np.ndarray,
+                 stream: np.ndarray, world_from_sensor: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Exact range (N,) float64 m (inf on a miss) of every beam, by the renderer's ray caster on the scene
+    the renderer drew. ``directions`` (N, 3) unit beams in the sensor frame."""
+    from renderer_proc.raycast import raycast          # lazily: only accuracy frames need the scene
+    from renderer_proc.scene import scene_from_state
+
+    scene = scene_from_state(scenario, state, heightmap_truth, stream)
+    d_w = directions @ world_from_sensor[:3, :3].T
+    o = np.broadcast_to(world_from_sensor[:3, 3], d_w.shape)
+    return raycast(scene, o, d_w)
+
+
+def true_corners_sensor(cart: Cart, state: Mapping[str, float], world_from_sensor: np.ndarray) -> np.ndarray:
+    """The true rim corners (4, 3) m in the sensor frame, grid order (front-left, rear-left, rear-right,
+    front-right at rim-top height)."""
+    L, W = cart.interior_length_m, cart.interior_width_m
+    zr = cart.interior_depth_m + cart.rim_height_m
+    g = np.array([[0, 0, zr], [L, 0, zr], [L, W, zr], [0, W, zr]], dtype=np.float64)
+    world_from_grid = vehicle_pose(float(state["cart_x_m"]), float(state["cart_y_m"]),
+                                   float(state["cart_yaw_rad"])) @ cart_body_from_grid(cart)
+    return apply(invert(world_from_sensor) @ world_from_grid, g)
+
+
+def corner_error(est: np.ndarray, truth: np.ndarray) -> float:
+    """Mean distance (m) between estimated and true corners (4, 3), same order; NaN if any estimate is NaN."""
+    d = np.linalg.norm(np.asarray(est, np.float64) - truth, axis=1)
+    return float(d.mean()) if np.all(np.isfinite(d)) else math.nan
+
+
+def truth_on_grid(truth: np.ndarray, truth_cell_m: float, shape: tuple[int, int], cart: Cart) -> np.ndarray:
+    """The true height map (grain grid, ``truth_cell_m``) sampled at the centres of a grid of ``shape`` over
+    the same interior (nearest truth cell); (nx, ny) float64 m."""
+    nx, ny = shape
+    tx, ty = truth.shape
+    cx = (np.arange(nx) + 0.5) * cart.interior_length_m / nx
+    cy = (np.arange(ny) + 0.5) * cart.interior_width_m / ny
+    i = np.clip((cx / truth_cell_m).astype(np.int64), 0, tx - 1)
+    j = np.clip((cy / truth_cell_m).astype(np.int64), 0, ty - 1)
+    return np.asarray(truth, np.float64)[np.ix_(i, j)]
+
+
+def heightmap_error(perceived: np.ndarray, truth_grid: np.ndarray) -> tuple[float, float, float]:
+    """(rmse m, bias m, coverage) of a perceived map against the truth on the same grid; RMSE and bias over
+    cells with a perceived height (NaN when there is none), coverage the share of such cells."""
+    p = np.asarray(perceived, np.float64)
+    ok = np.isfinite(p) & np.isfinite(truth_grid)
+    cov = float(np.count_nonzero(np.isfinite(p)) / p.size)
+    if not ok.any():
+        return math.nan, math.nan, cov
+    e = p[ok] - truth_grid[ok]
+    return float(np.sqrt(np.mean(e**2))), float(e.mean()), cov
+
+
+def impact_error(est_grid_xyz: np.ndarray, state: Mapping[str, float]) -> float:
+    """Horizontal distance (m, cart grid frame) between the perceived and the true impact; NaN when either is
+    missing. The truth is ``dyn_state.impact_g{x,y}_m`` with ``impact_valid``."""
+    if not int(state.get("impact_valid", 0)) or not np.all(np.isfinite(est_grid_xyz[:2])):
+        return math.nan
+    return float(math.hypot(est_grid_xyz[0] - float(state["impact_gx_m"]), est_grid_xyz[1] - float(state["impact_gy_m"])))

@@ -1,0 +1,182 @@
+"""The perception participant: a thin shell around :class:`perception_proc.pipeline.Perception`.
+
+``start`` plans the rig (``renderer_proc.rig.plan_rig``, the same pure function the renderer and the schema
+use) and precomputes the beam tables. ``step(frame)`` checks that every ``<cam>_depth`` image carries the
+frame, makes the LiDAR ranges (decode, resample, noise seeded from ``scenario.seed`` and the frame), runs
+the cart / height map / impact algorithms and writes ``perc_state``, ``heightmap_perceived`` and
+``lidar_points`` under the seqlock. Every ``perception.accuracy_every_frames`` frames it also compares with
+the truth (``dyn_state``, ``heightmap_truth``, ``stream``) through an exact ray cast; that happens after the
+outputs are computed, so truth never feeds an estimate.
+
+The sensor's parent pose (the combine's GNSS) comes from ``dyn_state``; it places the perceived cart in the
+world and orients the towing direction. The cart itself is found from the points alone.
+"""
+from __future__ import annotations
+
+import math
+import time
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from cosim.camera import Rig
+from cosim.config import Scenario
+from cosim.errors import FrameMismatch
+from cosim.geometry import invert
+
+from . import accuracy as acc
+from .blocks import ACCURACY_FIELDS, HEIGHTS_BLOCK, POINTS_BLOCK, STATE_BLOCK, WRITER
+from .pipeline import FrameResult, Perception
+
+if TYPE_CHECKING:
+    from shm_schema import Segment
+
+__all__ = ["PerceptionParticipant", "create"]
+
+_MS_PER_S = 1e3
+
+
+class PerceptionParticipant:
+    """Ring member ``perception``. Create with :func:`create`; the ring calls start, step, close.
+
+    ``rig``: optional rig to use instead of ``renderer_proc.rig.plan_rig(scenario)`` (tests, studies)."""
+
+    name = WRITER
+
+    def __init__(self, scenario: Scenario, rig: Rig | None = None):
+        self.scenario = scenario
+        self._rig = rig
+        self.pipeline: Perception | None = None
+        self.segment: "Segment | None" = None
+        self.last: FrameResult | None = None
+
+    # -- contract -------------------------------------------------------------------------------------------
+    def start(self, segment: "Segment") -> None:
+        """Bind views and precompute the beam-to-pixel tables."""
+        rig = self._rig
+        if rig is None:
+            from renderer_proc.rig import plan_rig
+
+            rig = plan_rig(self.scenario)
+        self.pipeline = Perception(self.scenario, rig)
+        self._images = []
+        for cam in rig.cameras:
+            name = f"{cam.name}_depth"
+            if not segment.has(name):
+                raise KeyError(f"perception needs block {name!r} (written by the renderer), absent from this run")
+            img = segment.view(name)
+            want = (cam.intrinsics.height, cam.intrinsics.width, 4)
+            if img.shape != want:
+                raise ValueError(f"block {name!r} has shape {img.shape}, the rig expects {want}")
+            self._images.append((name, img))
+        for name in (STATE_BLOCK, HEIGHTS_BLOCK, POINTS_BLOCK):
+            segment.view(name)                          # KeyError naming the missing block
+        if segment.view(POINTS_BLOCK).shape[0] != self.pipeline.n_beams:
+            raise ValueError(f"{POINTS_BLOCK} has {segment.view(POINTS_BLOCK).shape[0]} rows, the pattern "
+                             f"{self.pipeline.n_beams} beams")
+        self._state = segment.view("dyn_state") if segment.has("dyn_state") else None
+        self._ranges = np.empty(self.pipeline.n_beams, np.float32)
+        self.segment = segment
+
+    def step(self, frame: int) -> None:
+        """Perceive frame ``frame``: the images I(frame) into the outputs P(frame)."""
+        seg, pipe = self.segment, self.pipeline
+        if seg is None or pipe is None:
+            raise RuntimeError("perception stepped before start")
+        for name, _ in self._images:
+            got = seg.frame_of(name)
+            if got != frame:
+                raise FrameMismatch(f"perception expected {name} of frame {frame}, found frame {got}",
+                                    process=WRITER, frame=frame)
+        t0 = time.perf_counter()
+        state = self._state.as_dict() if self._state is not None else {}
+        clean = pipe.resample([img for _, img in self._images], out=self._ranges)
+        evaluate = self._accuracy_due(frame)
+        clean_copy = clean.copy() if evaluate else None
+        ranges = pipe.noisy(clean, frame)
+        t1 = time.perf_counter()
+        wfp = acc.world_from_parent(self.scenario, state) if state else np.eye(4)
+        heading = self._heading(state, wfp)
+        res = pipe.perceive(ranges, heading)
+        self.last = res
+        t2 = time.perf_counter()
+        with seg.write(POINTS_BLOCK, frame) as pts:
+            pts[...] = res.points
+        with seg.write(HEIGHTS_BLOCK, frame) as hv:
+            if res.heightmap is None:
+                hv.fill(np.nan)
+            else:
+                hv[...] = res.heightmap.heights
+        values = self._outputs(frame, state, ranges, res, wfp)
+        values["lidar_ms"] = _MS_PER_S * (t1 - t0)
+        values["perception_ms"] = _MS_PER_S * (t2 - t0)
+        values.update({n: (0 if d == "i8" else math.nan) for n, _, d, _ in ACCURACY_FIELDS})
+        values["accuracy_ms"] = math.nan
+        if evaluate and state:
+            t3 = time.perf_counter()
+            values.update(self._accuracy(state, clean_copy, res, wfp))
+            values["acc_evaluated"] = 1
+            values["accuracy_ms"] = _MS_PER_S * (time.perf_counter() - t3)
+        with seg.write(STATE_BLOCK, frame) as st:
+            st.update(values)
+
+    def close(self) -> None:
+        """Nothing to release but references; safe to call more than once."""
+        self.segment = None
+
+    # -- helpers --------------------------------------------------------------------------------------------
+    def _accuracy_due(self, frame: int) -> bool:
+        k = self.scenario.perception.accuracy_every_frames
+        return k > 0 and frame % k == 0 and self.segment is not None and all(
+            self.segment.has(b) for b in ("dyn_state", "heightmap_truth", "stream"))
+
+    def _heading(self, state: dict, wfp: np.ndarray) -> tuple[float, float]:
+        """Towing direction (the combine's heading) in the sensor's parent frame."""
+        yaw = float(state.get("combine_yaw_rad", 0.0)) if state else 0.0
+        d = invert(wfp)[:2, :2] @ np.array([math.cos(yaw), math.sin(yaw)])
+        return float(d[0]), float(d[1])
+
+    def _outputs(self, frame: int, state: dict, ranges: np.ndarray, res: FrameResult, wfp: np.ndarray) -> dict:
+        pipe = self.pipeline
+        v: dict[str, float] = {"t_s": float(state.get("t_s", math.nan)), "frame": frame,
+                               "valid_beams": int(np.count_nonzero(np.isfinite(ranges)))}
+        cart = res.cart
+        v["cart_valid"], v["cart_partial"] = int(cart.valid), int(cart.partial)
+        corners = (np.asarray(cart.corners) - pipe.level_from_sensor[:3, 3]) @ pipe.level_from_sensor[:3, :3]
+        for k in range(4):
+            for i, a in enumerate("xyz"):
+                v[f"corner{k}_{a}_m"] = float(corners[k, i])
+        if cart.valid:
+            c = wfp @ np.array([cart.centre_xy[0], cart.centre_xy[1], 0.0, 1.0])
+            v["cart_x_m"], v["cart_y_m"] = float(c[0]), float(c[1])
+            v["cart_yaw_rad"] = float(math.atan2(wfp[1, 0], wfp[0, 0]) + cart.yaw_rad)
+        else:
+            v["cart_x_m"] = v["cart_y_m"] = v["cart_yaw_rad"] = math.nan
+        imp = res.impact
+        v["impact_valid"] = int(imp.valid)
+        v["impact_gx_m"], v["impact_gy_m"], v["impact_gz_m"] = (float(x) for x in imp.xyz)
+        v["coverage"] = res.heightmap.coverage if res.heightmap is not None else 0.0
+        for key in ("cart", "heightmap", "impact"):
+            v[f"{key}_ms"] = res.timing_ms.get(key, math.nan)
+        return v
+
+    def _accuracy(self, state: dict, clean: np.ndarray, res: FrameResult, wfp: np.ndarray) -> dict:
+        sc, pipe, seg = self.scenario, self.pipeline, self.segment
+        wfs = wfp @ pipe.level_from_sensor
+        truth_h = np.array(seg.view("heightmap_truth"), copy=True)
+        exact = acc.exact_ranges(sc, state, truth_h, np.array(seg.view("stream")), wfs, pipe.directions)
+        clean = np.where((clean >= sc.sensor.range_min_m) & (clean <= sc.sensor.range_max_m), clean, np.nan)
+        out = acc.range_error_stats(clean, exact, sc.sensor.range_min_m, sc.sensor.range_max_m)
+        truth_grid = acc.truth_on_grid(truth_h, sc.grain.cell_m, pipe.grid, sc.cart)
+        heights = res.heightmap.heights if res.heightmap is not None else np.full(pipe.grid, np.nan)
+        out["heightmap_rmse_m"], out["heightmap_bias_m"], _ = acc.heightmap_error(heights, truth_grid)
+        truth_corners = acc.true_corners_sensor(sc.cart, state, wfs)
+        est = (np.asarray(res.cart.corners) - pipe.level_from_sensor[:3, 3]) @ pipe.level_from_sensor[:3, :3]
+        out["corner_error_m"] = acc.corner_error(est, truth_corners)
+        out["impact_error_m"] = acc.impact_error(res.impact.xyz, state)
+        return out
+
+
+def create(scenario: Scenario) -> PerceptionParticipant:
+    """The perception participant for ``scenario``."""
+    return PerceptionParticipant(scenario)
