@@ -1,7 +1,8 @@
 """Command line: ``python launch.py ...`` and ``python -m cosim ...`` (argparse).
 
 Verbs: ``run [SCENARIO]`` (the default verb; no scenario runs the packaged default), ``validate SCENARIO``,
-``schema`` (write the scenario JSON Schema). Exit codes: 0 success, 1 run failure, 2 invalid scenario or usage,
+``schema`` (write the scenario JSON Schema), ``view RUN`` (attach the live viewer to a running run) and
+``replay FILE.mcap`` (serve a recording to the viewer's dashboard). Exit codes: 0 success, 1 run failure, 2 invalid scenario or usage,
 130 interrupted.
 """
 from __future__ import annotations
@@ -13,9 +14,9 @@ from typing import Sequence
 
 from .errors import ScenarioError
 
-__all__ = ["main", "build_parser", "VERBS"]
+__all__ = ["main", "build_parser", "run_extras", "VERBS"]
 
-VERBS = ("run", "validate", "schema", "compare")
+VERBS = ("run", "validate", "schema", "compare", "study")
 EXIT_SCENARIO = 2
 
 
@@ -36,7 +37,14 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="run a scenario (default verb)")
     _scenario_options(run)
     run.add_argument("--out", type=Path, help="run directory (default runs/<scenario>-<timestamp>)")
-    run.add_argument("--viewer", action="store_true", help="allocate the viewer's blocks (RGB) for an observer")
+    run.add_argument("--viewer", action="store_true",
+                     help="render the RGB image and serve the live dashboard on 127.0.0.1 (see --viewer-port)")
+    run.add_argument("--viewer-port", type=int, default=8765, metavar="PORT",
+                     help="port of the --viewer dashboard (default %(default)s)")
+    run.add_argument("--record", nargs="?", const=True, default=None, type=Path, metavar="FILE",
+                     help="write an MCAP recording (Foxglove schemas) to FILE (default <run dir>/recording.mcap)")
+    run.add_argument("--record-image-every", type=int, default=1, metavar="N",
+                     help="record camera images every N frames (default %(default)s: every frame)")
     run.add_argument("--quiet", action="store_true", help="no progress output")
     val = sub.add_parser("validate", help="validate a scenario and print the resolved result")
     _scenario_options(val)
@@ -45,9 +53,38 @@ def build_parser() -> argparse.ArgumentParser:
     _scenario_options(cmp_)
     cmp_.add_argument("--out", type=Path, help="report directory (default runs/compare-<scenario>-<timestamp>)")
     cmp_.add_argument("--quiet", action="store_true", help="no progress output")
+    st = sub.add_parser("study", help="error against run time over the fidelity knobs")
+    _scenario_options(st)
+    st.add_argument("--knobs", default="dynamics,grain_cell", help="comma-separated: dynamics, grain_cell, render, "
+                    "beams, perception_grid (default: %(default)s)")
+    st.add_argument("--sim-seconds", type=float, default=20.0, help="simulated seconds per setting")
+    st.add_argument("--out", type=Path, help="output directory (default runs/study-<scenario>-<timestamp>)")
     sch = sub.add_parser("schema", help="write the scenario JSON Schema")
     sch.add_argument("--out", type=Path, help="output file (default: stdout)")
+    view = sub.add_parser("view", help="attach the live viewer to a running run (python -m cosim.viewer --attach)")
+    view.add_argument("run", help="run directory (with run.json) or shared-memory segment name")
+    view.add_argument("--port", type=int, default=8765, help="dashboard port on 127.0.0.1 (default %(default)s)")
+    rep = sub.add_parser("replay", help="serve an MCAP recording to the viewer's dashboard")
+    rep.add_argument("file", type=Path, help="recording written by run --record")
+    rep.add_argument("--port", type=int, default=8765, help="dashboard port on 127.0.0.1 (default %(default)s)")
+    rep.add_argument("--speed", type=float, default=1.0, help="x simulated time (default %(default)s)")
+    rep.add_argument("--loop", action="store_true", help="start over at the end")
     return parser
+
+
+def run_extras(args: argparse.Namespace) -> tuple[list, list]:
+    """(observers, sinks) that ``run``'s --viewer and --record ask for."""
+    observers, sinks = [], []
+    if getattr(args, "viewer", False):
+        from .launcher import ObserverSpec
+
+        observers.append(ObserverSpec("viewer", "cosim.viewer.server:observe", {"port": args.viewer_port}))
+    if getattr(args, "record", None) is not None:
+        from .recording import RecordOptions, mcap_sink
+
+        path = None if args.record is True else args.record
+        sinks.append(mcap_sink(RecordOptions(path=path, image_every=args.record_image_every)))
+    return observers, sinks
 
 
 def _extra(args: argparse.Namespace) -> dict:
@@ -97,6 +134,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not argv or (argv[0] not in VERBS and argv[0] not in ("-h", "--help")):
         argv.insert(0, "run")
     args = build_parser().parse_args(argv)
+    if args.verb in ("view", "replay"):
+        from .viewer.__main__ import main as viewer_main
+
+        if args.verb == "view":
+            return viewer_main(["--attach", args.run, "--port", str(args.port)])
+        return viewer_main(["--replay", str(args.file), "--port", str(args.port), "--speed", str(args.speed)]
+                           + (["--loop"] if args.loop else []))
     if args.verb == "schema":
         from .jsonschema import schema_text
 
@@ -125,6 +169,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     from .progress import ProgressPrinter
 
+    if args.verb == "study":
+        from .outputs import default_run_dir
+        from .study import KNOBS, run_study
+
+        knobs = [k.strip() for k in args.knobs.split(",") if k.strip()]
+        unknown = [k for k in knobs if k not in KNOBS]
+        if unknown:
+            sys.stderr.write(f"unknown knobs {unknown}; choose from {sorted(KNOBS)}\n")
+            return EXIT_SCENARIO
+        out = args.out or default_run_dir(scenario.model_copy(update={"name": f"study-{scenario.name}"}))
+        md = run_study(scenario, knobs, out, args.sim_seconds)
+        sys.stdout.write(md.read_text() + f"\nstudy written to {out}\n")
+        return 0
     if args.verb == "compare":
         from .compare import compare
         from .outputs import default_run_dir
@@ -136,6 +193,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     from .launcher import launch
 
     progress = None if args.quiet else ProgressPrinter()
-    result = launch(scenario, args.out, progress=progress)
+    try:
+        observers, sinks = run_extras(args)
+    except ValueError as exc:
+        sys.stderr.write(f"{exc}\n")
+        return EXIT_SCENARIO
+    if observers:
+        sys.stderr.write(f"viewer: http://127.0.0.1:{args.viewer_port}/ (while the run lasts)\n")
+    result = launch(scenario, args.out, progress=progress, observers=observers, sinks=sinks)
     _print_summary(result, sys.stdout)
     return result.exit_code

@@ -20,7 +20,7 @@ from .errors import RunError
 from .recorder import Recorder
 from .specs import ParticipantSpec, load_callable
 
-__all__ = ["default_run_dir", "write_scenario", "write_outputs", "STAGE_KEYS"]
+__all__ = ["default_run_dir", "write_scenario", "compose_summary", "write_outputs", "clean_json", "STAGE_KEYS"]
 
 log = logging.getLogger("cosim.outputs")
 
@@ -46,14 +46,14 @@ def write_scenario(run_dir: Path, scenario: Scenario) -> None:
     (run_dir / "scenario.yaml").write_text(dump_resolved(scenario))
 
 
-def _clean(obj):
+def clean_json(obj):
     """JSON-safe copy: numpy scalars to Python, NaN/inf to None."""
     if isinstance(obj, dict):
-        return {k: _clean(v) for k, v in obj.items()}
+        return {k: clean_json(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
+        return [clean_json(v) for v in obj]
     if isinstance(obj, np.ndarray):
-        return _clean(obj.tolist())
+        return clean_json(obj.tolist())
     if isinstance(obj, (np.floating, float)):
         f = float(obj)
         return f if math.isfinite(f) else None
@@ -62,9 +62,9 @@ def _clean(obj):
     return obj
 
 
-def write_outputs(run_dir: Path, scenario: Scenario, recorder: Recorder | None, ring: Sequence[ParticipantSpec],
-                  *, wall_time_s: float, error: RunError | None) -> dict:
-    """Write timeseries.csv, the final arrays and summary.json; return the summary."""
+def compose_summary(scenario: Scenario, recorder: Recorder | None, ring: Sequence[ParticipantSpec], *,
+                    wall_time_s: float, error: RunError | None) -> dict:
+    """summary.json's content (DESIGN.md section 6) from what the recorder holds."""
     completed_frames = len(recorder.frames) if recorder else 0
     last = recorder.frames[-1] if recorder and recorder.frames else -1
     sim_time = max(0, last) * scenario.timing.sensor_period_s
@@ -88,33 +88,41 @@ def write_outputs(run_dir: Path, scenario: Scenario, recorder: Recorder | None, 
     if error is not None:
         summary["error"] = {"type": type(error).__name__, "message": str(error), "process": error.process,
                             "frame": error.frame, "traceback": error.detail}
+    if recorder is None:
+        return summary
+    med = recorder.timing_medians_ms()
+    summary["timing_ms"] = {STAGE_KEYS.get(m, m): med[m] for m in members}
+    summary["timing_ms"]["handoff"] = med["handoff"]
+    if recorder.turn_ms:
+        turns = np.asarray(recorder.turn_ms)
+        summary["ring"] = {"turn_median_ms": float(np.median(turns)),
+                           "turn_p99_ms": float(np.percentile(turns, 99)),
+                           "handoff_median_ms": med["handoff"]}
+    if recorder.frames:
+        series = recorder.series()
+        for spec in ring:
+            if not spec.summary:
+                continue
+            try:
+                t0 = time.perf_counter()
+                summary.update(_summarize(spec, scenario, series, recorder))
+                log.info("%s summary in %.1f ms", spec.name, (time.perf_counter() - t0) * 1e3)
+            except Exception as exc:  # noqa: BLE001 - a summary bug must not lose the run's other outputs
+                log.exception("summary of %s failed", spec.name)
+                summary.setdefault("summary_errors", {})[spec.name] = f"{type(exc).__name__}: {exc}"
+    return summary
+
+
+def write_outputs(run_dir: Path, scenario: Scenario, recorder: Recorder | None, ring: Sequence[ParticipantSpec],
+                  *, wall_time_s: float, error: RunError | None) -> dict:
+    """Write timeseries.csv, the final arrays and summary.json; return the summary."""
     if recorder is not None:
         recorder.write_csv(run_dir / "timeseries.csv")
         for name in ("heightmap_truth", "heightmap_perceived"):
             if name in recorder.arrays and recorder.array_frames.get(name, -1) >= 0:
                 np.save(run_dir / f"{name}.npy", recorder.arrays[name])
-        med = recorder.timing_medians_ms()
-        summary["timing_ms"] = {STAGE_KEYS.get(m, m): med[m] for m in members}
-        summary["timing_ms"]["handoff"] = med["handoff"]
-        if recorder.turn_ms:
-            turns = np.asarray(recorder.turn_ms)
-            summary["ring"] = {"turn_median_ms": float(np.median(turns)),
-                               "turn_p99_ms": float(np.percentile(turns, 99)),
-                               "handoff_median_ms": med["handoff"]}
-        if recorder.frames:
-            series = recorder.series()
-            for spec in ring:
-                if not spec.summary:
-                    continue
-                try:
-                    t0 = time.perf_counter()
-                    part = _summarize(spec, scenario, series, recorder)
-                    summary.update(part)
-                    log.info("%s summary in %.1f ms", spec.name, (time.perf_counter() - t0) * 1e3)
-                except Exception as exc:  # noqa: BLE001 - a summary bug must not lose the run's other outputs
-                    log.exception("summary of %s failed", spec.name)
-                    summary.setdefault("summary_errors", {})[spec.name] = f"{type(exc).__name__}: {exc}"
-    (run_dir / "summary.json").write_text(json.dumps(_clean(summary), indent=2) + "\n")
+    summary = compose_summary(scenario, recorder, ring, wall_time_s=wall_time_s, error=error)
+    (run_dir / "summary.json").write_text(json.dumps(clean_json(summary), indent=2) + "\n")
     return summary
 
 
