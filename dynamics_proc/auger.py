@@ -27,8 +27,10 @@ GRAVITY_MPS2 = 9.80665
 #: rows of the ``stream`` block (CONTRACTS.md)
 STREAM_ROWS = 64
 #: coarse samples along the parabola, then two refinements of the crossing interval with this many each
-_COARSE, _FINE = 128, 64
+_COARSE, _FINE = 48, 48
 SURFACE_NONE, SURFACE_GRAIN, SURFACE_WALL, SURFACE_GROUND = 0, 1, 2, 3
+#: ramps shorter than this are instantaneous (avoids overflowing 1 / ramp), s
+MIN_RAMP_S = 1e-9
 
 
 @dataclass(frozen=True)
@@ -81,12 +83,12 @@ def flow_advance(level: float, on: bool, dt: float, a: AugerParams) -> tuple[flo
     the volume being the exact integral of flow_m3ps * level(t) over the step."""
     ramp = a.spool_up_s if on else a.run_out_s
     bound = 1.0 if on else 0.0
-    if ramp <= 0.0:
+    if ramp <= MIN_RAMP_S:
         return bound, a.flow_m3ps * bound * dt
     rate = (1.0 if on else -1.0) / ramp
     t_b = min(dt, (bound - level) / rate)                    # time to reach the bound (>= 0)
     integral = level * t_b + 0.5 * rate * t_b * t_b + bound * (dt - t_b)
-    new = level + rate * t_b if t_b < dt else bound
+    new = bound if t_b < dt else min(max(level + rate * dt, 0.0), 1.0)
     return new, a.flow_m3ps * integral
 
 
@@ -103,24 +105,22 @@ class Impact:
 
 def _surface(pts: np.ndarray, h: np.ndarray, cell: float, a: AugerParams) -> tuple[np.ndarray, np.ndarray]:
     """Surface height (n,) m (grid frame) under grid points (n, 3) and its code (n,) int."""
-    x, y = pts[:, 0], pts[:, 1]
-    inside = (x >= 0.0) & (x < a.length_m) & (y >= 0.0) & (y < a.width_m)
-    band = (x >= -a.band_m) & (x < a.length_m + a.band_m) & (y >= -a.band_m) & (y < a.width_m + a.band_m)
+    hl, hw = 0.5 * a.length_m, 0.5 * a.width_m
+    ax, ay = np.abs(pts[:, 0] - hl), np.abs(pts[:, 1] - hw)
+    inside = (ax < hl) & (ay < hw)
+    band = (ax < hl + a.band_m) & (ay < hw + a.band_m)
+    ij = (pts[:, :2] * (1.0 / cell)).astype(np.int64)
+    np.maximum(ij, 0, out=ij)
+    np.minimum(ij, (h.shape[0] - 1, h.shape[1] - 1), out=ij)
     z = np.where(band, a.rim_top_m, -a.floor_height_m)
-    code = np.where(band, SURFACE_WALL, SURFACE_GROUND)
-    if inside.any():
-        i = (x[inside] / cell).astype(np.int64)
-        j = (y[inside] / cell).astype(np.int64)
-        np.minimum(i, h.shape[0] - 1, out=i)
-        np.minimum(j, h.shape[1] - 1, out=j)
-        z[inside] = h[i, j]
-        code[inside] = SURFACE_GRAIN
+    z[inside] = h[ij[inside, 0], ij[inside, 1]]
+    code = SURFACE_GROUND - band - inside        # 3 ground, 2 band, 1 inside (inside implies band)
     return z, code
 
 
 def _points(spout: np.ndarray, vel: np.ndarray, s: np.ndarray) -> np.ndarray:
-    p = spout[None, :] + vel[None, :] * s[:, None]
-    p[:, 2] -= 0.5 * GRAVITY_MPS2 * s * s
+    p = spout + vel * s[:, None]
+    p[:, 2] -= (0.5 * GRAVITY_MPS2) * s * s
     return p
 
 
@@ -129,33 +129,42 @@ def first_surface(spout: np.ndarray, vel: np.ndarray, grid_from_world: np.ndarra
     """First crossing of the parabola spout + vel s + g s^2/2 (world, m, m/s) with the surfaces.
 
     ``grid_from_world`` (4, 4): cart grid frame from world. ``h`` (nx, ny) grain heights m. The crossing is
-    bracketed on a coarse sampling down to the ground and refined once (time resolution ~1e-4 of the fall).
+    bracketed on a coarse sampling from where the stream falls through the highest surface down to the ground
+    and refined once (time resolution ~4e-4 of that interval, sub-millimetre).
     """
-    vz = float(vel[2])
-    z0 = float(spout[2])
-    t_ground = (vz + math.sqrt(vz * vz + 2.0 * GRAVITY_MPS2 * max(z0, 0.0))) / GRAVITY_MPS2
     r, t = grid_from_world[:3, :3], grid_from_world[:3, 3]
-    lo, hi = 0.0, t_ground * 1.0001
+    sg, vg = r @ spout + t, r @ vel                  # the cart grid frame is the world turned about z: g stays -z
+    vz, z0 = float(vg[2]), float(sg[2])
+    t_ground = _fall_time(z0, vz, -a.floor_height_m) * 1.0001
+    # nothing can be hit above the highest surface: start the search where the stream falls through it
+    z_top = max(a.rim_top_m, float(h.max()))
+    lo, hi = _fall_time(z0, vz, z_top) if z0 > z_top else 0.0, t_ground
+    d_lo = d_hi = 0.0
     for n in (_COARSE, _FINE):
         s = np.linspace(lo, hi, n)
-        g = _points(spout, vel, s) @ r.T + t
+        g = _points(sg, vg, s)
         z, _ = _surface(g, h, cell, a)
-        below = np.nonzero(g[:, 2] <= z)[0]
-        if below.size == 0:          # only possible through round-off at the ground: take the end
-            k = n - 1
-        else:
-            k = int(below[0])
+        d = g[:, 2] - z                               # height above the surface below, m
+        below = np.flatnonzero(d <= 0.0)
+        k = int(below[0]) if below.size else n - 1   # none: only through round-off at the ground
         if k == 0:
             lo = hi = float(s[0])
+            d_lo, d_hi = 0.0, 0.0
             break
         lo, hi = float(s[k - 1]), float(s[k])
-    s_hit = np.array([hi])
-    g = _points(spout, vel, s_hit) @ r.T + t
-    # put the grid point on the surface it crossed (the bracket makes this a sub-millimetre correction)
+        d_lo, d_hi = float(d[k - 1]), float(d[k])
+    # the crossing inside the last bracket, the surface taken as level there (linear in time)
+    s_hit = lo + (hi - lo) * (d_lo / (d_lo - d_hi)) if d_lo > d_hi else hi
+    g = _points(sg, vg, np.array([s_hit]))
     z, code = _surface(g, h, cell, a)
-    g[0, 2] = z[0]
+    g[0, 2] = z[0]                                   # on the surface it crossed (sub-millimetre correction)
     w = (g[0] - t) @ r
-    return Impact(world=w, grid=g[0], time_s=hi, surface=int(code[0]))
+    return Impact(world=w, grid=g[0], time_s=s_hit, surface=int(code[0]))
+
+
+def _fall_time(z0: float, vz: float, z: float) -> float:
+    """Time s for z0 + vz s - g s^2 / 2 to come down to z (<= z0), m, m/s."""
+    return (vz + math.sqrt(vz * vz + 2.0 * GRAVITY_MPS2 * max(z0 - z, 0.0))) / GRAVITY_MPS2
 
 
 def stream_rows(spout: np.ndarray, vel: np.ndarray, t_impact: float, radius_m: float,

@@ -13,11 +13,13 @@ Fig 9, all in that coordinate:
   no more often than ``nudge_min_interval_s``, towards the control effort, never into the unsafe range;
 * actual auger location: the spout, measured.
 
-Measurements: a height map (nxc, nyc) m on the controller grid, NaN where invalid, or None. Section heights
-are the highest NaN-ignoring 2 x 2 block minimum (a robust peak: one noisy cell cannot fake it); sections without a valid cell keep their last
-value. A section counts as full once its estimate reaches the full level. The auger runs only while there is a target
-within one section length of the predicted impact (it travels with the auger off), the predicted impact is
-safely inside the cart, and a measurement has been seen.
+Measurements: a height map (nxc, nyc) m on the controller grid, NaN where invalid, or None (an all-NaN map
+counts as none). Section heights are the highest NaN-ignoring 2 x 2 block minimum (a robust peak: one noisy
+cell cannot fake it); sections without a valid cell keep their last value. A section counts as full once its
+estimate reaches the full level, and stays full (latched: noise must not send the auger back). A target
+section without a valid cell for ``stale_timeout_s`` while the auger runs is given up as full. The auger
+runs only while there is a target within one section length of the predicted impact (it travels with the
+auger off), the predicted impact is safely inside the cart, and a measurement has been seen.
 """
 from __future__ import annotations
 
@@ -91,6 +93,7 @@ class ControllerState:
     heights: np.ndarray          # (N,) m, last estimate per section, NaN never measured
     last_valid_t: np.ndarray     # (N,) s, time of the last valid cell per section (-inf never)
     forced_full: np.ndarray      # (N,) bool, sections given up as stale
+    full: np.ndarray             # (N,) bool, sections declared full (latched)
     memory: np.ndarray | None    # (nx, ny) m, last valid value per cell ("fused"), NaN never
     target: int                  # 0-based section being filled, -1 none
     last_nudge_t: float          # s
@@ -112,30 +115,36 @@ class ControllerOutput:
     fullness: np.ndarray         # (N,) estimated height / target, NaN unknown
 
 
-def min2x2(m: np.ndarray) -> np.ndarray:
-    """NaN-ignoring minimum over each 2 x 2 block of cells (the map's last row / column repeated), (nx, ny)
-    float64 m; NaN only where the whole block is NaN. A single noisy cell cannot raise it."""
+def min2x2(m: np.ndarray, next_row: np.ndarray | None = None) -> np.ndarray:
+    """NaN-ignoring minimum over each 2 x 2 block of cells, (nx, ny) float64 m; NaN only where the whole
+    block is NaN. A single noisy cell cannot raise it. ``next_row`` (nx,) int: the row paired with each row
+    (default i + 1, the last row with itself); the last column pairs with itself."""
+    m = np.asarray(m, dtype=np.float64)
     nx, ny = m.shape
-    q = np.empty((nx + 1, ny + 1))
-    q[:nx, :ny] = m
-    q[nx, :ny] = m[-1]
-    q[:, ny] = q[:, ny - 1]
-    return np.fmin(np.fmin(q[:-1, :-1], q[1:, :-1]), np.fmin(q[:-1, 1:], q[1:, 1:]))
+    if next_row is None:
+        next_row = np.minimum(np.arange(nx) + 1, nx - 1)
+    col = np.minimum(np.arange(ny) + 1, ny - 1)
+    down = m[next_row]
+    return np.fmin(np.fmin(m, down), np.fmin(m[:, col], down[:, col]))
 
 
 def section_heights(m: np.ndarray, p: ControllerParams) -> np.ndarray:
-    """Robust peak per section: the highest 2 x 2 block minimum, (N,) float64 m; NaN where a section has no
-    valid cell. Exact for a heap whose flat top spans 2 x 2 cells; spikes of single cells are rejected."""
-    rowmax = np.fmax.reduce(min2x2(m), axis=1)               # NaN only for all-NaN rows
-    return np.fmax.reduceat(rowmax, np.asarray(p.section_start_rows))
+    """Robust peak per section: the highest 2 x 2 block minimum (blocks stay inside their section), (N,)
+    float64 m; NaN where a section has no valid cell. Exact for a heap whose flat top spans 2 x 2 cells."""
+    starts = np.asarray(p.section_start_rows)
+    nxt = np.minimum(np.arange(p.nx) + 1, p.nx - 1)
+    last = np.append(starts[1:], p.nx) - 1                   # last row of each section pairs with itself
+    nxt[last] = last
+    rowmax = np.fmax.reduce(min2x2(m, nxt), axis=1)          # NaN only for all-NaN rows
+    return np.fmax.reduceat(rowmax, starts)
 
 
 def initial_controller(p: ControllerParams) -> ControllerState:
     """State before the first measurement: nothing known, auger off."""
     n = p.sections
     mem = np.full((p.nx, p.ny), np.nan) if p.estimator == "fused" else None
-    return ControllerState(np.full(n, np.nan), np.full(n, -np.inf), np.zeros(n, bool), mem, -1, -np.inf, 0.0,
-                           False, False, False, 0)
+    return ControllerState(np.full(n, np.nan), np.full(n, -np.inf), np.zeros(n, bool), np.zeros(n, bool), mem,
+                           -1, -np.inf, 0.0, False, False, False, 0)
 
 
 def _inside(x: float, y: float, margin: float, p: ControllerParams) -> bool:
@@ -148,7 +157,8 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
     """One controller decision at time ``t`` s.
 
     ``meas`` (nx, ny) m or None; ``actual_x`` spout grid x m; ``impacts`` predicted impact points (grid
-    x, y m, from the known geometry; the auger runs only while all are safely inside); ``drift_x`` predicted impact x minus spout x m; ``nudge_signal`` the spout grid x m
+    x, y m, from the known geometry; the auger runs only while all are safely inside); ``drift_x`` predicted
+    impact x minus spout x m; ``nudge_signal`` the spout grid x m
     the current setpoint implies.
     """
     heights, last_valid, memory, seen = st.heights, st.last_valid_t, st.memory, st.seen
@@ -161,7 +171,7 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
         ok = ~np.isnan(new)
         heights = np.where(ok, new, heights)
         last_valid = np.where(ok, t, last_valid)
-        seen = True
+        seen = seen or bool(ok.any())                          # an all-NaN map is no measurement
     forced = st.forced_full
     if (seen and st.target >= 0 and st.auger_cmd and t - last_valid[st.target] > p.stale_timeout_s
             and not forced[st.target]):
@@ -169,6 +179,7 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
         forced[st.target] = True
     with np.errstate(invalid="ignore"):
         full = (heights >= p.full_level_m) | forced      # NaN (unknown) is not full
+    full |= st.full                                       # latched: grain does not leave the cart
     target = get_strategy(p.strategy)(full, heights, st.target) if seen else -1
     all_full = seen and target < 0
     lo, hi = p.safe_margin_m, p.length_m - p.safe_margin_m
@@ -194,7 +205,7 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
     auger = bool(seen and target >= 0 and safe and near)
     with np.errstate(invalid="ignore"):
         fullness = heights / p.target_m
-    new_state = replace(st, heights=heights, last_valid_t=last_valid, forced_full=forced, memory=memory,
+    new_state = replace(st, heights=heights, last_valid_t=last_valid, forced_full=forced, full=full, memory=memory,
                         target=target, last_nudge_t=last_nudge, bias_m=bias, auger_cmd=auger, seen=seen,
                         all_full=all_full, nudges=count)
     return new_state, ControllerOutput(nudge, auger, desired, effort, fullness)

@@ -133,7 +133,8 @@ def relax(h: np.ndarray, grid: GrainGrid, tol_slope: float = 1e-4, max_iter: int
 
     Pairwise exchange: each 4-neighbour pair steeper than tan(repose) moves EXCHANGE_FACTOR of its excess
     difference from the high cell to the low one (all pairs at once), then wall cells above the cap lose the
-    excess as spill (the cap of inner cells follows from the slopes). Iterates until every pair is within ``tol_slope`` (dimensionless) of tan(repose). Returns
+    excess as spill (the cap of inner cells follows from the slopes). Iterates until every pair is within
+    ``tol_slope`` (dimensionless) of tan(repose). Returns
     (relaxed heights (nx, ny) float64, spilled m^3). Raises RuntimeError if it does not converge.
     """
     cap = grid.cap() if cap is None else cap

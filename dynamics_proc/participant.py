@@ -53,8 +53,16 @@ class DynamicsParticipant:
         got = tuple(self._state.array.dtype.names)
         if got != self._names:
             raise ValueError(f"dyn_state in the segment has fields {got}, this participant writes {self._names}")
-        self._perceived = segment.view("heightmap_perceived") if self.perception and segment.has(
-            "heightmap_perceived") else None
+        self._perceived = None
+        if self.perception:
+            if not segment.has("heightmap_perceived"):
+                raise ValueError("dynamics: feedback 'perception' but the segment has no 'heightmap_perceived' "
+                                 "block; is perception in the ring?")
+            self._perceived = segment.view("heightmap_perceived")
+            want = (self.params.control.nx, self.params.control.ny)
+            if self._perceived.shape != want:
+                raise ValueError(f"dynamics: heightmap_perceived is {self._perceived.shape}, the controller grid "
+                                 f"(controller.grid_cell_m = {self.params.control.grid_cell_m} m) is {want}")
         ps = segment.view("perc_state") if self.perception and segment.has("perc_state") else None
         self._cart_valid = ps if ps is not None and "cart_valid" in ps.array.dtype.names else None
 

@@ -11,16 +11,15 @@ would count them as grain; the bare minimum is biased low by range noise (by abo
 returns). The median of the lowest cluster rejects the stream and averages the noise.
 
 A cell whose only returns are the stream's (the stream hides the pile beneath it) has no lower cluster on the
-grain; it is found as a cell standing more than :data:`STREAM_STEP_M` above the median of its neighbourhood
-(:data:`NEIGHBOURHOOD` cells square; a grain pile at the angle of repose cannot rise that fast) and is left
-NaN: no answer rather than the stream's height. Returns more than :data:`STREAM_MIN_HEIGHT_M` above their
+grain; it is found as a cell standing more than :data:`STREAM_STEP_M` above the lower quartile of its
+neighbourhood (:data:`NEIGHBOURHOOD` cells square; a grain pile at the angle of repose cannot rise that fast;
+the quartile, not the median, because an occluding strip such as the auger tube can fill half the window)
+and is left NaN: no answer rather than the stream's (or the tube's) height. Returns more than :data:`STREAM_MIN_HEIGHT_M` above their
 cell's surface, or in such cells, are returned as stream returns for the impact search.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-
-import warnings
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -38,6 +37,11 @@ CLUSTER_GAP_M = 0.10
 STREAM_STEP_M = 0.35
 #: a return more than this above its cell's grain surface is a stream return, m
 STREAM_MIN_HEIGHT_M = 0.15
+#: span of the z sort key per cell, m (more than any grid-frame height kept)
+Z_SPAN_M = 16.0
+#: percentile of the neighbourhood heights the stream-cell test compares with (low: an occluding strip such
+#: as the auger tube may fill half the window)
+NEIGHBOUR_PERCENTILE = 25.0
 #: side of the square neighbourhood used for the stream-cell test, cells (odd)
 NEIGHBOURHOOD = 7
 #: grain can heap at most this far above the rim top (a 3 m wide cart at 23-25 deg repose heaps ~0.7 m), m
@@ -57,6 +61,18 @@ class HeightMap:
     grid_points: np.ndarray
     stream: np.ndarray
     coverage: float
+
+
+def _lower_quartile(heights: np.ndarray) -> np.ndarray:
+    """Per cell, the :data:`NEIGHBOUR_PERCENTILE` of the finite heights in its :data:`NEIGHBOURHOOD` square
+    (nearest-rank on the sorted window; NaN where the window is empty). (nx, ny) float32."""
+    half = NEIGHBOURHOOD // 2
+    pad = np.pad(heights, half, constant_values=np.nan)
+    win = np.sort(sliding_window_view(pad, (NEIGHBOURHOOD, NEIGHBOURHOOD)).reshape(*heights.shape, -1), axis=-1)
+    k = np.count_nonzero(np.isfinite(win), axis=-1)            # NaN sorts last: finite values come first
+    idx = np.maximum(np.floor(NEIGHBOUR_PERCENTILE / 100.0 * (k - 1)).astype(np.int64), 0)
+    q = np.take_along_axis(win, idx[..., None], axis=-1)[..., 0]
+    return np.where(k > 0, q, np.nan)
 
 
 def grid_shape(cart: Cart, cell_m: float) -> tuple[int, int]:
@@ -91,9 +107,14 @@ def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart
     j = np.minimum((g[:, 1] * (ny / W)).astype(np.int64), ny - 1)
     cell = i * ny + j
     low = np.flatnonzero(~high)
-    order = low[np.lexsort((g[low, 2], cell[low]))]
+    # one sort by (cell, z): z lies in (-1, top + HEAP_MAX) < Z_SPAN_M, so cell * Z_SPAN_M + z + 1 orders both
+    order = low[np.argsort(cell[low] * Z_SPAN_M + (g[low, 2] + 1.0))]
     cs, zs = cell[order], g[order, 2]
-    uniq, start, cnt = np.unique(cs, return_index=True, return_counts=True)
+    if cs.size == 0:
+        return HeightMap(heights, counts, g, high.copy(), 0.0)
+    start = np.flatnonzero(np.r_[True, cs[1:] != cs[:-1]])
+    cnt = np.diff(np.r_[start, cs.size])
+    uniq = cs[start]
     zmin = zs[start]
     lower = zs <= np.repeat(zmin, cnt) + CLUSTER_GAP_M
     k = np.add.reduceat(lower.astype(np.int64), start)          # lower cluster is a prefix of each cell
@@ -103,12 +124,7 @@ def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart
     flat[uniq[enough]] = med[enough]
     np.add.at(counts.reshape(-1), cell[low], 1)
     # cells holding only stream returns stand far above their neighbourhood
-    half = NEIGHBOURHOOD // 2
-    pad = np.pad(heights, half, constant_values=np.nan)
-    with np.errstate(invalid="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)          # all-NaN neighbourhoods give NaN: fine
-        neigh = np.nanmedian(sliding_window_view(pad, (NEIGHBOURHOOD, NEIGHBOURHOOD)), axis=(-2, -1))
-        stream_cell = heights > neigh + STREAM_STEP_M
+    stream_cell = heights > _lower_quartile(heights) + STREAM_STEP_M
     heights[stream_cell] = np.nan
     surface = heights.reshape(-1)[cell]
     with np.errstate(invalid="ignore"):

@@ -23,6 +23,9 @@ MIN_STREAM_POINTS = 6
 FIT_SPAN_M = 1.0
 #: stream returns farther than this (top-down) from their median are not the stream, m
 CLUSTER_RADIUS_M = 1.0
+#: mean distance, in radii, of a cylinder's visible returns in front of its axis (returns uniform across the
+#: projected width: pi/4)
+FACE_TO_AXIS = math.pi / 4.0
 #: below this vertical spread the stream is taken as vertical through its mean, m
 MIN_FIT_SPREAD_M = 0.2
 
@@ -62,9 +65,11 @@ def blank_under_stream(heights: np.ndarray, impact: Impact, cell_m: tuple[float,
 
 
 def find_impact(grid_points: np.ndarray, stream: np.ndarray, heights: np.ndarray, cell_m: tuple[float, float],
-                search_radius_m: float) -> Impact:
+                search_radius_m: float, sensor_xy: tuple[float, float] | None = None) -> Impact:
     """Impact point from ``grid_points`` (M, 3) grid frame, their ``stream`` flags (M,) bool, the height map
-    ``heights`` (nx, ny) m (NaN holes) with cell sizes ``cell_m`` (dx, dy) m."""
+    ``heights`` (nx, ny) m (NaN holes) with cell sizes ``cell_m`` (dx, dy) m. ``sensor_xy``: the LiDAR origin
+    in the grid frame (m); the stream's returns lie on its near face, so the fitted line is moved away from
+    the sensor by :data:`FACE_TO_AXIS` stream radii (None: no correction)."""
     s = np.asarray(grid_points, dtype=np.float64)[np.asarray(stream, bool)]
     if s.shape[0] < MIN_STREAM_POINTS:
         return _none(f"{s.shape[0]} stream returns, need {MIN_STREAM_POINTS}", s.shape[0])
@@ -95,4 +100,9 @@ def find_impact(grid_points: np.ndarray, stream: np.ndarray, heights: np.ndarray
         return _none("fit failed", s.shape[0])
     axis = np.stack([np.polyval(coef_x, z), np.polyval(coef_y, z)], axis=1)
     radius = float(np.percentile(np.hypot(*(low[:, :2] - axis).T), 90))
+    if sensor_xy is not None:
+        away = xyz[:2] - np.asarray(sensor_xy, dtype=np.float64)
+        norm = float(np.hypot(*away))
+        if norm > 0:
+            xyz[:2] += FACE_TO_AXIS * radius * away / norm
     return Impact(True, xyz, int(s.shape[0]), "", radius)

@@ -60,6 +60,7 @@ class Perception:
         else:
             self.table = build_table(rig, self.directions)
         self.level_from_sensor = mount_transform(sensor.mount) @ body_from_camera_axes()
+        self.level_directions = self.directions @ self.level_from_sensor[:3, :3].T    # (N, 3) level frame
         self.grid = grid_shape(scenario.cart, scenario.controller.grid_cell_m)
         self.cell_xy = (scenario.cart.interior_length_m / self.grid[0],
                         scenario.cart.interior_width_m / self.grid[1])
@@ -92,9 +93,7 @@ class Perception:
 
     def level_points(self, ranges: np.ndarray) -> np.ndarray:
         """Level-frame points (N, 3) float64 m of the ranges (NaN rows where invalid)."""
-        p = self.directions * ranges[:, None].astype(np.float64)
-        t = self.level_from_sensor
-        return p @ t[:3, :3].T + t[:3, 3]
+        return self.level_directions * ranges[:, None].astype(np.float64) + self.level_from_sensor[:3, 3]
 
     def perceive(self, ranges: np.ndarray, heading_xy=(1.0, 0.0), points_out: np.ndarray | None = None,
                  heights_out: np.ndarray | None = None) -> FrameResult:
@@ -119,7 +118,10 @@ class Perception:
         hm = height_map(lvl, cart.level_from_grid, sc.cart, sc.controller.grid_cell_m,
                         sc.perception.min_points_per_cell, sigma, out=heights_out)
         t3 = time.perf_counter()
-        imp = find_impact(hm.grid_points, hm.stream, hm.heights, self.cell_xy, sc.perception.impact_search_radius_m)
+        lfg = cart.level_from_grid
+        sensor_grid = (self.level_from_sensor[:3, 3] - lfg[:3, 3]) @ lfg[:3, :3]
+        imp = find_impact(hm.grid_points, hm.stream, hm.heights, self.cell_xy, sc.perception.impact_search_radius_m,
+                          (float(sensor_grid[0]), float(sensor_grid[1])))
         if blank_under_stream(hm.heights, imp, self.cell_xy):
             hm = replace(hm, coverage=float(np.count_nonzero(np.isfinite(hm.heights)) / hm.heights.size))
         t4 = time.perf_counter()

@@ -78,6 +78,15 @@ class CameraTable:
     def weight_t(self) -> np.ndarray:
         return self._cache("weight_t", lambda: np.ascontiguousarray(self.weight.T))
 
+    @property
+    def near_k(self) -> np.ndarray:
+        """(M,) int64: which of the four (clamped) neighbours is the nearest pixel."""
+        return self._cache("near_k", lambda: np.argmax(self.quad == self.pixel[:, None], axis=1))
+
+    @property
+    def arange(self) -> np.ndarray:
+        return self._cache("arange", lambda: np.arange(self.pixel.size))
+
     def _cache(self, key: str, make):
         store = self.__dict__.setdefault("_derived", {})
         if key not in store:
@@ -182,16 +191,13 @@ def gather_depth(rgba: np.ndarray, table: CameraTable, codec: Codec, sampler: Sa
     lut = decode_lut(codec)
     if sampler == "nearest":
         return decode_words(words[table.pixel], lut)
-    z = decode_words(words[table.quad_t], lut)                             # (4, M)
-    z00, z10, z01, z11 = z
-    with np.errstate(invalid="ignore"):
-        zmin = np.fmin(np.fmin(z00, z10), np.fmin(z01, z11))
-        zmax = np.fmax(np.fmax(z00, z10), np.fmax(z01, z11))
-        smooth = (zmax - zmin <= np.float32(DISCONTINUITY_REL) * zmin + np.float32(2.0 * codec.bound_m))
+    z = decode_words(words[table.quad_t], lut)                             # (4, M): one gather, one decode
+    with np.errstate(invalid="ignore", divide="ignore"):
+        zmin, zmax = z.min(axis=0), z.max(axis=0)                          # NaN propagates: no interpolation
+        smooth = zmax - zmin <= np.float32(DISCONTINUITY_REL) * zmin + np.float32(2.0 * codec.bound_m)
         smooth &= table.interp
-        w = table.weight_t
-        z_lin = 1.0 / (w[0] / z00 + w[1] / z10 + w[2] / z01 + w[3] / z11)
-    z_near = decode_words(words[table.pixel], lut)
+        z_lin = np.float32(1.0) / (table.weight_t / z).sum(axis=0)
+    z_near = z[table.near_k, table.arange]                                  # nearest pixel is one of the four
     return np.where(smooth, z_lin, z_near)
 
 

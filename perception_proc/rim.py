@@ -9,8 +9,10 @@ Works in the *level frame* (the sensor's parent vehicle body frame: x forward, y
    breaks into pieces where the auger or the stream hides it, so pieces are merged greedily while the union
    stays cart-sized.
 3. A component is a cart candidate when its rectangle is no larger than the cart's outer rim (plus
-   :data:`SIZE_TOL_M`), spans at least :data:`MIN_SPAN_FRACTION` of the cart length, and few points inside it
-   lie well above the rim (a tractor cab or roof would). The candidate with most rim points wins.
+   :data:`SIZE_TOL_M`), spans at least :data:`MIN_SPAN_FRACTION` of the cart length and
+   :data:`MIN_WIDTH_FRACTION` of its width (a lone line is not a cart), and is not roofed: points
+   well above the rim cover little of its area (a tractor cab covers most of its own; the auger tube and the
+   stream over an open cart cover a thin strip). The candidate with most rim points wins.
 4. Orientation from the rectangle's long side, its sign from the heading hint (the cart is towed forward).
    Per axis, a span matching the known outer size fixes the centre; a shorter span means a partly visible cart:
    the end whose points come from beams at the pattern's border or next to an occluder is the cut one and the
@@ -44,14 +46,25 @@ SIZE_TOL_M = 0.30
 FULL_SPAN_TOL_M = 0.15
 #: smallest long-side span, as a fraction of the outer length, for a candidate
 MIN_SPAN_FRACTION = 0.35
+#: smallest short-side span, as a fraction of the outer width (a lone wall line, e.g. the combine's own side
+#: crossing the rim band, is not a cart)
+MIN_WIDTH_FRACTION = 0.5
 #: width of the strip at each end examined for border/occlusion points, m
 END_STRIP_M = 0.20
 #: fraction of end-strip points from border beams that marks the end as cut
 CUT_FRACTION = 0.15
-#: points this far above the rim top inside a rectangle count against it (a cab roof, not a stream), m
+#: points this far above the rim top inside a rectangle may be a roof over it, m
 ABOVE_RIM_M = 0.20
-#: largest fraction of inside points allowed above the rim
-MAX_ABOVE_FRACTION = 0.3
+#: raster cell of the roof test, m
+ROOF_CELL_M = 0.20
+#: largest share of a candidate rectangle's area covered from above (a tractor cab covers most of its own)
+MAX_ROOF_FRACTION = 0.3
+#: strip along each long edge used for the line fits, m
+EDGE_STRIP_M = 0.25
+#: fewest points on an edge for a line fit
+MIN_EDGE_POINTS = 15
+#: largest correction of the hull-based direction by the line fits, deg
+MAX_REFINE_DEG = 5.0
 #: fewest rim points for an answer
 MIN_RIM_POINTS = 30
 #: a neighbouring beam nearer by this fraction of the range marks an occluder, dimensionless
@@ -90,17 +103,14 @@ def border_beams(ranges: np.ndarray, shape: tuple[int, int] | None) -> np.ndarra
     if shape is None:
         return np.ones(ranges.shape[0], bool)
     rows, cols = shape
-    r = ranges.reshape(rows, cols)
+    r = np.asarray(ranges, np.float32).reshape(rows, cols)
     out = np.zeros((rows, cols), bool)
     out[0, :] = out[-1, :] = out[:, 0] = out[:, -1] = True
-    pad = np.pad(r, 1, constant_values=np.nan)
+    # nearest neighbour (3 x 3 minimum, OpenCV erosion) with invalid beams counting as infinitely far
+    nearest = cv2.erode(np.where(np.isfinite(r), r, np.float32(np.inf)), np.ones((3, 3), np.uint8),
+                        borderType=cv2.BORDER_REPLICATE)
     with np.errstate(invalid="ignore"):
-        for di in (-1, 0, 1):
-            for dj in (-1, 0, 1):
-                if di == dj == 0:
-                    continue
-                nb = pad[1 + di:1 + di + rows, 1 + dj:1 + dj + cols]
-                out |= nb < r * (1.0 - OCCLUDER_REL)
+        out |= nearest < r * np.float32(1.0 - OCCLUDER_REL)
     return out.ravel()
 
 
@@ -127,6 +137,81 @@ def _components(xy: np.ndarray) -> list[np.ndarray]:
     return [g for g in np.split(order, bounds[:-1])[1:] if g.size]
 
 
+def _roofed(xy: np.ndarray, centre: np.ndarray, u_long: np.ndarray, long_side: float, short_side: float) -> bool:
+    """Whether points well above the rim cover more than :data:`MAX_ROOF_FRACTION` of the rectangle's area
+    (on a :data:`ROOF_CELL_M` raster): a cab or a roof, not the thin auger tube or stream over an open cart."""
+    d = xy - centre
+    along, across = d @ u_long, d @ np.array([-u_long[1], u_long[0]])
+    inside = (np.abs(along) <= long_side / 2) & (np.abs(across) <= short_side / 2)
+    if not inside.any():
+        return False
+    ni, nj = max(1, math.ceil(long_side / ROOF_CELL_M)), max(1, math.ceil(short_side / ROOF_CELL_M))
+    i = np.minimum(((along[inside] + long_side / 2) / ROOF_CELL_M).astype(np.int64), ni - 1)
+    j = np.minimum(((across[inside] + short_side / 2) / ROOF_CELL_M).astype(np.int64), nj - 1)
+    return np.unique(i * nj + j).size > MAX_ROOF_FRACTION * ni * nj
+
+
+def _best_group(xy: np.ndarray, above: np.ndarray, lo_len: float, lo_wid: float):
+    """(index array into ``xy``, unit long-side direction (2,)) of the best cart-sized group, or None.
+
+    The rim ring breaks into pieces (sparse rows, occlusion by the auger or the stream): each piece, largest
+    first, is grown by every other piece that keeps the union cart-sized and unroofed; the largest union
+    that spans enough of the cart's length and width wins. ``above`` (K, 2): points well above the rim."""
+
+    def fits(g: np.ndarray):
+        """(long side direction, long side m, short side m) if cart-sized and not roofed, else None."""
+        box = cv2.boxPoints(cv2.minAreaRect(xy[g].astype(np.float32))).astype(np.float64)
+        e1, e2 = box[1] - box[0], box[2] - box[1]
+        n1, n2 = float(np.hypot(*e1)), float(np.hypot(*e2))
+        long_side, short_side = max(n1, n2), min(n1, n2)
+        if long_side > lo_len + SIZE_TOL_M or short_side > lo_wid + SIZE_TOL_M:
+            return None
+        u_long = (e1 / max(n1, 1e-12)) if n1 >= n2 else (e2 / max(n2, 1e-12))
+        if above.size and _roofed(above, box.mean(axis=0), u_long, long_side, short_side):
+            return None
+        return u_long, long_side, short_side
+
+    comps = sorted((g for g in _components(xy) if g.size >= 3), key=lambda g: -g.size)
+    best, best_n = None, 0
+    for i, seed in enumerate(comps):
+        if seed.size < MIN_RIM_POINTS // 3 or seed.size <= best_n // 4:
+            break
+        if fits(seed) is None:
+            continue
+        group = seed
+        for j, other in enumerate(comps):
+            if j != i and fits(merged := np.concatenate([group, other])) is not None:
+                group = merged
+        res = fits(group)
+        if res is None or group.size < MIN_RIM_POINTS or res[1] < MIN_SPAN_FRACTION * lo_len \
+                or res[2] < MIN_WIDTH_FRACTION * lo_wid:
+            continue
+        if group.size > best_n:
+            best, best_n = (group, res[0]), group.size
+    return best
+
+
+def _refine_direction(xy: np.ndarray, u_long: np.ndarray) -> np.ndarray:
+    """Long-side direction refined by robust line fits (``cv2.fitLine``, Huber) to the points along the two
+    long edges (within :data:`EDGE_STRIP_M` of the extremes across); the rectangle's hull-based angle is
+    kept where an edge has fewer than :data:`MIN_EDGE_POINTS` points."""
+    across = xy @ np.array([-u_long[1], u_long[0]])
+    lo, hi = across.min(), across.max()
+    dirs, weights = [], []
+    for sel in (across <= lo + EDGE_STRIP_M, across >= hi - EDGE_STRIP_M):
+        if np.count_nonzero(sel) < MIN_EDGE_POINTS:
+            continue
+        vx, vy, _, _ = cv2.fitLine(xy[sel].astype(np.float32), cv2.DIST_HUBER, 0, 0.01, 0.01).ravel()
+        d = np.array([vx, vy], dtype=np.float64)
+        dirs.append(d if d @ u_long >= 0 else -d)
+        weights.append(np.count_nonzero(sel))
+    if not dirs:
+        return u_long
+    d = np.average(np.array(dirs), axis=0, weights=weights)
+    d /= np.linalg.norm(d)
+    return d if abs(d @ u_long) > math.cos(math.radians(MAX_REFINE_DEG)) else u_long
+
+
 def find_cart(points: np.ndarray, border: np.ndarray, cart: Cart, heading_xy=(1.0, 0.0),
               noise_sigma_m: float = 0.0) -> CartEstimate:
     """Find the cart rim in level-frame points.
@@ -141,48 +226,14 @@ def find_cart(points: np.ndarray, border: np.ndarray, cart: Cart, heading_xy=(1.
     cand = np.flatnonzero(ok & (np.abs(p[:, 2] - top) <= band))
     if cand.size < MIN_RIM_POINTS:
         return _none(f"{cand.size} points at rim height, need {MIN_RIM_POINTS}", int(cand.size))
-    lo_len, lo_wid, rw = _outer(cart)
+    lo_len, lo_wid, _ = _outer(cart)
     xy = p[cand, :2]
-    above = np.flatnonzero(ok & (p[:, 2] > top + band + ABOVE_RIM_M))
-    def fits(g: np.ndarray):
-        """(long side direction, n points) if the group's rectangle is cart-sized and not roofed, else None."""
-        rect = cv2.minAreaRect(xy[g].astype(np.float32))
-        box = cv2.boxPoints(rect).astype(np.float64)             # 4 corners in order
-        e1, e2 = box[1] - box[0], box[2] - box[1]
-        n1, n2 = float(np.hypot(*e1)), float(np.hypot(*e2))
-        long_side, short_side = max(n1, n2), min(n1, n2)
-        if long_side > lo_len + SIZE_TOL_M or short_side > lo_wid + SIZE_TOL_M:
-            return None
-        u_long = (e1 / max(n1, 1e-12)) if n1 >= n2 else (e2 / max(n2, 1e-12))
-        if above.size:
-            d = p[above, :2] - box.mean(axis=0)
-            along, across = d @ u_long, d @ np.array([-u_long[1], u_long[0]])
-            n_in = int(np.count_nonzero((np.abs(along) <= long_side / 2) & (np.abs(across) <= short_side / 2)))
-            if n_in > MAX_ABOVE_FRACTION * (g.size + n_in):
-                return None
-        return u_long, long_side
-
-    # the rim ring breaks into pieces (sparse rows, occlusion by the auger or the stream): grow each piece,
-    # largest first, by every other piece that keeps the union cart-sized; keep the largest union
-    comps = sorted((g for g in _components(xy) if g.size >= 3), key=lambda g: -g.size)
-    best, best_n = None, 0
-    for i, seed in enumerate(comps):
-        if seed.size < MIN_RIM_POINTS // 3 or seed.size <= best_n // 4:
-            break
-        if fits(seed) is None:
-            continue
-        group = seed
-        for j, other in enumerate(comps):
-            if j != i and fits(merged := np.concatenate([group, other])) is not None:
-                group = merged
-        res = fits(group)
-        if res is None or group.size < MIN_RIM_POINTS or res[1] < MIN_SPAN_FRACTION * lo_len:
-            continue
-        if group.size > best_n:
-            best, best_n = (group, res[0]), group.size
+    above = p[ok & (p[:, 2] > top + band + ABOVE_RIM_M), :2]
+    best = _best_group(xy, above, lo_len, lo_wid)
     if best is None:
         return _none("no rim-sized group of points at rim height", int(cand.size))
     g, ux = best
+    ux = _refine_direction(xy[g], ux)
     hx = np.asarray(heading_xy, dtype=np.float64)
     if ux @ hx < 0:
         ux = -ux

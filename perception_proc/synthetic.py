@@ -20,7 +20,7 @@ from cosim.geometry import apply, invert
 
 __all__ = [
     "Plane", "Box", "Cylinder", "HeightField", "raycast", "render_depth", "encode_linear", "cart_shapes",
-    "WALL_BOTTOM_M",
+    "WALL_BOTTOM_M", "stitched_rig",
 ]
 
 #: height above ground of the bottom of the synthetic cart's walls, m

@@ -14,7 +14,7 @@ from shm_schema import ArrayBlock, Block, Field, StructBlock, image_block
 
 from .rig import plan_rig
 
-__all__ = ["declare_blocks", "wants_rgb", "WRITER", "STATE_BLOCK"]
+__all__ = ["STATE_BLOCK", "WRITER", "declare_blocks", "wants_rgb"]
 
 #: writer name of every renderer block
 WRITER = "renderer"

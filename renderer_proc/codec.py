@@ -20,7 +20,7 @@ import numpy as np
 
 from cosim.config.sensing import Codec
 
-__all__ = ["CM_PER_M", "BYTE_MAX", "VALID_ALPHA", "encode_depth", "decode_depth", "valid_depth_mask"]
+__all__ = ["BYTE_MAX", "CM_PER_M", "VALID_ALPHA", "decode_depth", "encode_depth", "valid_depth_mask"]
 
 #: centimetres per metre (the codec works in cm, the platform in m)
 CM_PER_M = 100.0

@@ -27,13 +27,13 @@ from .meshes import INSTANCE_FLOATS, box_instances, cylinder_instances, pack_ins
 from .projection import NEAR_M, far_plane_m, gl_projection, gl_view
 from .scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
 
-__all__ = ["create_gl_context", "GLRenderer", "SHADER_DIR", "GL_REQUIRE"]
+__all__ = ["GL_REQUIRE", "SHADER_DIR", "GLRenderer", "create_gl_context"]
 
 #: directory of the GLSL sources
 SHADER_DIR = Path(__file__).with_name("shaders")
 #: minimum OpenGL version (x 100)
 GL_REQUIRE = 330
-_MUTE = "Run with --renderer mock (scenario key renderer: mock) to use the numpy ray caster instead."
+_FALLBACK_HINT = "Run with --renderer mock (scenario key renderer: mock) to use the numpy ray caster instead."
 
 
 def create_gl_context(backend: str = "egl") -> Any:
@@ -41,22 +41,22 @@ def create_gl_context(backend: str = "egl") -> Any:
     try:
         import moderngl
     except ImportError as exc:  # pragma: no cover - moderngl is a dependency
-        raise RendererUnavailable(f"moderngl cannot be imported ({exc}). {_MUTE}") from exc
+        raise RendererUnavailable(f"moderngl cannot be imported ({exc}). {_FALLBACK_HINT}") from exc
     try:
         return moderngl.create_context(standalone=True, backend=backend, require=GL_REQUIRE)
     except Exception as exc:  # moderngl raises plain Exception subclasses for every driver failure
         raise RendererUnavailable(
             f"no OpenGL >= {GL_REQUIRE / 100:.1f} context could be made (standalone, backend {backend!r}): "
-            f"{exc}. {_MUTE}") from exc
+            f"{exc}. {_FALLBACK_HINT}") from exc
 
 
 def _source(name: str) -> str:
     return (SHADER_DIR / name).read_text()
 
 
-def _fragment_source(rgb: bool, float_depth: bool) -> str:
+def _fragment_source(rgb: bool, float_depth: bool, mishandled: bool) -> str:
     head, body = _source("encode.frag").split("\n", 1)
-    defines = []
+    defines = ["#define MISHANDLED_GAMMA"] if mishandled else []
     loc = 1
     if rgb:
         defines.append(f"#define OUT_RGB {loc}")
@@ -90,21 +90,20 @@ class GLRenderer:
 
     def __init__(self, rig: Rig, codec: Codec, *, rgb: bool = False, float_depth: bool = False,
                  context: Any = None):
-        import moderngl
-
         self.rig, self.codec, self.rgb, self.float_depth = rig, codec, rgb, float_depth
         self._own_ctx = context is None
         self._made: list = []
         self.ctx = context if context is not None else create_gl_context()
         ctx = self.ctx
-        frag = _fragment_source(rgb, float_depth)
+        import moderngl  # after create_gl_context, which turns a missing moderngl into RendererUnavailable
+
+        frag = _fragment_source(rgb, float_depth, codec.gamma_mode == "mishandled")
         self.prog_inst = self._m(ctx.program(vertex_shader=_source("instanced.vert"), fragment_shader=frag))
         self.prog_hf = self._m(ctx.program(vertex_shader=_source("heightfield.vert"), fragment_shader=frag))
         for prog in (self.prog_inst, self.prog_hf):
             self._set(prog, "u_alpha_cm", codec.alpha_cm)
             self._set(prog, "u_beta_cm", codec.beta_cm)
             self._set(prog, "u_gamma", codec.gamma)
-            self._set(prog, "u_mishandled", int(codec.gamma_mode == "mishandled"))
         self._set(self.prog_hf, "u_colour", GRAIN_COLOUR)
         self._unit = {}
         for key, (v, f) in {"box": unit_cube(), "cyl": unit_cylinder()}.items():

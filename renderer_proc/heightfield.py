@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["padded_heights", "surface_height", "grid_vertices", "grid_triangles"]
+__all__ = ["grid_triangles", "grid_vertices", "padded_heights", "surface_height"]
 
 
 def padded_heights(heights: np.ndarray) -> np.ndarray:

@@ -11,8 +11,16 @@ import numpy as np
 
 from .scene import Boxes, Cylinders
 
-__all__ = ["CYLINDER_SIDES", "INSTANCE_FLOATS", "unit_cube", "unit_cylinder", "box_instances",
-           "cylinder_instances", "orthonormal_frames", "pack_instances"]
+__all__ = [
+    "CYLINDER_SIDES",
+    "INSTANCE_FLOATS",
+    "box_instances",
+    "cylinder_instances",
+    "orthonormal_frames",
+    "pack_instances",
+    "unit_cube",
+    "unit_cylinder",
+]
 
 #: facets of a drawn cylinder (an inscribed prism): the radial deviation from the exact cylinder is
 #: r (1 - cos(pi / n)), 2.9 mm for the 0.15 m grain stream at n = 16

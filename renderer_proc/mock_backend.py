@@ -18,10 +18,12 @@ from .projection import NEAR_M, far_plane_m, pixel_rays
 from .raycast import raycast
 from .scene import SKY_RGBA, SUN_WORLD, Scene
 
-__all__ = ["MockRenderer", "MOCK_GREY"]
+__all__ = ["AMBIENT", "DIFFUSE", "MOCK_GREY", "MockRenderer"]
 
 #: albedo of every surface in the mock's shaded image
 MOCK_GREY = 0.7
+#: ambient and diffuse shares of the shading (as in shaders/encode.frag)
+AMBIENT, DIFFUSE = 0.35, 0.65
 
 
 class MockRenderer:
@@ -73,7 +75,7 @@ class MockRenderer:
         n = np.cross(np.gradient(p, axis=1), np.gradient(p, axis=0))
         n /= np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-12)
         sun = SUN_WORLD @ self._pose[k][:3, :3]                               # camera frame
-        shade = MOCK_GREY * (0.35 + 0.65 * np.abs(n @ sun))
+        shade = MOCK_GREY * (AMBIENT + DIFFUSE * np.abs(n @ sun))
         rgb = np.where(np.isfinite(z)[..., None], shade[..., None], np.array(SKY_RGBA[:3]))
         out[..., :3] = np.clip(np.floor(rgb * 255.0 + 0.5), 0, 255).astype(np.uint8)
         out[..., 3] = 255

@@ -23,7 +23,7 @@ from .scene import scene_from_state
 if TYPE_CHECKING:
     from shm_schema.segment import Segment
 
-__all__ = ["RendererParticipant", "create", "make_backend", "INPUT_BLOCKS"]
+__all__ = ["INPUT_BLOCKS", "RendererParticipant", "create", "make_backend"]
 
 #: blocks the renderer reads (written by dynamics)
 INPUT_BLOCKS = ("dyn_state", "heightmap_truth", "stream")
@@ -54,11 +54,11 @@ class RendererParticipant:
         self.scenario = scenario
         self.rig = plan_rig(scenario)
         self.backend = None
-        self.segment: "Segment | None" = None
+        self.segment: Segment | None = None
         self.rgb = wants_rgb(scenario)
         self.last_ms = float("nan")
 
-    def start(self, segment: "Segment") -> None:
+    def start(self, segment: Segment) -> None:
         """Bind the input and output views, then make the backend (GL context creation happens here)."""
         for name in INPUT_BLOCKS:
             if not segment.has(name):

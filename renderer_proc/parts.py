@@ -16,7 +16,7 @@ import numpy as np
 from cosim.config.scenario import Scenario
 from cosim.geometry import make_transform
 
-__all__ = ["EntityParts", "entity_parts", "box_from_bounds", "cart_boxes"]
+__all__ = ["EntityParts", "box_from_bounds", "cart_boxes", "entity_parts"]
 
 #: combine: ground clearance of the body, header depth / bottom / top, cab height and width (m)
 COMBINE_CLEARANCE_M = 0.5

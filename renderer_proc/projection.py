@@ -16,8 +16,17 @@ from cosim.camera import Pinhole, Rig
 from cosim.config.scenario import Scenario
 from cosim.geometry import body_from_camera_axes, invert, mount_transform, vehicle_pose
 
-__all__ = ["GL_FROM_CAMERA", "NEAR_M", "FAR_MARGIN", "world_from_sensor", "camera_poses", "gl_view",
-           "gl_projection", "pixel_rays", "far_plane_m"]
+__all__ = [
+    "FAR_MARGIN",
+    "GL_FROM_CAMERA",
+    "NEAR_M",
+    "camera_poses",
+    "far_plane_m",
+    "gl_projection",
+    "gl_view",
+    "pixel_rays",
+    "world_from_sensor",
+]
 
 #: camera frame (X right, Y up, Z forward) -> GL view frame (x right, y up, -z forward), 4 x 4
 GL_FROM_CAMERA = np.diag([1.0, 1.0, -1.0, 1.0])

@@ -15,7 +15,7 @@ from .heightfield import padded_heights, surface_height
 from .meshes import CYLINDER_SIDES, orthonormal_frames
 from .scene import Boxes, Cylinders, HeightField, MeshInstance, Scene
 
-__all__ = ["raycast", "ray_boxes", "ray_cylinders", "ray_heightfield", "ray_mesh", "T_MIN_M"]
+__all__ = ["T_MIN_M", "ray_boxes", "ray_cylinders", "ray_heightfield", "ray_mesh", "raycast"]
 
 #: hits closer than this along the ray are ignored (self-intersection guard), m
 T_MIN_M = 1e-9
@@ -23,6 +23,8 @@ T_MIN_M = 1e-9
 _GROUP = 8
 #: triangles per chunk in the mesh intersector
 _TRI_CHUNK = 256
+#: vertical padding of the height field's bounding slab, m
+_HF_Z_PAD_M = 1e-3
 #: rays per chunk in the height-field intersector
 _HF_CHUNK = 4096
 
@@ -40,7 +42,7 @@ def _convex_pairs(ol, dl, normals, offsets) -> np.ndarray:
     ``offsets`` (K, P) m. Returns t (K,): entry (or exit when inside), inf on a miss."""
     num = offsets - ol @ normals.T
     den = dl @ normals.T
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         t = num / den
     t_lo = np.max(np.where(den < 0.0, t, -np.inf), axis=1)
     t_hi = np.min(np.where(den > 0.0, t, np.inf), axis=1)
@@ -48,72 +50,67 @@ def _convex_pairs(ol, dl, normals, offsets) -> np.ndarray:
     return _first_positive(t_lo, t_hi, (t_hi >= t_lo) & ~parallel_out)
 
 
-def _sphere_hit(o, d, centre, rad) -> np.ndarray:
-    """(N, G) bool: ray n passes within ``rad`` (G,) of ``centre`` (G, 3) ahead of its origin (or inside)."""
-    m = centre[None] - o[:, None]                              # (N, G, 3)
-    tc = np.einsum("ngi,ni->ng", m, d)
-    dist2 = np.einsum("ngi,ngi->ng", m, m) - tc**2
-    return (dist2 <= rad[None] ** 2) & (tc + rad[None] > 0.0)
+def _sphere_rays(o, d, centre, rad: float, best) -> np.ndarray:
+    """Indices of rays that pass within ``rad`` of ``centre`` and could enter it before their ``best``."""
+    m = centre - o
+    tc = np.einsum("ni,ni->n", m, d)
+    dist2 = np.einsum("ni,ni->n", m, m) - tc * tc
+    return np.nonzero((dist2 <= rad * rad) & (tc + rad > 0.0) & (tc - rad < best))[0]
 
 
-def _candidate_pairs(o, d, centre, rad) -> tuple[np.ndarray, np.ndarray]:
-    """(ray index, primitive index) pairs whose bounding spheres the rays pass, culled first by groups of
-    ``_GROUP`` consecutive primitives (the stream's segments are consecutive, hence close together)."""
-    ris, cis = [], []
-    for g0 in range(0, len(rad), _GROUP):
-        sl = slice(g0, min(g0 + _GROUP, len(rad)))
-        gc = centre[sl].mean(axis=0)
-        gr = np.max(np.linalg.norm(centre[sl] - gc, axis=1) + rad[sl])
-        rays = np.nonzero(_sphere_hit(o, d, gc[None], np.array([gr]))[:, 0])[0]
-        if len(rays):
-            ri, ci = np.nonzero(_sphere_hit(o[rays], d[rays], centre[sl], rad[sl]))
-            ris.append(rays[ri])
-            cis.append(ci + g0)
-    if not ris:
-        return np.zeros(0, np.intp), np.zeros(0, np.intp)
-    return np.concatenate(ris), np.concatenate(cis)
+def ray_boxes(o: np.ndarray, d: np.ndarray, boxes: Boxes, t_max: np.ndarray | None = None) -> np.ndarray:
+    """Distance to the nearest oriented box (slab test in each box frame). o, d (N, 3) -> t (N,).
 
-
-def _nearest(n: int, ri: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """(n,) smallest t per ray index ``ri`` (inf where a ray has none)."""
-    best = np.full(n, np.inf)
-    np.minimum.at(best, ri, t)
+    Per box, only rays that pass its bounding sphere and could still beat the best hit so far (initially
+    ``t_max`` (N,), a known nearer hit, if given) are tested."""
+    best = np.full(len(o), np.inf) if t_max is None else np.array(t_max, dtype=np.float64)
+    for k in range(len(boxes)):
+        rot, c, h = boxes.world_from_box[k, :3, :3], boxes.world_from_box[k, :3, 3], boxes.half_extents[k]
+        rays = _sphere_rays(o, d, c, float(np.linalg.norm(h)), best)
+        if len(rays) == 0:
+            continue
+        ol = (o[rays] - c) @ rot
+        dl = d[rays] @ rot
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            inv = 1.0 / dl
+            t1, t2 = (-h - ol) * inv, (h - ol) * inv
+        lo, hi = np.minimum(t1, t2), np.maximum(t1, t2)     # fmax / fmin ignore the NaN of 0 * inf
+        t_lo = np.fmax(np.fmax(lo[:, 0], lo[:, 1]), lo[:, 2])
+        t_hi = np.fmin(np.fmin(hi[:, 0], hi[:, 1]), hi[:, 2])
+        best[rays] = np.minimum(best[rays], _first_positive(t_lo, t_hi, t_hi >= t_lo))
     return best
 
 
-_BOX_NORMALS = np.array([[1.0, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]])
-
-
-def ray_boxes(o: np.ndarray, d: np.ndarray, boxes: Boxes) -> np.ndarray:
-    """Distance to the nearest oriented box (slab test in each box frame). o, d (N, 3) -> t (N,)."""
-    if len(boxes) == 0:
-        return np.full(len(o), np.inf)
-    rot, centre = boxes.world_from_box[:, :3, :3], boxes.world_from_box[:, :3, 3]
-    ri, bi = _candidate_pairs(o, d, centre, np.linalg.norm(boxes.half_extents, axis=1))
-    ol = np.einsum("kji,kj->ki", rot[bi], o[ri] - centre[bi])
-    dl = np.einsum("kji,kj->ki", rot[bi], d[ri])
-    return _nearest(len(o), ri, _convex_pairs(ol, dl, _BOX_NORMALS, np.repeat(boxes.half_extents[bi], 2, axis=1)))
-
-
-def ray_cylinders(o: np.ndarray, d: np.ndarray, cyl: Cylinders) -> np.ndarray:
+def ray_cylinders(o: np.ndarray, d: np.ndarray, cyl: Cylinders, t_max: np.ndarray | None = None) -> np.ndarray:
     """Distance to the nearest cylinder, drawn and cast as a capped regular prism (CYLINDER_SIDES facets,
-    vertices on the circle, local frame from ``orthonormal_frames``: x, y across, z along p0 -> p1)."""
+    vertices on the circle, local frame from ``orthonormal_frames``: x, y across, z along p0 -> p1).
+
+    Culled by group, then per-cylinder bounding spheres, and by ``t_max`` (N,), a known nearer hit."""
+    best = np.full(len(o), np.inf) if t_max is None else np.array(t_max, dtype=np.float64)
     if len(cyl) == 0:
-        return np.full(len(o), np.inf)
+        return best
     axis = cyl.p1 - cyl.p0
     length = np.linalg.norm(axis, axis=1)
-    rot = orthonormal_frames(axis)
+    frames = orthonormal_frames(axis)
     centre = 0.5 * (cyl.p0 + cyl.p1)
-    ri, ci = _candidate_pairs(o, d, centre, np.sqrt((0.5 * length) ** 2 + cyl.radius**2))
-    ol = np.einsum("kji,kj->ki", rot[ci], o[ri] - cyl.p0[ci])
-    dl = np.einsum("kji,kj->ki", rot[ci], d[ri])
+    rad = np.sqrt((0.5 * length) ** 2 + cyl.radius**2)
     phi = 2.0 * np.pi * (np.arange(CYLINDER_SIDES) + 0.5) / CYLINDER_SIDES
     normals = np.concatenate([np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], axis=1),
                               [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]])
-    flat = cyl.radius[ci] * np.cos(np.pi / CYLINDER_SIDES)
-    offsets = np.concatenate([np.repeat(flat[:, None], CYLINDER_SIDES, axis=1), length[ci][:, None],
-                              np.zeros((len(ci), 1))], axis=1)
-    return _nearest(len(o), ri, _convex_pairs(ol, dl, normals, offsets))
+    for g0 in range(0, len(cyl), _GROUP):
+        sl = slice(g0, min(g0 + _GROUP, len(cyl)))
+        gc = centre[sl].mean(axis=0)
+        gr = float(np.max(np.linalg.norm(centre[sl] - gc, axis=1) + rad[sl]))
+        grays = _sphere_rays(o, d, gc, gr, best)
+        for k in range(sl.start, sl.stop):
+            rays = grays[_sphere_rays(o[grays], d[grays], centre[k], rad[k], best[grays])]
+            if len(rays) == 0:
+                continue
+            ol = (o[rays] - cyl.p0[k]) @ frames[k]
+            dl = d[rays] @ frames[k]
+            off = np.array([cyl.radius[k] * np.cos(np.pi / CYLINDER_SIDES)] * CYLINDER_SIDES + [length[k], 0.0])
+            best[rays] = np.minimum(best[rays], _convex_pairs(ol, dl, normals, off[None]))
+    return best
 
 
 def _line_crossings(q0, dq, a, b) -> tuple[np.ndarray, np.ndarray]:
@@ -139,7 +136,7 @@ def _hf_chunk(og, dg, a, b, hp: np.ndarray, cell: float) -> np.ndarray:
         if m == 0:
             continue
         j = np.arange(m)[None]
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             t = (first[:, None] + j - q0[:, None]) / dq[:, None]
         use = (j < count[:, None]) & np.isfinite(t)       # a ray along a line (dq = 0) crosses none of it
         cols.append(np.where(use, np.clip(t, a[:, None], b[:, None]), b[:, None]))
@@ -153,7 +150,7 @@ def _hf_chunk(og, dg, a, b, hp: np.ndarray, cell: float) -> np.ndarray:
     km = np.maximum(k - 1, 0)
     g0, g1 = g[rows, km], g[rows, k]
     t0, t1 = ts[rows, km], ts[rows, k]
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         t = np.where(k == 0, t0, t0 + g0 * (t1 - t0) / (g0 - g1))
     return np.where(below.any(axis=1) & (t > T_MIN_M), t, np.inf)
 
@@ -169,9 +166,11 @@ def ray_heightfield(o: np.ndarray, d: np.ndarray, hf: HeightField) -> np.ndarray
     og = o @ g_from_w[:3, :3].T + g_from_w[:3, 3]
     dg = d @ g_from_w[:3, :3].T
     h = np.asarray(hf.heights, dtype=np.float64)
-    lo = np.array([0.0, 0.0, float(h.min())])
-    hi = np.array([hf.length_m, hf.width_m, float(h.max())])
-    with np.errstate(divide="ignore", invalid="ignore"):
+    # the z slab is padded so that a ray leaving through its bottom is strictly below the surface there: on a
+    # flat fill (min h = surface) round-off would otherwise let about half of the rays slip through
+    lo = np.array([0.0, 0.0, float(h.min()) - _HF_Z_PAD_M])
+    hi = np.array([hf.length_m, hf.width_m, float(h.max()) + _HF_Z_PAD_M])
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         t1, t2 = (lo - og) / dg, (hi - og) / dg
     t_lo = np.maximum(np.fmax.reduce(np.minimum(t1, t2), axis=1), 0.0)
     t_hi = np.fmin.reduce(np.maximum(t1, t2), axis=1)
@@ -194,7 +193,7 @@ def ray_mesh(o: np.ndarray, d: np.ndarray, mesh: MeshInstance) -> np.ndarray:
     best = np.full(len(o), np.inf)
     v = mesh.vertices @ mesh.world_from_mesh[:3, :3].T + mesh.world_from_mesh[:3, 3]
     lo, hi = v.min(axis=0), v.max(axis=0)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         t1, t2 = (lo - o) / d, (hi - o) / d
     t_hi = np.nanmin(np.maximum(t1, t2), axis=1)
     rays = np.nonzero(t_hi >= np.maximum(np.nanmax(np.minimum(t1, t2), axis=1), 0.0))[0]
@@ -205,7 +204,7 @@ def ray_mesh(o: np.ndarray, d: np.ndarray, mesh: MeshInstance) -> np.ndarray:
         dr = d[rays][:, None]
         pv = np.cross(dr, e2[None])
         det = np.einsum("nti,ti->nt", pv, e1)
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             inv = 1.0 / det
             tv = o[rays][:, None] - p0[None]
             u = np.einsum("nti,nti->nt", tv, pv) * inv
@@ -224,8 +223,10 @@ def raycast(scene: Scene, origins: np.ndarray, directions: np.ndarray) -> np.nda
     d = np.ascontiguousarray(directions, dtype=np.float64).reshape(-1, 3)
     if o.shape != d.shape:
         o = np.broadcast_to(o, d.shape)
-    t = np.minimum(ray_boxes(o, d, scene.boxes), ray_cylinders(o, d, scene.cylinders))
-    t = np.minimum(t, ray_heightfield(o, d, scene.heightfield))
+    # cheapest-to-cull first: every hit found bounds the search of the primitives after it
+    t = ray_heightfield(o, d, scene.heightfield)
+    t = ray_cylinders(o, d, scene.cylinders, t_max=t)
+    t = ray_boxes(o, d, scene.boxes, t_max=t)
     for mesh in scene.meshes:
         t = np.minimum(t, ray_mesh(o, d, mesh))
     return t

@@ -12,7 +12,8 @@ sectors (yaw) times ``n_rows`` equal elevation bands (pitch about the camera X a
 camera of its sector and band; that camera's image is made just large enough (symmetric about the principal
 point) to contain all of its beams. Tall fields (the Honeycomb-like preset spans 95 deg vertically) are met by
 a tall image while the vertical field stays <= MAX_FOV_DEG, and by pitched rows beyond it. Among layouts that
-meet the limits (field of view, pixels per side), the planner takes the fewest cameras, then the fewest pixels.
+meet the limits (field of view per camera, pixels per side), the planner takes the fewest cameras, then the
+fewest pixels.
 """
 from __future__ import annotations
 
@@ -24,11 +25,25 @@ from cosim.camera import Pinhole, Rig, RigCamera, beam_directions, yaw_transform
 from cosim.config.scenario import Scenario
 from cosim.config.sensing import Pattern
 
-__all__ = ["plan_rig", "plan_cameras", "beam_angles", "required_focal_px", "pitch_transform",
-           "beam_pixel_error", "scale_rig", "MAX_FOV_DEG", "MAX_SIDE_PX", "MAX_CAMERAS", "NEAREST_PIXEL_OFFSET"]
+__all__ = [
+    "MAX_CAMERAS",
+    "MAX_FOV_DEG",
+    "MAX_SIDE_PX",
+    "NEAREST_PIXEL_OFFSET",
+    "beam_angles",
+    "beam_pixel_error",
+    "pitch_transform",
+    "plan_cameras",
+    "plan_rig",
+    "required_focal_px",
+    "scale_rig",
+]
 
-#: largest field of view (either axis) of one planned pinhole camera, deg: wider wastes pixels at the edges
-MAX_FOV_DEG = 120.0
+#: largest field of view (either axis) of one planned pinhole camera, deg. A pinhole's pixels per radian grow
+#: as 1 / cos^2 of the off-axis angle; at 100 deg the edges hold 2.4 times the centre's density, beyond it one
+#: wide camera costs more pixels than two narrower ones (the Honeycomb-like 90 x 95 deg pattern: one camera
+#: would need a 114 deg vertical field and 1.01 Mpx, two cameras need 0.64 Mpx)
+MAX_FOV_DEG = 100.0
 #: largest image side of one planned camera, px (a safe GL framebuffer size everywhere)
 MAX_SIDE_PX = 4096
 #: most cameras a rig may have (render.cameras allows 16)
@@ -75,7 +90,7 @@ def _layout(el, az, f, n_cols, n_rows) -> list[tuple[float, float, int, int]] | 
     col = np.clip(((az - a0) / da).astype(int) if da > 0 else np.zeros(len(az), int), 0, n_cols - 1)
     row = np.clip(((el - e0) / de).astype(int) if de > 0 else np.zeros(len(el), int), 0, n_rows - 1)
     dirs = beam_directions(el, az)
-    tan_max = math.tan(math.radians(MAX_FOV_DEG) / 2.0)
+    tan_max = math.tan(math.radians(MAX_FOV_DEG) / 2.0) * (1.0 + 1e-9)   # a field of exactly MAX_FOV_DEG is fine
     out = []
     for r in range(n_rows):
         for c in range(n_cols):

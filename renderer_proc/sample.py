@@ -16,7 +16,7 @@ from cosim.geometry import apply, cart_grid_from_body, invert, vehicle_pose
 
 from .scene import STREAM_ROWS
 
-__all__ = ["sample_frame", "GRAVITY_MPS2", "STREAM_SAMPLES", "PILE_HEIGHT_M"]
+__all__ = ["GRAVITY_MPS2", "PILE_HEIGHT_M", "STREAM_SAMPLES", "sample_frame"]
 
 #: gravitational acceleration, m/s^2
 GRAVITY_MPS2 = 9.81

@@ -26,8 +26,21 @@ from cosim.geometry import apply, cart_body_from_grid, vehicle_pose
 
 from .parts import EntityParts, entity_parts
 
-__all__ = ["Boxes", "Cylinders", "HeightField", "MeshInstance", "Scene", "scene_from_state", "load_mesh",
-           "STREAM_ROWS", "GROUND_THICKNESS_M", "GRAIN_COLOUR", "STREAM_COLOUR", "SKY_RGBA", "SUN_WORLD"]
+__all__ = [
+    "GRAIN_COLOUR",
+    "GROUND_THICKNESS_M",
+    "SKY_RGBA",
+    "STREAM_COLOUR",
+    "STREAM_ROWS",
+    "SUN_WORLD",
+    "Boxes",
+    "Cylinders",
+    "HeightField",
+    "MeshInstance",
+    "Scene",
+    "load_mesh",
+    "scene_from_state",
+]
 
 #: rows of the ``stream`` block (CONTRACTS.md)
 STREAM_ROWS = 64

@@ -149,8 +149,9 @@ def test_arc_steady_state_trailer_offtracking_closed_form():
 def test_stiff_drivetrain_stays_finite_and_close(method):
     """tau = 1 ms with 10 ms steps (dt / tau = 10): beyond RK4's linear stability limit."""
     s = scen(tractor={"drivetrain_tau_s": 0.001}, machine_sync={"initial_long_error_m": -1.0})
-    states, p = run_sync(s, 10.0, 0.01, method)
-    ref, _ = run_sync(s, 10.0, 0.01, "exponential")
+    seconds = 2.0 if method == "radau" else 10.0             # covers the saturated catch-up; Radau is slow
+    states, p = run_sync(s, seconds, 0.01, method)
+    ref, _ = run_sync(s, seconds, 0.01, "exponential")
     assert np.all(np.isfinite(states))
     # RK4: its rate-limited derivative keeps it within one step of braking of the exact lag; Radau: the kink in
     # the clipped derivative limits its accuracy at rtol 1e-8

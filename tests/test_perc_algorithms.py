@@ -95,9 +95,13 @@ def test_stream_occluding_the_pile_gives_impact_and_no_stream_heights():
     cart, hm = run(shapes)
     assert cart.valid
     truth = truth_grid(fn)
-    imp = find_impact(hm.grid_points, hm.stream, hm.heights, (CELL, CELL), 0.6)
-    assert imp.valid
-    assert np.hypot(imp.xyz[0] - 2.2, imp.xyz[1] - 1.4) < 0.15
+    lfg = cart.level_from_grid
+    sensor = (np.asarray(MOUNT.xyz_m) - lfg[:3, 3]) @ lfg[:3, :3]
+    raw = find_impact(hm.grid_points, hm.stream, hm.heights, (CELL, CELL), 0.6)
+    imp = find_impact(hm.grid_points, hm.stream, hm.heights, (CELL, CELL), 0.6, tuple(sensor[:2]))
+    assert imp.valid and raw.valid
+    err, err_raw = np.hypot(imp.xyz[0] - 2.2, imp.xyz[1] - 1.4), np.hypot(raw.xyz[0] - 2.2, raw.xyz[1] - 1.4)
+    assert err < 0.06 and err < err_raw                  # the returns lie on the stream's near face
     assert imp.xyz[2] == pytest.approx(1.6, abs=0.2)
     assert imp.radius_m == pytest.approx(0.15, abs=0.1)
     before = np.isfinite(hm.heights).sum()
@@ -147,6 +151,14 @@ def test_roofed_box_beside_the_cart_is_not_taken_for_it():
     cart, _ = run(cart_shapes(CART, POSE) + [tractor])
     assert cart.valid
     assert np.max(np.linalg.norm(cart.corners - true_corners(), axis=1)) < 0.05
+
+
+def test_lone_wall_at_rim_height_is_not_a_cart():
+    # e.g. the combine's own side crossing the rim band: long enough, but a line, not a rectangle
+    wall = Box((-2.5, 6.0, 0.5), (1.5, 6.3, 3.5))
+    r, lvl, border = scan([wall, Box((-50, -50, -1), (50, 50, 0))])
+    cart = find_cart(lvl, border, CART, (1.0, 0.0))
+    assert not cart.valid and "rim-sized" in cart.reason
 
 
 def test_height_map_rejects_bad_pose_input_shapes():

@@ -154,3 +154,18 @@ def test_scene_raycast_is_fast_and_sees_cart():
     world = hf.world_from_grid @ grid_pt
     t = raycast(scene, world[None, :3], np.array([[0.0, 0.0, -1.0]]))[0]
     assert 5.0 - t == pytest.approx(float(h[20, 10]), abs=1e-6)
+
+
+@pytest.mark.parametrize("level", [0.0, 1.0, 1.37])
+def test_flat_fill_never_leaks(level):
+    """Regression: on a flat fill the surface equals the slab's bottom; every ray must still hit it."""
+    hf = flat_field(np.full((60, 30), level, np.float32))
+    rng = np.random.default_rng(7)
+    n = 20_000
+    target = np.c_[rng.uniform(0.0, 6.0, n), rng.uniform(0.0, 3.0, n), np.full(n, level)]
+    o = np.array([-2.0, 7.0, 4.6])
+    d = target - o
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    t = ray_heightfield(np.broadcast_to(o, d.shape), d, hf)
+    assert np.all(np.isfinite(t))
+    np.testing.assert_allclose(o[2] + t * d[:, 2], level, atol=1e-9)

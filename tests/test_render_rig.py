@@ -9,8 +9,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cosim.config import Scenario
-from renderer_proc.rig import (MAX_FOV_DEG, beam_angles, beam_pixel_error, plan_cameras, plan_rig,
-                               required_focal_px, scale_rig)
+from renderer_proc.rig import (
+    MAX_FOV_DEG,
+    beam_angles,
+    beam_pixel_error,
+    plan_cameras,
+    plan_rig,
+    required_focal_px,
+    scale_rig,
+)
 
 
 def grid(az0, az1, el0, el1, n_az=61, n_el=41):

@@ -114,7 +114,14 @@ class LiveSource:
             return self._ended
 
     def _end(self) -> None:
+        """The name is gone but the mapping still holds the run's final state: copy it once, then unmap."""
         self._ended = True
+        if self._seg is not None:
+            try:
+                self._last = self._take(self._seg, self._last)
+                self.history.add(self._last)
+            except Exception:  # noqa: BLE001 - keep the previous snapshot
+                log.exception("viewer: final snapshot of %s failed", self.name)
         self._last.status = "run ended"
         self._last.rtf = None
         if self._seg is not None:

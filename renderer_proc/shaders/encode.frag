@@ -4,11 +4,11 @@
 // writes the bytes themselves, so no float->unorm conversion, filtering or blending can touch them.
 // Linear mode: the paper's x^gamma followed by the engine's inverse gamma cancel exactly, the stored bytes are
 // round(255 x). Mishandled mode: nothing undoes the gamma, bytes are round(255 x^gamma).
-// Optional outputs are switched on by the #defines the renderer prepends (OUT_RGB, OUT_ZF with locations).
+// The renderer prepends #defines: MISHANDLED_GAMMA (compile-time, so the linear pipeline pays for no pow),
+// and the optional outputs OUT_RGB, OUT_ZF with their locations.
 uniform float u_alpha_cm;
 uniform float u_beta_cm;
 uniform float u_gamma;
-uniform int u_mishandled;
 uniform vec3 u_light;      // unit vector towards the light, GL view space
 in vec3 v_view;
 in vec3 v_colour;
@@ -21,10 +21,15 @@ layout(location = OUT_ZF) out float o_zf;
 #endif
 
 const float CM_PER_M = 100.0;
+const float BYTE_MAX = 255.0;
+const float AMBIENT = 0.35;   // shaded image only: ambient and diffuse shares (as renderer_proc.mock_backend)
+const float DIFFUSE = 0.65;
 
 uint to_byte(float x) {
-    if (u_mishandled != 0) x = pow(x, u_gamma);
-    return uint(floor(x * 255.0 + 0.5));
+#ifdef MISHANDLED_GAMMA
+    x = pow(x, u_gamma);
+#endif
+    return uint(floor(x * BYTE_MAX + 0.5));   // round half up, as codec.encode_depth
 }
 
 void main() {
@@ -42,7 +47,7 @@ void main() {
 #ifdef OUT_RGB
     vec3 n = normalize(cross(dFdx(v_view), dFdy(v_view)));
     float lambert = abs(dot(n, u_light));
-    o_rgb = vec4(v_colour * (0.35 + 0.65 * lambert), 1.0);
+    o_rgb = vec4(v_colour * (AMBIENT + DIFFUSE * lambert), 1.0);
 #endif
 #ifdef OUT_ZF
     o_zf = valid ? z_m : uintBitsToFloat(0x7fc00000u);

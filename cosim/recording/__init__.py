@@ -1,0 +1,22 @@
+"""MCAP recording of a run with Foxglove's well-known schemas, reading it back, and replaying it (issue 7).
+
+``launch(..., sinks=[mcap_sink()])`` (``launch.py run ... --record``) writes ``<run_dir>/recording.mcap``: JSON
+messages with the JSON-schema definitions of foxglove.PointCloud (LiDAR), foxglove.CompressedImage (cameras),
+foxglove.Grid (height maps), foxglove.FrameTransform (vehicle and sensor poses) and one scalar topic per struct
+block, so a run opens in Foxglove, Lichtblick or Rerun without ROS. :func:`read_recording` reads it back (also
+a file cut off by a killed run, up to its last completed frame); :class:`ReplaySource` serves it to the
+viewer's dashboard.
+"""
+from .reader import Channel, Recording, RecordingError, read_recording
+from .writer import DEFAULT_NAME, McapRecorder, RecordOptions, mcap_sink
+
+__all__ = ["Channel", "Recording", "RecordingError", "read_recording", "DEFAULT_NAME", "McapRecorder",
+           "RecordOptions", "mcap_sink", "ReplaySource"]
+
+
+def __getattr__(name):
+    if name == "ReplaySource":
+        from .replay import ReplaySource
+
+        return ReplaySource
+    raise AttributeError(name)

@@ -1,0 +1,153 @@
+"""Replay: serve a recording to the live viewer's dashboard (``python -m cosim.viewer --replay FILE.mcap``).
+
+:class:`ReplaySource` has the viewer source interface (``name``, ``frames_planned``, ``history``,
+``snapshot()``, ``check_end()``, ``close()``) and plays the recorded frames back at ``speed`` times the
+simulation's pace, holding the last frame at the end (or looping). Topics map back to block names: ``/<block>``
+(cosim.struct) -> struct block, ``/<cam>/rgb`` -> ``<cam>_rgb``, ``/<cam>/depth_encoded`` -> ``<cam>_depth``,
+``/lidar/points`` -> ``lidar_points`` (camera axes again), ``/heightmap/<kind>`` -> ``heightmap_<kind>``.
+"""
+from __future__ import annotations
+
+import bisect
+import threading
+import time
+from pathlib import Path
+
+from .encode import heights_from_grid, image_from_msg, points_from_cloud
+from .reader import RecordingError, read_recording
+
+__all__ = ["ReplaySource", "block_of_topic"]
+
+#: how many auger samples the replayed chart shows
+HISTORY_LEN = 600
+
+
+def block_of_topic(topic: str, schema: str) -> tuple[str, str] | None:
+    """(block name, kind) a recorded topic stands for, kind in struct|image|array; None for others."""
+    parts = topic.strip("/").split("/")
+    if schema.startswith("cosim.struct."):
+        return schema[len("cosim.struct."):], "struct"
+    if schema == "foxglove.CompressedImage" and len(parts) == 2:
+        return f"{parts[0]}_{'depth' if parts[1] == 'depth_encoded' else parts[1]}", "image"
+    if schema == "foxglove.PointCloud" and topic == "/lidar/points":
+        return "lidar_points", "array"
+    if schema == "foxglove.Grid" and len(parts) == 2 and parts[0] == "heightmap":
+        return f"heightmap_{parts[1]}", "array"
+    return None
+
+
+class _ReplayHistory:
+    """The auger chart's samples up to the replayed frame."""
+
+    def __init__(self, owner: "ReplaySource"):
+        self._owner = owner
+
+    def as_json(self) -> dict:
+        o = self._owner
+        i = o._index + 1
+        rows = o._auger[max(0, i - HISTORY_LEN):i]
+        t, d, a = (list(c) for c in zip(*rows)) if rows else ([], [], [])
+        return {"t": t, "desired": d, "actual": a}
+
+
+class ReplaySource:
+    """Plays a recording back as viewer snapshots."""
+
+    def __init__(self, path: Path | str, speed: float = 1.0, loop: bool = False):
+        from cosim.viewer.snapshot import auger_now
+
+        if speed <= 0:
+            raise ValueError(f"replay speed must be > 0, got {speed}")
+        self.rec = read_recording(path)
+        if not self.rec.frames:
+            raise RecordingError(f"{path} holds no completed frame to replay")
+        self.name = f"replay of {Path(path).name}"
+        self.frames = self.rec.frames
+        self.frames_planned = self.frames[-1]
+        period = self.rec.metadata.get("run", {}).get("sensor_period_s")
+        self.period_s = float(period) if period else 0.1
+        self.speed, self.loop = float(speed), bool(loop)
+        self._topics: dict[str, tuple[str, str, list[int], list[dict]]] = {}
+        for topic, ch in self.rec.channels.items():
+            hit = block_of_topic(topic, ch.schema)
+            if hit is None or topic not in self.rec.messages:
+                continue
+            msgs = self.rec.messages[topic]
+            frames = [m.get("frame", round(t / 1e9 / self.period_s)) for t, m in msgs]
+            self._topics[topic] = (hit[0], hit[1], frames, [m for _, m in msgs])
+        self._decoded: dict[str, tuple[int, object]] = {}
+        self._lock = threading.Lock()
+        self._t0 = time.monotonic()
+        self._index = 0
+        self._auger = []
+        for k in range(len(self.frames)):
+            structs = self._structs_at(self.frames[k])[0]
+            hit = auger_now(structs)
+            if hit is not None:
+                t = structs.get(hit[0], {}).get("t_s", self.frames[k] * self.period_s)
+                self._auger.append((t, hit[1], hit[2]))
+        self.history = _ReplayHistory(self)
+
+    def _latest(self, topic: str, frame: int) -> tuple[int, dict] | None:
+        _, _, frames, msgs = self._topics[topic]
+        i = bisect.bisect_right(frames, frame) - 1
+        return (frames[i], msgs[i]) if i >= 0 else None
+
+    def _structs_at(self, frame: int) -> tuple[dict, dict]:
+        structs, stamps = {}, {}
+        for topic, (block, kind, _, _) in self._topics.items():
+            if kind != "struct":
+                continue
+            hit = self._latest(topic, frame)
+            if hit is not None:
+                stamps[block] = hit[0]
+                structs[block] = {k: (float("nan") if v is None else v) for k, v in hit[1].items()
+                                  if k not in ("timestamp", "frame")}
+        return structs, stamps
+
+    def _decode(self, topic: str, kind_block: str, frame: int, msg: dict):
+        cached = self._decoded.get(topic)
+        if cached is not None and cached[0] == frame:
+            return cached[1]
+        if self.rec.channels[topic].schema == "foxglove.CompressedImage":
+            data = image_from_msg(msg)
+        elif kind_block == "lidar_points":
+            data = points_from_cloud(msg)
+        else:
+            data = heights_from_grid(msg)
+        self._decoded[topic] = (frame, data)
+        return data
+
+    def _current_index(self) -> int:
+        step = (time.monotonic() - self._t0) * self.speed / self.period_s
+        n = len(self.frames)
+        return int(step) % n if self.loop else min(int(step), n - 1)
+
+    def snapshot(self):
+        """The snapshot of the frame the replay clock has reached."""
+        from cosim.viewer.snapshot import Snapshot
+
+        with self._lock:
+            self._index = self._current_index()
+            frame = self.frames[self._index]
+            structs, stamps = self._structs_at(frame)
+            snap = Snapshot(frame=frame, structs=structs, frames=dict(stamps))
+            for topic, (block, kind, _, _) in self._topics.items():
+                if kind == "struct":
+                    continue
+                hit = self._latest(topic, frame)
+                if hit is None:
+                    continue
+                data = self._decode(topic, block, hit[0], hit[1])
+                (snap.images if kind == "image" else snap.arrays)[block] = data
+                snap.frames[block] = hit[0]
+            at_end = not self.loop and self._index == len(self.frames) - 1
+            snap.status = "replay ended" if at_end else "replay"
+            snap.rtf = None if at_end else self.speed
+            return snap
+
+    def check_end(self) -> bool:
+        return False
+
+    def close(self) -> None:
+        self._decoded.clear()

@@ -1,0 +1,185 @@
+"""The dashboard's HTTP server (``http.server.ThreadingHTTPServer``, 127.0.0.1 by default) and the observer entry.
+
+Routes: ``/`` the page, ``/api/state`` the numbers (JSON), ``/panel/<id>.png`` an image panel (404 when absent),
+``/healthz``. A *source* supplies snapshots: :class:`~cosim.viewer.live.LiveSource` (a running segment) or
+:class:`~cosim.recording.replay.ReplaySource` (a recording); both have ``name``, ``frames_planned``,
+``history``, ``snapshot()``, ``check_end()`` and ``close()``.
+
+:func:`observe` is what ``launch(..., observers=[ObserverSpec("viewer", "cosim.viewer.server:observe", {...})])``
+runs in its own process: it lowers its scheduling priority (the run's processes come first on a small machine),
+attaches and serves until the launcher terminates it.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import threading
+from http import HTTPStatus
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
+from urllib.parse import urlsplit
+
+from .page import page_html
+from .panels import IMAGE_PANELS, PanelRenderer, panel_info
+from .snapshot import fullness
+
+__all__ = ["DashboardServer", "state_json", "observe", "serve", "DEFAULT_PORT", "DEFAULT_HOST", "NICE"]
+
+log = logging.getLogger("cosim.viewer")
+
+DEFAULT_PORT = 8765
+DEFAULT_HOST = "127.0.0.1"
+#: niceness increment of a viewer process: it yields the CPU to the run
+NICE = 10
+#: how often the server checks whether the run has ended (to unmap promptly), s
+HOUSEKEEPING_S = 1.0
+
+
+def _finite(x):
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite(v) for v in x]
+    return x
+
+
+def state_json(source, dropped_total: int = 0) -> dict:
+    """The ``/api/state`` document for ``source``'s latest snapshot."""
+    snap = source.snapshot()
+    full = fullness(snap.structs)
+    return _finite({
+        "run": source.name, "status": snap.status, "frame": snap.frame, "frames_planned": source.frames_planned,
+        "t_s": snap.t_s, "rtf": snap.rtf, "dropped_total": dropped_total,
+        "panels": panel_info(snap),
+        "auger": source.history.as_json(),
+        "fullness": {"block": full[0], "values": full[1]} if full else None,
+        "frames": snap.frames,
+    })
+
+
+class _Handler(BaseHTTPRequestHandler):
+    server: "DashboardServer"
+    protocol_version = "HTTP/1.1"
+
+    def log_message(self, fmt, *args) -> None:  # http.server logs every request to stderr otherwise
+        log.debug("viewer http: " + fmt, *args)
+
+    def _send(self, code: int, body: bytes, ctype: str) -> None:
+        self.send_response(code)
+        self.send_header("Content-Type", ctype)
+        self.send_header("Content-Length", str(len(body)))
+        self.send_header("Cache-Control", "no-store")
+        self.end_headers()
+        if self.command != "HEAD":
+            self.wfile.write(body)
+
+    def do_GET(self) -> None:  # noqa: N802 - http.server's naming
+        path = urlsplit(self.path).path
+        srv = self.server
+        try:
+            if path in ("/", "/index.html"):
+                self._send(200, srv.page, "text/html; charset=utf-8")
+            elif path == "/api/state":
+                body = json.dumps(srv.state()).encode()
+                self._send(200, body, "application/json")
+            elif path.startswith("/panel/") and path.endswith(".png"):
+                pid = path[len("/panel/"):-len(".png")]
+                if pid not in IMAGE_PANELS:
+                    self._send(404, f"no image panel {pid!r}".encode(), "text/plain")
+                    return
+                png = srv.renderer.get(srv.source.snapshot(), pid)
+                if png is None:
+                    self._send(404, f"panel {pid} is absent in this run".encode(), "text/plain")
+                else:
+                    self._send(200, png, "image/png")
+            elif path == "/healthz":
+                self._send(200, b"ok", "text/plain")
+            else:
+                self._send(404, b"not found", "text/plain")
+        except (BrokenPipeError, ConnectionResetError):
+            pass
+        except Exception as exc:  # noqa: BLE001 - one bad request must not stop the viewer
+            log.exception("viewer request %s failed", path)
+            try:
+                self._send(HTTPStatus.INTERNAL_SERVER_ERROR, f"{type(exc).__name__}: {exc}".encode(), "text/plain")
+            except OSError:
+                pass
+
+    do_HEAD = do_GET
+
+
+class DashboardServer(ThreadingHTTPServer):
+    """Serves one source's dashboard. ``port=0`` picks a free port (``server_port`` tells which)."""
+
+    daemon_threads = True
+    allow_reuse_address = True
+
+    def __init__(self, source, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT):
+        super().__init__((host, port), _Handler)
+        self.source = source
+        self.renderer = PanelRenderer()
+        self.page = page_html(f"graincosim viewer: {source.name}").encode()
+        self._dropped = 0
+        self._last_frame = -1
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._keeper = threading.Thread(target=self._housekeeping, name="viewer-housekeeping", daemon=True)
+        self._keeper.start()
+
+    @property
+    def url(self) -> str:
+        host, port = self.server_address[:2]
+        return f"http://{host}:{port}/"
+
+    def state(self) -> dict:
+        doc = state_json(self.source)
+        with self._lock:
+            if doc["frame"] is not None and doc["frame"] > self._last_frame >= 0:
+                self._dropped += doc["frame"] - self._last_frame - 1
+            if doc["frame"] is not None:
+                self._last_frame = max(self._last_frame, doc["frame"])
+            doc["dropped_total"] = self._dropped
+        return doc
+
+    def _housekeeping(self) -> None:
+        while not self._stop.wait(HOUSEKEEPING_S):
+            try:
+                self.source.check_end()
+            except Exception:  # noqa: BLE001
+                log.exception("viewer housekeeping failed")
+
+    def server_close(self) -> None:
+        self._stop.set()
+        super().server_close()
+        self.source.close()
+
+
+def serve(source, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, announce: str | None = None) -> None:
+    """Serve ``source`` until interrupted. ``announce``: a file to write ``{"url": ...}`` to once listening."""
+    srv = DashboardServer(source, host, port)
+    log.info("viewer of %s at %s", source.name, srv.url)
+    if announce:
+        tmp = Path(announce).with_suffix(".tmp")
+        tmp.write_text(json.dumps({"url": srv.url, "pid": os.getpid()}))
+        os.replace(tmp, announce)
+    try:
+        srv.serve_forever(poll_interval=0.5)
+    finally:
+        srv.server_close()
+
+
+def observe(segment_name: str, port: int = DEFAULT_PORT, host: str = DEFAULT_HOST, announce: str | None = None,
+            min_interval_s: float | None = None) -> None:
+    """Observer entry (spawned by the launcher): attach to ``segment_name`` read-only and serve the dashboard."""
+    from .live import MIN_INTERVAL_S, LiveSource
+
+    try:
+        os.nice(NICE)
+    except OSError:
+        pass
+    source = LiveSource(segment_name, MIN_INTERVAL_S if min_interval_s is None else min_interval_s)
+    serve(source, host, port, announce)

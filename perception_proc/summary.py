@@ -1,0 +1,113 @@
+"""The ``perception`` section of summary.json (DESIGN.md section 6) from a run's recorded series.
+
+``series`` maps ``"perc_state.<field>"`` to a (frames,) float64 array, one entry per completed frame.
+Accuracy fields are NaN on frames without an evaluation. Range statistics over the run weight each evaluated
+frame by its number of compared beams; percentiles over the run are the beam-weighted mean of the per-frame
+percentiles (the per-beam errors are not kept). NaN becomes ``null`` in the JSON.
+"""
+from __future__ import annotations
+
+import math
+from typing import Mapping
+
+import numpy as np
+
+from cosim.config import Scenario
+
+from . import accuracy as acc
+from .blocks import RANGE_BANDS_M, band_name
+from .heightmap import grid_shape
+
+__all__ = ["summarize", "clean_json"]
+
+_P = "perc_state."
+
+
+def clean_json(x):
+    """Recursively replace non-finite floats by None and numpy scalars by Python numbers."""
+    if isinstance(x, dict):
+        return {k: clean_json(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [clean_json(v) for v in x]
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return float(x) if math.isfinite(x) else None
+    return x
+
+
+def _col(series: Mapping[str, np.ndarray], name: str) -> np.ndarray:
+    v = series.get(_P + name)
+    return np.asarray(v, np.float64) if v is not None else np.zeros(0)
+
+
+def _weighted(values: np.ndarray, weights: np.ndarray) -> float:
+    ok = np.isfinite(values) & np.isfinite(weights) & (weights > 0)
+    if not ok.any():
+        return math.nan
+    return float(np.sum(values[ok] * weights[ok]) / np.sum(weights[ok]))
+
+
+def _median(values: np.ndarray) -> float:
+    v = values[np.isfinite(values)]
+    return float(np.median(v)) if v.size else math.nan
+
+
+def summarize(scenario: Scenario, series: Mapping[str, np.ndarray], heightmap_truth: np.ndarray | None,
+              heightmap_perceived: np.ndarray | None) -> dict:
+    """``{"perception": {...}}``: final height-map RMSE and coverage, median corner and impact errors over the
+    evaluated frames, range-error statistics overall, in the 2-15 m working range and per distance band."""
+    shape = grid_shape(scenario.cart, scenario.controller.grid_cell_m)
+    rmse = bias = cov = math.nan
+    if heightmap_perceived is not None:
+        per = np.asarray(heightmap_perceived)
+        cov = float(np.count_nonzero(np.isfinite(per)) / max(per.size, 1))
+        if heightmap_truth is not None:
+            truth = acc.truth_on_grid(np.asarray(heightmap_truth), scenario.grain.cell_m, shape, scenario.cart)
+            rmse, bias, cov = acc.heightmap_error(per, truth)
+    n = _col(series, "range_beams")
+    evaluated = _col(series, "acc_evaluated")
+    bands = []
+    for lo, hi in RANGE_BANDS_M:
+        b = band_name(lo, hi)
+        w = _col(series, f"rerr_{b}_n")
+        bands.append({
+            "lo_m": lo, "hi_m": hi, "beams": float(np.nansum(w)) if w.size else 0.0,
+            "mean_m": _weighted(_col(series, f"rerr_{b}_mean_m"), w),
+            "p99_m": _weighted(_col(series, f"rerr_{b}_p99_m"), w),
+            "frac_above_5cm": _weighted(_col(series, f"rerr_{b}_above5_frac"), w),
+        })
+    wr = sum(_col(series, f"rerr_{band_name(lo, hi)}_n") for lo, hi in RANGE_BANDS_M if 2.0 <= lo and hi <= 15.0) \
+        if n.size else np.zeros(0)
+    maxes = _col(series, "range_err_max_m")
+    range_error = {
+        "frames_evaluated": int(np.nansum(evaluated)) if evaluated.size else 0,
+        "beams": float(np.nansum(n)) if n.size else 0.0,
+        "mean_m": _weighted(_col(series, "range_err_mean_m"), n),
+        "median_m": _median(_col(series, "range_err_median_m")),
+        "p99_m": _weighted(_col(series, "range_err_p99_m"), n),
+        "max_m": float(np.nanmax(maxes)) if np.isfinite(maxes).any() else math.nan,
+        "frac_above_5cm": _weighted(_col(series, "frac_above_5cm"), n),
+        "working_range_m": list(acc.WORKING_RANGE_M),
+        "working_mean_m": _weighted(_col(series, "range_err_mean_2_15_m"), wr) if n.size else math.nan,
+        "working_frac_above_5cm": _weighted(_col(series, "frac_above_5cm_2_15"), wr) if n.size else math.nan,
+        "beam_missing_frac": _weighted(_col(series, "beam_missing_frac"), n),
+        "bands": bands,
+    }
+    cart_valid = _col(series, "cart_valid")
+    impact_valid = _col(series, "impact_valid")
+    out = {
+        "heightmap_rmse_m": rmse,
+        "heightmap_bias_m": bias,
+        "coverage": cov,
+        "corner_error_m": _median(_col(series, "corner_error_m")),
+        "impact_error_m": _median(_col(series, "impact_error_m")),
+        "heightmap_rmse_median_m": _median(_col(series, "heightmap_rmse_m")),
+        "cart_found_fraction": float(np.mean(cart_valid)) if cart_valid.size else math.nan,
+        "impact_found_fraction": float(np.mean(impact_valid)) if impact_valid.size else math.nan,
+        "sampler": scenario.perception.sampler,
+        "range_error": range_error,
+        "timing_ms": {k: _median(_col(series, f"{k}_ms"))
+                      for k in ("lidar", "cart", "heightmap", "impact", "perception", "accuracy")},
+    }
+    return {"perception": clean_json(out)}

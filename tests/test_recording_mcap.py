@@ -1,0 +1,223 @@
+"""MCAP recording of a run: channels, point counts, image sizes, time stamps; killed runs; reading back."""
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from multiprocessing import shared_memory
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import test_viewer_standins as standins
+from cosim.errors import ParticipantDied
+from cosim.launcher import launch
+from cosim.recording import RecordingError, RecordOptions, mcap_sink, read_recording
+from cosim.recording.encode import heights_from_grid, image_from_msg, points_from_cloud
+
+TOPICS = {"/tf": "foxglove.FrameTransform", "/dyn_state": "cosim.struct.dyn_state",
+          "/render_state": "cosim.struct.render_state", "/perc_state": "cosim.struct.perc_state",
+          "/cam0/rgb": "foxglove.CompressedImage", "/cam0/depth_encoded": "foxglove.CompressedImage",
+          "/lidar/points": "foxglove.PointCloud", "/heightmap/truth": "foxglove.Grid",
+          "/heightmap/perceived": "foxglove.Grid", "/cosim/frame": "cosim.Frame"}
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    out = tmp_path_factory.mktemp("rec") / "run"
+    sc = standins.scenario(1.0)
+    res = launch(sc, out, specs=standins.specs(), console_log=False, sinks=[mcap_sink()])
+    assert res.completed, res.error
+    return sc, out, read_recording(out / "recording.mcap")
+
+
+def test_channels_and_schemas(recorded):
+    _, _, rec = recorded
+    assert {t: c.schema for t, c in rec.channels.items()} == TOPICS
+    assert all(c.encoding == "json" for c in rec.channels.values())
+    assert rec.truncated is False
+
+
+def test_every_frame_with_sim_time_stamps(recorded):
+    sc, _, rec = recorded
+    n = sc.frames + 1
+    assert rec.frames == list(range(n))
+    period_ns = round(sc.timing.sensor_period_s * 1e9)
+    for topic in TOPICS:
+        if topic == "/tf":
+            continue
+        msgs = rec.topic(topic)
+        assert len(msgs) == n, topic
+        for k, (log_time, m) in enumerate(msgs):
+            assert log_time == k * period_ns
+            assert m["timestamp"]["sec"] * 1_000_000_000 + m["timestamp"]["nsec"] == log_time
+
+
+def test_point_counts_and_values(recorded):
+    _, _, rec = recorded
+    for k, (_, m) in enumerate(rec.topic("/lidar/points")):
+        pts = points_from_cloud(m)
+        assert len(pts) == int(standins.valid_beams(k).sum())
+        want = standins.points(k)
+        want = want[np.isfinite(want[:, 0])]
+        np.testing.assert_array_equal(pts, want)
+
+
+def test_image_sizes_and_lossless_depth(recorded):
+    _, _, rec = recorded
+    _, rgb = rec.topic("/cam0/rgb")[3]
+    assert rgb["format"] == "jpeg" and image_from_msg(rgb).shape == (standins.IMG_H, standins.IMG_W, 3)
+    _, depth = rec.topic("/cam0/depth_encoded")[3]
+    assert depth["format"] == "png"
+    img = image_from_msg(depth)
+    assert img.shape == (standins.IMG_H, standins.IMG_W, 3)
+    assert np.array_equal(img[0, :, 0], (np.arange(standins.IMG_W) + 3) % 256), "depth bytes must be lossless"
+
+
+def test_grids_and_transforms(recorded):
+    sc, _, rec = recorded
+    last = sc.frames
+    _, g = rec.topic("/heightmap/truth")[-1]
+    assert g["frame_id"] == "cart_grid" and g["column_count"] == standins.NX
+    assert g["cell_size"]["x"] == pytest.approx(sc.cart.interior_length_m / standins.NX)
+    np.testing.assert_array_equal(heights_from_grid(g), standins.truth(last))
+    _, gp = rec.topic("/heightmap/perceived")[-1]
+    assert np.isnan(heights_from_grid(gp)).any()
+    tf = [m for _, m in rec.topic("/tf")]
+    children = {m["child_frame_id"] for m in tf}
+    assert children == {"combine", "tractor", "cart", "cart_grid", "lidar"}
+    cart = [m for m in tf if m["child_frame_id"] == "cart"][-1]
+    assert cart["translation"]["x"] == pytest.approx(2.0 * last * sc.timing.sensor_period_s - 6.0)
+    q = cart["rotation"]
+    assert q["z"] == pytest.approx(np.sin(0.01), abs=1e-9) and q["w"] == pytest.approx(np.cos(0.01), abs=1e-9)
+
+
+def test_scalars_match_timeseries_csv(recorded):
+    _, out, rec = recorded
+    rows = list(csv.DictReader((out / "timeseries.csv").open()))
+    msgs = rec.topic("/dyn_state")
+    assert len(rows) == len(msgs)
+    for row, (_, m) in zip(rows, msgs):
+        assert m["frame"] == int(row["frame"])
+        assert m["desired_auger_x_m"] == float(row["dyn_state.desired_auger_x_m"])
+        assert m["section3_fullness"] == float(row["dyn_state.section3_fullness"])
+    assert msgs[0][1]["spilled_m3"] is None, "NaN is written as null (JSON has no NaN)"
+
+
+def test_finished_file_has_an_index(recorded):
+    from mcap.reader import make_reader
+
+    _, out, rec = recorded
+    with open(out / "recording.mcap", "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics.channel_count == len(TOPICS)
+    assert summary.statistics.message_count == sum(len(v) for v in rec.messages.values())
+
+
+def test_image_decimation(tmp_path, shm_clean):
+    sc = standins.scenario(1.0)
+    launch(sc, tmp_path / "run", specs=standins.specs(), console_log=False,
+           sinks=[mcap_sink(RecordOptions(image_every=4, rgb_format="png"))])
+    rec = read_recording(tmp_path / "run" / "recording.mcap")
+    assert [m["timestamp"]["nsec"] // 100_000_000 + 10 * m["timestamp"]["sec"]
+            for _, m in rec.topic("/cam0/rgb")] == list(range(0, sc.frames + 1, 4))
+    assert len(rec.topic("/lidar/points")) == sc.frames + 1
+
+
+def test_options_are_checked():
+    with pytest.raises(ValueError, match="image_every must be >= 1"):
+        RecordOptions(image_every=0)
+    with pytest.raises(ValueError, match="jpeg_quality must be in 1..100"):
+        RecordOptions(jpeg_quality=0)
+
+
+def test_not_a_recording(tmp_path):
+    bad = tmp_path / "x.mcap"
+    bad.write_bytes(b"this is not an mcap file at all")
+    with pytest.raises(RecordingError, match="not a readable MCAP recording"):
+        read_recording(bad)
+
+
+def test_child_killed_mid_run_leaves_a_finished_recording(tmp_path, shm_clean):
+    res = launch(standins.scenario(2.0), tmp_path / "run", specs=standins.specs(perception={"kill_at": 6}),
+                 console_log=False, sinks=[mcap_sink()])
+    assert isinstance(res.error, ParticipantDied)
+    rec = read_recording(tmp_path / "run" / "recording.mcap")
+    assert rec.frames == list(range(6)) and rec.truncated is False
+    assert len(rec.topic("/lidar/points")) == 6
+
+
+KILL_SCRIPT = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, {tests!r})
+    import test_viewer_standins as standins
+    from cosim.launcher import launch
+    from cosim.recording import mcap_sink
+    if __name__ == "__main__":
+        launch(standins.scenario(600.0), {out!r}, specs=standins.specs(pace_s=0.005), console_log=False,
+               sinks=[mcap_sink()])
+""")
+
+
+def _children(pid: int) -> dict[int, str]:
+    """Child pid -> command line."""
+    out = subprocess.run(["ps", "-ww", "-o", "pid=,args=", "--ppid", str(pid)], capture_output=True, text=True).stdout
+    return {int(line.split()[0]): line for line in out.splitlines() if line.strip()}
+
+
+def _gone(pids, timeout_s: float) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if not any(Path(f"/proc/{p}").exists() and "Z" not in Path(f"/proc/{p}/stat").read_text().split()[2]
+                   for p in pids):
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def test_launcher_killed_mid_run_leaves_a_readable_recording(tmp_path):
+    """SIGKILL of the launcher itself: no close, no summary; the file still reads up to the last whole frame."""
+    out = tmp_path / "run"
+    script = tmp_path / "run_it.py"
+    script.write_text(KILL_SCRIPT.format(tests=str(Path(__file__).parent), out=str(out)))
+    proc = subprocess.Popen([sys.executable, str(script)], cwd=Path(__file__).parent.parent)
+    path = out / "recording.mcap"
+    segment = None
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and (not path.exists() or path.stat().st_size < 60_000):
+            time.sleep(0.1)
+        assert path.exists(), "the run did not start recording"
+        segment = json.loads((out / "run.json").read_text())["segment"]
+        kids = _children(proc.pid)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(10)
+    workers = [k for k, args in kids.items() if "resource_tracker" not in args]
+    for k in workers:  # ring children end when their parent is gone; make sure, by their ids
+        try:
+            os.kill(k, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    # the dead launcher's resource tracker unlinks its semaphores and segment once it sees the launcher gone
+    assert _gone(kids, 10.0), "processes of the killed run are still alive"
+    try:
+        shm = shared_memory.SharedMemory(segment)  # the dead launcher could not unlink it: clean up after it
+        shm.close()
+        shm.unlink()
+    except FileNotFoundError:
+        pass
+    rec = read_recording(path)
+    assert rec.truncated is True
+    n = len(rec.frames)
+    assert n >= 5 and rec.frames == list(range(n))
+    for topic in TOPICS:
+        if topic != "/tf":
+            assert len(rec.topic(topic)) == n, topic
+    assert rec.topic("/cosim/frame")[-1][1]["frame"] == n - 1

@@ -1,0 +1,95 @@
+"""The dashboard in headless Chromium during a run: panels update with the run's frame numbers; a screenshot.
+
+Skipped where Debian's ``chromium`` is not installed (.ci/run installs it where apt works). The run is a
+launcher subprocess with the viewer as its observer; it is stopped with SIGTERM once the page has been checked.
+Set ``VIEWER_SCREENSHOT`` to a path to keep the screenshot.
+"""
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import textwrap
+import time
+from pathlib import Path
+
+import cv2
+import pytest
+
+from cosim.viewer.panels import PANELS
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (apt-get install chromium)")
+
+RUN_SCRIPT = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, {tests!r})
+    import test_viewer_standins as standins
+    from cosim.launcher import ObserverSpec, launch
+    if __name__ == "__main__":
+        obs = ObserverSpec("viewer", "cosim.viewer.server:observe", {{"port": 0, "announce": {announce!r}}})
+        res = launch(standins.scenario(600.0), {out!r}, specs=standins.specs(pace_s=0.02), console_log=False,
+                     observers=[obs])
+        sys.exit(res.exit_code)
+""")
+FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+         "--disable-background-networking", "--disable-component-update", "--disable-sync",
+         "--disable-dev-shm-usage", "--virtual-time-budget=3000", "--window-size=1400,1000")
+
+
+def chromium(url: str, *extra: str) -> str:
+    with tempfile.TemporaryDirectory() as profile:
+        r = subprocess.run([CHROMIUM, *FLAGS, f"--user-data-dir={profile}", *extra, url], capture_output=True,
+                           text=True, timeout=90)
+    assert r.returncode == 0, r.stderr[-2000:]
+    return r.stdout
+
+
+def frames_in(dom: str) -> dict[str, int]:
+    """Panel id -> the frame it shows (data-frame), and 'header' -> the header's frame."""
+    out = {}
+    for m in re.finditer(r'<section[^>]*id="p-([a-z_]+)"[^>]*>', dom):
+        tag = m.group(0)
+        f = re.search(r'data-frame="(\d*)"', tag).group(1)
+        a = re.search(r'data-available="([01])"', tag).group(1)
+        out[m.group(1)] = int(f) if f and a == "1" else None
+    hdr = re.search(r'id="frame" data-frame="(-?\d*)"', dom)
+    out["header"] = int(hdr.group(1)) if hdr and hdr.group(1) else None
+    return out
+
+
+def test_dashboard_updates_with_the_runs_frames(tmp_path):
+    out, announce = tmp_path / "run", tmp_path / "viewer.json"
+    script = tmp_path / "run_it.py"
+    script.write_text(RUN_SCRIPT.format(tests=str(Path(__file__).parent), out=str(out), announce=str(announce)))
+    proc = subprocess.Popen([sys.executable, str(script)], cwd=Path(__file__).parent.parent)
+    try:
+        deadline = time.monotonic() + 60
+        while not announce.exists() and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.1)
+        assert announce.exists(), "the viewer observer did not start"
+        url = json.loads(announce.read_text())["url"]
+        first = frames_in(chromium(url, "--dump-dom"))
+        second = frames_in(chromium(url, "--dump-dom"))
+        shot = tmp_path / "dashboard.png"
+        chromium(url, f"--screenshot={shot}")
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        code = proc.wait(30)
+    assert code == 130
+    assert set(PANELS) <= set(first)
+    for pid in list(PANELS) + ["header"]:
+        assert first[pid] is not None and second[pid] is not None, (pid, first, second)
+        assert second[pid] > first[pid] >= 0, (pid, first[pid], second[pid])
+    frames_run = json.loads((out / "summary.json").read_text())["frames"]
+    assert max(second.values()) < frames_run + 1
+    img = cv2.imread(str(shot))
+    assert img is not None and img.shape[:2] == (1000, 1400)
+    assert img.std() > 10, "the screenshot is blank"
+    if os.environ.get("VIEWER_SCREENSHOT"):
+        shutil.copy(shot, os.environ["VIEWER_SCREENSHOT"])

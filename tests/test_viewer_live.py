@@ -1,0 +1,214 @@
+"""The live viewer as an observer: attach mid-run without changing the run, attach/detach cycles, run end, errors."""
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+import threading
+import time
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+import test_viewer_standins as standins
+from cosim.launcher import ObserverSpec, launch
+from cosim.viewer import LiveSource, RunEnded, RunNotFound, resolve_run
+from cosim.viewer.live import SHM_DIR
+
+DURATION_S = 6.0
+#: per-step compute time of each stand-in: the run lasts long enough (~2 s) to attach to it mid-way
+PACE_S = 0.01
+STARTUP_S = 60.0
+
+
+@pytest.fixture(scope="module")
+def baseline(tmp_path_factory):
+    """timeseries.csv of the same run without any viewer."""
+    out = tmp_path_factory.mktemp("base") / "run"
+    res = launch(standins.scenario(DURATION_S), out, specs=standins.specs(), console_log=False)
+    assert res.completed
+    return (out / "timeseries.csv").read_bytes()
+
+
+def get(url: str, timeout: float = 10.0) -> tuple[int, str, bytes]:
+    try:
+        with urllib.request.urlopen(url, timeout=timeout) as r:
+            return r.status, r.headers.get("Content-Type", ""), r.read()
+    except urllib.error.HTTPError as e:
+        return e.code, e.headers.get("Content-Type", ""), e.read()
+
+
+def start_viewer(run: Path, announce: Path) -> tuple[subprocess.Popen, str]:
+    proc = subprocess.Popen([sys.executable, "-m", "cosim.viewer", "--attach", str(run), "--port", "0",
+                             "--announce", str(announce)], stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + STARTUP_S
+    while not announce.exists():
+        if proc.poll() is not None:
+            raise AssertionError(f"viewer exited {proc.returncode}: {proc.stderr.read()}")
+        if time.monotonic() > deadline:
+            proc.kill()
+            raise AssertionError("viewer did not start")
+        time.sleep(0.05)
+    return proc, json.loads(announce.read_text())["url"]
+
+
+class ViewerAt:
+    """Sink factory: at frame ``at`` start the viewer CLI on this run and hold the frame until it serves, then
+    poll it from a client thread for the rest of the run (the run's content never depends on wall time)."""
+
+    def __init__(self, at: int, tmp: Path):
+        self.at, self.tmp = at, tmp
+        self.proc = None
+        self.url = ""
+        self.seen: list[dict] = []
+        self.pngs: list[tuple[str, int, str]] = []
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._client, daemon=True)
+
+    def __call__(self, scenario, run_dir, segment):
+        def sink(seg, frame):
+            if frame == self.at:
+                self.proc, self.url = start_viewer(run_dir, self.tmp / "viewer.json")
+                self.thread.start()
+        return sink
+
+    def _client(self):
+        while not self.stop.is_set():
+            code, _, body = get(self.url + "api/state")
+            state = json.loads(body)
+            self.seen.append(state)
+            for pid in ("rgb", "lidar_top", "heightmaps"):
+                c, ctype, _ = get(f"{self.url}panel/{pid}.png?frame={state['frame']}")
+                self.pngs.append((pid, c, ctype))
+            self.stop.wait(0.05)
+
+
+def test_attach_mid_run_leaves_the_timeseries_byte_identical(tmp_path, shm_clean, baseline):
+    sc = standins.scenario(DURATION_S)
+    viewer = ViewerAt(5, tmp_path)
+    try:
+        res = launch(sc, tmp_path / "run", specs=standins.specs(pace_s=PACE_S), console_log=False, sinks=[viewer])
+        viewer.stop.set()
+        viewer.thread.join(10)
+        assert res.completed
+        assert (tmp_path / "run" / "timeseries.csv").read_bytes() == baseline
+        live = [s["frame"] for s in viewer.seen if s["status"] in ("running", "finished")]
+        assert live and min(live) >= 5 and any(5 < f < sc.frames for f in live), live
+        assert live == sorted(live), "frames go forward"
+        ok = [p for p in viewer.pngs if p[1] == 200]
+        assert ok and all(ctype == "image/png" for _, _, ctype in ok)
+        state = viewer.seen[-1]
+        assert state["panels"]["rgb"]["available"] and state["panels"]["fullness"]["available"]
+        assert len(state["fullness"]["values"]) == standins.SECTIONS
+        # the run is over: the viewer says so, keeps the last frame, and is still alive
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            state = json.loads(get(viewer.url + "api/state")[2])
+            if state["status"] == "run ended":
+                break
+            time.sleep(0.1)
+        assert state["status"] == "run ended" and state["frame"] == sc.frames
+        assert get(viewer.url + "panel/heightmaps.png")[0] == 200
+        assert viewer.proc.poll() is None
+    finally:
+        if viewer.proc is not None:
+            viewer.proc.terminate()
+            viewer.proc.wait(10)
+
+
+def test_fifty_attach_detach_cycles_during_a_run(tmp_path, shm_clean, baseline):
+    sc = standins.scenario(DURATION_S)
+    out = tmp_path / "run"
+    cycles: list[tuple[int, bool]] = []
+    errors: list[BaseException] = []
+
+    def cycle():
+        try:
+            for _ in range(50):
+                src = LiveSource(out, min_interval_s=0.0)
+                snap = src.snapshot()
+                src.close()
+                cycles.append((snap.frames.get("dyn_state", -1), (SHM_DIR / src.segment_name).exists()))
+        except BaseException as exc:  # noqa: BLE001 - reported by the test thread
+            errors.append(exc)
+
+    worker = threading.Thread(target=cycle)
+
+    def factory(scenario, run_dir, segment):
+        def sink(seg, frame):
+            if frame == 2:
+                worker.start()
+        return sink
+
+    res = launch(sc, out, specs=standins.specs(pace_s=PACE_S), console_log=False, sinks=[factory])
+    worker.join(30)
+    assert not errors, errors
+    assert res.completed and res.exit_code == 0
+    assert (out / "timeseries.csv").read_bytes() == baseline
+    assert len(cycles) == 50
+    assert all(alive for _, alive in cycles), "a detach must never delete the segment"
+    frames = [f for f, _ in cycles]
+    assert frames == sorted(frames) and frames[0] >= 1 and frames[-1] < sc.frames, frames
+
+
+def test_a_source_sees_the_run_end_and_keeps_the_last_frame(tmp_path, shm_clean):
+    sc = standins.scenario(1.0)
+    sources: list[LiveSource] = []
+
+    def factory(scenario, run_dir, segment):
+        def sink(seg, frame):
+            if frame == 0:
+                sources.append(LiveSource(run_dir, min_interval_s=0.0))
+            sources[0].snapshot()
+        return sink
+
+    res = launch(sc, tmp_path / "run", specs=standins.specs(), console_log=False, sinks=[factory])
+    assert res.completed
+    src = sources[0]
+    assert src.check_end() is True
+    snap = src.snapshot()
+    assert snap.status == "run ended" and snap.frame == sc.frames
+    assert snap.arrays["heightmap_truth"].max() == pytest.approx(standins.truth(sc.frames).max())
+    src.close()
+    with pytest.raises(RunEnded, match="has ended"):
+        LiveSource(tmp_path / "run")
+    with pytest.raises(RunNotFound, match="no running co-simulation with segment"):
+        LiveSource(res.segment_name)
+
+
+def test_missing_runs_are_named(tmp_path):
+    with pytest.raises(RunNotFound, match="has no run.json"):
+        resolve_run(tmp_path)
+    with pytest.raises(RunNotFound, match="no running co-simulation with segment 'cosim-none-000000'"):
+        LiveSource("cosim-none-000000")
+    with pytest.raises(RunNotFound, match="no such run directory"):
+        resolve_run(tmp_path / "nope" / "deeper")
+    assert resolve_run("/dev/shm/cosim-1-abc") == ("cosim-1-abc", None)
+
+
+def test_cli_says_clearly_when_the_run_is_gone(tmp_path):
+    (tmp_path / "run.json").write_text(json.dumps({"segment": "cosim-1-dead", "ended": True}))
+    r = subprocess.run([sys.executable, "-m", "cosim.viewer", "--attach", str(tmp_path), "--once"],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 1 and "has ended" in r.stderr and "Traceback" not in r.stderr
+    r = subprocess.run([sys.executable, "-m", "cosim.viewer", "--attach", "cosim-none-1", "--once"],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 1 and "not started, or it has ended" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_a_failing_viewer_is_a_warning_to_the_run(tmp_path, shm_clean):
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen(1)
+    port = busy.getsockname()[1]
+    try:
+        res = launch(standins.scenario(4.0), tmp_path / "run", specs=standins.specs(pace_s=0.02), console_log=False,
+                     observers=[ObserverSpec("viewer", "cosim.viewer.server:observe", {"port": port})])
+    finally:
+        busy.close()
+    assert res.completed and res.exit_code == 0
+    log = (tmp_path / "run" / "log.txt").read_text()
+    assert "observer viewer ended" in log and "the run goes on without it" in log
