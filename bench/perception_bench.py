@@ -49,6 +49,22 @@ def timeit(fn, repeats: int) -> float:
     return 1e3 * min(out)
 
 
+def remap_nearest(imgs, tab) -> np.ndarray:
+    """The nearest-pixel gather done with ``cv2.remap`` (INTER_NEAREST on the RGBA bytes, then Eq 3), for
+    comparison with the numpy word gather the pipeline uses. OpenCV puts pixel centres at integers."""
+    import cv2
+
+    from perception_proc.codec import decode_bytes
+
+    out = np.full(tab.n_beams, np.nan, np.float32)
+    for img, cam in zip(imgs, tab.cameras):
+        mx = (cam.uv[:, 0] - 0.5).astype(np.float32)[None]
+        my = (cam.uv[:, 1] - 0.5).astype(np.float32)[None]
+        g = cv2.remap(img, mx, my, cv2.INTER_NEAREST)[0]
+        out[cam.beams] = decode_bytes(g[:, 0], g[:, 2], g[:, 3], CODEC) * cam.scale
+    return out
+
+
 def lidar_rows() -> list[tuple]:
     e, a = beam_table(PATTERN)
     d = beam_directions(e, a)
@@ -73,6 +89,9 @@ def lidar_rows() -> list[tuple]:
                 for sampler in ("nearest", "planar"):
                     ms = timeit(lambda: resample(imgs, tab, CODEC, sampler), 30)
                     rows.append((f"{w}x{h}", "co-located", sampler, build, dec, ms, n / ms * 1e3))
+                ms = timeit(lambda: remap_nearest(imgs, tab), 30)
+                rows.append((f"{w}x{h}", "co-located", "nearest via cv2.remap (comparison)", build, dec, ms,
+                             n / ms * 1e3))
     return rows
 
 

@@ -49,14 +49,18 @@ def encode_depth(depth_m: np.ndarray, codec: Codec, out: np.ndarray | None = Non
     elif out.shape != d_m.shape + (4,) or out.dtype != np.uint8:
         raise ValueError(f"out must be {d_m.shape + (4,)} uint8, got {out.shape} {out.dtype}")
     valid = valid_depth_mask(d_m, codec)
-    d = np.where(valid, d_m * CM_PER_M, 0.0)
-    x_r = np.minimum(d / codec.alpha_cm, 1.0)
-    x_b = np.mod(d, codec.beta_cm) / codec.beta_cm
+    # both channels come from one quantity, the period count q = d / beta: x_B = frac(q) and
+    # 255 x_R = q (255 beta / alpha). At alpha / beta = 255 the factor is exactly 1, so R and B round
+    # consistently even at the ties (d / beta a half-integer) where separate float products could disagree
+    # and decode a whole period off.
+    q = np.where(valid, d_m * (CM_PER_M / codec.beta_cm), 0.0)
+    x_b = q - np.floor(q)
+    r255 = np.minimum(q * (BYTE_MAX * codec.beta_cm / codec.alpha_cm), float(BYTE_MAX))
     if codec.gamma_mode == "mishandled":
-        x_r = x_r**codec.gamma
+        r255 = BYTE_MAX * (r255 / BYTE_MAX) ** codec.gamma
         x_b = x_b**codec.gamma
-    # round half away from zero, as the shader's floor(x * 255 + 0.5) for x >= 0
-    r = np.floor(x_r * BYTE_MAX + 0.5).astype(np.uint8)
+    # round half up, as the shader's floor(x + 0.5) for x >= 0
+    r = np.floor(r255 + 0.5).astype(np.uint8)
     b = np.floor(x_b * BYTE_MAX + 0.5).astype(np.uint8)
     out[..., 0] = np.where(valid, r, 0)
     out[..., 1] = out[..., 0]

@@ -103,6 +103,7 @@ class GLRenderer:
         for prog in (self.prog_inst, self.prog_hf):
             self._set(prog, "u_alpha_cm", codec.alpha_cm)
             self._set(prog, "u_beta_cm", codec.beta_cm)
+            self._set(prog, "u_r_per_period", 255.0 * codec.beta_cm / codec.alpha_cm)
             self._set(prog, "u_gamma", codec.gamma)
         self._set(self.prog_hf, "u_colour", GRAIN_COLOUR)
         self._unit = {}

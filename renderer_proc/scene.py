@@ -29,6 +29,7 @@ from .parts import EntityParts, entity_parts
 __all__ = [
     "GRAIN_COLOUR",
     "GROUND_THICKNESS_M",
+    "MIN_SEGMENT_M",
     "SKY_RGBA",
     "STREAM_COLOUR",
     "STREAM_ROWS",
@@ -46,6 +47,8 @@ __all__ = [
 STREAM_ROWS = 64
 #: thickness of the ground slab below z = 0, m (its top face is the ground plane)
 GROUND_THICKNESS_M = 0.5
+#: stream segments shorter than this are dropped (repeated polyline points), m
+MIN_SEGMENT_M = 1e-9
 #: linear RGB colours of the shaded image
 GROUND_COLOUR = (0.35, 0.30, 0.18)
 GRAIN_COLOUR = (0.85, 0.70, 0.20)
@@ -148,7 +151,7 @@ def _stream_cylinders(stream: np.ndarray, n_points: int) -> tuple[np.ndarray, np
         empty = np.zeros((0, 3))
         return empty, empty, np.zeros(0)
     pts = s[:n]
-    keep = np.linalg.norm(np.diff(pts[:, :3], axis=0), axis=1) > 1e-9
+    keep = np.linalg.norm(np.diff(pts[:, :3], axis=0), axis=1) > MIN_SEGMENT_M
     return pts[:-1, :3][keep], pts[1:, :3][keep], (0.5 * (pts[:-1, 3] + pts[1:, 3]))[keep]
 
 

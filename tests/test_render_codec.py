@@ -35,11 +35,22 @@ def test_codec_bound_over_whole_range(frac, ab):
     assert abs(back[0, 0] - d[0, 0]) <= codec.bound_m + 1e-12
 
 
-def test_codec_bound_dense_sweep():
-    d = np.linspace(1e-4, CODEC.max_depth_m * (1 - 1e-9), 400_001)[None]
-    err = np.abs(decode_depth(encode_depth(d, CODEC), CODEC) - d)
-    assert err.max() <= CODEC.bound_m + 1e-12
-    assert err.max() > 0.9 * CODEC.bound_m          # the bound is tight, not loose
+@pytest.mark.parametrize("alpha_cm,beta_cm", [(5000.0, 100.0), (2550.0, 10.0), (2540.0, 10.0), (2500.0, 10.0)])
+def test_codec_bound_dense_sweep(alpha_cm, beta_cm):
+    codec = Codec(alpha_cm=alpha_cm, beta_cm=beta_cm)
+    d = np.linspace(1e-4, codec.max_depth_m * (1 - 1e-9), 400_001)[None]
+    err = np.abs(decode_depth(encode_depth(d, codec), codec) - d)
+    assert err.max() <= codec.bound_m + 1e-12
+    assert err.max() > 0.9 * codec.bound_m          # the bound is tight, not loose
+
+
+def test_half_period_ties_at_ratio_255():
+    """Regression: at alpha / beta = 255, d / beta a half-integer (17.85 m with beta = 10 cm) once rounded R
+    down and B up (separate float products) and decoded a whole period (10 cm) off."""
+    codec = Codec(alpha_cm=2550.0, beta_cm=10.0)
+    d = (np.arange(1, 255) + 0.5)[None] * 0.1          # every half-integer period count, m
+    err = np.abs(decode_depth(encode_depth(d, codec), codec) - d)
+    assert err.max() <= codec.bound_m + 1e-12
 
 
 @pytest.mark.parametrize("bad", [np.inf, np.nan, 0.0, -1.0, 50.0, 80.0])
@@ -79,3 +90,13 @@ def test_mishandled_bytes_are_gamma_domain():
     x_r, x_b = 1234.0 / 5000.0, 34.0 / 100.0
     assert img[0, 0, 0] == np.floor(255 * x_r**2.2 + 0.5)
     assert img[0, 0, 2] == np.floor(255 * x_b**2.2 + 0.5)
+
+
+def test_ratio_strictly_between_254_and_255_breaks_the_bound():
+    """The bound needs R's error (<= 0.5 (alpha / beta) / 255 periods) plus B's (<= 0.5 / 255) below half a
+    period: alpha / beta <= 254. Exactly 255 still works because then R and B round one and the same q (see
+    encode_depth), but in between a whole period is lost near half-integer period counts."""
+    codec = Codec(alpha_cm=2545.0, beta_cm=10.0)
+    d = np.linspace(1e-4, codec.max_depth_m * (1 - 1e-9), 400_001)[None]
+    err = np.abs(decode_depth(encode_depth(d, codec), codec) - d)
+    assert err.max() == pytest.approx(codec.beta_cm / 100.0, rel=0.01)

@@ -136,8 +136,8 @@ def test_mesh_matches_box_primitive():
 
 
 def test_scene_raycast_is_fast_and_sees_cart():
-    """A 320 x 240 frame of the default scene well under a second, and a ray straight down into the cart hits
-    the grain at the sample's heights."""
+    """A 320 x 240 frame of the default scene well under a second (CPU time: steady on a shared machine), and
+    a ray straight down into the cart hits the grain at the sample's heights."""
     import time
     s = Scenario(format_version=1)
     state, h, stream = sample_frame(s)
@@ -146,9 +146,9 @@ def test_scene_raycast_is_fast_and_sees_cart():
     d = rng.normal(size=(320 * 240, 3)) * [0.3, 1.0, 0.3] + [0.0, 1.0, -0.8]
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     o = np.broadcast_to(np.array([state["combine_x_m"] - 2.0, 1.9, 4.6]), d.shape)
-    t0 = time.perf_counter()
+    t0 = time.process_time()
     raycast(scene, o, d)
-    assert time.perf_counter() - t0 < 1.5
+    assert time.process_time() - t0 < 1.0
     hf = scene.heightfield
     grid_pt = np.array([2.05, 1.05, 5.0, 1.0])            # above cell (20, 10)
     world = hf.world_from_grid @ grid_pt

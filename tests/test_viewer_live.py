@@ -187,6 +187,9 @@ def test_missing_runs_are_named(tmp_path):
     with pytest.raises(RunNotFound, match="no such run directory"):
         resolve_run(tmp_path / "nope" / "deeper")
     assert resolve_run("/dev/shm/cosim-1-abc") == ("cosim-1-abc", None)
+    (tmp_path / "run.json").write_text("{half written")
+    with pytest.raises(RunNotFound, match="does not name a segment"):
+        resolve_run(tmp_path)
 
 
 def test_cli_says_clearly_when_the_run_is_gone(tmp_path):

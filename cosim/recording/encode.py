@@ -1,5 +1,8 @@
 """Pure message builders: arrays and transforms to Foxglove JSON messages (dicts), and back.
 
+Builders return dicts whose ``data`` is raw bytes; :func:`to_json` writes them (base64). Decoders take the
+JSON-decoded message (``data`` a base64 string).
+
 Frames: the LiDAR block (``lidar_points``) is in the sensor frame with the paper's camera axes (X right, Y up,
 Z forward), which is left-handed and so cannot be reached from a right-handed frame by a rotation. The
 recording therefore stores points in the ``lidar`` frame, the sensor *mount* frame with body axes (x forward,
@@ -10,6 +13,7 @@ along x and rows along y (Foxglove's y-major order), i.e. the bytes of ``h.T``.
 from __future__ import annotations
 
 import base64
+import json
 import math
 
 import cv2
@@ -20,6 +24,7 @@ from .schemas import NUMERIC_TYPES
 __all__ = [
     "stamp", "quaternion_from_matrix", "transform_msg", "point_cloud_msg", "points_from_cloud", "image_msg",
     "image_from_msg", "grid_msg", "heights_from_grid", "scalars_msg", "CLOUD_FIELDS", "encode_png", "encode_jpeg",
+    "to_json",
 ]
 
 #: fields of a recorded point, float32 each: position in the lidar mount frame (m) and range (m)
@@ -34,8 +39,17 @@ def stamp(t_ns: int) -> dict:
     return {"sec": t_ns // 1_000_000_000, "nsec": t_ns % 1_000_000_000}
 
 
-def _b64(data: bytes) -> str:
-    return base64.b64encode(data).decode("ascii")
+def to_json(msg: dict) -> bytes:
+    """JSON bytes of a message; a raw ``bytes`` ``data`` field is written as base64 (Foxglove's JSON encoding).
+
+    The base64 text is spliced in rather than passed through ``json.dumps`` (it never needs escaping), which
+    keeps a megabyte-sized field cheap. Non-finite floats are refused (JSON has no NaN).
+    """
+    data = msg.get("data")
+    if isinstance(data, (bytes, bytearray, memoryview)):
+        head = json.dumps({k: v for k, v in msg.items() if k != "data"}, separators=(",", ":"), allow_nan=False)
+        return head[:-1].encode() + b',"data":"' + base64.b64encode(data) + b'"}'
+    return json.dumps(msg, separators=(",", ":"), allow_nan=False).encode()
 
 
 def quaternion_from_matrix(r: np.ndarray) -> dict:
@@ -85,7 +99,7 @@ def point_cloud_msg(t_ns: int, points_cam: np.ndarray, frame_id: str = "lidar") 
     return {"timestamp": stamp(t_ns), "frame_id": frame_id,
             "pose": {"position": {"x": 0.0, "y": 0.0, "z": 0.0}, "orientation": {"x": 0.0, "y": 0.0, "z": 0.0,
                                                                                  "w": 1.0}},
-            "point_stride": 16, "fields": fields, "data": _b64(out.astype("<f4").tobytes())}
+            "point_stride": 16, "fields": fields, "data": out.astype("<f4").tobytes()}
 
 
 def points_from_cloud(msg: dict) -> np.ndarray:
@@ -125,14 +139,14 @@ def image_msg(t_ns: int, rgba: np.ndarray, frame_id: str, fmt: str = "png", qual
 
     Depth-encoded images must use ``png``: lossy compression would decode to wrong depths (DESIGN.md 4).
     """
-    rgb = rgba[..., :3]
+    rgb = rgba[..., :3] if rgba.shape[-1] == 4 else rgba
     if fmt == "png":
         data = encode_png(rgb)
     elif fmt == "jpeg":
         data = encode_jpeg(rgb, quality)
     else:
         raise ValueError(f"image format {fmt!r} is not 'png' or 'jpeg'")
-    return {"timestamp": stamp(t_ns), "frame_id": frame_id, "format": fmt, "data": _b64(data)}
+    return {"timestamp": stamp(t_ns), "frame_id": frame_id, "format": fmt, "data": data}
 
 
 def image_from_msg(msg: dict) -> np.ndarray:
@@ -154,7 +168,7 @@ def grid_msg(t_ns: int, heights: np.ndarray, cell_x_m: float, cell_y_m: float, f
                                                                                  "w": 1.0}},
             "column_count": nx, "cell_size": {"x": float(cell_x_m), "y": float(cell_y_m)},
             "row_stride": 4 * nx, "cell_stride": 4,
-            "fields": [{"name": "height", "offset": 0, "type": NUMERIC_TYPES["f4"]}], "data": _b64(data)}
+            "fields": [{"name": "height", "offset": 0, "type": NUMERIC_TYPES["f4"]}], "data": data}
 
 
 def heights_from_grid(msg: dict) -> np.ndarray:

@@ -12,14 +12,22 @@ frame's simulation time as log time and message timestamp:
 * ``/lidar/points`` foxglove.PointCloud (valid beams), ``/heightmap/<kind>`` foxglove.Grid.
 * ``/cosim/frame`` ``cosim.Frame``, last: the frame is complete in the file once its marker is there.
 
+Cost: the sink only copies the frame's blocks (a memcpy) and queues them; a writer thread encodes (cv2 and
+zstd release the GIL) and writes. The ring is sequential, so on a 2-core machine the writer mostly uses the core
+the ring leaves idle. The queue is bounded (``queue_frames``): when encoding cannot keep up, the sink waits, so
+no frame is ever dropped from a recording. ``queue_frames=0`` writes synchronously inside the sink.
+
 After each frame the writer closes its chunk and flushes the file, so a run killed at any point leaves a file
-that :func:`cosim.recording.reader.read_recording` reads up to the last completed frame. A recording failure
-(disk full, ...) is logged once and recording stops; the run goes on.
+that :func:`cosim.recording.reader.read_recording` reads up to the last frame written: with a child's crash
+or a stop, ``close`` drains the queue first (every completed frame); with the launcher itself SIGKILLed, the
+frames still queued (at most ``queue_frames``) are lost. A recording failure (disk full, ...) is logged once
+and recording stops; the run goes on.
 """
 from __future__ import annotations
 
-import json
 import logging
+import queue
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -29,7 +37,7 @@ import numpy as np
 from shm_schema import Segment, StructBlock
 
 from . import schemas as S
-from .encode import grid_msg, image_msg, point_cloud_msg, scalars_msg, stamp, transform_msg
+from .encode import grid_msg, image_msg, point_cloud_msg, scalars_msg, stamp, to_json, transform_msg
 
 __all__ = ["RecordOptions", "McapRecorder", "mcap_sink", "DEFAULT_NAME", "PROFILE", "VEHICLES"]
 
@@ -56,8 +64,12 @@ class RecordOptions:
     jpeg_quality: int = 90
     #: per-frame chunk compression
     compression: Literal["zstd", "lz4", "none"] = "zstd"
+    #: frames that may wait for the writer thread (0: write synchronously in the sink)
+    queue_frames: int = 4
 
     def __post_init__(self) -> None:
+        if self.queue_frames < 0:
+            raise ValueError(f"queue_frames must be >= 0, got {self.queue_frames}")
         if self.image_every < 1:
             raise ValueError(f"image_every must be >= 1, got {self.image_every}")
         if not 1 <= self.jpeg_quality <= 100:
@@ -91,6 +103,11 @@ class McapRecorder:
         self._w.start(PROFILE, "graincosim.cosim.recording")
         self._schemas: dict[str, int] = {}
         self._plan(segment)
+        self._queue: queue.Queue = queue.Queue(maxsize=max(1, self.options.queue_frames))
+        self._thread = None
+        if self.options.queue_frames > 0:
+            self._thread = threading.Thread(target=self._worker, name="mcap-writer", daemon=True)
+            self._thread.start()
         self._w.add_metadata("run", {"run_id": segment.run_id, "fingerprint": segment.fingerprint,
                                      "scenario": scenario.name, "sensor_period_s": repr(self.period_s)})
         self._flush()
@@ -151,8 +168,7 @@ class McapRecorder:
 
     # -- frames ------------------------------------------------------------------------------------------
     def _put(self, channel: int, t_ns: int, msg: dict) -> None:
-        data = json.dumps(msg, separators=(",", ":"), allow_nan=False).encode()
-        self._w.add_message(channel, log_time=t_ns, data=data, publish_time=t_ns)
+        self._w.add_message(channel, log_time=t_ns, data=to_json(msg), publish_time=t_ns)
 
     def _flush(self) -> None:
         if self._chunked:
@@ -165,17 +181,47 @@ class McapRecorder:
         if self._failed or self._closed:
             return
         try:
-            self._record(seg, frame)
+            item = self._capture(seg, frame)
+            if self._thread is None:
+                self._write(item)
+            else:
+                self._queue.put(item)
         except Exception:  # noqa: BLE001 - a recording failure must not end the run
-            self._failed = True
-            log.exception("recording to %s failed at frame %d; the run goes on without recording", self.path, frame)
-            self.close()
+            self._fail(frame)
 
-    def _record(self, seg: Segment, frame: int) -> None:
+    def _fail(self, frame: int) -> None:
+        self._failed = True
+        log.exception("recording to %s failed at frame %d; the run goes on without recording", self.path, frame)
+
+    def _capture(self, seg: Segment, frame: int) -> tuple:
+        """Copies of what frame ``frame`` records (the blocks are quiescent while the supervisor holds the token)."""
+        structs = {name: seg.view(name).as_dict() for name, _ in self._structs}
+        images = []
+        if frame % self.options.image_every == 0:
+            images = [(fmt, cam, ch, np.array(seg.view(name)[..., :3])) for name, fmt, cam, ch in self._images
+                      if seg.frame_of(name) >= 0]
+        lidar = (np.array(seg.view("lidar_points")) if self._lidar is not None and seg.frame_of("lidar_points") >= 0
+                 else None)
+        grids = [(cell, ch, np.array(seg.view(name))) for name, cell, ch in self._grids if seg.frame_of(name) >= 0]
+        return frame, structs, images, lidar, grids
+
+    def _worker(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is None:
+                return
+            if self._failed:
+                continue
+            try:
+                self._write(item)
+            except Exception:  # noqa: BLE001
+                self._fail(item[0])
+
+    def _write(self, item: tuple) -> None:
+        frame, structs, images, lidar, grids = item
         t_ns = round(frame * self.period_s * 1e9)
         for parent, child, tf in self._static:
             self._put(self._tf, t_ns, transform_msg(t_ns, parent, child, tf))
-        structs = {name: seg.view(name).as_dict() for name, _ in self._structs}
         for v, block in self._vehicles:
             s = structs[block]
             c, sn = np.cos(s[f"{v}_yaw_rad"]), np.sin(s[f"{v}_yaw_rad"])
@@ -184,25 +230,24 @@ class McapRecorder:
                 self._put(self._tf, t_ns, transform_msg(t_ns, "world", v, tf))
         for name, channel in self._structs:
             self._put(channel, t_ns, scalars_msg(t_ns, frame, structs[name]))
-        if frame % self.options.image_every == 0:
-            for name, fmt, cam, channel in self._images:
-                if seg.frame_of(name) >= 0:
-                    self._put(channel, t_ns, image_msg(t_ns, seg.view(name), cam, fmt, self.options.jpeg_quality))
-        if self._lidar is not None and seg.frame_of("lidar_points") >= 0:
-            self._put(self._lidar, t_ns, point_cloud_msg(t_ns, seg.view("lidar_points")))
-        for name, (cx, cy), channel in self._grids:
-            if seg.frame_of(name) >= 0:
-                h = seg.view(name)
-                self._put(channel, t_ns, grid_msg(t_ns, h, cx, cy))
+        for fmt, cam, channel, rgb in images:
+            self._put(channel, t_ns, image_msg(t_ns, rgb, cam, fmt, self.options.jpeg_quality))
+        if lidar is not None:
+            self._put(self._lidar, t_ns, point_cloud_msg(t_ns, lidar))
+        for (cx, cy), channel, h in grids:
+            self._put(channel, t_ns, grid_msg(t_ns, h, cx, cy))
         self._put(self._marker, t_ns, {"timestamp": stamp(t_ns), "frame": int(frame), "t_s": frame * self.period_s})
         self._flush()
         self.frames_written += 1
 
     def close(self) -> None:
-        """Write the summary and close the file. Idempotent; also called on failure or stop."""
+        """Drain the queue, write the summary and close the file. Idempotent; also called on failure or stop."""
         if self._closed:
             return
         self._closed = True
+        if self._thread is not None:
+            self._queue.put(None)
+            self._thread.join()
         try:
             self._w.finish()
         finally:

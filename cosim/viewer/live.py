@@ -55,11 +55,15 @@ def resolve_run(run: str | os.PathLike) -> tuple[str, Path | None]:
         info_path = p / "run.json"
         if not info_path.is_file():
             raise RunNotFound(f"{p} has no run.json: it is not a run directory, or its run has not started yet")
-        info = json.loads(info_path.read_text())
+        try:
+            info = json.loads(info_path.read_text())
+            segment = str(info["segment"])
+        except (ValueError, KeyError, TypeError) as exc:
+            raise RunNotFound(f"{info_path} does not name a segment ({type(exc).__name__}: {exc})") from None
         if info.get("ended"):
-            raise RunEnded(f"run {p.name} has ended (its segment {info.get('segment')} is gone); its outputs are in "
+            raise RunEnded(f"run {p.name} has ended (its segment {segment} is gone); its outputs are in "
                            f"{p}; replay a recording with `python -m cosim.viewer --replay {p}/recording.mcap`")
-        return str(info["segment"]), p
+        return segment, p
     name = str(run)
     if name.startswith(str(SHM_DIR) + "/"):
         name = name[len(str(SHM_DIR)) + 1:]

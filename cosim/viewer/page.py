@@ -2,7 +2,8 @@
 
 The script polls ``/api/state`` (about 4 times a second, with ``setTimeout``: nothing spins), swaps an image
 panel's ``src`` when that panel's frame changes, and marks each panel with the frame it shows in its
-``data-frame`` attribute (what the headless-browser test reads). The auger chart and the fullness bars are
+``data-frame`` attribute, and the frames it has shown in ``data-seen`` (what the headless-browser test reads).
+The auger chart and the fullness bars are
 drawn on canvases from the numbers in the state.
 """
 from __future__ import annotations
@@ -33,6 +34,11 @@ section.absent{opacity:.55}section.absent .body{display:none}
 _JS = """
 const POLL_MS = %(poll)d, IMAGE_PANELS = %(image_panels)s;
 const $ = (id) => document.getElementById(id);
+function shown(sec, f) {
+  sec.dataset.frame = String(f); sec.querySelector(".f").textContent = "frame " + f;
+  const seen = sec.dataset.seen ? sec.dataset.seen.split(" ") : [];
+  if (seen[seen.length - 1] !== String(f)) { seen.push(String(f)); sec.dataset.seen = seen.slice(-20).join(" "); }
+}
 function fmt(x, d) { return (x === null || x === undefined || !isFinite(x)) ? "-" : x.toFixed(d); }
 function setPanel(id, info) {
   const sec = $("p-" + id); if (!sec) return;
@@ -45,12 +51,11 @@ function setPanel(id, info) {
     if (img.dataset.want !== String(info.frame)) {
       img.dataset.want = String(info.frame);
       const f = info.frame;
-      img.onload = () => { sec.dataset.frame = String(f); sec.querySelector(".f").textContent = "frame " + f; };
+      img.onload = () => shown(sec, f);
       img.src = "/panel/" + id + ".png?frame=" + f;
     }
   } else {
-    sec.dataset.frame = String(info.frame);
-    sec.querySelector(".f").textContent = "frame " + info.frame;
+    shown(sec, info.frame);
   }
 }
 function drawAuger(a) {
@@ -111,7 +116,7 @@ poll();
 def _panel(pid: str, title: str) -> str:
     body = (f'<img alt="{title}">' if pid in IMAGE_PANELS else
             f'<canvas id="c-{pid}" width="520" height="{240 if pid == "auger" else 200}"></canvas>')
-    return (f'<section class="panel absent" id="p-{pid}" data-frame="" data-available="0">'
+    return (f'<section class="panel absent" id="p-{pid}" data-frame="" data-seen="" data-available="0">'
             f'<h2><span>{title}</span><span class="f"></span></h2><div class="note"></div>'
             f'<div class="body">{body}</div></section>')
 

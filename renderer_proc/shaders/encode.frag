@@ -8,6 +8,7 @@
 // and the optional outputs OUT_RGB, OUT_ZF with their locations.
 uniform float u_alpha_cm;
 uniform float u_beta_cm;
+uniform float u_r_per_period;   // 255 beta / alpha: R counts per period of B (exactly 1.0 at alpha / beta = 255)
 uniform float u_gamma;
 uniform vec3 u_light;      // unit vector towards the light, GL view space
 in vec3 v_view;
@@ -25,22 +26,27 @@ const float BYTE_MAX = 255.0;
 const float AMBIENT = 0.35;   // shaded image only: ambient and diffuse shares (as renderer_proc.mock_backend)
 const float DIFFUSE = 0.65;
 
-uint to_byte(float x) {
-#ifdef MISHANDLED_GAMMA
-    x = pow(x, u_gamma);
-#endif
-    return uint(floor(x * BYTE_MAX + 0.5));   // round half up, as codec.encode_depth
+uint quantise(float x) {          // x in [0, 1] -> round(255 x), half up as codec.encode_depth
+    return uint(floor(x * BYTE_MAX + 0.5));
 }
+#ifdef MISHANDLED_GAMMA
+uint r_byte(float r255) { return quantise(pow(r255 / BYTE_MAX, u_gamma)); }
+uint b_byte(float x_b) { return quantise(pow(x_b, u_gamma)); }
+#else
+uint r_byte(float r255) { return uint(floor(r255 + 0.5)); }
+uint b_byte(float x_b) { return quantise(x_b); }
+#endif
 
 void main() {
     float z_m = -v_view.z;            // planar camera Z, m
     float d = z_m * CM_PER_M;         // cm
     bool valid = d > 0.0 && d < u_alpha_cm;
     if (valid) {
-        float x_r = min(d / u_alpha_cm, 1.0);
-        float x_b = mod(d, u_beta_cm) / u_beta_cm;
-        uint r = to_byte(x_r);
-        o_encoded = uvec4(r, r, to_byte(x_b), 255u);
+        // one quantity feeds both channels: q = d / beta; x_B = frac(q), 255 x_R = q * 255 beta / alpha
+        float q = d / u_beta_cm;
+        float x_b = q - floor(q);
+        uint r = r_byte(min(q * u_r_per_period, BYTE_MAX));
+        o_encoded = uvec4(r, r, b_byte(x_b), 255u);
     } else {
         o_encoded = uvec4(0u);
     }

@@ -1,0 +1,239 @@
+"""Cost of the live viewer and of MCAP recording to a run's real-time factor (issue 7 benchmark).
+
+Four configurations, interleaved and repeated: plain, ``viewer`` (the observer process attached, with a client
+polling the dashboard like the page does: state every 250 ms, each changed image panel fetched), ``record``
+(the MCAP sink) and both. Two workloads:
+
+* ``payload``: a CPU-bound stand-in ring with the real runs' payload sizes: 2 cameras of 640 x 480 depth-encoded
+  and RGB images, 32768 LiDAR rows, 60 x 30 and 30 x 15 height maps, a 60-field dyn_state; each step burns
+  ``--work-ms`` of CPU time (thread time, so contention shows as lost real time).
+* ``dynamics``: the real dynamics participant alone (ground-truth feedback, no renderer), if it runs.
+
+The real-time factor is measured in steady state by a timing sink: frames completed more than ``SETTLE_S``
+after frame 0 (so the children's and the viewer's start-up, imports included, does not count), to the end. Usage: ``python bench/viewer_bench.py [--reps 3] [--frames 120]``; prints
+a Markdown table.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from cosim.config import Scenario  # noqa: E402
+from cosim.launcher import ObserverSpec, launch  # noqa: E402
+from cosim.recording import mcap_sink  # noqa: E402
+from cosim.specs import ParticipantSpec  # noqa: E402
+from shm_schema import ArrayBlock, Field, StructBlock, image_block  # noqa: E402
+
+#: wall time after frame 0 left out of the measurement (start-up of the viewer process and its client), s
+SETTLE_S = 4.0
+CAMS, H, W = 2, 480, 640
+BEAMS = 32768
+CONFIGS = ("plain", "viewer", "record", "viewer+record")
+
+
+def blocks_dynamics(scenario):
+    fields = [Field("t_s", "s")] + [Field(f"f{k}_m", "m") for k in range(40)]
+    fields += [Field("desired_auger_x_m", "m"), Field("actual_auger_x_m", "m")]
+    fields += [Field(f"section{k}_fullness") for k in range(1, 10)]
+    return [StructBlock("dyn_state", "dynamics", tuple(fields)), ArrayBlock("heightmap_truth", "dynamics", "f4",
+                                                                            (60, 30))]
+
+
+def blocks_renderer(scenario):
+    out = []
+    for c in range(CAMS):
+        out += [image_block(f"cam{c}_depth", "renderer", H, W), image_block(f"cam{c}_rgb", "renderer", H, W)]
+    return out
+
+
+def blocks_perception(scenario):
+    return [ArrayBlock("lidar_points", "perception", "f4", (BEAMS, 4)),
+            ArrayBlock("heightmap_perceived", "perception", "f4", (30, 15))]
+
+
+class Payload:
+    """A ring member that burns ``work_ms`` of CPU per step and writes payloads of the real sizes."""
+
+    def __init__(self, scenario, role, work_ms=10.0):
+        self.name, self.scenario, self.work_s = role, scenario, work_ms / 1e3
+        rng = np.random.default_rng(0)
+        yy, xx = np.mgrid[0:H, 0:W]
+        # smooth like a rendered scene (a depth-encoded image's fine channel wraps every period), not noise
+        self.image = np.stack([(xx // 3) % 256, (yy // 2) % 256, (xx * 7 + yy * 3) % 256, np.full_like(xx, 255)],
+                              axis=-1).astype(np.uint8)
+        self.points = rng.normal(0, 5, (BEAMS, 4)).astype(np.float32)
+        self.points[::10] = np.nan
+        self.buf = rng.normal(size=20000)
+        self.seg = None
+
+    def start(self, segment):
+        self.seg = segment
+
+    def step(self, frame):
+        t0 = time.thread_time()
+        while time.thread_time() - t0 < self.work_s:
+            np.sin(self.buf, out=self.buf)
+        seg, t = self.seg, frame * self.scenario.timing.sensor_period_s
+        if self.name == "dynamics":
+            with seg.write("dyn_state", frame) as v:
+                v.t_s = t
+                v.desired_auger_x_m, v.actual_auger_x_m = 1.0 + 0.01 * frame, 0.99 + 0.01 * frame
+                for k in range(1, 10):
+                    setattr(v, f"section{k}_fullness", min(1.0, 0.005 * frame * k))
+            with seg.write("heightmap_truth", frame) as h:
+                h[...] = 0.01 * frame
+        elif self.name == "renderer":
+            for c in range(CAMS):
+                for kind in ("depth", "rgb"):
+                    with seg.write(f"cam{c}_{kind}", frame) as img:
+                        np.copyto(img, self.image)
+                        img[(frame * 7) % H:(frame * 7) % H + 40] = 255 - img[(frame * 7) % H:(frame * 7) % H + 40]
+        else:
+            with seg.write("lidar_points", frame) as p:
+                np.copyto(p, self.points)
+            with seg.write("heightmap_perceived", frame) as h:
+                h[...] = 0.01 * frame
+
+    def close(self):
+        self.seg = None
+
+
+def make(scenario, role="dynamics", **kw):
+    return Payload(scenario, role, **kw)
+
+
+def payload_specs(work_ms: float) -> dict:
+    return {r: ParticipantSpec(r, "viewer_bench:make", f"viewer_bench:blocks_{r}",
+                               kwargs={"role": r, "work_ms": work_ms}) for r in ("dynamics", "renderer", "perception")}
+
+
+class Timing:
+    """Sink factory recording each completed frame's wall time."""
+
+    def __init__(self):
+        self.stamps: list[float] = []
+
+    def __call__(self, scenario, run_dir, segment):
+        self.stamps.clear()
+
+        def sink(seg, frame):
+            self.stamps.append(time.perf_counter())
+        return sink
+
+    def rtf(self, period_s: float) -> float:
+        s = [t for t in self.stamps if t - self.stamps[0] > SETTLE_S]
+        if len(s) < 20:
+            raise RuntimeError(f"only {len(s)} frames after the {SETTLE_S} s settling time: run more frames")
+        return (len(s) - 1) * period_s / (s[-1] - s[0])
+
+
+CLIENT = """
+import json, sys, time, urllib.request
+url = sys.argv[1]
+shown = {}
+while True:
+    try:
+        s = json.load(urllib.request.urlopen(url + "api/state", timeout=5))
+        for pid, info in s["panels"].items():
+            if info["available"] and info["frame"] is not None and pid in ("rgb", "depth", "lidar_top",
+                    "lidar_side", "heightmaps") and shown.get(pid) != info["frame"]:
+                urllib.request.urlopen(f"{url}panel/{pid}.png?frame={info['frame']}", timeout=5).read()
+                shown[pid] = info["frame"]
+    except OSError:
+        pass
+    time.sleep(0.25)
+"""
+
+
+def one_run(scenario: Scenario, specs, config: str, tmp: Path) -> float:
+    timing = Timing()
+    sinks = [timing] + ([mcap_sink()] if "record" in config else [])
+    observers, client = [], None
+    announce = tmp / "viewer.json"
+    announce.unlink(missing_ok=True)
+    if "viewer" in config:
+        observers = [ObserverSpec("viewer", "cosim.viewer.server:observe", {"port": 0, "announce": str(announce)})]
+
+        def start_client(sc, run_dir, seg):
+            def sink(s, frame):
+                nonlocal client
+                if client is None and announce.exists():
+                    url = json.loads(announce.read_text())["url"]
+                    client = subprocess.Popen([sys.executable, "-c", CLIENT, url])
+            return sink
+        sinks.append(start_client)
+    out = tmp / f"run-{config}"
+    try:
+        res = launch(scenario, out, specs=specs, console_log=False, observers=observers, sinks=sinks)
+    finally:
+        if client is not None:
+            client.terminate()
+            client.wait(5)
+    if not res.completed:
+        raise RuntimeError(f"{config} run failed: {res.error}")
+    if "viewer" in config and client is None:
+        raise RuntimeError("the viewer never announced itself; no client polled it")
+    size = (out / "recording.mcap").stat().st_size if "record" in config else 0
+    one_run.sizes[config] = size / (len(timing.stamps) or 1)
+    return timing.rtf(scenario.timing.sensor_period_s)
+
+
+one_run.sizes = {}
+
+
+def bench(name: str, scenario: Scenario, specs, reps: int) -> list[str]:
+    results = {c: [] for c in CONFIGS}
+    with tempfile.TemporaryDirectory() as tmp:
+        for _ in range(reps):
+            for c in CONFIGS:
+                results[c].append(one_run(scenario, specs, c, Path(tmp)))
+    base = statistics.median(results["plain"])
+    rows = []
+    for c in CONFIGS:
+        med = statistics.median(results[c])
+        spread = f"{min(results[c]):.2f}-{max(results[c]):.2f}"
+        kb = one_run.sizes.get(c, 0) / 1024
+        rows.append(f"| {name} | {c} | {med:.2f} | {spread} | {100 * (med / base - 1):+.1f} % | "
+                    f"{kb:.0f} |" if "record" in c else
+                    f"| {name} | {c} | {med:.2f} | {spread} | {100 * (med / base - 1):+.1f} % | - |")
+    return rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--reps", type=int, default=3)
+    ap.add_argument("--frames", type=int, default=250, help="payload frames (dynamics runs 15x as many)")
+    ap.add_argument("--work-ms", type=float, default=10.0, help="CPU time per payload step, ms")
+    ap.add_argument("--skip-dynamics", action="store_true")
+    args = ap.parse_args()
+    period = 0.1
+    sc = Scenario(format_version=1, duration_s=args.frames * period, renderer="mock", viewer=True)
+    rows = bench("payload", sc, payload_specs(args.work_ms), args.reps)
+    if not args.skip_dynamics:
+        gt = Scenario(format_version=1, duration_s=15 * args.frames * period, feedback="ground_truth",
+                      renderer="none")
+        try:
+            rows += bench("dynamics", gt, None, args.reps)
+        except Exception as exc:  # noqa: BLE001 - the real participant is someone else's work in progress
+            rows.append(f"| dynamics | (failed: {type(exc).__name__}: {exc}) | | | | |")
+    print(f"machine: {os.cpu_count()} cores; {args.reps} runs each, interleaved; {args.frames} payload frames; "
+          f"steady state from {SETTLE_S:g} s after frame 0; payload work {args.work_ms:g} ms CPU per step")
+    print("| workload | config | real-time factor (median) | range | vs plain | recording KiB/frame |")
+    print("|---|---|---|---|---|---|")
+    print("\n".join(rows))
+
+
+if __name__ == "__main__":
+    main()
