@@ -7,7 +7,6 @@ Run: ``python bench/perception_bench.py`` (from the repository root). Prints Mar
 """
 from __future__ import annotations
 
-import math
 import statistics
 import sys
 import time

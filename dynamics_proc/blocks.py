@@ -67,7 +67,7 @@ STATE_FIELDS: tuple[tuple[str, str, str, str], ...] = (
     ("delivered_m3", "m^3", "f8", "cumulative volume delivered by the auger"),
     ("in_cart_m3", "m^3", "f8", "grain in the cart minus the initial grain (height-map sum)"),
     ("spilled_m3", "m^3", "f8", "cumulative spill (outside the cart or over a wall top)"),
-    ("spilled_ground_m3", "m^3", "f8", "part of the spill that landed outside the interior"),
+    ("spilled_outside_m3", "m^3", "f8", "part of the spill that landed outside the interior"),
     ("cart_grain_m3", "m^3", "f8", "grain in the cart"),
     ("peak_height_m", "m", "f8", "highest grain cell above the floor"),
 )

@@ -18,11 +18,12 @@ counts as none). Section heights are the highest NaN-ignoring 2 x 2 block minimu
 cell cannot fake it); sections without a valid cell keep their last value. A section counts as full once its
 estimate reaches the full level, and stays full (latched: noise must not send the auger back). A target
 section without a valid cell for ``stale_timeout_s`` while the auger runs is given up as full. The auger
-runs only while there is a target within one section length of the predicted impact (it travels with the
-auger off), the predicted impact is safely inside the cart, and a measurement has been seen.
+runs only while there is a target within TRAVEL_ON_SECTIONS section lengths of the predicted impact (it
+travels farther with the auger off), the predicted impact is safely inside the cart, and a measurement has been seen.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -39,6 +40,9 @@ __all__ = ["BIAS_TAU_S", "SETTLE_S", "ControllerParams", "ControllerState", "Con
 BIAS_TAU_S = 5.0
 #: the bias is only learnt this long after the last nudge (transients excluded), s
 SETTLE_S = 6.0
+#: the auger keeps running while the target is within this many section lengths (adjacent moves, allowing
+#: for the nudge lattice); farther targets are approached with the auger off
+TRAVEL_ON_SECTIONS = 1.5
 #: slack on the nudge threshold (half a nudge) so that an exactly half-way error does not chatter, m
 NUDGE_SLACK_M = 1e-9
 
@@ -56,6 +60,8 @@ class ControllerParams:
     nx: int
     ny: int
     section_start_rows: tuple[int, ...]
+    edge_cells: tuple[int, int]      # rows / columns left out at each wall
+    min_section_cells: int
     centres_m: tuple[float, ...]
     safe_margin_m: float
     off_margin_m: float
@@ -80,10 +86,18 @@ class ControllerParams:
         sl = k.interior_length_m / c.sections
         return cls(c.target_fill_m, c.full_fraction * c.target_fill_m, c.sections, k.interior_length_m,
                    k.interior_width_m, cell, nx, ny, tuple(int(np.searchsorted(rows, i)) for i in range(c.sections)),
+                   _edge_cells(c.edge_margin_m, cell, nx, ny), c.min_section_cells,
                    tuple((i + 0.5) * sl for i in range(c.sections)), c.safe_margin_m,
                    max(c.safe_margin_m - c.safety_hysteresis_m, 0.0), s.machine_sync.nudge_m,
                    s.machine_sync.nudge_min_interval_s, c.stale_timeout_s, c.estimator, c.strategy,
                    s.timing.sensor_period_s)
+
+
+def _edge_cells(margin_m: float, cell_m: float, nx: int, ny: int) -> tuple[int, int]:
+    """Rows / columns whose centres lie within ``margin_m`` of a wall: (i + 0.5) cell < margin. Never so many
+    that nothing is left."""
+    k = max(0, math.ceil(margin_m / cell_m - 0.5))
+    return min(k, (nx - 1) // 2), min(k, (ny - 1) // 2)
 
 
 @dataclass(frozen=True)
@@ -129,14 +143,23 @@ def min2x2(m: np.ndarray, next_row: np.ndarray | None = None) -> np.ndarray:
 
 
 def section_heights(m: np.ndarray, p: ControllerParams) -> np.ndarray:
-    """Robust peak per section: the highest 2 x 2 block minimum (blocks stay inside their section), (N,)
-    float64 m; NaN where a section has no valid cell. Exact for a heap whose flat top spans 2 x 2 cells."""
+    """Robust peak per section: the highest 2 x 2 block minimum (blocks stay inside their section; cells within
+    the edge margin left out), (N,) float64 m; NaN where a section has fewer than ``min_section_cells`` valid
+    cells. Exact for a heap whose flat top spans 2 x 2 cells."""
+    ex, ey = p.edge_cells
+    m = np.array(m, dtype=np.float64)
+    if ex:
+        m[:ex], m[-ex:] = np.nan, np.nan
+    if ey:
+        m[:, :ey], m[:, -ey:] = np.nan, np.nan
     starts = np.asarray(p.section_start_rows)
     nxt = np.minimum(np.arange(p.nx) + 1, p.nx - 1)
     last = np.append(starts[1:], p.nx) - 1                   # last row of each section pairs with itself
     nxt[last] = last
     rowmax = np.fmax.reduce(min2x2(m, nxt), axis=1)          # NaN only for all-NaN rows
-    return np.fmax.reduceat(rowmax, starts)
+    peak = np.fmax.reduceat(rowmax, starts)
+    valid = np.add.reduceat(np.count_nonzero(~np.isnan(m), axis=1), starts)
+    return np.where(valid >= p.min_section_cells, peak, np.nan)
 
 
 def initial_controller(p: ControllerParams) -> ControllerState:
@@ -201,7 +224,8 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
     margin = p.off_margin_m if st.auger_cmd else p.safe_margin_m
     safe = all(_inside(ix, iy, margin, p) for ix, iy in impacts)
     # travel with the auger off: grain dropped far from the target lands on sections that may be full
-    near = target >= 0 and abs(actual_x + drift_x - p.centres_m[target]) <= p.length_m / p.sections
+    reach = TRAVEL_ON_SECTIONS * p.length_m / p.sections
+    near = target >= 0 and abs(actual_x + drift_x - p.centres_m[target]) <= reach
     auger = bool(seen and target >= 0 and safe and near)
     with np.errstate(invalid="ignore"):
         fullness = heights / p.target_m

@@ -72,7 +72,7 @@ class World:
     initial_m3: float
     delivered_m3: float
     spilled_m3: float
-    spilled_ground_m3: float         # part of the spill that never reached the interior
+    spilled_outside_m3: float         # part of the spill that never reached the interior
     setpoint: tuple[float, float]    # Machine Sync cart offset (long, lat), m
     ctrl: ControllerState
     out: ControllerOutput
@@ -145,15 +145,15 @@ def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
         level, dv = ag.flow_advance(level, out.auger_cmd, p.dt_s, p.auger)
         vol += dv
     imp, rows, n = _stream(x, w.heights, level, vol > 0.0 or level > 0.0, p)
-    h, spill, spill_ground = w.heights, 0.0, 0.0
+    h, spill, spill_outside = w.heights, 0.0, 0.0
     if vol > 0.0:
         if imp.surface == ag.SURFACE_GRAIN:
             h, spill = deposit(h, float(imp.grid[0]), float(imp.grid[1]), vol, p.grid, p.cap)
         else:
-            spill_ground = vol
+            spill_outside = vol
     return replace(w, frame=w.frame + 1, t_s=(w.frame + 1) * p.frame_dt_s, x=x, flow_level=level, heights=h,
-                   delivered_m3=w.delivered_m3 + vol, spilled_m3=w.spilled_m3 + spill + spill_ground,
-                   spilled_ground_m3=w.spilled_ground_m3 + spill_ground, setpoint=setpoint, ctrl=ctrl, out=out,
+                   delivered_m3=w.delivered_m3 + vol, spilled_m3=w.spilled_m3 + spill + spill_outside,
+                   spilled_outside_m3=w.spilled_outside_m3 + spill_outside, setpoint=setpoint, ctrl=ctrl, out=out,
                    impact=imp, stream=rows, stream_points=n)
 
 
@@ -188,7 +188,7 @@ def signals(w: World, p: ModelParams) -> dict[str, float]:
         "target_section": w.ctrl.target + 1, "all_full": int(w.ctrl.all_full),
         "measurement_seen": int(w.ctrl.seen), "control_bias_m": w.ctrl.bias_m,
         "delivered_m3": w.delivered_m3, "in_cart_m3": in_cart, "spilled_m3": w.spilled_m3,
-        "spilled_ground_m3": w.spilled_ground_m3, "cart_grain_m3": w.initial_m3 + in_cart,
+        "spilled_outside_m3": w.spilled_outside_m3, "cart_grain_m3": w.initial_m3 + in_cart,
         "peak_height_m": float(w.heights.max()),
     }
     for k in range(p.control.sections):

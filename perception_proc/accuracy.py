@@ -133,4 +133,5 @@ def impact_error(est_grid_xyz: np.ndarray, state: Mapping[str, float]) -> float:
     missing. The truth is ``dyn_state.impact_g{x,y}_m`` with ``impact_valid``."""
     if not int(state.get("impact_valid", 0)) or not np.all(np.isfinite(est_grid_xyz[:2])):
         return math.nan
-    return float(math.hypot(est_grid_xyz[0] - float(state["impact_gx_m"]), est_grid_xyz[1] - float(state["impact_gy_m"])))
+    dx = est_grid_xyz[0] - float(state["impact_gx_m"])
+    return float(math.hypot(dx, est_grid_xyz[1] - float(state["impact_gy_m"])))

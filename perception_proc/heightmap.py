@@ -2,7 +2,7 @@
 
 Points go from the level frame to the cart grid frame through the perceived pose (``CartEstimate``); the
 height above the floor is z in that frame. Points within :data:`WALL_CLEAR_M` (plus 3 sigma of range noise) of
-an inner wall are dropped: they lie on the wall, not on the grain.
+an inner wall are dropped: they may lie on the wall, not on the grain, given the pose error.
 
 Per cell the statistic is the *median of the lower cluster*: the median of the returns within
 :data:`CLUSTER_GAP_M` of the cell's lowest return. Why: the grain surface is single-valued, and the only
@@ -14,8 +14,10 @@ A cell whose only returns are the stream's (the stream hides the pile beneath it
 grain; it is found as a cell standing more than :data:`STREAM_STEP_M` above the lower quartile of its
 neighbourhood (:data:`NEIGHBOURHOOD` cells square; a grain pile at the angle of repose cannot rise that fast;
 the quartile, not the median, because an occluding strip such as the auger tube can fill half the window)
-and is left NaN: no answer rather than the stream's (or the tube's) height. Returns more than :data:`STREAM_MIN_HEIGHT_M` above their
-cell's surface, or in such cells, are returned as stream returns for the impact search.
+and is left NaN: no answer rather than the stream's (or the tube's) height. Returns more than
+:data:`STREAM_MIN_HEIGHT_M` above their cell's surface, above any heap (:data:`HEAP_MAX_M` over the rim), or in
+such cells, are returned as stream returns for the impact search; the pipeline then blanks the cells the
+stream hides (``impact.blank_under_stream``).
 """
 from __future__ import annotations
 
@@ -29,8 +31,10 @@ from cosim.config import Cart
 __all__ = ["HeightMap", "height_map", "grid_shape", "WALL_CLEAR_M", "CLUSTER_GAP_M", "STREAM_STEP_M",
            "STREAM_MIN_HEIGHT_M", "HEAP_MAX_M", "STREAM_TOP_M"]
 
-#: returns closer than this to an inner wall are wall returns, m
-WALL_CLEAR_M = 0.03
+#: returns closer than this to an inner wall are taken as wall returns, m: it must exceed the error of the
+#: perceived cart pose (a few cm, more when an end of the cart is out of view), or the inner wall faces
+#: read as grain at the wall's height in the border cells
+WALL_CLEAR_M = 0.08
 #: returns within this of a cell's lowest return form its lower cluster, m
 CLUSTER_GAP_M = 0.10
 #: a cell more than this above its neighbourhood median holds only stream returns, m

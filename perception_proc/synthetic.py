@@ -10,11 +10,12 @@ top, a floor, a grain height field over the floor and an optional vertical grain
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import math
 from typing import Callable, Sequence
 
 import numpy as np
 
-from cosim.camera import RigCamera
+from cosim.camera import Pinhole, Rig, RigCamera, yaw_transform
 from cosim.config import Cart, Codec
 from cosim.geometry import apply, invert
 
@@ -254,14 +255,10 @@ class _GrainField:
 
 def stitched_rig(n: int = 2, width: int = 640, height: int = 480, hfov_deg: float = 60.0,
                  yaw_step_deg: float | None = None, offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                 pitch_deg: float = 0.0) -> "Rig":
+                 pitch_deg: float = 0.0) -> Rig:
     """A rig of ``n`` cameras side by side, turned ``yaw_step_deg`` apart (default: hfov - 5 deg overlap),
     symmetric about the sensor's forward axis, all at ``offset_m`` (sensor frame, m) from the LiDAR origin and
     pitched ``pitch_deg`` (positive looks up). For tests and benchmarks; the run uses renderer_proc.rig."""
-    import math
-
-    from cosim.camera import Pinhole, Rig, RigCamera, yaw_transform
-
     step = hfov_deg - 5.0 if yaw_step_deg is None else yaw_step_deg
     cams = []
     c, s = math.cos(math.radians(pitch_deg)), math.sin(math.radians(pitch_deg))

@@ -52,6 +52,18 @@ def test_section_heights_truth_holes_and_noise():
     m3 = m.copy()
     m3[40, 5] = 5.0
     assert section_heights(m3, p)[6] == pytest.approx(1.0)
+    # rim returns along the walls (cells centred within 0.2 m of a wall) are left out
+    m4 = m.copy()
+    m4[:2, :] = 2.06
+    m4[:, -2:] = 2.06
+    assert np.all(section_heights(m4, p) == section_heights(m, p))
+    # a section with fewer than min_section_cells valid cells (outside the edge band) is unknown
+    m5 = np.full((p.nx, p.ny), np.nan)
+    m5[5:7, 5] = 1.4
+    m5[5, 6] = 1.4
+    assert np.isnan(section_heights(m5, p)[0])
+    m5[6, 6] = 1.4
+    assert section_heights(m5, p)[0] == pytest.approx(1.4)
 
 
 @settings(max_examples=50, deadline=None)

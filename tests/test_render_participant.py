@@ -95,7 +95,7 @@ def test_participant_renders_into_blocks(backend):
 
 
 def test_gl_and_mock_participants_agree():
-    base = {"render": {**SMALL, "cameras": 1, "width_px": 120, "height_px": 90}}
+    base = {"render": {**SMALL, "cameras": 1, "width_px": 120, "height_px": 90, "mock_scale": 1.0}}
     out = {}
     for backend in ("mock", "gl"):
         s = scenario(renderer=backend, **base)

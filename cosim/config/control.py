@@ -29,12 +29,15 @@ class Grain(Model):
 class Controller(Model):
     """Offloading controller: operator inputs and the section grid.
 
-    A section is full when its estimated peak height reaches ``full_fraction * target_fill_m``. The auger only
-    runs while the predicted impact lies at least ``safe_margin_m`` inside every inner wall (it stops when it
-    comes closer than ``safe_margin_m - safety_hysteresis_m``). A target section that gives no valid
+    A section is full when its estimated peak height reaches ``full_fraction * target_fill_m`` (latched). The
+    auger only runs while the predicted impact lies at least ``safe_margin_m`` inside every inner wall (it stops
+    when it comes closer than ``safe_margin_m - safety_hysteresis_m``). A target section that gives no valid
     measurement for ``stale_timeout_s`` while it is being filled is treated as full (so nothing overfills
-    blind). ``estimator``: ``paper`` takes the per-section robust peak (highest 2 x 2 block minimum) of the
-    map; ``fused`` first fills holes with each cell's last valid value.
+    blind). Cells whose centre lies within ``edge_margin_m`` of an inner wall are left out of the estimate (the
+    heap's peak is never there; wall and rim returns are); a section's estimate is updated only from a map with
+    at least ``min_section_cells`` valid cells in it. ``estimator``: ``paper`` takes the per-section robust
+    peak (highest 2 x 2 block minimum) of the map; ``fused`` first fills holes with each cell's last valid value.
+    Strategies: dynamics_proc.strategies.
     """
 
     target_fill_m: PosFloat = 1.9
@@ -46,6 +49,8 @@ class Controller(Model):
     safe_margin_m: NonNegFloat = 0.3
     safety_hysteresis_m: NonNegFloat = 0.1
     stale_timeout_s: PosFloat = 10.0
+    edge_margin_m: NonNegFloat = 0.2
+    min_section_cells: int = Field(default=4, ge=1)
 
 
 class Integrator(Model):

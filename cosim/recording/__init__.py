@@ -8,10 +8,11 @@ a file cut off by a killed run, up to its last completed frame); :class:`ReplayS
 viewer's dashboard.
 """
 from .reader import Channel, Recording, RecordingError, read_recording
-from .writer import DEFAULT_NAME, McapRecorder, RecordOptions, mcap_sink
+from .sink import McapRecorder, mcap_sink
+from .writer import DEFAULT_NAME, McapWriter, RecordOptions
 
 __all__ = ["Channel", "Recording", "RecordingError", "read_recording", "DEFAULT_NAME", "McapRecorder",
-           "RecordOptions", "mcap_sink", "ReplaySource"]
+           "McapWriter", "RecordOptions", "mcap_sink", "ReplaySource"]
 
 
 def __getattr__(name):
