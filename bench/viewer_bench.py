@@ -1,7 +1,7 @@
 """Cost of the live viewer and of MCAP recording to a run's real-time factor (issue 7 benchmark).
 
 Four configurations, interleaved and repeated: plain, ``viewer`` (the observer process attached, with a client
-polling the dashboard like the page does: state every 250 ms, each changed image panel fetched), ``record``
+polling the dashboard like the page does: state every 250 ms, each changed image panel at most every 500 ms), ``record``
 (the MCAP sink) and both. Two workloads:
 
 * ``payload``: a CPU-bound stand-in ring with the real runs' payload sizes: 2 cameras of 640 x 480 depth-encoded
@@ -142,15 +142,16 @@ class Timing:
 CLIENT = """
 import json, sys, time, urllib.request
 url = sys.argv[1]
-shown = {}
+shown, fetched = {}, {}
 while True:
     try:
         s = json.load(urllib.request.urlopen(url + "api/state", timeout=5))
         for pid, info in s["panels"].items():
             if info["available"] and info["frame"] is not None and pid in ("rgb", "depth", "lidar_top",
-                    "lidar_side", "heightmaps") and shown.get(pid) != info["frame"]:
+                    "lidar_side", "heightmaps") and shown.get(pid) != info["frame"] \
+                    and time.monotonic() - fetched.get(pid, 0) >= 0.5:
                 urllib.request.urlopen(f"{url}panel/{pid}.png?frame={info['frame']}", timeout=5).read()
-                shown[pid] = info["frame"]
+                shown[pid], fetched[pid] = info["frame"], time.monotonic()
     except OSError:
         pass
     time.sleep(0.25)

@@ -4,7 +4,8 @@
   the lag time constants (dt / tau < 2.78 in the linear range); the rate limits keep it bounded beyond.
 * ``exponential``: the two lag states are advanced by their exact solution (rate limits included,
   :func:`~dynamics_proc.vehicles.lag_exact`), and the kinematic states by RK4 with the lag states taken from
-  that exact solution at the stage times. Unconditionally stable for any tau.
+  that exact solution at the stage times, or, where the step does not resolve a lag (dt > tau), its exact
+  means over the stage intervals (so the distance travelled stays exact). Unconditionally stable for any tau.
 * ``radau`` / ``bdf``: scipy ``solve_ivp`` (implicit, adaptive) with the given tolerances: the reference.
 
 Every function maps state (9,) float64 -> new state (9,) float64 over ``dt`` seconds; inputs are held.
@@ -16,7 +17,7 @@ from typing import Literal
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from .vehicles import DELTA, V, VehicleParams, derivative, kinematic_derivative, lag_exact
+from .vehicles import DELTA, V, VehicleParams, derivative, kinematic_derivative, lag_exact, lag_integral
 
 __all__ = ["METHODS", "step_rk4", "step_exponential", "step_ivp", "integrate"]
 
@@ -33,25 +34,32 @@ def step_rk4(x: np.ndarray, u: tuple[float, float], p: VehicleParams, dt: float)
     return x + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
 
 
-def _lags(v0: float, d0: float, u: tuple[float, float], p: VehicleParams, t: float) -> tuple[float, float]:
-    v = lag_exact(v0, u[0], p.drivetrain_tau_s, p.accel_max_mps2, p.brake_max_mps2, t)
-    d = lag_exact(d0, u[1], p.steer_tau_s, p.steer_rate_max_radps, p.steer_rate_max_radps, t)
-    return v, d
+def _stage_lag(x0: float, target: float, tau: float, up: float, down: float, dt: float) -> tuple[float, ...]:
+    """Lag values for the RK4 stages at 0, dt/2, dt, and the end value. When dt resolves the lag (dt <= tau)
+    these are the exact point values. When it does not (stiff), the transient falls between the stage times,
+    so the stages take the exact means over [0, dt/2], [0, dt] and [dt/2, dt] instead: with Simpson's
+    weights that reproduces the exact integral of the lag state (the distance travelled) over the step."""
+    end = lag_exact(x0, target, tau, up, down, dt)
+    if dt <= tau:
+        return x0, lag_exact(x0, target, tau, up, down, 0.5 * dt), end, end
+    i_half = lag_integral(x0, target, tau, up, down, 0.5 * dt)
+    i_full = lag_integral(x0, target, tau, up, down, dt)
+    return 2.0 * i_half / dt, i_full / dt, 2.0 * (i_full - i_half) / dt, end
 
 
 def step_exponential(x: np.ndarray, u: tuple[float, float], p: VehicleParams, dt: float) -> np.ndarray:
     """Exact lags, RK4 kinematics driven by them; one step of ``dt`` s."""
     xs = x.tolist()
-    v0, d0 = xs[V], xs[DELTA]
-    vm, dm = _lags(v0, d0, u, p, 0.5 * dt)
-    v1, d1 = _lags(v0, d0, u, p, dt)
+    v0, vm, v1, v_end = _stage_lag(xs[V], u[0], p.drivetrain_tau_s, p.accel_max_mps2, p.brake_max_mps2, dt)
+    r = p.steer_rate_max_radps
+    d0, dm, d1, d_end = _stage_lag(xs[DELTA], u[1], p.steer_tau_s, r, r, dt)
     y0 = [xs[i] for i in _KIN]
     k1 = kinematic_derivative(y0, v0, d0, p)
     k2 = kinematic_derivative([a + 0.5 * dt * b for a, b in zip(y0, k1)], vm, dm, p)
     k3 = kinematic_derivative([a + 0.5 * dt * b for a, b in zip(y0, k2)], vm, dm, p)
     k4 = kinematic_derivative([a + dt * b for a, b in zip(y0, k3)], v1, d1, p)
     y1 = [a + (dt / 6.0) * (b + 2.0 * c + 2.0 * d + e) for a, b, c, d, e in zip(y0, k1, k2, k3, k4)]
-    return np.array([y1[0], y1[1], y1[2], y1[3], y1[4], y1[5], v1, d1, y1[6]])
+    return np.array([y1[0], y1[1], y1[2], y1[3], y1[4], y1[5], v_end, d_end, y1[6]])
 
 
 def step_ivp(x: np.ndarray, u: tuple[float, float], p: VehicleParams, dt: float,

@@ -34,7 +34,7 @@ from cosim.config import Scenario
 
 __all__ = [
     "N_STATES", "CX", "CY", "CYAW", "TX", "TY", "TYAW", "V", "DELTA", "PYAW", "VehicleParams",
-    "derivative", "kinematic_derivative", "lag_exact", "cart_pose", "tractor_pose", "hitch_point",
+    "derivative", "kinematic_derivative", "lag_exact", "lag_integral", "cart_pose", "tractor_pose", "hitch_point",
     "initial_state",
 ]
 
@@ -118,6 +118,22 @@ def lag_exact(x0: float, target: float, tau: float, rate_up: float, rate_down: f
             return x0 + sign * rate * t
         return target - sign * band * math.exp(-(t - t1) / tau)
     return target - e0 * math.exp(-t / tau)
+
+
+def lag_integral(x0: float, target: float, tau: float, rate_up: float, rate_down: float, t: float) -> float:
+    """Exact integral over [0, t] of the :func:`lag_exact` solution (units of x times s)."""
+    e0 = target - x0
+    rate = rate_up if e0 >= 0.0 else rate_down
+    sign = 1.0 if e0 >= 0.0 else -1.0
+    band = tau * rate
+    ae = abs(e0)
+    if ae > band:
+        t1 = (ae - band) / rate
+        if t <= t1:
+            return x0 * t + 0.5 * sign * rate * t * t
+        i1 = x0 * t1 + 0.5 * sign * rate * t1 * t1
+        return i1 + target * (t - t1) - sign * band * tau * -math.expm1(-(t - t1) / tau)
+    return target * t - e0 * tau * -math.expm1(-t / tau)
 
 
 def tractor_pose(x: np.ndarray, p: VehicleParams) -> tuple[float, float, float]:

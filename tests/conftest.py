@@ -14,10 +14,16 @@ if str(TESTS) not in sys.path:
 SHM = Path("/dev/shm")
 
 
-def _ours() -> set[str]:
+def segments(pid: int | None = None) -> set[str]:
+    """Names of the project's segments in /dev/shm made by launcher ``pid`` (default: this process)."""
+    pid = os.getpid() if pid is None else pid
     if not SHM.exists():
         return set()
-    return {p.name for p in SHM.iterdir() if p.name.startswith(("cosim-", "cosimtest-"))}
+    return {p.name for p in SHM.iterdir() if p.name.startswith((f"cosim-{pid}-", f"cosimtest-{pid}-"))}
+
+
+def _ours() -> set[str]:
+    return segments()
 
 
 @pytest.fixture

@@ -14,7 +14,7 @@ from cosim.config import Scenario
 from dynamics_proc.integrators import integrate, step_ivp
 from dynamics_proc.machine_sync import cart_offset, sync_command, tractor_offset
 from dynamics_proc.vehicles import (CX, CY, DELTA, PYAW, TX, TY, TYAW, V, VehicleParams, cart_pose, initial_state,
-                                    lag_exact)
+                                    lag_exact, lag_integral)
 
 
 def scen(**kw) -> Scenario:
@@ -60,6 +60,35 @@ def test_lag_exact_matches_radau(x0, target, tau, up, down, t):
         return [min(max((target - y[0]) / tau, -down), up)]
     ref = solve_ivp(f, (0.0, max(t, 1e-12)), [x0], method="Radau", rtol=1e-11, atol=1e-12).y[0, -1]
     assert lag_exact(x0, target, tau, up, down, t) == pytest.approx(ref, abs=2e-7 * (1 + abs(target - x0)))
+
+
+@settings(max_examples=25, deadline=None)
+@given(x0=st.floats(-5, 5), target=st.floats(-5, 5), tau=st.floats(1e-3, 2.0), up=st.floats(0.1, 5.0),
+       down=st.floats(0.1, 5.0), t=st.floats(0.0, 4.0))
+def test_lag_integral_matches_quadrature(x0, target, tau, up, down, t):
+    from scipy.integrate import quad
+    e0 = abs(target - x0)
+    kink = max(0.0, (e0 - tau * (up if target >= x0 else down)) / (up if target >= x0 else down))
+    ref = quad(lambda s: lag_exact(x0, target, tau, up, down, s), 0.0, t,
+               points=[kink] if 0.0 < kink < t else None, epsabs=1e-12, epsrel=1e-12, limit=200)[0]
+    assert lag_integral(x0, target, tau, up, down, t) == pytest.approx(ref, abs=1e-9 * (1 + abs(ref)))
+
+
+def test_exponential_keeps_the_stiff_distance_exact():
+    """tau = 1 ms, one 0.1 s step on a straight line: the distance is the exact integral of the lag; RK4's
+    point samples of the speed miss the 1 ms transient."""
+    s = scen(tractor={"drivetrain_tau_s": 0.001, "accel_max_mps2": 100.0})
+    p = VehicleParams.from_scenario(s)
+    x = initial_state(s, p)
+    u = (3.0, 0.0)
+    exact = lag_integral(2.0, 3.0, 0.001, 100.0, 3.0, 0.1)
+    t1 = (1.0 - 0.1) / 100.0                  # ramp at 100 m/s^2 until within tau * a = 0.1 m/s, then decay
+    closed = 2.0 * t1 + 50.0 * t1 ** 2 + 3.0 * (0.1 - t1) - 0.1 * 0.001 * (1.0 - math.exp(-(0.1 - t1) / 0.001))
+    assert exact == pytest.approx(closed, abs=1e-15)
+    got = integrate("exponential", x, u, p, 0.1)[TX] - x[TX]
+    assert got == pytest.approx(exact, abs=1e-12)
+    rk = integrate("rk4", x, u, p, 0.1)[TX] - x[TX]
+    assert abs(rk - exact) > 1e-3
 
 
 @pytest.mark.parametrize("method,tol", [("rk4", 1e-9), ("exponential", 1e-14), ("radau", 1e-7), ("bdf", 1e-6)])

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import test_viewer_standins as standins
+from test_viewer_standins import shm_clean  # noqa: F401 - this process's segments only
 from cosim.errors import ParticipantDied
 from cosim.launcher import launch
 from cosim.recording import RecordingError, RecordOptions, mcap_sink, read_recording
@@ -182,7 +183,8 @@ def _gone(pids, timeout_s: float) -> bool:
 
 
 def test_launcher_killed_mid_run_leaves_a_readable_recording(tmp_path):
-    """SIGKILL of the launcher itself: no close, no summary; the file still reads up to the last whole frame."""
+    """SIGKILL of the launcher itself: its recorder sees the pipe close, writes every frame it was sent (each
+    completed frame is sent as it completes) and finishes the file; every process of the run ends by itself."""
     out = tmp_path / "run"
     script = tmp_path / "run_it.py"
     script.write_text(KILL_SCRIPT.format(tests=str(Path(__file__).parent), out=str(out)))
@@ -199,14 +201,16 @@ def test_launcher_killed_mid_run_leaves_a_readable_recording(tmp_path):
     finally:
         proc.send_signal(signal.SIGKILL)
         proc.wait(10)
-    workers = [k for k, args in kids.items() if "resource_tracker" not in args]
-    for k in workers:  # ring children end when their parent is gone; make sure, by their ids
-        try:
-            os.kill(k, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-    # the dead launcher's resource tracker unlinks its semaphores and segment once it sees the launcher gone
-    assert _gone(kids, 10.0), "processes of the killed run are still alive"
+    # ring children get SIGTERM from the kernel (PR_SET_PDEATHSIG), the recorder sees EOF, and the resource
+    # tracker unlinks the dead launcher's semaphores and segment
+    gone = _gone(kids, 15.0)
+    for k in kids:
+        if not gone:
+            try:
+                os.kill(k, signal.SIGKILL)  # only after the assertion below has failed: leave nothing behind
+            except ProcessLookupError:
+                pass
+    assert gone, "processes of the killed run are still alive"
     try:
         shm = shared_memory.SharedMemory(segment)  # the dead launcher could not unlink it: clean up after it
         shm.close()
@@ -214,10 +218,26 @@ def test_launcher_killed_mid_run_leaves_a_readable_recording(tmp_path):
     except FileNotFoundError:
         pass
     rec = read_recording(path)
-    assert rec.truncated is True
+    assert rec.truncated is False, "the recorder finishes the file after the launcher died"
     n = len(rec.frames)
     assert n >= 5 and rec.frames == list(range(n))
     for topic in TOPICS:
         if topic != "/tf":
             assert len(rec.topic(topic)) == n, topic
     assert rec.topic("/cosim/frame")[-1][1]["frame"] == n - 1
+
+
+@pytest.mark.parametrize("keep", [0.35, 0.6, 0.93])
+def test_a_file_cut_off_mid_record_reads_up_to_its_last_whole_frame(recorded, tmp_path, keep):
+    """What a power cut or a killed recorder leaves: the bytes up to some point, no summary."""
+    sc, out, full = recorded
+    data = (out / "recording.mcap").read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[:int(len(data) * keep)])
+    rec = read_recording(cut)
+    n = len(rec.frames)
+    assert rec.truncated is True and 1 <= n <= sc.frames + 1
+    assert rec.frames == list(range(n))
+    for topic in TOPICS:
+        if topic != "/tf":
+            assert [m for _, m in rec.topic(topic)] == [m for _, m in full.topic(topic)[:n]], topic

@@ -214,6 +214,7 @@ def test_signal_stops_cleanly(sig, tmp_path, shm_clean):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["completed"] is False and summary["frames"] > 1
     assert signal.Signals(sig).name in summary["error"]["message"]
+    assert not list(Path("/dev/shm").glob(f"cosim-{proc.pid}-*")), "the stopped launcher left its segment"
     time.sleep(0.2)
     alive = [k for k in kids if Path(f"/proc/{k}").exists() and "Z" not in Path(f"/proc/{k}/stat").read_text().split()[2]]
     assert not alive, f"orphans left: {alive}"

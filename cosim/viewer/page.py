@@ -14,6 +14,8 @@ __all__ = ["page_html", "POLL_MS"]
 
 #: the page's polling period, ms
 POLL_MS = 250
+#: shortest time between two refreshes of one image panel, ms (each refresh costs the viewer an encode)
+IMAGE_MIN_MS = 500
 
 _CSS = """
 body{margin:0;background:#111418;color:#e6e6e6;font:14px system-ui,sans-serif}
@@ -32,7 +34,8 @@ section.absent{opacity:.55}section.absent .body{display:none}
 """
 
 _JS = """
-const POLL_MS = %(poll)d, IMAGE_PANELS = %(image_panels)s;
+const POLL_MS = %(poll)d, IMAGE_MIN_MS = %(image_min)d, IMAGE_PANELS = %(image_panels)s;
+const lastFetch = {};
 const $ = (id) => document.getElementById(id);
 function shown(sec, f) {
   sec.dataset.frame = String(f); sec.querySelector(".f").textContent = "frame " + f;
@@ -48,7 +51,9 @@ function setPanel(id, info) {
   if (!info.available || info.frame === null) return;
   if (IMAGE_PANELS.includes(id)) {
     const img = sec.querySelector("img");
-    if (img.dataset.want !== String(info.frame)) {
+    const now = Date.now();
+    if (img.dataset.want !== String(info.frame) && !(now - (lastFetch[id] || 0) < IMAGE_MIN_MS)) {
+      lastFetch[id] = now;
       img.dataset.want = String(info.frame);
       const f = info.frame;
       img.onload = () => shown(sec, f);
@@ -124,7 +129,8 @@ def _panel(pid: str, title: str) -> str:
 def page_html(title: str = "graincosim viewer") -> str:
     """The whole dashboard document."""
     panels = "\n".join(_panel(pid, t) for pid, t in PANELS.items())
-    js = _JS % {"poll": POLL_MS, "image_panels": "[" + ", ".join(f'"{p}"' for p in IMAGE_PANELS) + "]"}
+    ids = "[" + ", ".join(f'"{p}"' for p in IMAGE_PANELS) + "]"
+    js = _JS % {"poll": POLL_MS, "image_min": IMAGE_MIN_MS, "image_panels": ids}
     return f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>{title}</title>
 <meta name="viewport" content="width=device-width, initial-scale=1"><style>{_CSS}</style></head>

@@ -36,6 +36,9 @@ PLOT_W, PLOT_H = 420, 300
 PLOT_MARGIN = 28
 #: height of each height map drawing, px
 MAP_H = 220
+#: largest camera panel drawing, px: camera images are shrunk to it (INTER_AREA) before PNG encoding, which
+#: keeps the viewer's CPU time per refresh small; the browser shows them at panel width anyway
+CAMERA_MAX_W, CAMERA_MAX_H = 880, 330
 BACKGROUND = (24, 24, 28)
 UNKNOWN = (90, 90, 90)
 TEXT = (230, 230, 230)
@@ -97,6 +100,14 @@ def _hconcat(images: list[np.ndarray]) -> np.ndarray:
                              interpolation=cv2.INTER_NEAREST)
         parts.append(bgr)
     return cv2.hconcat(parts) if len(parts) > 1 else parts[0]
+
+
+def _shrink(bgr: np.ndarray) -> np.ndarray:
+    s = min(1.0, CAMERA_MAX_W / bgr.shape[1], CAMERA_MAX_H / bgr.shape[0])
+    if s >= 1.0:
+        return bgr
+    return cv2.resize(bgr, (max(1, round(bgr.shape[1] * s)), max(1, round(bgr.shape[0] * s))),
+                      interpolation=cv2.INTER_AREA)
 
 
 def _scatter(u: np.ndarray, v: np.ndarray, c: np.ndarray, xlabel: str, ylabel: str) -> np.ndarray:
@@ -176,7 +187,7 @@ def render_panel(snap: Snapshot, panel: str) -> bytes | None:
         raise KeyError(f"no image panel {panel!r}; image panels: {IMAGE_PANELS}")
     if panel in ("rgb", "depth"):
         names = _cams(snap, f"_{panel}")
-        return _png(_hconcat([snap.images[n] for n in names])) if names else None
+        return _png(_shrink(_hconcat([snap.images[n] for n in names]))) if names else None
     if panel in ("lidar_top", "lidar_side"):
         pts = snap.arrays.get("lidar_points")
         return _png(_lidar(pts, panel[len("lidar_"):])) if pts is not None else None
