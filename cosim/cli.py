@@ -2,8 +2,8 @@
 
 Verbs: ``run [SCENARIO]`` (the default verb; no scenario runs the packaged default), ``validate SCENARIO``,
 ``schema`` (write the scenario JSON Schema), ``view RUN`` (attach the live viewer to a running run) and
-``replay FILE.mcap`` (serve a recording to the viewer's dashboard). Exit codes: 0 success, 1 run failure, 2 invalid scenario or usage,
-130 interrupted.
+``replay FILE.mcap`` (serve a recording to the viewer's dashboard). Exit codes: 0 success, 1 run failure,
+2 invalid scenario or usage, 130 interrupted.
 """
 from __future__ import annotations
 

@@ -67,6 +67,14 @@ class HeightMap:
     coverage: float
 
 
+def _grid_from_level(p: np.ndarray, level_from_grid: np.ndarray) -> np.ndarray:
+    """(N, 3) level-frame points into the grid frame, R^T (p - t), written out per component (a 3 x 3 BLAS
+    product on tall arrays is slower than nine multiply-adds)."""
+    r, t = level_from_grid[:3, :3], level_from_grid[:3, 3]
+    x, y, z = p[:, 0] - t[0], p[:, 1] - t[1], p[:, 2] - t[2]
+    return np.stack([r[0, k] * x + r[1, k] * y + r[2, k] * z for k in range(3)], axis=1)
+
+
 def _lower_quartile(heights: np.ndarray) -> np.ndarray:
     """Per cell, the :data:`NEIGHBOUR_PERCENTILE` of the finite heights in its :data:`NEIGHBOURHOOD` square
     (nearest-rank on the sorted window; NaN where the window is empty). (nx, ny) float32."""
@@ -93,9 +101,8 @@ def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart
     nx, ny = grid_shape(cart, cell_m)
     L, W = cart.interior_length_m, cart.interior_width_m
     p = np.asarray(points_level, dtype=np.float64)
-    p = p[np.isfinite(p).all(axis=1)]
-    r, t = level_from_grid[:3, :3], level_from_grid[:3, 3]
-    g = (p - t) @ r                                             # grid_from_level applied (r orthonormal)
+    p = p[np.isfinite(p[:, 0])]                                 # invalid beams are whole NaN rows
+    g = _grid_from_level(p, level_from_grid)
     clear = WALL_CLEAR_M + 3.0 * noise_sigma_m
     top = cart.interior_depth_m + cart.rim_height_m
     inside = ((g[:, 0] > clear) & (g[:, 0] < L - clear) & (g[:, 1] > clear) & (g[:, 1] < W - clear)

@@ -3,7 +3,8 @@
 Works in the *level frame* (the sensor's parent vehicle body frame: x forward, y left, z up from flat ground;
 ``body_from_sensor`` is the mount, known like the GNSS pose). The cart's dimensions are known; its pose is not.
 
-1. Rim candidates: valid points within :data:`RIM_BAND_M` (plus 3 sigma of range noise) of the rim-top height.
+1. Rim candidates: valid points within :data:`RIM_BAND_M` (plus 3 sigma of range noise) of the rim-top height
+   with nothing well above them within :data:`UNDER_RADIUS_M` (that would be the stream or a cab wall).
 2. Top-down occupancy raster (:data:`RASTER_M` cells), dilated so that points closer than :data:`CLOSE_M`
    connect; connected components (OpenCV); each gets ``cv2.minAreaRect`` of its points. The rim ring still
    breaks into pieces where the auger or the stream hides it, so pieces are merged greedily while the union
@@ -28,6 +29,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from scipy.spatial import cKDTree
 
 from cosim.config import Cart
 from cosim.geometry import cart_body_from_grid, make_transform, rot_z
@@ -55,6 +57,9 @@ END_STRIP_M = 0.20
 CUT_FRACTION = 0.15
 #: points this far above the rim top inside a rectangle may be a roof over it, m
 ABOVE_RIM_M = 0.20
+#: rim candidates with a point well above them within this horizontal distance belong to a vertical structure
+#: (the stream, a cab wall), not to the rim, m
+UNDER_RADIUS_M = 0.25
 #: raster cell of the roof test, m
 ROOF_CELL_M = 0.20
 #: largest share of a candidate rectangle's area covered from above (a tractor cab covers most of its own)
@@ -216,19 +221,25 @@ def find_cart(points: np.ndarray, border: np.ndarray, cart: Cart, heading_xy=(1.
               noise_sigma_m: float = 0.0) -> CartEstimate:
     """Find the cart rim in level-frame points.
 
-    ``points`` (N, 3) float, m, level frame, NaN rows invalid; ``border`` (N,) bool from :func:`border_beams`;
+    ``points`` (N, 3) float, m, level frame, NaN rows invalid (a row is all NaN or all finite); ``border`` (N,) bool from :func:`border_beams`;
     ``heading_xy`` direction the cart faces (the towing direction, level frame); returns a :class:`CartEstimate`.
     """
     p = np.asarray(points, dtype=np.float64)
-    ok = np.isfinite(p).all(axis=1)
+    ok = np.isfinite(p[:, 2])                                   # invalid beams are whole NaN rows
     band = RIM_BAND_M + 3.0 * noise_sigma_m
     top = cart.rim_top_m
     cand = np.flatnonzero(ok & (np.abs(p[:, 2] - top) <= band))
     if cand.size < MIN_RIM_POINTS:
         return _none(f"{cand.size} points at rim height, need {MIN_RIM_POINTS}", int(cand.size))
     lo_len, lo_wid, _ = _outer(cart)
-    xy = p[cand, :2]
     above = p[ok & (p[:, 2] > top + band + ABOVE_RIM_M), :2]
+    if above.shape[0]:
+        # a rim point has nothing right above it; a falling stream, a cab wall or a post does
+        d, _ = cKDTree(above).query(p[cand, :2], k=1, distance_upper_bound=UNDER_RADIUS_M)
+        cand = cand[~np.isfinite(d)]
+        if cand.size < MIN_RIM_POINTS:
+            return _none(f"{cand.size} open points at rim height, need {MIN_RIM_POINTS}", int(cand.size))
+    xy = p[cand, :2]
     best = _best_group(xy, above, lo_len, lo_wid)
     if best is None:
         return _none("no rim-sized group of points at rim height", int(cand.size))

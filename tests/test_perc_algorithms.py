@@ -155,7 +155,7 @@ def test_roofed_box_beside_the_cart_is_not_taken_for_it():
 
 def test_lone_wall_at_rim_height_is_not_a_cart():
     # e.g. the combine's own side crossing the rim band: long enough, but a line, not a rectangle
-    wall = Box((-2.5, 6.0, 0.5), (1.5, 6.3, 3.5))
+    wall = Box((-2.5, 6.0, 0.5), (1.5, 6.3, 3.1))
     r, lvl, border = scan([wall, Box((-50, -50, -1), (50, 50, 0))])
     cart = find_cart(lvl, border, CART, (1.0, 0.0))
     assert not cart.valid and "rim-sized" in cart.reason

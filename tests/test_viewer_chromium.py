@@ -87,7 +87,8 @@ def test_dashboard_updates_with_the_runs_frames(tmp_path):
         seen = panels[pid]
         assert len(seen) >= 2, (pid, seen)  # the panel updated while the page was open
         assert seen == sorted(set(seen)) and 0 <= seen[0] and seen[-1] < frames_run, (pid, seen)
-    assert panels["header"] and panels["header"][0] >= max(panels["rgb"])
+    # block stamps may run one frame ahead of the supervisor's (the ring is mid-turn)
+    assert panels["header"] and panels["header"][0] >= max(panels["rgb"]) - 1
     img = cv2.imread(str(shot))
     assert img is not None and img.shape[:2] == (1000, 1400)
     assert img.std() > 10, "the screenshot is blank"

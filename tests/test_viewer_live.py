@@ -216,3 +216,16 @@ def test_a_failing_viewer_is_a_warning_to_the_run(tmp_path, shm_clean):
     assert res.completed and res.exit_code == 0
     log = (tmp_path / "run" / "log.txt").read_text()
     assert "observer viewer ended" in log and "the run goes on without it" in log
+
+
+def test_run_flags_wire_the_viewer_and_the_recorder(tmp_path):
+    from cosim.cli import build_parser, run_extras
+
+    args = build_parser().parse_args(["run", "default", "--viewer", "--viewer-port", "9001", "--record"])
+    observers, sinks = run_extras(args)
+    assert observers == [ObserverSpec("viewer", "cosim.viewer.server:observe", {"port": 9001})]
+    assert len(sinks) == 1 and args.record is True
+    args = build_parser().parse_args(["run", "--record", str(tmp_path / "x.mcap"), "--record-image-every", "0"])
+    with pytest.raises(ValueError, match="image_every must be >= 1"):
+        run_extras(args)
+    assert run_extras(build_parser().parse_args(["run"])) == ([], [])

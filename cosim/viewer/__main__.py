@@ -27,7 +27,7 @@ def build_parser() -> argparse.ArgumentParser:
     what = p.add_mutually_exclusive_group(required=True)
     what.add_argument("--attach", metavar="RUN", help="run directory (with run.json) or shared-memory segment name")
     what.add_argument("--replay", metavar="FILE", help="an MCAP recording written with launch.py run --record")
-    p.add_argument("--port", type=int, default=8765, help="TCP port on the host (0: any free port; default %(default)s)")
+    p.add_argument("--port", type=int, default=8765, help="TCP port (0: any free port; default %(default)s)")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default %(default)s, local only)")
     p.add_argument("--once", action="store_true", help="with --attach: print one snapshot as JSON, then detach")
     p.add_argument("--announce", metavar="FILE", help="write {\"url\": ...} to FILE once the server listens")

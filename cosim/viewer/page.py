@@ -85,8 +85,9 @@ function drawFullness(f) {
   const c = $("c-fullness"), g = c.getContext("2d"); g.fillStyle = "#181c22"; g.fillRect(0, 0, c.width, c.height);
   if (!f || !f.values.length) return;
   const n = f.values.length, W = (c.width - 40) / n, H = c.height - 40, top = 1.2;
-  g.strokeStyle = "#f0c060"; g.beginPath(); g.moveTo(30, 10 + H * (1 - 1 / top)); g.lineTo(c.width, 10 + H * (1 - 1 / top));
-  g.stroke(); g.font = "11px sans-serif";
+  const y100 = 10 + H * (1 - 1 / top);
+  g.strokeStyle = "#f0c060"; g.beginPath(); g.moveTo(30, y100); g.lineTo(c.width, y100); g.stroke();
+  g.font = "11px sans-serif";
   f.values.forEach((v, i) => {
     const ok = v !== null && isFinite(v), h = ok ? Math.min(v, top) / top * H : 0;
     g.fillStyle = ok ? (v >= 1 ? "#7fdc7f" : "#60b0ff") : "#555";
