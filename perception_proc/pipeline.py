@@ -29,7 +29,27 @@ from .resample import build_table, resample
 from .resample_offset import build_offset_table, is_offset, resample_offset
 from .rim import CartEstimate, border_beams, find_cart
 
-__all__ = ["Perception", "FrameResult"]
+__all__ = ["Perception", "FrameResult", "own_vehicle_box", "OWN_BOX_MARGIN_M"]
+
+#: margin around the sensor's own vehicle box inside which returns are the vehicle itself, m
+OWN_BOX_MARGIN_M = 0.3
+
+
+def own_vehicle_box(scenario: Scenario) -> tuple[np.ndarray, np.ndarray] | None:
+    """(lo (3,), hi (3,)) m, level frame: the body box of the vehicle carrying the sensor (the combine's low,
+    wide header in front is left out: it is far below the rim and never over the cart) with
+    :data:`OWN_BOX_MARGIN_M`; None for a sensor on the cart or in the world."""
+    parent = scenario.sensor.mount.parent
+    if parent == "combine":
+        c = scenario.combine
+        lo, hi = np.array([-c.length_m / 2, -c.width_m / 2, 0.0]), np.array([c.length_m / 2, c.width_m / 2, c.height_m])
+    elif parent == "tractor":
+        t = scenario.tractor
+        lo = np.array([-t.length_m / 2, -t.width_m / 2, 0.0])
+        hi = np.array([t.length_m / 2, t.width_m / 2, t.height_m])
+    else:
+        return None
+    return lo - OWN_BOX_MARGIN_M, hi + OWN_BOX_MARGIN_M
 
 
 @dataclass
@@ -61,6 +81,7 @@ class Perception:
             self.table = build_table(rig, self.directions)
         self.level_from_sensor = mount_transform(sensor.mount) @ body_from_camera_axes()
         self.level_directions = self.directions @ self.level_from_sensor[:3, :3].T    # (N, 3) level frame
+        self.own_box = own_vehicle_box(scenario)
         self.grid = grid_shape(scenario.cart, scenario.controller.grid_cell_m)
         self.cell_xy = (scenario.cart.interior_length_m / self.grid[0],
                         scenario.cart.interior_width_m / self.grid[1])
@@ -92,8 +113,15 @@ class Perception:
         return self.noisy(self.resample(images, out=out), frame)
 
     def level_points(self, ranges: np.ndarray) -> np.ndarray:
-        """Level-frame points (N, 3) float64 m of the ranges (NaN rows where invalid)."""
-        return self.level_directions * ranges[:, None].astype(np.float64) + self.level_from_sensor[:3, 3]
+        """Level-frame points (N, 3) float64 m of the ranges (NaN rows where invalid, and where the return is on
+        the sensor's own vehicle: its body box, known like its GNSS pose, is masked out)."""
+        p = self.level_directions * ranges[:, None].astype(np.float64) + self.level_from_sensor[:3, 3]
+        if self.own_box is not None:
+            lo, hi = self.own_box
+            with np.errstate(invalid="ignore"):
+                own = np.all((p >= lo) & (p <= hi), axis=1)
+            p[own] = np.nan
+        return p
 
     def perceive(self, ranges: np.ndarray, heading_xy=(1.0, 0.0), points_out: np.ndarray | None = None,
                  heights_out: np.ndarray | None = None) -> FrameResult:

@@ -70,6 +70,8 @@ EDGE_STRIP_M = 0.25
 MIN_EDGE_POINTS = 15
 #: largest correction of the hull-based direction by the line fits, deg
 MAX_REFINE_DEG = 5.0
+#: largest turn of the rectangle's long side when a piece is merged into a group, deg
+MAX_MERGE_TURN_DEG = 10.0
 #: fewest rim points for an answer
 MIN_RIM_POINTS = 30
 #: a neighbouring beam nearer by this fraction of the range marks an occluder, dimensionless
@@ -178,14 +180,18 @@ def _best_group(xy: np.ndarray, above: np.ndarray, lo_len: float, lo_wid: float)
 
     comps = sorted((g for g in _components(xy) if g.size >= 3), key=lambda g: -g.size)
     best, best_n = None, 0
+    turn = math.cos(math.radians(MAX_MERGE_TURN_DEG))
     for i, seed in enumerate(comps):
         if seed.size < MIN_RIM_POINTS // 3 or seed.size <= best_n // 4:
             break
-        if fits(seed) is None:
+        if (first := fits(seed)) is None:
             continue
-        group = seed
+        group, u_seed = seed, first[0]
         for j, other in enumerate(comps):
-            if j != i and fits(merged := np.concatenate([group, other])) is not None:
+            # a union whose rectangle axes turn (modulo 90 deg: a square seed may swap its long side) is a
+            # diagonal join of unrelated pieces, not more of the rim
+            if j != i and (res := fits(merged := np.concatenate([group, other]))) is not None \
+                    and max(abs(res[0] @ u_seed), abs(res[0][0] * u_seed[1] - res[0][1] * u_seed[0])) >= turn:
                 group = merged
         res = fits(group)
         if res is None or group.size < MIN_RIM_POINTS or res[1] < MIN_SPAN_FRACTION * lo_len \
@@ -221,8 +227,9 @@ def find_cart(points: np.ndarray, border: np.ndarray, cart: Cart, heading_xy=(1.
               noise_sigma_m: float = 0.0) -> CartEstimate:
     """Find the cart rim in level-frame points.
 
-    ``points`` (N, 3) float, m, level frame, NaN rows invalid (a row is all NaN or all finite); ``border`` (N,) bool from :func:`border_beams`;
-    ``heading_xy`` direction the cart faces (the towing direction, level frame); returns a :class:`CartEstimate`.
+    ``points`` (N, 3) float, m, level frame, NaN rows invalid (a row is all NaN or all finite); ``border`` (N,)
+    bool from :func:`border_beams`; ``heading_xy`` direction the cart faces (the towing direction, level
+    frame); returns a :class:`CartEstimate`.
     """
     p = np.asarray(points, dtype=np.float64)
     ok = np.isfinite(p[:, 2])                                   # invalid beams are whole NaN rows
