@@ -23,9 +23,9 @@ from perception_proc.accuracy_report import render_markdown, write_report  # noq
 from perception_proc.summary import summarize  # noqa: E402
 
 
-#: a mount that sees past the auger tube: behind the auger pivot, looking left and forward (the default mount
-#: looks along the tube, which hides the stream and most of the cart floor)
-ALT_MOUNT = {"parent": "combine", "xyz_m": [-4.5, 1.9, 5.5], "rpy_deg": [0.0, 40.0, 70.0]}
+#: a mount that sees past the auger tube: behind the auger pivot, looking left and forward (from the default
+#: auger-side mast the tube and spout hide the falling stream)
+ALT_MOUNT = {"parent": "combine", "xyz_m": [-4.0, 1.5, 6.0], "rpy_deg": [0.0, 45.0, 75.0]}
 
 
 def run(sampler: str, frames: int, mount: dict | None = None) -> dict:

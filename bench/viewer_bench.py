@@ -1,8 +1,9 @@
 """Cost of the live viewer and of MCAP recording to a run's real-time factor (issue 7 benchmark).
 
-Four configurations, interleaved and repeated: plain, ``viewer`` (the observer process attached, with a client
-polling the dashboard like the page does: state every 250 ms, each changed image panel at most every 500 ms), ``record``
-(the MCAP sink) and both. Two workloads:
+Five configurations, interleaved and repeated: plain, ``viewer`` (the observer process attached, with a
+client polling the dashboard like the page does: state every 250 ms, each changed image panel at most every
+500 ms), ``record`` (the MCAP sink, images every frame), ``record-img5`` (images every 5th frame) and
+``viewer+record``. Two workloads:
 
 * ``payload``: a CPU-bound stand-in ring with the real runs' payload sizes: 2 cameras of 640 x 480 depth-encoded
   and RGB images, 32768 LiDAR rows, 60 x 30 and 30 x 15 height maps, a 60-field dyn_state; each step burns
@@ -10,8 +11,9 @@ polling the dashboard like the page does: state every 250 ms, each changed image
 * ``dynamics``: the real dynamics participant alone (ground-truth feedback, no renderer), if it runs.
 
 The real-time factor is measured in steady state by a timing sink: frames completed more than ``SETTLE_S``
-after frame 0 (so the children's and the viewer's start-up, imports included, does not count), to the end. Usage: ``python bench/viewer_bench.py [--reps 3] [--frames 120]``; prints
-a Markdown table.
+after frame 0 (so the children's and the viewer's start-up, imports included, does not count), to the end.
+Usage: ``python bench/viewer_bench.py [--reps 3] [--frames 250] [--work-ms 10] [--skip-dynamics]``; prints a
+Markdown table. Figures: bench/viewer.md.
 """
 from __future__ import annotations
 
@@ -32,7 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from cosim.config import Scenario  # noqa: E402
 from cosim.launcher import ObserverSpec, launch  # noqa: E402
-from cosim.recording import mcap_sink  # noqa: E402
+from cosim.recording import RecordOptions, mcap_sink  # noqa: E402
 from cosim.specs import ParticipantSpec  # noqa: E402
 from shm_schema import ArrayBlock, Field, StructBlock, image_block  # noqa: E402
 
@@ -40,7 +42,7 @@ from shm_schema import ArrayBlock, Field, StructBlock, image_block  # noqa: E402
 SETTLE_S = 4.0
 CAMS, H, W = 2, 480, 640
 BEAMS = 32768
-CONFIGS = ("plain", "viewer", "record", "viewer+record")
+CONFIGS = ("plain", "viewer", "record", "record-img5", "viewer+record")
 
 
 def blocks_dynamics(scenario):
@@ -160,7 +162,8 @@ while True:
 
 def one_run(scenario: Scenario, specs, config: str, tmp: Path) -> float:
     timing = Timing()
-    sinks = [timing] + ([mcap_sink()] if "record" in config else [])
+    options = RecordOptions(image_every=5 if config.endswith("img5") else 1)
+    sinks = [timing] + ([mcap_sink(options)] if "record" in config else [])
     observers, client = [], None
     announce = tmp / "viewer.json"
     announce.unlink(missing_ok=True)

@@ -119,7 +119,8 @@ class Perception:
         if self.own_box is not None:
             lo, hi = self.own_box
             with np.errstate(invalid="ignore"):
-                own = np.all((p >= lo) & (p <= hi), axis=1)
+                own = (p[:, 0] >= lo[0]) & (p[:, 0] <= hi[0]) & (p[:, 1] >= lo[1]) & (p[:, 1] <= hi[1]) \
+                    & (p[:, 2] >= lo[2]) & (p[:, 2] <= hi[2])
             p[own] = np.nan
         return p
 

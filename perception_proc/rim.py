@@ -4,7 +4,8 @@ Works in the *level frame* (the sensor's parent vehicle body frame: x forward, y
 ``body_from_sensor`` is the mount, known like the GNSS pose). The cart's dimensions are known; its pose is not.
 
 1. Rim candidates: valid points within :data:`RIM_BAND_M` (plus 3 sigma of range noise) of the rim-top height
-   with nothing well above them within :data:`UNDER_RADIUS_M` (that would be the stream or a cab wall).
+   with nothing in the :data:`UNDER_SLAB_M` slab right above them within :data:`UNDER_RADIUS_M` (that would be
+   the stream or a cab wall rising from the band).
 2. Top-down occupancy raster (:data:`RASTER_M` cells), dilated so that points closer than :data:`CLOSE_M`
    connect; connected components (OpenCV); each gets ``cv2.minAreaRect`` of its points. The rim ring still
    breaks into pieces where the auger or the stream hides it, so pieces are merged greedily while the union
@@ -16,8 +17,10 @@ Works in the *level frame* (the sensor's parent vehicle body frame: x forward, y
    stream over an open cart cover a thin strip). The candidate with most rim points wins.
 4. Orientation from the rectangle's long side, its sign from the heading hint (the cart is towed forward).
    Per axis, a span matching the known outer size fixes the centre; a shorter span means a partly visible cart:
-   the end whose points come from beams at the pattern's border or next to an occluder is the cut one and the
-   other end anchors the known size. If both ends are cut, or the cut end cannot be told, there is no answer.
+   an end whose points come from beams at the pattern's edge, or which lies next to an occluder and covers
+   little of its own length (a seen end shows the end rim running across it), is cut, and the other end
+   anchors the known size. If both ends
+   are cut, or neither is, there is no answer.
 
 Corners are the interior corners at rim-top height, in grid-frame order k = 0..3: front-left (grid (0, 0)),
 rear-left (L, 0), rear-right (L, W), front-right (0, W).
@@ -34,7 +37,8 @@ from scipy.spatial import cKDTree
 from cosim.config import Cart
 from cosim.geometry import cart_body_from_grid, make_transform, rot_z
 
-__all__ = ["CartEstimate", "find_cart", "border_beams", "RIM_BAND_M", "RASTER_M", "SIZE_TOL_M", "NO_CART"]
+__all__ = ["CartEstimate", "find_cart", "border_beams", "RIM_BAND_M", "RASTER_M", "SIZE_TOL_M", "NO_CART",
+           "FOV_EDGE", "OCCLUDED"]
 
 #: half-height of the slab around the rim top in which points count as rim candidates, m
 RIM_BAND_M = 0.10
@@ -53,13 +57,25 @@ MIN_SPAN_FRACTION = 0.35
 MIN_WIDTH_FRACTION = 0.5
 #: width of the strip at each end examined for border/occlusion points, m
 END_STRIP_M = 0.20
-#: fraction of end-strip points from border beams that marks the end as cut
+#: bit of :func:`border_beams`: the beam is on the pattern's outer rows or columns
+FOV_EDGE = 1
+#: bit of :func:`border_beams`: a neighbouring beam is nearer (an occluder)
+OCCLUDED = 2
+#: share of end-strip points next to an occluder above which the end may be hidden rather than seen
+OCCLUDED_FRACTION = 0.2
+#: bins along an end used to measure how much of it is seen, m
+END_BIN_M = 0.20
+#: a seen end covers at least this share of its bins (the auger tube may hide a strip of it)
+MIN_END_COVER = 0.5
+#: fraction of end-strip points from pattern-edge beams that marks the end as cut
 CUT_FRACTION = 0.15
 #: points this far above the rim top inside a rectangle may be a roof over it, m
 ABOVE_RIM_M = 0.20
 #: rim candidates with a point well above them within this horizontal distance belong to a vertical structure
 #: (the stream, a cab wall), not to the rim, m
 UNDER_RADIUS_M = 0.25
+#: height of the slab right above the rim band searched for such structures, m
+UNDER_SLAB_M = 0.30
 #: raster cell of the roof test, m
 ROOF_CELL_M = 0.20
 #: largest share of a candidate rectangle's area covered from above (a tractor cab covers most of its own)
@@ -104,21 +120,39 @@ def _none(reason: str, n: int = 0) -> CartEstimate:
 
 
 def border_beams(ranges: np.ndarray, shape: tuple[int, int] | None) -> np.ndarray:
-    """(N,) bool: beams on the pattern's outer rows/columns, or next to a beam nearer by more than
-    :data:`OCCLUDER_REL` of the range (an occluder). ``ranges`` (N,) m, NaN invalid; ``shape`` (rows, cols) of
-    a row-major grid pattern, None for a table without layout (then every beam counts as a border beam)."""
+    """(N,) uint8 flags: :data:`FOV_EDGE` for beams on the pattern's outer rows/columns, :data:`OCCLUDED` for
+    beams next to a beam nearer by more than :data:`OCCLUDER_REL` of the range. ``ranges`` (N,) m, NaN
+    invalid; ``shape`` (rows, cols) of a row-major grid pattern, None for a table without layout (then every
+    beam counts as on the edge: a partly seen cart gets no answer)."""
     if shape is None:
-        return np.ones(ranges.shape[0], bool)
+        return np.full(ranges.shape[0], FOV_EDGE, np.uint8)
     rows, cols = shape
     r = np.asarray(ranges, np.float32).reshape(rows, cols)
-    out = np.zeros((rows, cols), bool)
-    out[0, :] = out[-1, :] = out[:, 0] = out[:, -1] = True
+    out = np.zeros((rows, cols), np.uint8)
+    out[0, :] = out[-1, :] = out[:, 0] = out[:, -1] = FOV_EDGE
     # nearest neighbour (3 x 3 minimum, OpenCV erosion) with invalid beams counting as infinitely far
     nearest = cv2.erode(np.where(np.isfinite(r), r, np.float32(np.inf)), np.ones((3, 3), np.uint8),
                         borderType=cv2.BORDER_REPLICATE)
     with np.errstate(invalid="ignore"):
-        out |= nearest < r * np.float32(1.0 - OCCLUDER_REL)
+        out[nearest < r * np.float32(1.0 - OCCLUDER_REL)] |= OCCLUDED
     return out.ravel()
+
+
+def _end_is_cut(flags: np.ndarray, other: np.ndarray, other_lo: float, other_hi: float) -> bool:
+    """Whether one end of the rim is cut off rather than seen: many of its points come from beams at the
+    pattern's edge; or many lie next to an occluder *and* they cover little of the cart's extent across that
+    end (a seen end shows the end rim running across it, even with the auger tube in front of a strip of it;
+    an end seen edge-on from afar shows little of it too, but no occluder). ``flags`` (K,) uint8 and
+    ``other`` (K,) m: the end strip's points, their coordinate along the end."""
+    if flags.size == 0:
+        return True
+    if np.mean((flags & FOV_EDGE) > 0) >= CUT_FRACTION:
+        return True
+    if np.mean((flags & OCCLUDED) > 0) < OCCLUDED_FRACTION:
+        return False
+    nbins = max(1, int(math.ceil((other_hi - other_lo) / END_BIN_M)))
+    b = np.clip(((other - other_lo) / END_BIN_M).astype(np.int64), 0, nbins - 1)
+    return np.unique(b).size < MIN_END_COVER * nbins
 
 
 def _outer(cart: Cart) -> tuple[float, float, float]:
@@ -228,7 +262,7 @@ def find_cart(points: np.ndarray, border: np.ndarray, cart: Cart, heading_xy=(1.
     """Find the cart rim in level-frame points.
 
     ``points`` (N, 3) float, m, level frame, NaN rows invalid (a row is all NaN or all finite); ``border`` (N,)
-    bool from :func:`border_beams`; ``heading_xy`` direction the cart faces (the towing direction, level
+    uint8 flags from :func:`border_beams`; ``heading_xy`` direction the cart faces (the towing direction, level
     frame); returns a :class:`CartEstimate`.
     """
     p = np.asarray(points, dtype=np.float64)
@@ -240,9 +274,11 @@ def find_cart(points: np.ndarray, border: np.ndarray, cart: Cart, heading_xy=(1.
         return _none(f"{cand.size} points at rim height, need {MIN_RIM_POINTS}", int(cand.size))
     lo_len, lo_wid, _ = _outer(cart)
     above = p[ok & (p[:, 2] > top + band + ABOVE_RIM_M), :2]
-    if above.shape[0]:
-        # a rim point has nothing right above it; a falling stream, a cab wall or a post does
-        d, _ = cKDTree(above).query(p[cand, :2], k=1, distance_upper_bound=UNDER_RADIUS_M)
+    slab = p[ok & (p[:, 2] > top + band) & (p[:, 2] <= top + band + UNDER_SLAB_M), :2]
+    if slab.shape[0]:
+        # a rim point has nothing right above it; a falling stream or a cab wall rising from the rim band does
+        # (the auger tube passes higher over the rim, above the slab, and does not count)
+        d, _ = cKDTree(slab).query(p[cand, :2], k=1, distance_upper_bound=UNDER_RADIUS_M)
         cand = cand[~np.isfinite(d)]
         if cand.size < MIN_RIM_POINTS:
             return _none(f"{cand.size} open points at rim height, need {MIN_RIM_POINTS}", int(cand.size))
@@ -267,8 +303,11 @@ def find_cart(points: np.ndarray, border: np.ndarray, cart: Cart, heading_xy=(1.
             centre.append(0.5 * (lo + hi))
             continue
         partial = True
-        cut_lo = bd[coord <= lo + END_STRIP_M].mean() >= CUT_FRACTION
-        cut_hi = bd[coord >= hi - END_STRIP_M].mean() >= CUT_FRACTION
+        other = t if coord is s else s
+        o_lo, o_hi = np.percentile(other, [0.5, 99.5])
+        at_lo, at_hi = coord <= lo + END_STRIP_M, coord >= hi - END_STRIP_M
+        cut_lo = _end_is_cut(bd[at_lo], other[at_lo], o_lo, o_hi)
+        cut_hi = _end_is_cut(bd[at_hi], other[at_hi], o_lo, o_hi)
         if cut_lo == cut_hi:
             why = "both ends cut" if cut_lo else "short span with no cut end"
             return _none(f"cart only partly visible ({why}); no answer", int(g.size))

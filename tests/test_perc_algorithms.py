@@ -164,3 +164,34 @@ def test_lone_wall_at_rim_height_is_not_a_cart():
 def test_height_map_rejects_bad_pose_input_shapes():
     hm = height_map(np.full((5, 3), np.nan), np.eye(4), CART, CELL)
     assert hm.coverage == 0.0 and np.isnan(hm.heights).all() and hm.heights.shape == grid_shape(CART, CELL)
+
+
+def test_returns_on_the_sensors_own_vehicle_are_masked():
+    from cosim.config import Scenario
+    from perception_proc.pipeline import OWN_BOX_MARGIN_M, Perception
+    from perception_proc.synthetic import stitched_rig
+
+    # a sensor on a mast above the combine's right half, looking left and down across its own roof
+    sc = Scenario(format_version=1, sensor=Sensor(mount=Mount(parent="combine", xyz_m=(0.0, -1.0, 5.0),
+                                                              rpy_deg=(0.0, 45.0, 90.0))))
+    p = Perception(sc, stitched_rig(1, 32, 32, 60.0))
+    r = np.random.default_rng(0).uniform(0.2, 12.0, p.n_beams).astype(np.float32)
+    lvl = p.level_points(r)
+    raw = p.level_directions * r[:, None].astype(np.float64) + p.level_from_sensor[:3, 3]
+    c = sc.combine
+    inside = ((np.abs(raw[:, 0]) <= c.length_m / 2 + OWN_BOX_MARGIN_M)
+              & (np.abs(raw[:, 1]) <= c.width_m / 2 + OWN_BOX_MARGIN_M) & (raw[:, 2] <= c.height_m + OWN_BOX_MARGIN_M)
+              & (raw[:, 2] >= -OWN_BOX_MARGIN_M))
+    assert 0 < inside.sum() < inside.size
+    assert np.isnan(lvl[inside]).all() and np.isfinite(lvl[~inside]).all()
+
+
+@pytest.mark.parametrize("x0", [1.6, 2.6])
+def test_tube_hiding_part_of_the_rim_never_gives_a_wrong_cart(x0):
+    # an auger-like bar between the sensor and the cart's front part: answer right, or no answer
+    tube = Box((x0, 3.5, 5.0), (x0 + 0.5, 9.5, 5.4))
+    cart, hm = run(cart_shapes(CART, POSE, grain_height=heap(1.5)) + [tube])
+    if cart.valid:
+        assert np.max(np.linalg.norm(cart.corners - true_corners(), axis=1)) < 0.1
+    else:
+        assert "no answer" in cart.reason or "rim" in cart.reason

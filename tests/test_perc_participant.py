@@ -99,14 +99,12 @@ def test_accuracy_fields_against_the_exact_cast(stepped):
     assert st.range_err_median_m < 2e-3
     assert st.frac_above_5cm < 0.02
     assert st.corner_error_m < 0.05
-    assert st.heightmap_rmse_m < 0.1
+    assert st.heightmap_rmse_m < 0.03
     assert math.isnan(st.impact_error_m)                 # no stream in this scene: nothing to compare
     assert st.impact_valid == 0
 
 
 def test_perceived_heights_match_truth(stepped):
-    # robust statistics: the stand-in images come from renderer_proc.raycast, whose height field lets a few
-    # rays through to the floor (reported to the lead); those cells read the floor, not the grain
     seg, _ = stepped
     h, t = np.array(seg.view("heightmap_perceived")), np.array(seg.view("heightmap_truth"))
     ok = np.isfinite(h)
@@ -114,6 +112,7 @@ def test_perceived_heights_match_truth(stepped):
     err = np.abs(h[ok] - t[ok])
     assert np.median(err) < 0.01
     assert np.mean(err < 0.03) > 0.95
+    assert err.max() < 0.08                             # cell statistic vs the cell-centre truth on a cone
 
 
 def test_frame_mismatch_is_refused(stepped):
@@ -179,7 +178,10 @@ def test_full_ring_with_the_mock_renderer():
         "perception": {"accuracy_every_frames": 1}}))
     run = simulate(sc, frames=2)
     s = run.recorder.series()
-    assert np.all(s["perc_state.cart_valid"] == 1)
+    assert s["perc_state.frame"].tolist() == [0.0, 1.0, 2.0]
+    valid = s["perc_state.cart_valid"] == 1                # a sparse pattern may rightly give no answer
+    assert np.all(s["perc_state.corner_error_m"][valid] < 0.1)
+    assert np.all(np.isnan(s["perc_state.corner_error_m"][~valid]))
     assert np.all(s["perc_state.range_err_median_m"] < 2e-3)
     assert np.all(s["perc_state.frac_above_5cm_2_15"] < 0.02)
     out = summarize(sc, {k: v for k, v in s.items() if k.startswith("perc_state.")},

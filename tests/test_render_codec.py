@@ -96,7 +96,18 @@ def test_ratio_strictly_between_254_and_255_breaks_the_bound():
     """The bound needs R's error (<= 0.5 (alpha / beta) / 255 periods) plus B's (<= 0.5 / 255) below half a
     period: alpha / beta <= 254. Exactly 255 still works because then R and B round one and the same q (see
     encode_depth), but in between a whole period is lost near half-integer period counts."""
-    codec = Codec(alpha_cm=2545.0, beta_cm=10.0)
+    codec = Codec.model_construct(alpha_cm=2545.0, beta_cm=10.0, gamma=2.2, gamma_mode="linear")  # bypasses the validator that refuses it
     d = np.linspace(1e-4, codec.max_depth_m * (1 - 1e-9), 400_001)[None]
     err = np.abs(decode_depth(encode_depth(d, codec), codec) - d)
     assert err.max() == pytest.approx(codec.beta_cm / 100.0, rel=0.01)
+
+
+def test_codec_ratio_band_where_eq3_breaks_is_refused():
+    from pydantic import ValidationError
+
+    from cosim.config import Codec
+
+    Codec(alpha_cm=25400.0, beta_cm=100.0)
+    Codec(alpha_cm=25500.0, beta_cm=100.0)
+    with pytest.raises(ValidationError, match="between 254 and 255"):
+        Codec(alpha_cm=25450.0, beta_cm=100.0)

@@ -158,17 +158,21 @@ def test_fifty_attach_detach_cycles_during_a_run(tmp_path, shm_clean, baseline):
 def test_a_source_sees_the_run_end_and_keeps_the_last_frame(tmp_path, shm_clean):
     sc = standins.scenario(1.0)
     sources: list[LiveSource] = []
+    states = []
 
     def factory(scenario, run_dir, segment):
         def sink(seg, frame):
             if frame == 0:
                 sources.append(LiveSource(run_dir, min_interval_s=0.0))
-            sources[0].snapshot()
+            states.append(sources[0].snapshot())
         return sink
 
     res = launch(sc, tmp_path / "run", specs=standins.specs(), console_log=False, sinks=[factory])
     assert res.completed
     src = sources[0]
+    state = states[-1]
+    assert state.stamps["cam0_rgb"] == sc.frames and not state.images, "a state snapshot copies no image"
+    assert "lidar_points" not in state.arrays and state.structs["dyn_state"]["frame"] == sc.frames
     assert src.check_end() is True
     snap = src.snapshot()
     assert snap.status == "run ended" and snap.frame == sc.frames

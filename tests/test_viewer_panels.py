@@ -56,7 +56,7 @@ def test_every_panel_present_with_its_frame():
 def test_a_run_without_rgb_shows_the_panel_absent_not_an_error():
     snap = full_snapshot()
     for name in ("cam0_rgb", "cam1_rgb"):
-        del snap.images[name]
+        del snap.images[name], snap.frames[name]
     del snap.structs["dyn_state"]["desired_auger_x_m"], snap.structs["dyn_state"]["actual_auger_x_m"]
     info = panel_info(snap)
     assert info["rgb"] == {"available": False, "frame": None,

@@ -15,6 +15,10 @@ from .base import Fraction, Model, Mount, NonNegFloat, PosFloat
 __all__ = ["Codec", "Pattern", "Noise", "Sensor", "Perception"]
 
 
+#: relative slack on the alpha / beta limits, so that alpha / (alpha / 255) passes despite round-off
+RATIO_SLACK = 1e-12
+
+
 class Codec(Model):
     """Depth-in-colour codec of the paper's Eqs 1-3 (d in cm). DESIGN.md section 4.
 
@@ -31,10 +35,16 @@ class Codec(Model):
     def _ratio(self) -> "Codec":
         if self.alpha_cm <= self.beta_cm:
             raise ValueError(f"alpha_cm ({self.alpha_cm}) must be larger than beta_cm ({self.beta_cm})")
-        if self.alpha_cm / self.beta_cm > 255.0:
+        if self.alpha_cm / self.beta_cm > 255.0 * (1.0 + RATIO_SLACK):
             raise ValueError(
                 f"alpha_cm / beta_cm = {self.alpha_cm / self.beta_cm:g} exceeds 255: the period count in R "
                 "can no longer be recovered (DESIGN.md section 4); raise beta_cm or lower alpha_cm"
+            )
+        ratio = self.alpha_cm / self.beta_cm
+        if 254.0 * (1.0 + RATIO_SLACK) < ratio < 255.0 * (1.0 - RATIO_SLACK):
+            raise ValueError(
+                f"alpha_cm / beta_cm = {ratio:g} lies between 254 and 255, where Eq 3 loses a whole period "
+                "(R's quantisation step exceeds half a period); use a ratio <= 254, or exactly 255"
             )
         return self
 
@@ -87,10 +97,12 @@ class Noise(Model):
 class Sensor(Model):
     """The LiDAR: where it is, what it samples, its range limits and noise, the codec its images use."""
 
-    #: on a mast on the auger, 3.5 m out from the combine's centre line and 5.5 m up, looking left and 60 deg down,
-    #: rolled 90 deg so the 95 deg vertical field runs along the cart: sees ~58 % of the grain cells from half
-    #: full to the target, wherever Machine Sync puts the cart (the default at the combine's side saw 5 %).
-    mount: Mount = Mount(parent="combine", xyz_m=(-2.0, 5.0, 5.5), rpy_deg=(90.0, 60.0, 90.0))
+    #: on a mast on the combine's auger side, 1.5 m behind the auger, 3.5 m out from the centre line and 6 m up,
+    #: looking left, 15 deg forward and 60 deg down, rolled 90 deg so the 95 deg vertical field runs along the
+    #: cart. Exact ray cast from half full to the target, wherever Machine Sync puts the cart: 50-85 % of the
+    #: grain cells seen and ~230 beams on the stream's lowest metre (a mast on the auger saw 58 % of the cells but
+    #: the tube hid the stream; the combine's side saw 5 %).
+    mount: Mount = Mount(parent="combine", xyz_m=(-3.5, 5.0, 6.0), rpy_deg=(90.0, 60.0, 75.0))
     pattern: Pattern = Pattern()
     range_min_m: NonNegFloat = 0.0
     range_max_m: PosFloat = 40.0

@@ -123,8 +123,9 @@ class ReplaySource:
         n = len(self.frames)
         return int(step) % n if self.loop else min(int(step), n - 1)
 
-    def snapshot(self):
-        """The snapshot of the frame the replay clock has reached."""
+    def snapshot(self, big: bool = True):
+        """The snapshot of the frame the replay clock has reached (``big`` is accepted for the source interface:
+        a replay always decodes what the frame shows, once per frame and topic)."""
         from cosim.viewer.snapshot import Snapshot
 
         with self._lock:

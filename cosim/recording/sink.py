@@ -44,7 +44,8 @@ def _recorder_main(conn, credits, scenario_json: str, schema_bytes: bytes, path:
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the launcher handles Ctrl-C and then closes us
     scenario = Scenario.model_validate_json(scenario_json)
-    writer = McapWriter(scenario, Schema.decode(schema_bytes), Path(path), options, run_id, fingerprint)
+    writer = McapWriter(scenario, Schema.decode(schema_bytes), Path(path), options, run_id, fingerprint,
+                        flush_s=options.flush_s)
     inbox: queue.Queue = queue.Queue()
 
     def receive() -> None:
@@ -65,6 +66,8 @@ def _recorder_main(conn, credits, scenario_json: str, schema_bytes: bytes, path:
                 break
             writer.write(item)
             credits.release()
+            if inbox.empty():
+                writer.flush()  # idle: put everything on disk; busy: at most every flush_s
     finally:
         writer.close()
 

@@ -10,13 +10,15 @@ Per frame, with the frame's simulation time as log time and message timestamp:
 * ``/lidar/points`` foxglove.PointCloud (valid beams), ``/heightmap/<kind>`` foxglove.Grid.
 * ``/cosim/frame`` ``cosim.Frame``, last: the frame is complete in the file once its marker is there.
 
-After each frame the writer closes its chunk and flushes the file, so a file cut off at any point reads up to
-its last whole frame. :func:`capture` takes the copies (in the supervisor, while it holds the token);
-:class:`McapWriter` encodes and writes them (in the recorder process, :mod:`cosim.recording.sink`).
+The writer closes its chunk and flushes the file after each frame (``flush_s=0``) or at most every ``flush_s``
+seconds (the recorder process, which outlives a killed launcher and finishes the file itself), so a file cut
+off at any point reads up to its last whole frame flushed. :func:`capture` takes the copies (in the
+supervisor, while it holds the token); :class:`McapWriter` encodes and writes them (in the recorder process, :mod:`cosim.recording.sink`).
 """
 from __future__ import annotations
 
 import logging
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -55,8 +57,12 @@ class RecordOptions:
     compression: Literal["zstd", "lz4", "none"] = "zstd"
     #: frames in flight to the recorder process (0: no process, write synchronously inside the sink)
     queue_frames: int = 4
+    #: the recorder process closes a chunk and flushes at most this often, s (the synchronous writer: every frame)
+    flush_s: float = 0.5
 
     def __post_init__(self) -> None:
+        if self.flush_s < 0:
+            raise ValueError(f"flush_s must be >= 0, got {self.flush_s}")
         if self.queue_frames < 0:
             raise ValueError(f"queue_frames must be >= 0, got {self.queue_frames}")
         if self.image_every < 1:
@@ -101,8 +107,11 @@ class McapWriter:
     """
 
     def __init__(self, scenario, schema: Schema, path: Path, options: RecordOptions, run_id: str = "",
-                 fingerprint: str = ""):
+                 fingerprint: str = "", flush_s: float = 0.0):
         self.options = options
+        self.flush_s = float(flush_s)
+        self._t_flush = time.monotonic()
+        self._dirty = False
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.period_s = float(scenario.timing.sensor_period_s)
@@ -195,8 +204,17 @@ class McapWriter:
             (cx, cy), channel = self._grids[name]
             self._put(channel, t_ns, grid_msg(t_ns, h, cx, cy))
         self._put(self._marker, t_ns, {"timestamp": stamp(t_ns), "frame": int(frame), "t_s": frame * self.period_s})
-        self._flush()
         self.frames_written += 1
+        self._dirty = True
+        if time.monotonic() - self._t_flush >= self.flush_s:
+            self.flush()
+
+    def flush(self) -> None:
+        """Close the chunk and flush the file now, if any frame was written since the last flush."""
+        if self._dirty:
+            self._t_flush = time.monotonic()
+            self._dirty = False
+            self._flush()
 
     def close(self) -> None:
         """Write the summary and close the file. Idempotent."""

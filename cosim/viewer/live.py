@@ -3,7 +3,9 @@
 The viewer learns the layout from the segment itself (``Segment.attach`` decodes the stored schema), copies
 blocks with the seqlock (``Segment.snapshot``: copy, retry if the writer moved), never writes, never unlinks
 (attach does not register with the resource tracker) and takes no part in the lockstep. Snapshots are taken
-only when a client asks, at most every ``min_interval_s``; frames in between are dropped. When the run ends
+only when a client asks, at most every ``min_interval_s``; frames in between are dropped. A state snapshot
+copies only the struct blocks and reads every block's frame stamp; the big blocks (images, LiDAR, height maps)
+are copied only when a panel asks for them (``snapshot(big=True)``), and only if their stamp moved. When the run ends
 (the launcher unlinks the segment) the source keeps its last snapshot, reports ``run ended`` and unmaps.
 """
 from __future__ import annotations
@@ -89,7 +91,11 @@ class LiveSource:
         self.blocks = [b.name for b in seg.schema.blocks]
         self._wanted = [(b.name, "struct" if isinstance(b, StructBlock) else b.kind,
                          () if isinstance(b, StructBlock) else b.shape) for b in seg.schema.blocks]
-        self._wanted = [n for n, k, s in self._wanted if wanted_block(n, k, s)]
+        self._kinds = {n: k for n, k, s in self._wanted if wanted_block(n, k, s)}
+        self._wanted = list(self._kinds)
+        #: big block -> (frame, copy) held for the panels
+        self._copies: dict[str, tuple[int, object]] = {}
+        self._t_big = -float("inf")
         self._has_sup = SUPERVISOR in seg.schema.participants
         self.min_interval_s = float(min_interval_s)
         self.history = History()
@@ -122,7 +128,7 @@ class LiveSource:
         self._ended = True
         if self._seg is not None:
             try:
-                self._last = self._take(self._seg, self._last)
+                self._last = self._take(self._seg, self._last, big=True)
                 self.history.add(self._last)
             except Exception:  # noqa: BLE001 - keep the previous snapshot
                 log.exception("viewer: final snapshot of %s failed", self.name)
@@ -133,39 +139,54 @@ class LiveSource:
             self._seg = None
         log.info("viewer: run %s ended; showing its last frame %d", self.name, self._last.frame)
 
-    def snapshot(self) -> Snapshot:
-        """The latest snapshot, taking a new one if the last is older than ``min_interval_s``."""
+    def snapshot(self, big: bool = False) -> Snapshot:
+        """The latest snapshot, taking a new one if the last is older than ``min_interval_s``.
+
+        ``big``: also bring the copies of the big blocks up to date (what the image panels draw).
+        """
         with self._lock:
             now = time.monotonic()
-            if self._ended or now - self._t_last < self.min_interval_s:
+            if self._ended:
                 return self._last
-            self._t_last = now
+            fresh = now - self._t_last < self.min_interval_s
+            if fresh and (not big or now - self._t_big < self.min_interval_s):
+                return self._last
             if not self._alive():
                 self._end()
                 return self._last
-            self._last = self._take(self._seg, self._last)
+            if not fresh:
+                self._t_last = now
+                self.samples += 1
+            if big:
+                self._t_big = now
+            self._last = self._take(self._seg, self._last, big)
             self.history.add(self._last)
-            self.samples += 1
             return self._last
 
-    def _take(self, seg: Segment, prev: Snapshot) -> Snapshot:
+    def _take(self, seg: Segment, prev: Snapshot, big: bool = False) -> Snapshot:
         snap = Snapshot()
         for name in self._wanted:
+            kind = self._kinds[name]
+            snap.stamps[name] = seg.frame_of(name)
+            if kind != "struct":
+                held = self._copies.get(name)
+                if big and (held is None or held[0] != snap.stamps[name]) and snap.stamps[name] >= 0:
+                    try:
+                        self._copies[name] = held = seg.snapshot(name, tries=SNAPSHOT_TRIES)
+                    except SnapshotTimeout:
+                        pass  # the writer kept writing: keep the copy held
+                if held is not None:
+                    snap.frames[name] = held[0]
+                    (snap.images if kind == "image" else snap.arrays)[name] = held[1]
+                continue
             try:
                 frame, data = seg.snapshot(name, tries=SNAPSHOT_TRIES)
             except SnapshotTimeout:
-                if name in prev.frames:
-                    frame, data = prev.frames[name], (prev.structs.get(name) if name in prev.structs else
-                                                      prev.images.get(name, prev.arrays.get(name)))
-                else:
+                if name not in prev.structs:
                     continue
+                frame, data = prev.frames[name], prev.structs[name]
             snap.frames[name] = frame
-            if isinstance(data, dict):
-                snap.structs[name] = data
-            elif seg.schema.block(name).kind == "image":
-                snap.images[name] = data
-            else:
-                snap.arrays[name] = data
+            snap.structs[name] = data
         if self._has_sup:
             slot = seg.slot(SUPERVISOR)
             snap.frame = int(slot["frame"])

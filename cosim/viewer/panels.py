@@ -45,18 +45,21 @@ TEXT = (230, 230, 230)
 
 
 def _cams(snap: Snapshot, suffix: str) -> list[str]:
-    return sorted(n for n in snap.images if n.endswith(suffix))
+    return sorted(n for n in snap.names if n.endswith(suffix) and n not in snap.structs)
 
 
 def _heightmaps(snap: Snapshot) -> tuple[str | None, str | None]:
-    maps = [n for n in snap.arrays if n.startswith("heightmap")]
+    maps = [n for n in snap.names if n.startswith("heightmap")]
     truth = "heightmap_truth" if "heightmap_truth" in maps else None
     perc = "heightmap_perceived" if "heightmap_perceived" in maps else None
     return truth, perc
 
 
-def panel_info(snap: Snapshot) -> dict[str, dict]:
-    """Panel id -> {available, frame, note} for ``snap`` (frame None: not written yet)."""
+def panel_info(snap: Snapshot, stamps: bool = True) -> dict[str, dict]:
+    """Panel id -> {available, frame, note} for ``snap`` (frame None: not written yet).
+
+    ``stamps``: the frames the blocks have now (the page's refresh cue), else those of the copies held.
+    """
     out: dict[str, dict] = {}
 
     def put(pid, blocks, note_absent):
@@ -64,14 +67,14 @@ def panel_info(snap: Snapshot) -> dict[str, dict]:
         if not blocks:
             out[pid] = {"available": False, "frame": None, "note": note_absent}
             return
-        frames = [snap.block_frame(b) for b in blocks]
+        frames = [snap.block_frame(b, stamps) for b in blocks]
         frames = [f for f in frames if f is not None]
         out[pid] = {"available": True, "frame": max(frames) if frames else None,
                     "note": ", ".join(blocks)}
 
     put("rgb", _cams(snap, "_rgb"), "absent: this run renders no RGB image (start it with --viewer)")
     put("depth", _cams(snap, "_depth"), "absent: this run has no renderer")
-    lidar = ["lidar_points"] if "lidar_points" in snap.arrays else []
+    lidar = ["lidar_points"] if "lidar_points" in snap.names else []
     put("lidar_top", lidar, "absent: this run has no perception (lidar_points)")
     put("lidar_side", lidar, "absent: this run has no perception (lidar_points)")
     put("heightmaps", list(_heightmaps(snap)), "absent: this run has no height map block")
@@ -186,12 +189,12 @@ def render_panel(snap: Snapshot, panel: str) -> bytes | None:
     if panel not in IMAGE_PANELS:
         raise KeyError(f"no image panel {panel!r}; image panels: {IMAGE_PANELS}")
     if panel in ("rgb", "depth"):
-        names = _cams(snap, f"_{panel}")
+        names = [n for n in _cams(snap, f"_{panel}") if n in snap.images]
         return _png(_shrink(_hconcat([snap.images[n] for n in names]))) if names else None
     if panel in ("lidar_top", "lidar_side"):
         pts = snap.arrays.get("lidar_points")
         return _png(_lidar(pts, panel[len("lidar_"):])) if pts is not None else None
-    if not any(_heightmaps(snap)):
+    if not any(n in snap.arrays for n in _heightmaps(snap)):
         return None
     return _png(_heightmap_pair(snap))
 
@@ -205,7 +208,7 @@ class PanelRenderer:
         self.rendered = 0
 
     def get(self, snap: Snapshot, panel: str) -> bytes | None:
-        info = panel_info(snap).get(panel, {})
+        info = panel_info(snap, stamps=False).get(panel, {})
         key = (info.get("frame"), info.get("note"))
         with self._lock:
             hit = self._cache.get(panel)

@@ -3,7 +3,7 @@
 Routes: ``/`` the page, ``/api/state`` the numbers (JSON), ``/panel/<id>.png`` an image panel (404 when absent),
 ``/healthz``. A *source* supplies snapshots: :class:`~cosim.viewer.live.LiveSource` (a running segment) or
 :class:`~cosim.recording.replay.ReplaySource` (a recording); both have ``name``, ``frames_planned``,
-``history``, ``snapshot()``, ``check_end()`` and ``close()``.
+``history``, ``snapshot(big=False)``, ``check_end()`` and ``close()``.
 
 :func:`observe` is what ``launch(..., observers=[ObserverSpec("viewer", "cosim.viewer.server:observe", {...})])``
 runs in its own process: it lowers its scheduling priority (the run's processes come first on a small machine),
@@ -91,7 +91,7 @@ class _Handler(BaseHTTPRequestHandler):
                 if pid not in IMAGE_PANELS:
                     self._send(404, f"no image panel {pid!r}".encode(), "text/plain")
                     return
-                png = srv.renderer.get(srv.source.snapshot(), pid)
+                png = srv.renderer.get(srv.source.snapshot(big=True), pid)
                 if png is None:
                     self._send(404, f"panel {pid} is absent in this run".encode(), "text/plain")
                 else:

@@ -46,6 +46,8 @@ class Snapshot:
     images: dict[str, np.ndarray] = field(default_factory=dict)
     arrays: dict[str, np.ndarray] = field(default_factory=dict)
     frames: dict[str, int] = field(default_factory=dict)
+    #: block -> frame stamp now (a live source reads every block's stamp but copies big blocks only for panels)
+    stamps: dict[str, int] = field(default_factory=dict)
     status: str = "waiting"
     rtf: float | None = None
     #: frames the viewer did not see between its last two snapshots (it may drop frames)
@@ -55,8 +57,16 @@ class Snapshot:
     def t_s(self) -> float | None:
         return sim_time(self.structs)
 
-    def block_frame(self, name: str) -> int | None:
-        f = self.frames.get(name)
+    @property
+    def names(self) -> set[str]:
+        """Every block this snapshot knows of, copied or not."""
+        return set(self.stamps) | set(self.frames) | set(self.images) | set(self.arrays) | set(self.structs)
+
+    def block_frame(self, name: str, stamp: bool = True) -> int | None:
+        """Frame of block ``name``: its current stamp (``stamp``) or that of the copy held; None if unwritten."""
+        f = self.stamps.get(name) if stamp else None
+        if f is None:
+            f = self.frames.get(name)
         return None if f is None or f < 0 else f
 
 
