@@ -15,7 +15,9 @@ from .base import Fraction, Model, Mount, NonNegFloat, PosFloat
 __all__ = ["Codec", "Pattern", "Noise", "Sensor", "Perception"]
 
 
-#: relative slack on the alpha / beta limits, so that alpha / (alpha / 255) passes despite round-off
+#: largest alpha / beta for which |d' - d| <= beta / 510 holds with Eqs 1-3 as written
+MAX_RATIO = 254.0
+#: relative slack on the limit, so that alpha / (alpha / 254) passes despite round-off
 RATIO_SLACK = 1e-12
 
 
@@ -35,16 +37,12 @@ class Codec(Model):
     def _ratio(self) -> "Codec":
         if self.alpha_cm <= self.beta_cm:
             raise ValueError(f"alpha_cm ({self.alpha_cm}) must be larger than beta_cm ({self.beta_cm})")
-        if self.alpha_cm / self.beta_cm > 255.0 * (1.0 + RATIO_SLACK):
-            raise ValueError(
-                f"alpha_cm / beta_cm = {self.alpha_cm / self.beta_cm:g} exceeds 255: the period count in R "
-                "can no longer be recovered (DESIGN.md section 4); raise beta_cm or lower alpha_cm"
-            )
         ratio = self.alpha_cm / self.beta_cm
-        if 254.0 * (1.0 + RATIO_SLACK) < ratio < 255.0 * (1.0 - RATIO_SLACK):
+        if ratio > MAX_RATIO * (1.0 + RATIO_SLACK):
             raise ValueError(
-                f"alpha_cm / beta_cm = {ratio:g} lies between 254 and 255, where Eq 3 loses a whole period "
-                "(R's quantisation step exceeds half a period); use a ratio <= 254, or exactly 255"
+                f"alpha_cm / beta_cm = {ratio:g} exceeds {MAX_RATIO:g}: R's quantisation step then exceeds half a "
+                "period and Eq 3 loses whole periods (DESIGN.md section 4 says 255; above 254 the bound holds only "
+                "for an encoder that rounds R and B from one shared value); raise beta_cm or lower alpha_cm"
             )
         return self
 
