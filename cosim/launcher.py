@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
 from shm_schema import Phase, Segment
+from shm_schema.layout import SLOT_WORD
 
 from .child import ChildArgs, child_main
 from .config import Scenario
@@ -188,21 +189,23 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
         first = plan.members[0]
         t_turn = time.monotonic_ns()
         token.give(first, 0)
+        sw = seg.slot_words(SUPERVISOR)
+        phase, frame_word, heartbeat = SLOT_WORD["phase"], SLOT_WORD["frame"], SLOT_WORD["heartbeat_ns"]
         for frame in range(plan.frames + 1):
-            sup["phase"] = Phase.WAITING
+            sw[phase] = Phase.WAITING
             timeout = scenario.timing.handoff_timeout_s
             if frame == 0:
                 timeout += scenario.timing.startup_timeout_s
             token.take(SUPERVISOR, frame, timeout, check)
             turn = time.monotonic_ns() - t_turn
-            sup["frame"] = frame
-            sup["phase"] = Phase.STEPPING
+            sw[frame_word] = frame
+            sw[phase] = Phase.STEPPING
             recorder.record(frame, turn if frame > 0 else None)
             for sink in frame_sinks:
                 sink(seg, frame)
             _warn_dead_observers(watchers)
             check_stop()
-            sup["heartbeat_ns"] = time.monotonic_ns()
+            sw[heartbeat] = time.monotonic_ns()
             if progress is not None:
                 progress(frame, plan.frames, frame * scenario.timing.sensor_period_s, time.perf_counter() - t_start)
             if frame < plan.frames:

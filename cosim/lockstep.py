@@ -15,8 +15,12 @@ from dataclasses import dataclass
 from typing import Callable, Mapping, Sequence
 
 from shm_schema import Phase, Segment
+from shm_schema.layout import SLOT_WORD
 
 from .errors import FrameMismatch, HandoffTimeout
+
+_TOKEN, _PHASE, _FRAME = SLOT_WORD["token"], SLOT_WORD["phase"], SLOT_WORD["frame"]
+_HEARTBEAT, _STEP = SLOT_WORD["heartbeat_ns"], SLOT_WORD["step_ns"]
 
 __all__ = ["POLL_S", "RingPlan", "Token", "member_loop", "describe_stall", "run_inprocess"]
 
@@ -46,9 +50,10 @@ class Token:
     def __init__(self, segment: Segment, semaphores: Mapping[str, object]):
         self._seg = segment
         self._sems = dict(semaphores)
+        self._words = {name: segment.slot_words(name) for name in self._sems}
 
     def give(self, to: str, frame: int) -> None:
-        self._seg.slot(to)["token"] = frame
+        self._words[to][_TOKEN] = frame
         self._sems[to].release()
 
     def take(self, me: str, frame: int, timeout_s: float, check: Callable[[], None] | None = None) -> None:
@@ -58,7 +63,12 @@ class Token:
         :class:`HandoffTimeout` after ``timeout_s`` and :class:`FrameMismatch` for a token of another frame.
         """
         sem = self._sems[me]
-        deadline = time.monotonic() + timeout_s
+        if sem.acquire(timeout=POLL_S):
+            self._check_frame(me, frame)
+            return
+        deadline = time.monotonic() + timeout_s - POLL_S
+        if check is not None:
+            check()
         while not sem.acquire(timeout=min(POLL_S, max(0.0, deadline - time.monotonic()))):
             if check is not None:
                 check()
@@ -67,7 +77,10 @@ class Token:
                     f"{me} waited {timeout_s:g} s for the token of frame {frame}: "
                     + describe_stall(self._seg, exclude=me),
                     process=me, frame=frame)
-        got = int(self._seg.slot(me)["token"])
+        self._check_frame(me, frame)
+
+    def _check_frame(self, me: str, frame: int) -> None:
+        got = self._words[me][_TOKEN]
         if got != frame:
             raise FrameMismatch(f"{me} expected the token of frame {frame} but received frame {got}",
                                 process=me, frame=frame)
@@ -92,21 +105,21 @@ def describe_stall(seg: Segment, exclude: str = "") -> str:
 def member_loop(name: str, participant, seg: Segment, token: Token, plan: RingPlan, *,
                 startup_timeout_s: float, handoff_timeout_s: float, check: Callable[[], None] | None = None) -> None:
     """Run one ring member for frames 0..plan.frames: take the token, step, pass it on."""
-    slot = seg.slot(name)
+    w = seg.slot_words(name)
     nxt = plan.next_of(name)
+    clock = time.monotonic_ns
+    step = participant.step
     for frame in range(plan.frames + 1):
-        slot["phase"] = Phase.WAITING
+        w[_PHASE] = Phase.WAITING
         token.take(name, frame, startup_timeout_s if frame == 0 else handoff_timeout_s, check)
-        slot["frame"] = frame
-        slot["phase"] = Phase.STEPPING
-        t0 = time.monotonic_ns()
-        slot["heartbeat_ns"] = t0
-        participant.step(frame)
-        t1 = time.monotonic_ns()
-        slot["step_ns"] = t1 - t0
-        slot["heartbeat_ns"] = t1
+        w[_FRAME] = frame
+        w[_PHASE] = Phase.STEPPING
+        t0 = w[_HEARTBEAT] = clock()
+        step(frame)
+        t1 = w[_HEARTBEAT] = clock()
+        w[_STEP] = t1 - t0
         token.give(nxt, frame)
-    slot["phase"] = Phase.DONE
+    w[_PHASE] = Phase.DONE
 
 
 def run_inprocess(seg: Segment, participants: Sequence, frames: int,

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from shm_schema import Segment, StructBlock
+from shm_schema.layout import SLOT_WORD
 
 __all__ = ["Recorder", "ARRAY_COPY_LIMIT"]
 
@@ -40,6 +41,7 @@ class Recorder:
                 self.arrays[b.name] = np.zeros(b.shape, np.dtype(b.dtype))
         self.array_frames: dict[str, int] = {n: -1 for n in self._array_views}
         self.step_ms: dict[str, list[float]] = {m: [] for m in members}
+        self._step_words = [(m, seg.slot_words(m)) for m in members]
         self.turn_ms: list[float] = []
 
     def record(self, frame: int, turn_ns: int | None = None) -> None:
@@ -50,8 +52,9 @@ class Recorder:
         for name, view in self._array_views.items():
             np.copyto(self.arrays[name], view)
             self.array_frames[name] = self._seg.frame_of(name)
-        for m in self.members:
-            self.step_ms[m].append(int(self._seg.slot(m)["step_ns"]) / 1e6)
+        step = SLOT_WORD["step_ns"]
+        for m, words in self._step_words:
+            self.step_ms[m].append(words[step] / 1e6)
         if turn_ns is not None:
             self.turn_ms.append(turn_ns / 1e6)
 

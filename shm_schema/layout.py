@@ -21,7 +21,7 @@ from .spec import ArrayBlock, Block, Field, SchemaError, StructBlock, check_name
 
 __all__ = [
     "ALIGN", "MAGIC", "LAYOUT_VERSION", "MAX_PROCS", "ERROR_BYTES", "PROC_DTYPE", "HEADER_DTYPE",
-    "BLOCK_HEADER_DTYPE", "BlockLayout", "Schema", "align_up",
+    "BLOCK_HEADER_DTYPE", "SLOT_WORD", "BlockLayout", "Schema", "align_up",
 ]
 
 ALIGN = 64
@@ -46,6 +46,10 @@ PROC_DTYPE = np.dtype(
     ],
     align=True,
 )
+
+#: index of each int64 field of a process slot in :meth:`Segment.slot_words` (derived from PROC_DTYPE)
+SLOT_WORD = {name: PROC_DTYPE.fields[name][1] // 8 for name in PROC_DTYPE.names
+             if PROC_DTYPE.fields[name][0] == np.dtype("<i8")}
 
 HEADER_DTYPE = np.dtype(
     [

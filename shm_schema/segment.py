@@ -17,7 +17,7 @@ from typing import Iterator
 import msgpack
 import numpy as np
 
-from .layout import (BLOCK_HEADER_DTYPE, ERROR_BYTES, HEADER_DTYPE, LAYOUT_VERSION, MAGIC, Schema)
+from .layout import (BLOCK_HEADER_DTYPE, ERROR_BYTES, HEADER_DTYPE, LAYOUT_VERSION, MAGIC, PROC_DTYPE, Schema)
 from .spec import StructBlock
 
 __all__ = ["Segment", "StructView", "SchemaMismatch", "SegmentNotFound", "Phase", "SnapshotTimeout"]
@@ -102,6 +102,7 @@ class Segment:
         self._buf = buf
         self.header = np.ndarray((), HEADER_DTYPE, buffer=buf, offset=0)
         self._views: dict[str, object] = {}
+        self._words: list[memoryview] = []
         self._bheaders: dict[str, np.ndarray] = {}
         for name, lay in schema.layout.items():
             self._bheaders[name] = np.ndarray((), BLOCK_HEADER_DTYPE, buffer=buf, offset=lay.offset)
@@ -246,6 +247,17 @@ class Segment:
             raise KeyError(f"no process slot {process!r}; slots: {self.schema.participants}") from None
         return self.header["procs"][i]
 
+    def slot_words(self, process: str) -> memoryview:
+        """``process``'s slot as int64 words (a cast memoryview, zero copy), indexed by ``layout.SLOT_WORD``.
+
+        The lockstep's hot path uses this: a word store costs ~0.1 us against ~1.2 us for a structured field.
+        """
+        i = self.schema.participants.index(process)
+        off = HEADER_DTYPE.fields["procs"][1] + i * PROC_DTYPE.itemsize
+        words = memoryview(self._buf)[off:off + PROC_DTYPE.itemsize - ERROR_BYTES].cast("B").cast("q")
+        self._words.append(words)
+        return words
+
     def report_error(self, process: str, frame: int, kind: str, message: str, traceback: str) -> None:
         """Store an error report in ``process``'s slot (truncated to fit)."""
         payload = {"process": process, "frame": frame, "type": kind, "message": message[:2000],
@@ -283,6 +295,9 @@ class Segment:
         """Drop every view and unmap (attachers and owner alike). Idempotent."""
         self._views.clear()
         self._bheaders.clear()
+        for w in self._words:
+            w.release()
+        self._words.clear()
         self.header = None
         self._buf = None
         if self._shm is not None:
