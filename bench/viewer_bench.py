@@ -13,7 +13,7 @@ client polling the dashboard like the page does: state every 250 ms, each change
 The real-time factor is measured in steady state by a timing sink: frames completed more than ``SETTLE_S``
 after frame 0 (so the children's and the viewer's start-up, imports included, does not count), to the end.
 Usage: ``python bench/viewer_bench.py [--reps 3] [--frames 250] [--work-ms 10] [--skip-dynamics]``; prints a
-Markdown table. Figures: bench/viewer.md.
+Markdown table. Figures: bench/README.md.
 """
 from __future__ import annotations
 
