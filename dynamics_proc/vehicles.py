@@ -101,19 +101,23 @@ def derivative(x: np.ndarray, u: tuple[float, float], p: VehicleParams) -> np.nd
     return np.array([k[0], k[1], k[2], k[3], k[4], k[5], dv, dd, k[6]])
 
 
+def _lag_phases(x0: float, target: float, tau: float, rate_up: float, rate_down: float):
+    """(e0, sign, limiting rate, band = tau * rate, end of the rate-limited ramp t1 or None) of a lag."""
+    e0 = target - x0
+    rate = rate_up if e0 >= 0.0 else rate_down
+    sign = 1.0 if e0 >= 0.0 else -1.0
+    band = tau * rate
+    return e0, sign, rate, band, (abs(e0) - band) / rate if abs(e0) > band else None
+
+
 def lag_exact(x0: float, target: float, tau: float, rate_up: float, rate_down: float, t: float) -> float:
     """Exact solution at time ``t`` >= 0 of dx/dt = clip((target - x) / tau, -rate_down, rate_up), x(0) = x0.
 
     While |target - x| > tau * rate the state ramps at the limiting rate; from then on it decays as
     exp(-t / tau). Same units as x; ``tau`` s, rates in units of x per s.
     """
-    e0 = target - x0
-    rate = rate_up if e0 >= 0.0 else rate_down
-    sign = 1.0 if e0 >= 0.0 else -1.0
-    band = tau * rate
-    ae = abs(e0)
-    if ae > band:
-        t1 = (ae - band) / rate
+    e0, sign, rate, band, t1 = _lag_phases(x0, target, tau, rate_up, rate_down)
+    if t1 is not None:
         if t <= t1:
             return x0 + sign * rate * t
         return target - sign * band * math.exp(-(t - t1) / tau)
@@ -122,13 +126,8 @@ def lag_exact(x0: float, target: float, tau: float, rate_up: float, rate_down: f
 
 def lag_integral(x0: float, target: float, tau: float, rate_up: float, rate_down: float, t: float) -> float:
     """Exact integral over [0, t] of the :func:`lag_exact` solution (units of x times s)."""
-    e0 = target - x0
-    rate = rate_up if e0 >= 0.0 else rate_down
-    sign = 1.0 if e0 >= 0.0 else -1.0
-    band = tau * rate
-    ae = abs(e0)
-    if ae > band:
-        t1 = (ae - band) / rate
+    e0, sign, rate, band, t1 = _lag_phases(x0, target, tau, rate_up, rate_down)
+    if t1 is not None:
         if t <= t1:
             return x0 * t + 0.5 * sign * rate * t * t
         i1 = x0 * t1 + 0.5 * sign * rate * t1 * t1
