@@ -133,7 +133,7 @@ def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart
     enough = k >= min_points
     flat = heights.reshape(-1)
     flat[uniq[enough]] = med[enough]
-    np.add.at(counts.reshape(-1), cell[low], 1)
+    counts.reshape(-1)[:] = np.bincount(cell[low], minlength=nx * ny)
     # cells holding only stream returns stand far above their neighbourhood
     stream_cell = heights > _lower_quartile(heights) + STREAM_STEP_M
     heights[stream_cell] = np.nan
