@@ -17,21 +17,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from cosim.config import Scenario  # noqa: E402
-from dynamics_proc.closed_loop import simulate  # noqa: E402
+from dynamics_proc.closed_loop import noisy_measurement, simulate  # noqa: E402
 from dynamics_proc.summary import section_stats, summarize  # noqa: E402
 
 HOLES = 0.3
 SIGMA_M = 0.02
-
-
-def perceived(seed: int):
-    rng = np.random.default_rng(seed)
-
-    def measure(truth, frame):
-        out = truth + rng.normal(0.0, SIGMA_M, truth.shape)
-        out[rng.random(truth.shape) < HOLES] = np.nan
-        return out
-    return measure
 
 
 def levelness_at_half(s: Scenario, strategy_run) -> float:
@@ -51,7 +41,8 @@ def main() -> None:
         for strategy in ("front_to_back", "back_to_front", "lowest_first"):
             s = Scenario.model_validate({"format_version": 1, "feedback": "ground_truth", "renderer": "none",
                                          "duration_s": 300.0, "controller": {"strategy": strategy}})
-            r = simulate(s, stop_when_done=True, measure=perceived(7) if feedback == "perceived" else None)
+            measure = noisy_measurement(7, HOLES, SIGMA_M) if feedback == "perceived" else None
+            r = simulate(s, stop_when_done=True, measure=measure)
             sm = summarize(s, r.series, r.heights)
             f = sm["fill"]
             err = np.max(np.abs(np.array(f["section_peak_height_m"]) - f["target_height_m"]))

@@ -149,6 +149,7 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
                                                    "participants": list(plan.members), "ended": False},
                                                   indent=2) + "\n")
     watchers: dict[str, mp.process.BaseProcess] = {}
+    warned: set[str] = set()
     frame_sinks: list = []
     try:
         sup = seg.slot(SUPERVISOR)
@@ -203,7 +204,7 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
             recorder.record(frame, turn if frame > 0 else None)
             for sink in frame_sinks:
                 sink(seg, frame)
-            _warn_dead_observers(watchers)
+            _warn_dead_observers(watchers, warned)
             check_stop()
             sw[heartbeat] = time.monotonic_ns()
             if progress is not None:
@@ -265,13 +266,11 @@ def _observer_main(obs: ObserverSpec, segment: str, log_path: str) -> None:
     load_callable(obs.target)(segment, **dict(obs.kwargs))
 
 
-_warned: set[int] = set()
-
-
-def _warn_dead_observers(watchers: Mapping[str, mp.process.BaseProcess]) -> None:
+def _warn_dead_observers(watchers: Mapping[str, mp.process.BaseProcess], warned: set[str]) -> None:
+    """Log once per observer that has ended; the run goes on."""
     for n, w in watchers.items():
-        if w.exitcode is not None and w.pid not in _warned:
-            _warned.add(w.pid)
+        if w.exitcode is not None and n not in warned:
+            warned.add(n)
             log.warning("observer %s ended (exit %s); the run goes on without it", n, w.exitcode)
 
 

@@ -47,6 +47,17 @@ class Dumper(yaml.SafeDumper):
 
 Dumper.add_implicit_resolver("tag:yaml.org,2002:int", INT_12, list("-+0123456789"))
 Dumper.add_implicit_resolver("tag:yaml.org,2002:float", FLOAT_12, list("-+0123456789."))
+#: characters YAML reads as line breaks inside a plain or folded scalar (they would come back as spaces)
+YAML_BREAKS = frozenset("\x85\u2028\u2029")
+
+
+def _represent_str(dumper: yaml.SafeDumper, text: str):
+    """Double-quote (escaping them) strings holding YAML line-break characters, so they load back unchanged."""
+    style = '"' if YAML_BREAKS.intersection(text) else None
+    return dumper.represent_scalar("tag:yaml.org,2002:str", text, style=style)
+
+
+Dumper.add_representer(str, _represent_str)
 Dumper.add_representer(list, lambda dumper, seq: dumper.represent_sequence("tag:yaml.org,2002:seq", seq, flow_style=True))
 
 Loc = tuple  # path into the data: str keys and int list indices

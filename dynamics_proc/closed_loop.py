@@ -17,7 +17,7 @@ from cosim.config import Scenario
 
 from .model import ModelParams, World, initial_world, signals, step_frame, truth_measurement
 
-__all__ = ["SimResult", "simulate", "Measure", "DONE_GRACE_FRAMES"]
+__all__ = ["SimResult", "simulate", "Measure", "noisy_measurement", "DONE_GRACE_FRAMES"]
 
 #: frames still simulated after the controller declares the cart full and the flow has stopped
 DONE_GRACE_FRAMES = 5
@@ -35,6 +35,18 @@ class SimResult:
     heights: np.ndarray
     world: World
     wall_s: float
+
+
+def noisy_measurement(seed: int, holes: float, sigma_m: float) -> Measure:
+    """A ``measure`` hook that degrades the truth map like a perceived one: Gaussian noise of ``sigma_m`` (m)
+    on every cell, then a random fraction ``holes`` of cells NaN. Seeded, so runs repeat."""
+    rng = np.random.default_rng(seed)
+
+    def measure(truth, frame):
+        out = truth + rng.normal(0.0, sigma_m, truth.shape)
+        out[rng.random(truth.shape) < holes] = np.nan
+        return out
+    return measure
 
 
 def simulate(scenario: Scenario, frames: int | None = None, measure: Measure | None = None,

@@ -2,7 +2,8 @@
 
 Each role writes a struct, a trace array (frame, monotonic ns) and, for the renderer, an image. Faults are
 chosen per role with keyword arguments: ``crash_at`` (raise), ``kill_at`` (SIGKILL itself), ``exit_at``
-(os._exit without report), ``hang_at`` (block far longer than any timeout).
+(os._exit without report), ``hang_at`` (block far longer than any timeout); ``stamp_file`` receives the
+monotonic time of a ``kill_at`` kill.
 """
 from __future__ import annotations
 
@@ -40,11 +41,13 @@ def blocks_perception(scenario):
 class Fake:
     """One stand-in role; the fault keywords pick the frame at which it misbehaves (-1: never)."""
 
-    def __init__(self, scenario, role, crash_at=-1, kill_at=-1, exit_at=-1, hang_at=-1, start_delay_s=0.0):
+    def __init__(self, scenario, role, crash_at=-1, kill_at=-1, exit_at=-1, hang_at=-1, start_delay_s=0.0,
+                 stamp_file=""):
         self.name = role
         self.scenario = scenario
         self.faults = dict(crash_at=crash_at, kill_at=kill_at, exit_at=exit_at, hang_at=hang_at)
         self.start_delay_s = start_delay_s
+        self.stamp_file = stamp_file
         self.seg = None
 
     def start(self, segment):
@@ -56,6 +59,9 @@ class Fake:
         if frame == self.faults["crash_at"]:
             raise ValueError(f"injected crash in {self.name} at frame {frame}")
         if frame == self.faults["kill_at"]:
+            if self.stamp_file:  # CLOCK_MONOTONIC is system-wide: the test compares it with its own clock
+                with open(self.stamp_file, "w") as f:
+                    f.write(repr(time.monotonic()))
             os.kill(os.getpid(), signal.SIGKILL)
         if frame == self.faults["exit_at"]:
             os._exit(3)

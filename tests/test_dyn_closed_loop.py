@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cosim.config import Scenario
-from dynamics_proc.closed_loop import simulate
+from dynamics_proc.closed_loop import noisy_measurement, simulate
 from dynamics_proc.grainfill import GrainGrid, max_slope
 from dynamics_proc.summary import summarize
 
@@ -75,20 +75,10 @@ def test_fig9_signals_track():
     assert np.abs(a[settled] - d[settled]).max() <= 0.5 * s.machine_sync.nudge_m + 0.01
 
 
-def noisy_holes(seed: int, holes: float, sigma: float):
-    rng = np.random.default_rng(seed)
-
-    def measure(truth, frame):
-        out = truth + rng.normal(0.0, sigma, truth.shape)
-        out[rng.random(truth.shape) < holes] = np.nan
-        return out
-    return measure
-
-
 @pytest.mark.parametrize("estimator", ["paper", pytest.param("fused", marks=pytest.mark.slow)])
 def test_perceived_map_with_holes_and_noise_neither_crashes_nor_stalls(estimator):
     s = scen(controller={"estimator": estimator})
-    r = simulate(s, stop_when_done=True, measure=noisy_holes(3, holes=0.3, sigma=0.02))
+    r = simulate(s, stop_when_done=True, measure=noisy_measurement(3, holes=0.3, sigma_m=0.02))
     sm = check_invariants(s, r)
     assert r.series["dyn_state.all_full"][-1] == 1                 # finished
     assert sm["spill"]["volume_m3"] == 0.0

@@ -16,7 +16,6 @@ import numpy as np
 import pytest
 
 import test_viewer_standins as standins
-from test_viewer_standins import shm_clean  # noqa: F401 - this process's segments only
 from cosim.errors import ParticipantDied
 from cosim.launcher import launch
 from cosim.recording import RecordingError, RecordOptions, mcap_sink, read_recording
@@ -33,7 +32,9 @@ TOPICS = {"/tf": "foxglove.FrameTransform", "/dyn_state": "cosim.struct.dyn_stat
 def recorded(tmp_path_factory):
     out = tmp_path_factory.mktemp("rec") / "run"
     sc = standins.scenario(1.0)
-    res = launch(sc, out, specs=standins.specs(), console_log=False, sinks=[mcap_sink()])
+    # flush every frame (the default batches up to 0.5 s per chunk), so that where a cut keeps whole frames
+    # does not depend on how loaded the machine was while recording
+    res = launch(sc, out, specs=standins.specs(), console_log=False, sinks=[mcap_sink(RecordOptions(flush_s=0.0))])
     assert res.completed, res.error
     return sc, out, read_recording(out / "recording.mcap")
 

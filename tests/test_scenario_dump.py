@@ -3,11 +3,18 @@ from __future__ import annotations
 
 import math
 
+import pytest
 import yaml
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from cosim.config import Scenario
-from cosim.loader import dump_resolved, load_scenario, load_scenario_text, resolve_scenario_arg
+from cosim.loader import (
+    dump_resolved,
+    load_scenario,
+    load_scenario_text,
+    resolve_scenario_arg,
+)
 from cosim.yamlmarks import Loader as _Loader
 
 
@@ -60,3 +67,10 @@ def test_round_trip_property(name, description, seed, duration, heading, xyz, de
     back = roundtrip(s)
     assert back == s
     assert math.copysign(1.0, back.combine.heading_deg) == math.copysign(1.0, heading)
+
+
+@pytest.mark.parametrize("text", ["\x85", "a\u2028b", "c\u2029d", "multi\nline", "1e3"])
+def test_yaml_line_break_characters_survive_the_round_trip(text):
+    """Regression (found by hypothesis): U+0085 in a description reloaded as a space."""
+    s = load_scenario_text("format_version: 1\n", extra={"description": text})
+    assert roundtrip(s).description == text

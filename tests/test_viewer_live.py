@@ -14,7 +14,6 @@ from pathlib import Path
 import pytest
 
 import test_viewer_standins as standins
-from test_viewer_standins import shm_clean  # noqa: F401 - this process's segments only
 from cosim.launcher import ObserverSpec, launch
 from cosim.viewer import LiveSource, RunEnded, RunNotFound, resolve_run
 from cosim.viewer.live import SHM_DIR

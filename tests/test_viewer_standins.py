@@ -11,10 +11,8 @@ from __future__ import annotations
 import os
 import signal
 import time
-from pathlib import Path
 
 import numpy as np
-import pytest
 
 from cosim.config import Scenario
 from cosim.inprocess import simulate
@@ -27,21 +25,6 @@ NXC, NYC = 30, 15
 N_BEAMS = 400
 SECTIONS = 9
 VEHICLES = ("combine", "tractor", "cart")
-
-
-@pytest.fixture
-def shm_clean():
-    """Fails the test if this process leaves a run segment in /dev/shm.
-
-    Narrower than conftest's fixture of the same name (which this overrides where imported): several engineers
-    run tests on one machine at once, and their launchers' segments (``cosim-<their pid>-...``) come and go.
-    """
-    shm = Path("/dev/shm")
-    mine = f"cosim-{os.getpid()}-"
-    before = {p.name for p in shm.glob(mine + "*")} if shm.is_dir() else set()
-    yield
-    left = ({p.name for p in shm.glob(mine + "*")} if shm.is_dir() else set()) - before
-    assert not left, f"segments left in /dev/shm: {sorted(left)}"
 
 
 def blocks_dynamics(scenario):
