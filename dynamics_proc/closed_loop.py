@@ -17,7 +17,7 @@ from cosim.config import Scenario
 
 from .model import ModelParams, World, initial_world, signals, step_frame, truth_measurement
 
-__all__ = ["SimResult", "simulate", "Measure", "noisy_measurement", "DONE_GRACE_FRAMES"]
+__all__ = ["SimResult", "simulate", "Measure", "noisy_measurement", "occluded_measurement", "DONE_GRACE_FRAMES"]
 
 #: frames still simulated after the controller declares the cart full and the flow has stopped
 DONE_GRACE_FRAMES = 5
@@ -45,6 +45,25 @@ def noisy_measurement(seed: int, holes: float, sigma_m: float) -> Measure:
     def measure(truth, frame):
         out = truth + rng.normal(0.0, sigma_m, truth.shape)
         out[rng.random(truth.shape) < holes] = np.nan
+        return out
+    return measure
+
+
+def occluded_measurement(seed: int, holes: float, sigma_m: float, radius_m: float, cell_m: float) -> Measure:
+    """Like :func:`noisy_measurement`, and also hides a disc of ``radius_m`` around the cell that rose most
+    since the previous frame: where grain is arriving, the view the falling stream blocks (the paper's
+    degradation). ``cell_m``: the controller grid's cell. Seeded."""
+    rng = np.random.default_rng(seed)
+    prev: list[np.ndarray] = []
+
+    def measure(truth, frame):
+        out = truth + rng.normal(0.0, sigma_m, truth.shape)
+        out[rng.random(truth.shape) < holes] = np.nan
+        if prev and float(np.max(truth - prev[0])) > 0.0:
+            i, j = np.unravel_index(np.argmax(truth - prev[0]), truth.shape)
+            ii, jj = np.ogrid[:truth.shape[0], :truth.shape[1]]
+            out[((ii - i) ** 2 + (jj - j) ** 2) * cell_m ** 2 <= radius_m ** 2] = np.nan
+        prev[:] = [truth]
         return out
     return measure
 

@@ -30,10 +30,11 @@ import numpy as np
 
 from cosim.config import Scenario
 
-from .grainfill import section_rows
+from .estimator import FillEstimate, FusionParams, initial_estimate, landing_on, predict, update
+from .grainfill import GrainGrid, section_rows
 from .strategies import get_strategy
 
-__all__ = ["BIAS_TAU_S", "SETTLE_S", "ControllerParams", "ControllerState", "ControllerOutput",
+__all__ = ["BIAS_TAU_S", "SETTLE_S", "ControllerParams", "ControllerState", "ControllerOutput", "Delivery",
            "min2x2", "section_heights", "initial_controller", "controller_step"]
 
 #: time constant of the steady-state bias filter, s
@@ -71,6 +72,7 @@ class ControllerParams:
     estimator: str
     strategy: str
     frame_dt_s: float
+    fusion: FusionParams | None      # the fused estimator's constants (estimator "fused"), else None
 
     @classmethod
     def from_scenario(cls, s: Scenario) -> "ControllerParams":
@@ -90,7 +92,14 @@ class ControllerParams:
                    tuple((i + 0.5) * sl for i in range(c.sections)), c.safe_margin_m,
                    max(c.safe_margin_m - c.safety_hysteresis_m, 0.0), s.machine_sync.nudge_m,
                    s.machine_sync.nudge_min_interval_s, c.stale_timeout_s, c.estimator, c.strategy,
-                   s.timing.sensor_period_s)
+                   s.timing.sensor_period_s, _fusion(s, nx, ny) if c.estimator == "fused" else None)
+
+
+def _fusion(s: Scenario, nx: int, ny: int) -> FusionParams:
+    f = s.controller.fusion
+    grid = GrainGrid(nx, ny, s.controller.grid_cell_m, s.cart.interior_depth_m, math.tan(s.crop.repose_rad),
+                     s.grain.deposit_radius_m)
+    return FusionParams(grid, f.flow_sigma, f.settle_sigma_m, f.measurement_sigma_m, s.timing.latency_frames)
 
 
 def _edge_cells(margin_m: float, cell_m: float, nx: int, ny: int) -> tuple[int, int]:
@@ -108,7 +117,8 @@ class ControllerState:
     last_valid_t: np.ndarray     # (N,) s, time of the last valid cell per section (-inf never)
     forced_full: np.ndarray      # (N,) bool, sections given up as stale
     full: np.ndarray             # (N,) bool, sections declared full (latched)
-    memory: np.ndarray | None    # (nx, ny) m, last valid value per cell ("fused"), NaN never
+    estimate: FillEstimate | None  # the fused estimate (estimator "fused"), else None
+    delivered_m3: float          # flow signal integrated up to the last step, m^3
     target: int                  # 0-based section being filled, -1 none
     last_nudge_t: float          # s
     bias_m: float
@@ -127,6 +137,17 @@ class ControllerOutput:
     desired_m: float
     effort_m: float
     fullness: np.ndarray         # (N,) estimated height / target, NaN unknown
+
+
+@dataclass(frozen=True)
+class Delivery:
+    """What the machine knows of the grain it has delivered, for the fused estimator: the flow signal
+    integrated since the start (m^3), and the spout position and exit velocity in the cart grid frame (m, m/s),
+    from which the impact is predicted."""
+
+    delivered_m3: float
+    spout: np.ndarray            # (3,) m
+    velocity: np.ndarray         # (3,) m/s
 
 
 def min2x2(m: np.ndarray, next_row: np.ndarray | None = None) -> np.ndarray:
@@ -165,9 +186,9 @@ def section_heights(m: np.ndarray, p: ControllerParams) -> np.ndarray:
 def initial_controller(p: ControllerParams) -> ControllerState:
     """State before the first measurement: nothing known, auger off."""
     n = p.sections
-    mem = np.full((p.nx, p.ny), np.nan) if p.estimator == "fused" else None
-    return ControllerState(np.full(n, np.nan), np.full(n, -np.inf), np.zeros(n, bool), np.zeros(n, bool), mem,
-                           -1, -np.inf, 0.0, False, False, False, 0)
+    est = initial_estimate(p.fusion) if p.fusion is not None else None
+    return ControllerState(np.full(n, np.nan), np.full(n, -np.inf), np.zeros(n, bool), np.zeros(n, bool), est,
+                           0.0, -1, -np.inf, 0.0, False, False, False, 0)
 
 
 def _inside(x: float, y: float, margin: float, p: ControllerParams) -> bool:
@@ -176,25 +197,38 @@ def _inside(x: float, y: float, margin: float, p: ControllerParams) -> bool:
 
 def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np.ndarray | None,
                     actual_x: float, impacts: tuple[tuple[float, float], ...], drift_x: float,
-                    nudge_signal: float) -> tuple[ControllerState, ControllerOutput]:
+                    nudge_signal: float, delivery: Delivery | None = None) -> tuple[ControllerState, ControllerOutput]:
     """One controller decision at time ``t`` s.
 
     ``meas`` (nx, ny) m or None; ``actual_x`` spout grid x m; ``impacts`` predicted impact points (grid
     x, y m, from the known geometry; the auger runs only while all are safely inside); ``drift_x`` predicted
     impact x minus spout x m; ``nudge_signal`` the spout grid x m
-    the current setpoint implies.
+    the current setpoint implies; ``delivery`` what the fused estimator needs (required with it).
     """
-    heights, last_valid, memory, seen = st.heights, st.last_valid_t, st.memory, st.seen
+    heights, last_valid, seen = st.heights, st.last_valid_t, st.seen
+    est, delivered = st.estimate, st.delivered_m3
+    if est is not None:
+        if delivery is None:
+            raise ValueError("the fused estimator needs the delivery signal")
+        vol = max(delivery.delivered_m3 - delivered, 0.0)
+        delivered = delivery.delivered_m3
+        if vol > 0.0 and est.started:
+            gx, gy = landing_on(est.height, delivery.spout, delivery.velocity, p.fusion.grid)
+            est = predict(est, vol, gx, gy, p.fusion)
+        else:
+            est = predict(est, 0.0, 0.0, 0.0, p.fusion)
     if meas is not None:
         m = np.asarray(meas, dtype=np.float64)
-        if memory is not None:
-            memory = np.where(np.isnan(m), memory, m)
-            m = memory
         new = section_heights(m, p)
         ok = ~np.isnan(new)
-        heights = np.where(ok, new, heights)
         last_valid = np.where(ok, t, last_valid)
         seen = seen or bool(ok.any())                          # an all-NaN map is no measurement
+        if est is None:
+            heights = np.where(ok, new, heights)
+        else:
+            est = update(est, m, p.fusion)
+    if est is not None and est.started:
+        heights = section_heights(est.height, p)
     forced = st.forced_full
     if (seen and st.target >= 0 and st.auger_cmd and t - last_valid[st.target] > p.stale_timeout_s
             and not forced[st.target]):
@@ -229,7 +263,8 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
     auger = bool(seen and target >= 0 and safe and near)
     with np.errstate(invalid="ignore"):
         fullness = heights / p.target_m
-    new_state = replace(st, heights=heights, last_valid_t=last_valid, forced_full=forced, full=full, memory=memory,
+    new_state = replace(st, heights=heights, last_valid_t=last_valid, forced_full=forced, full=full, estimate=est,
+                        delivered_m3=delivered,
                         target=target, last_nudge_t=last_nudge, bias_m=bias, auger_cmd=auger, seen=seen,
                         all_full=all_full, nudges=count)
     return new_state, ControllerOutput(nudge, auger, desired, effort, fullness)

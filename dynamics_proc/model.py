@@ -15,7 +15,8 @@ from cosim.config import Scenario
 from cosim.geometry import cart_grid_from_body, invert, vehicle_pose
 
 from . import auger as ag
-from .controller import ControllerOutput, ControllerParams, ControllerState, controller_step, initial_controller
+from .controller import (ControllerOutput, ControllerParams, ControllerState, Delivery, controller_step,
+                         initial_controller)
 from .grainfill import GrainGrid, deposit, initial_heights, resample, volume
 from .integrators import integrate
 from .machine_sync import SyncGains, cart_offset, sync_command
@@ -48,6 +49,7 @@ class ModelParams:
     lateral_offset_m: float
     signal_offset_m: float           # nudge signal = setpoint long + this (spout grid x at the setpoint)
     density_kgpm3: float
+    flow_meter_bias: float           # relative error of the flow signal the fused estimator is given
 
     @classmethod
     def from_scenario(cls, s: Scenario) -> "ModelParams":
@@ -57,7 +59,7 @@ class ModelParams:
                    ControllerParams.from_scenario(s), GrainGrid.from_scenario(s).cap(), cart_grid_from_body(s.cart),
                    s.integrator.method, s.integrator.rtol, s.integrator.atol, s.timing.dynamics_dt_s,
                    s.timing.steps_per_frame, s.timing.sensor_period_s, s.machine_sync.lateral_offset_m,
-                   s.cart.interior_length_m / 2.0 - spout_x, s.crop.density)
+                   s.cart.interior_length_m / 2.0 - spout_x, s.crop.density, s.controller.fusion.flow_meter_bias)
 
 
 @dataclass(frozen=True)
@@ -132,11 +134,15 @@ def _predicted_impacts(x: np.ndarray, p: ModelParams) -> tuple[float, tuple[floa
 def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
     """Advance the world by one sensor frame acting on ``meas`` (controller grid heights m, NaN holes) or None."""
     x = w.x
-    _, _, spg, _ = spout_grid(x, p)
+    _, vel, spg, g = spout_grid(x, p)
     drift, top, floor = _predicted_impacts(x, p)
     signal = w.setpoint[0] + p.signal_offset_m
+    delivery = None
+    if p.control.fusion is not None:
+        delivery = Delivery(w.delivered_m3 * (1.0 + p.flow_meter_bias), spg, g[:3, :3] @ vel)
     # the stream lands between these two points: both must be safely inside
-    ctrl, out = controller_step(w.ctrl, p.control, w.t_s, meas, float(spg[0]), (top, floor), drift, signal)
+    ctrl, out = controller_step(w.ctrl, p.control, w.t_s, meas, float(spg[0]), (top, floor), drift, signal,
+                                delivery)
     setpoint = (w.setpoint[0] + out.nudge * p.control.nudge_m, w.setpoint[1])
     level, vol = w.flow_level, 0.0
     for _ in range(p.steps):

@@ -12,6 +12,8 @@ from dynamics_proc.strategies import back_to_front, front_to_back, get_strategy,
 
 
 def cparams(**controller) -> ControllerParams:
+    """The decision logic on the paper-style estimator (the fused one has tests of its own)."""
+    controller.setdefault("estimator", "paper")
     return ControllerParams.from_scenario(Scenario.model_validate({"format_version": 1, "controller": controller}))
 
 

@@ -1,13 +1,13 @@
 """Typed, frozen scenario records (pydantic v2). ``Scenario`` is the root."""
 from .base import Model, Mount
-from .control import Controller, Grain, Integrator
+from .control import Controller, Fusion, Grain, Integrator
 from .machines import CROP_PRESETS, Auger, Cart, Combine, Crop, MachineSync, Tractor
 from .rendering import Render
 from .scenario import FORMAT_VERSION, Outputs, Scenario, Timing
 from .sensing import Codec, Noise, Pattern, Perception, Sensor
 
 __all__ = [
-    "Model", "Mount", "Controller", "Grain", "Integrator", "CROP_PRESETS", "Auger", "Cart", "Combine", "Crop",
+    "Model", "Mount", "Controller", "Fusion", "Grain", "Integrator", "CROP_PRESETS", "Auger", "Cart", "Combine", "Crop",
     "MachineSync", "Tractor", "Render", "FORMAT_VERSION", "Outputs", "Scenario", "Timing", "Codec", "Noise",
     "Pattern", "Perception", "Sensor",
 ]

@@ -11,7 +11,7 @@ from pydantic import Field
 
 from .base import Fraction, Model, NonNegFloat, PosFloat
 
-__all__ = ["Grain", "Controller", "Integrator"]
+__all__ = ["Grain", "Fusion", "Controller", "Integrator"]
 
 
 class Grain(Model):
@@ -26,6 +26,25 @@ class Grain(Model):
     deposit_radius_m: PosFloat = 0.25
 
 
+class Fusion(Model):
+    """The fused estimator (``controller.estimator: fused``, dynamics_proc.estimator): a per-cell Kalman filter
+    that deposits the delivered volume at the predicted impact with the heap law and corrects it with the
+    perceived heights.
+
+    * ``flow_sigma``: relative 1-sigma of each frame's predicted rise per cell (flow signal, heap shape,
+      placement);
+    * ``settle_sigma_m``: per-frame 1-sigma drift of every cell (settling the heap law does not model);
+    * ``measurement_sigma_m``: 1-sigma of a perceived cell height;
+    * ``flow_meter_bias``: relative error of the flow signal the estimator is given (0: calibrated), a study
+      knob for model mismatch; the grain delivered is unchanged.
+    """
+
+    flow_sigma: NonNegFloat = 0.2
+    settle_sigma_m: NonNegFloat = 0.002
+    measurement_sigma_m: PosFloat = 0.03
+    flow_meter_bias: float = Field(default=0.0, ge=-0.9, le=10.0, allow_inf_nan=False)
+
+
 class Controller(Model):
     """Offloading controller: operator inputs and the section grid.
 
@@ -35,8 +54,10 @@ class Controller(Model):
     measurement for ``stale_timeout_s`` while it is being filled is treated as full (so nothing overfills
     blind). Cells whose centre lies within ``edge_margin_m`` of an inner wall are left out of the estimate (the
     heap's peak is never there; wall and rim returns are); a section's estimate is updated only from a map with
-    at least ``min_section_cells`` valid cells in it. ``estimator``: ``paper`` takes the per-section robust
-    peak (highest 2 x 2 block minimum) of the map; ``fused`` first fills holes with each cell's last valid value.
+    at least ``min_section_cells`` valid cells in it. ``estimator``: ``fused`` (default) takes each section's
+    robust peak (highest 2 x 2 block minimum) from the fused estimate of :class:`Fusion` (perceived heights
+    fused with the volume delivered at the predicted impact); ``paper`` takes it from the perceived map alone,
+    as the paper does.
     Strategies: dynamics_proc.strategies.
     """
 
@@ -45,12 +66,13 @@ class Controller(Model):
     sections: int = Field(default=9, ge=1, le=64)
     grid_cell_m: PosFloat = 0.1
     full_fraction: Fraction = 0.995
-    estimator: Literal["paper", "fused"] = "paper"
+    estimator: Literal["paper", "fused"] = "fused"
     safe_margin_m: NonNegFloat = 0.3
     safety_hysteresis_m: NonNegFloat = 0.1
     stale_timeout_s: PosFloat = 10.0
     edge_margin_m: NonNegFloat = 0.2
     min_section_cells: int = Field(default=4, ge=1)
+    fusion: Fusion = Fusion()
 
 
 class Integrator(Model):
