@@ -25,9 +25,13 @@ NOTES = ("Ground truth feeds the controller the exact height map. Perception fee
          "simulated LiDAR: cells hidden behind the near wall, the pile's own crest or the grain stream have no "
          "return (holes), cells seen at grazing angles carry the nearest-pixel error, and every measurement is "
          "one or more frames old. The paper-style estimator takes each section's fullness from the perceived "
-         "cells alone, so holes and stale views make it switch sections late or early (the paper's Figs 9b and "
-         "10b). The fused estimator adds the volume known to have been delivered at the known impact points and "
-         "weights each source by its uncertainty.")
+         "cells alone. The section being filled is exactly the one the falling stream hides and the mast views "
+         "at a grazing angle, so its perceived peak lags or vanishes while grain arrives: the controller moves "
+         "on late and the section overfills (the paper's Figs 9b and 10b). The fused estimator (ours) is a "
+         "per-cell Kalman filter: every frame it deposits the volume the flow signal reports at the impact "
+         "predicted from the spout's pose, with the heap law (a flat-topped cone at the angle of repose), and "
+         "corrects that prediction with the perceived heights wherever they exist, each weighted by its "
+         "variance; the measurement's latency is accounted for.")
 
 
 def variants(scenario: Scenario) -> dict[str, Scenario]:
