@@ -35,7 +35,7 @@ from .grainfill import GrainGrid, section_rows
 from .strategies import get_strategy
 
 __all__ = ["BIAS_TAU_S", "SETTLE_S", "ControllerParams", "ControllerState", "ControllerOutput", "Delivery",
-           "min2x2", "section_heights", "initial_controller", "controller_step"]
+           "min2x2", "section_heights", "section_valid", "initial_controller", "controller_step"]
 
 #: time constant of the steady-state bias filter, s
 BIAS_TAU_S = 5.0
@@ -163,16 +163,29 @@ def min2x2(m: np.ndarray, next_row: np.ndarray | None = None) -> np.ndarray:
     return np.fmin(np.fmin(m, down), np.fmin(m[:, col], down[:, col]))
 
 
-def section_heights(m: np.ndarray, p: ControllerParams) -> np.ndarray:
-    """Robust peak per section: the highest 2 x 2 block minimum (blocks stay inside their section; cells within
-    the edge margin left out), (N,) float64 m; NaN where a section has fewer than ``min_section_cells`` valid
-    cells. Exact for a heap whose flat top spans 2 x 2 cells."""
+def _inner(m: np.ndarray, p: ControllerParams) -> np.ndarray:
+    """A float64 copy of ``m`` (nx, ny) m with the cells within the edge margin set to NaN."""
     ex, ey = p.edge_cells
     m = np.array(m, dtype=np.float64)
     if ex:
         m[:ex], m[-ex:] = np.nan, np.nan
     if ey:
         m[:, :ey], m[:, -ey:] = np.nan, np.nan
+    return m
+
+
+def section_valid(m: np.ndarray, p: ControllerParams) -> np.ndarray:
+    """Whether each section of ``m`` (nx, ny) m has at least ``min_section_cells`` valid cells inside the edge
+    margin, (N,) bool."""
+    valid = np.count_nonzero(~np.isnan(_inner(m, p)), axis=1)
+    return np.add.reduceat(valid, np.asarray(p.section_start_rows)) >= p.min_section_cells
+
+
+def section_heights(m: np.ndarray, p: ControllerParams) -> np.ndarray:
+    """Robust peak per section: the highest 2 x 2 block minimum (blocks stay inside their section; cells within
+    the edge margin left out), (N,) float64 m; NaN where a section has fewer than ``min_section_cells`` valid
+    cells. Exact for a heap whose flat top spans 2 x 2 cells."""
+    m = _inner(m, p)
     starts = np.asarray(p.section_start_rows)
     nxt = np.minimum(np.arange(p.nx) + 1, p.nx - 1)
     last = np.append(starts[1:], p.nx) - 1                   # last row of each section pairs with itself
@@ -219,14 +232,15 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
             est = predict(est, 0.0, 0.0, 0.0, p.fusion)
     if meas is not None:
         m = np.asarray(meas, dtype=np.float64)
-        new = section_heights(m, p)
-        ok = ~np.isnan(new)
-        last_valid = np.where(ok, t, last_valid)
-        seen = seen or bool(ok.any())                          # an all-NaN map is no measurement
         if est is None:
+            new = section_heights(m, p)
+            ok = ~np.isnan(new)
             heights = np.where(ok, new, heights)
         else:
+            ok = section_valid(m, p)
             est = update(est, m, p.fusion)
+        last_valid = np.where(ok, t, last_valid)
+        seen = seen or bool(ok.any())                          # an all-NaN map is no measurement
     if est is not None and est.started:
         heights = section_heights(est.height, p)
     forced = st.forced_full
