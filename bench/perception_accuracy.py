@@ -2,7 +2,8 @@
 
 Run: ``python bench/perception_accuracy.py [frames]`` (from the repository root; default 4 frames). Runs the
 default scenario in-process with the mock renderer at full resolution (the GL renderer writes the same
-bytes; the mock needs no GPU), both samplers, accuracy every frame, and prints Markdown: the range-error
+bytes; the mock needs no GPU), both samplers, accuracy every frame on every beam (``accuracy_beams: 0``; a
+run samples 4096 beams per evaluation by default), and prints Markdown: the range-error
 table by distance band and the offloading measures. Writes the standalone reports to
 ``bench/out/perception_accuracy_<label>_<sampler>.{md,json}``. A third run uses a mount that sees past the
 auger tube (:data:`ALT_MOUNT`) for the impact and coverage figures.
@@ -30,7 +31,7 @@ ALT_MOUNT = {"parent": "combine", "xyz_m": [-4.0, 1.5, 6.0], "rpy_deg": [0.0, 45
 
 def run(sampler: str, frames: int, mount: dict | None = None) -> dict:
     doc = {"format_version": 1, "renderer": "mock", "render": {"mock_scale": 1.0},
-           "perception": {"accuracy_every_frames": 1, "sampler": sampler}}
+           "perception": {"accuracy_every_frames": 1, "accuracy_beams": 0, "sampler": sampler}}
     if mount is not None:
         doc["sensor"] = {"mount": mount}
     sc = Scenario.model_validate_json(json.dumps(doc))

@@ -5,6 +5,13 @@ the LiDAR origin (an exact ray cast of the same scene: ``renderer_proc.raycast``
 are valid and within the sensor's range limits. The other measures compare the perceived rim corners, height
 map and impact with the dynamics' ground truth. Truth never feeds the estimates: these functions are called
 after the frame's outputs are computed.
+
+Sampling: an evaluation need not cast every beam. :func:`sample_beams` draws one beam uniformly from each of
+``count`` equal runs of the beam table (row-major for the grid and honeycomb patterns, so a run is a short
+stretch of one row and the sample covers the whole field evenly), seeded by the scenario seed and the frame:
+reproducible, and a different sample each evaluated frame, so a run's statistics cover every part of the
+field. Each frame's statistics then carry a sampling error: about s / sqrt(n) for a mean (s the spread of the
+per-beam errors, n the compared beams; stratification only lowers it) and sqrt(p (1 - p) / n) for a share p.
 """
 from __future__ import annotations
 
@@ -18,13 +25,26 @@ from cosim.geometry import apply, cart_body_from_grid, invert, vehicle_pose
 
 from .blocks import RANGE_BANDS_M, band_name
 
-__all__ = ["range_error_stats", "exact_ranges", "true_corners_sensor", "corner_error", "truth_on_grid",
+__all__ = ["range_error_stats", "exact_ranges", "sample_beams", "ACCURACY_STREAM", "true_corners_sensor", "corner_error", "truth_on_grid",
            "heightmap_error", "impact_error", "world_from_parent", "ABOVE_M", "WORKING_RANGE_M"]
 
 #: the "large error" threshold of the range statistics, m
 ABOVE_M = 0.05
 #: the working range inside which the accuracy target applies, m
 WORKING_RANGE_M = (2.0, 15.0)
+#: fixed third seed word that separates the accuracy sample from any other use of (seed, frame)
+ACCURACY_STREAM = 0x41434355  # "ACCU"
+
+
+def sample_beams(n_beams: int, count: int, seed: int, frame: int) -> np.ndarray:
+    """Beam indices (min(count, N),) int64, ascending: one drawn uniformly from each of ``count`` equal runs of
+    consecutive beams (stratified sample), PCG64 seeded by (seed, frame, ACCURACY_STREAM). ``count`` 0 or at
+    least ``n_beams``: every beam."""
+    if count <= 0 or count >= n_beams:
+        return np.arange(n_beams, dtype=np.int64)
+    edges = (np.arange(count + 1, dtype=np.int64) * n_beams) // count
+    gen = np.random.default_rng([int(seed), int(frame), ACCURACY_STREAM])
+    return edges[:-1] + (gen.random(count) * np.diff(edges)).astype(np.int64)
 
 
 def range_error_stats(ranges: np.ndarray, exact: np.ndarray, range_min_m: float, range_max_m: float) -> dict:

@@ -52,30 +52,35 @@ def decode_bytes(r: np.ndarray, b: np.ndarray, a: np.ndarray, codec: Codec) -> n
 def decode_lut(codec: Codec) -> np.ndarray:
     """Eq 3 tabulated for every (R, B, valid) byte combination: (2^17,) float32 m, NaN where invalid.
 
-    Index with :func:`lut_key`. Built by :func:`decode_bytes` itself, so the two agree bit for bit; the
-    per-frame decode of a gathered word is then one integer key and one table read (256 KiB + 256 KiB: the
-    table stays in cache).
+    Index with :func:`lut_key` (R | B << 8 | valid << 16). Built by :func:`decode_bytes` itself, so the two
+    agree bit for bit; the per-frame decode of a gathered word is then one integer key and one table read
+    (512 KiB: the table stays in cache).
     """
-    r = np.repeat(np.arange(256, dtype=np.uint8), 512)
-    b = np.tile(np.repeat(np.arange(256, dtype=np.uint8), 2), 256)
-    a = np.tile(np.array([0, 255], dtype=np.uint8), 256 * 256)
+    key = np.arange(1 << 17, dtype=np.uint32)
+    r = (key & np.uint32(0xFF)).astype(np.uint8)
+    b = ((key >> np.uint32(8)) & np.uint32(0xFF)).astype(np.uint8)
+    a = np.where(key >> np.uint32(16), np.uint8(255), np.uint8(0))
     lut = decode_bytes(r, b, a, codec)
     lut.flags.writeable = False                         # shared by every caller through the cache
     return lut
 
 
 def lut_key(words: np.ndarray) -> np.ndarray:
-    """Little-endian RGBA words (any shape, uint32) -> key R << 9 | B << 1 | (A >= 128) into the decode table.
+    """Little-endian RGBA words (any shape, uint32) -> key R | B << 8 | (A & 1) << 16 into the decode table.
 
-    Valid pixels carry A = 255 and invalid ones A = 0 (the renderer contract), so the top bit of A decides.
+    Valid pixels carry A = 255 and invalid ones A = 0 (the renderer contract), so the low bit of A decides.
+    Four integer operations: (w >> 8) holds G | B << 8 | A << 16, masked to B and A's low bit.
     """
     w = np.asarray(words, dtype=np.uint32)
-    return ((w & np.uint32(0xFF)) << np.uint32(9)) | ((w >> np.uint32(15)) & np.uint32(0x1FE)) | (w >> np.uint32(31))
+    key = w >> np.uint32(8)
+    key &= np.uint32(0x1FF00)
+    key |= w & np.uint32(0xFF)
+    return key
 
 
 def decode_words(words: np.ndarray, lut: np.ndarray) -> np.ndarray:
     """Decode gathered RGBA words (any shape, uint32) with a :func:`decode_lut` table: depth m float32, NaN."""
-    return lut[lut_key(words)]
+    return np.take(lut, lut_key(words))
 
 
 def decode_depth(rgba: np.ndarray, codec: Codec) -> np.ndarray:

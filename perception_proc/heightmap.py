@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
@@ -57,7 +58,7 @@ STREAM_TOP_M = 1.2
 @dataclass(frozen=True)
 class HeightMap:
     """``heights`` (nx, ny) float32 m above the cart floor, NaN where no answer; ``counts`` (nx, ny) int32
-    returns per cell; ``grid_points`` (M, 3) float64 interior points in the grid frame; ``stream`` (M,) bool
+    returns per cell; ``grid_points`` (M, 3) float64 interior points in the grid frame (column-major); ``stream`` (M,) bool
     which of them are stream returns; ``coverage`` fraction of cells with a height."""
 
     heights: np.ndarray
@@ -67,24 +68,49 @@ class HeightMap:
     coverage: float
 
 
-def _grid_from_level(p: np.ndarray, level_from_grid: np.ndarray) -> np.ndarray:
-    """(N, 3) level-frame points into the grid frame, R^T (p - t), written out per component (a 3 x 3 BLAS
-    product on tall arrays is slower than nine multiply-adds)."""
+def _grid_rows(p: np.ndarray, level_from_grid: np.ndarray, z_lo: float, z_hi: float):
+    """Level-frame points (N, 3) into the grid frame, R^T (p - t), keeping those with grid z in (z_lo, z_hi).
+
+    Written out per component on contiguous coordinate rows (a 3 x 3 BLAS product on tall arrays is slower
+    than nine multiply-adds), z first so that x and y are only computed for the points in the slab. Returns
+    (x, y, z) (K,) float64 and the kept indices (K,) int64 into ``p`` (ascending); NaN rows never pass."""
     r, t = level_from_grid[:3, :3], level_from_grid[:3, 3]
-    x, y, z = p[:, 0] - t[0], p[:, 1] - t[1], p[:, 2] - t[2]
-    return np.stack([r[0, k] * x + r[1, k] * y + r[2, k] * z for k in range(3)], axis=1)
+    x, y, z = (p[:, k] - t[k] for k in range(3))
+    with np.errstate(invalid="ignore"):
+        gz = r[0, 2] * x + r[1, 2] * y + r[2, 2] * z
+        sel = np.flatnonzero((gz > z_lo) & (gz < z_hi))
+    x, y, z = x[sel], y[sel], z[sel]
+    return r[0, 0] * x + r[1, 0] * y + r[2, 0] * z, r[0, 1] * x + r[1, 1] * y + r[2, 1] * z, gz[sel], sel
 
 
-def _lower_quartile(heights: np.ndarray) -> np.ndarray:
+def _lower_quartile(heights: np.ndarray, cells: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Per cell, the :data:`NEIGHBOUR_PERCENTILE` of the finite heights in its :data:`NEIGHBOURHOOD` square
-    (nearest-rank on the sorted window; NaN where the window is empty). (nx, ny) float32."""
+    (nearest-rank on the sorted window; NaN where the window is empty). (nx, ny) float32; with ``cells``
+    (row indices, column indices) only at those cells, (K,) float32."""
     half = NEIGHBOURHOOD // 2
     pad = np.pad(heights, half, constant_values=np.nan)
-    win = np.sort(sliding_window_view(pad, (NEIGHBOURHOOD, NEIGHBOURHOOD)).reshape(*heights.shape, -1), axis=-1)
+    win = sliding_window_view(pad, (NEIGHBOURHOOD, NEIGHBOURHOOD))
+    win = win.reshape(*heights.shape, -1) if cells is None else win[cells].reshape(cells[0].size, -1)
+    win = np.sort(win, axis=-1)
     k = np.count_nonzero(np.isfinite(win), axis=-1)            # NaN sorts last: finite values come first
     idx = np.maximum(np.floor(NEIGHBOUR_PERCENTILE / 100.0 * (k - 1)).astype(np.int64), 0)
     q = np.take_along_axis(win, idx[..., None], axis=-1)[..., 0]
     return np.where(k > 0, q, np.nan)
+
+
+def _stream_cells(heights: np.ndarray) -> np.ndarray:
+    """(nx, ny) bool: cells more than :data:`STREAM_STEP_M` above the lower quartile of their neighbourhood.
+
+    The neighbourhood minimum (OpenCV erosion, NaN as +inf) never exceeds the quartile, so only cells more than
+    the step above their minimum (a handful: the stream, steep edges) need the sorted window."""
+    finite = np.isfinite(heights)
+    h = np.where(finite, heights, np.float32(np.inf)).astype(np.float32)
+    low = cv2.erode(h, np.ones((NEIGHBOURHOOD, NEIGHBOURHOOD), np.uint8))   # border ignored (+inf)
+    out = np.zeros(heights.shape, bool)
+    cand = np.nonzero(finite & (heights > low + np.float32(STREAM_STEP_M)))
+    if cand[0].size:
+        out[cand] = heights[cand] > _lower_quartile(heights, cand) + STREAM_STEP_M
+    return out
 
 
 def grid_shape(cart: Cart, cell_m: float) -> tuple[int, int]:
@@ -100,14 +126,15 @@ def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart
     """
     nx, ny = grid_shape(cart, cell_m)
     L, W = cart.interior_length_m, cart.interior_width_m
-    p = np.asarray(points_level, dtype=np.float64)
-    p = p[np.isfinite(p[:, 0])]                                 # invalid beams are whole NaN rows
-    g = _grid_from_level(p, level_from_grid)
+    p = np.asarray(points_level, dtype=np.float64)              # invalid beams are whole NaN rows
     clear = WALL_CLEAR_M + 3.0 * noise_sigma_m
     top = cart.interior_depth_m + cart.rim_height_m
-    inside = ((g[:, 0] > clear) & (g[:, 0] < L - clear) & (g[:, 1] > clear) & (g[:, 1] < W - clear)
-              & (g[:, 2] > -clear) & (g[:, 2] < top + STREAM_TOP_M))
-    g = g[inside]
+    gx, gy, gz, _ = _grid_rows(p, level_from_grid, -clear, top + STREAM_TOP_M)
+    inside = (gx > clear) & (gx < L - clear) & (gy > clear) & (gy < W - clear)
+    g = np.empty((3, np.count_nonzero(inside)))                 # column-major (M, 3): coordinates contiguous
+    for k, c in enumerate((gx, gy, gz)):
+        np.compress(inside, c, out=g[k])
+    g = g.T
     high = g[:, 2] > top + HEAP_MAX_M                           # above any heap: stream (or spill) only
     heights = np.full((nx, ny), np.nan, np.float32) if out is None else out
     heights.fill(np.nan)
@@ -135,7 +162,7 @@ def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart
     flat[uniq[enough]] = med[enough]
     counts.reshape(-1)[:] = np.bincount(cell[low], minlength=nx * ny)
     # cells holding only stream returns stand far above their neighbourhood
-    stream_cell = heights > _lower_quartile(heights) + STREAM_STEP_M
+    stream_cell = _stream_cells(heights)
     heights[stream_cell] = np.nan
     surface = heights.reshape(-1)[cell]
     with np.errstate(invalid="ignore"):

@@ -4,9 +4,11 @@
 use) and precomputes the beam tables. ``step(frame)`` checks that every ``<cam>_depth`` image carries the
 frame, makes the LiDAR ranges (decode, resample, noise seeded from ``scenario.seed`` and the frame), runs
 the cart / height map / impact algorithms and writes ``perc_state``, ``heightmap_perceived`` and
-``lidar_points`` under the seqlock. Every ``perception.accuracy_every_frames`` frames it also compares with
-the truth (``dyn_state``, ``heightmap_truth``, ``stream``) through an exact ray cast; that happens after the
-outputs are computed, so truth never feeds an estimate.
+``lidar_points`` under the seqlock (the points straight into the shared block). Every
+``perception.accuracy_every_frames`` frames it also compares with the truth (``dyn_state``,
+``heightmap_truth``, ``stream``) through an exact ray cast of ``perception.accuracy_beams`` beams (a seeded
+stratified sample, ``accuracy.sample_beams``; 0: all); that happens after the outputs are computed, so truth
+never feeds an estimate.
 
 The sensor's parent pose (the combine's GNSS) comes from ``dyn_state``; it places the perceived cart in the
 world and orients the towing direction. The cart itself is found from the points alone.
@@ -91,17 +93,17 @@ class PerceptionParticipant:
         t0 = time.perf_counter()
         state = self._state.as_dict() if self._state is not None else {}
         clean = pipe.resample([img for _, img in self._images], out=self._ranges)
-        evaluate = self._accuracy_due(frame)
-        clean_copy = clean.copy() if evaluate else None
+        beams = self._accuracy_beams(frame)
+        clean_sample = clean[beams] if beams is not None else None        # a copy: noise comes next, in place
         ranges = pipe.noisy(clean, frame)
         t1 = time.perf_counter()
         wfp = acc.world_from_parent(self.scenario, state) if state else np.eye(4)
         heading = self._heading(state, wfp)
-        res = pipe.perceive(ranges, heading)
+        res = pipe.perceive(ranges, heading, with_points=False)
         self.last = res
-        t2 = time.perf_counter()
         with seg.write(POINTS_BLOCK, frame) as pts:
-            pts[...] = res.points
+            pipe.points(ranges, out=pts)                                  # straight into the shared block
+        t2 = time.perf_counter()
         with seg.write(HEIGHTS_BLOCK, frame) as hv:
             if res.heightmap is None:
                 hv.fill(np.nan)
@@ -112,9 +114,9 @@ class PerceptionParticipant:
         values["perception_ms"] = _MS_PER_S * (t2 - t0)
         values.update({n: (0 if d == "i8" else math.nan) for n, _, d, _ in ACCURACY_FIELDS})
         values["accuracy_ms"] = math.nan
-        if evaluate and state:
+        if beams is not None and state:
             t3 = time.perf_counter()
-            values.update(self._accuracy(state, clean_copy, res, wfp))
+            values.update(self._accuracy(state, beams, clean_sample, res, wfp))
             values["acc_evaluated"] = 1
             values["accuracy_ms"] = _MS_PER_S * (time.perf_counter() - t3)
         with seg.write(STATE_BLOCK, frame) as st:
@@ -129,6 +131,14 @@ class PerceptionParticipant:
         k = self.scenario.perception.accuracy_every_frames
         return k > 0 and frame % k == 0 and self.segment is not None and all(
             self.segment.has(b) for b in ("dyn_state", "heightmap_truth", "stream"))
+
+    def _accuracy_beams(self, frame: int) -> np.ndarray | None:
+        """The beams (K,) int64 the frame's accuracy evaluation casts (``perception.accuracy_beams``, a seeded
+        stratified sample), or None when the frame is not evaluated."""
+        if not self._accuracy_due(frame):
+            return None
+        sc = self.scenario
+        return acc.sample_beams(self.pipeline.n_beams, sc.perception.accuracy_beams, sc.seed, frame)
 
     def _heading(self, state: dict, wfp: np.ndarray) -> tuple[float, float]:
         """Towing direction (the combine's heading) in the sensor's parent frame."""
@@ -160,11 +170,12 @@ class PerceptionParticipant:
             v[f"{key}_ms"] = res.timing_ms.get(key, math.nan)
         return v
 
-    def _accuracy(self, state: dict, clean: np.ndarray, res: FrameResult, wfp: np.ndarray) -> dict:
+    def _accuracy(self, state: dict, beams: np.ndarray, clean: np.ndarray, res: FrameResult, wfp: np.ndarray) -> dict:
+        """Accuracy fields of the frame: ``clean`` (K,) float32 m, the noise-free ranges of ``beams`` (K,)."""
         sc, pipe, seg = self.scenario, self.pipeline, self.segment
         wfs = wfp @ pipe.level_from_sensor
         truth_h = np.array(seg.view("heightmap_truth"), copy=True)
-        exact = acc.exact_ranges(sc, state, truth_h, np.array(seg.view("stream")), wfs, pipe.directions)
+        exact = acc.exact_ranges(sc, state, truth_h, np.array(seg.view("stream")), wfs, pipe.directions[beams])
         clean = np.where((clean >= sc.sensor.range_min_m) & (clean <= sc.sensor.range_max_m), clean, np.nan)
         out = acc.range_error_stats(clean, exact, sc.sensor.range_min_m, sc.sensor.range_max_m)
         truth_grid = acc.truth_on_grid(truth_h, sc.grain.cell_m, pipe.grid, sc.cart)

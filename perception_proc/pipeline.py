@@ -23,7 +23,7 @@ from cosim.geometry import body_from_camera_axes, mount_transform
 
 from .heightmap import HeightMap, grid_shape, height_map
 from .impact import Impact, blank_under_stream, find_impact
-from .lidar import apply_noise_and_limits, frame_generator, to_points
+from .lidar import apply_noise_and_limits, frame_generator, point_basis, to_points
 from .patterns import beam_table, pattern_shape
 from .resample import build_table, resample
 from .resample_offset import build_offset_table, is_offset, resample_offset
@@ -54,10 +54,11 @@ def own_vehicle_box(scenario: Scenario) -> tuple[np.ndarray, np.ndarray] | None:
 
 @dataclass
 class FrameResult:
-    """One frame's perception. ``points`` (N, 4) float32 lidar_points record (sensor frame); ``cart``,
+    """One frame's perception. ``points`` (N, 4) float32 lidar_points record (sensor frame; None when not
+    asked for); ``cart``,
     ``heightmap`` (None when there was no cart), ``impact``; ``timing_ms`` stage name -> wall ms."""
 
-    points: np.ndarray
+    points: np.ndarray | None
     cart: CartEstimate
     heightmap: HeightMap | None
     impact: Impact
@@ -81,6 +82,10 @@ class Perception:
             self.table = build_table(rig, self.directions)
         self.level_from_sensor = mount_transform(sensor.mount) @ body_from_camera_axes()
         self.level_directions = self.directions @ self.level_from_sensor[:3, :3].T    # (N, 3) level frame
+        #: (3, N) float64 C-contiguous: the level-frame direction components, one row each
+        self._level_dir_rows = np.ascontiguousarray(self.level_directions.T)
+        #: (N, 4) float64 rows (s, 1): the lidar_points record is this times the range (lidar.point_basis)
+        self.point_basis = point_basis(self.directions)
         self.own_box = own_vehicle_box(scenario)
         self.grid = grid_shape(scenario.cart, scenario.controller.grid_cell_m)
         self.cell_xy = (scenario.cart.interior_length_m / self.grid[0],
@@ -114,25 +119,40 @@ class Perception:
 
     def level_points(self, ranges: np.ndarray) -> np.ndarray:
         """Level-frame points (N, 3) float64 m of the ranges (NaN rows where invalid, and where the return is on
-        the sensor's own vehicle: its body box, known like its GNSS pose, is masked out)."""
-        p = self.level_directions * ranges[:, None].astype(np.float64) + self.level_from_sensor[:3, 3]
+        the sensor's own vehicle: its body box, known like its GNSS pose, is masked out).
+
+        The array is column-major (a transposed (3, N) block): each coordinate ``p[:, k]`` is contiguous, which
+        is what the algorithms read."""
+        r = np.asarray(ranges, np.float64)
+        rows = np.empty((3, r.shape[0]))
+        np.multiply(self._level_dir_rows, r, out=rows)
+        rows += self.level_from_sensor[:3, 3:4]
         if self.own_box is not None:
             lo, hi = self.own_box
+            x, y, z = rows
             with np.errstate(invalid="ignore"):
-                own = (p[:, 0] >= lo[0]) & (p[:, 0] <= hi[0]) & (p[:, 1] >= lo[1]) & (p[:, 1] <= hi[1]) \
-                    & (p[:, 2] >= lo[2]) & (p[:, 2] <= hi[2])
-            p[own] = np.nan
-        return p
+                own = np.flatnonzero((z >= lo[2]) & (z <= hi[2]))            # the box test, axis by axis
+                own = own[(x[own] >= lo[0]) & (x[own] <= hi[0])]
+                own = own[(y[own] >= lo[1]) & (y[own] <= hi[1])]
+            rows[:, own] = np.nan
+        return rows.T
+
+    def points(self, ranges: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """The ``lidar_points`` record (N, 4) float32 (sensor frame x, y, z, range; m) of the ranges, written
+        into ``out`` (e.g. the shared block) when given."""
+        return to_points(self.point_basis, ranges, out=out)
 
     def perceive(self, ranges: np.ndarray, heading_xy=(1.0, 0.0), points_out: np.ndarray | None = None,
-                 heights_out: np.ndarray | None = None) -> FrameResult:
+                 heights_out: np.ndarray | None = None, with_points: bool = True) -> FrameResult:
         """Cart, height map and impact from the frame's ranges (N,) float32. ``heading_xy``: the towing
-        direction in the level frame. ``points_out`` (N, 4) / ``heights_out`` (nx, ny): optional destinations."""
+        direction in the level frame. ``points_out`` (N, 4) / ``heights_out`` (nx, ny): optional destinations.
+        ``with_points`` False leaves the ``lidar_points`` record out (``FrameResult.points`` is None): a caller
+        that writes it straight into shared memory uses :meth:`points`."""
         sc = self.scenario
         sigma = sc.sensor.noise.range_sigma_m
         tm: dict[str, float] = {}
         t0 = time.perf_counter()
-        pts = to_points(self.directions, ranges, out=points_out)
+        pts = self.points(ranges, out=points_out) if with_points or points_out is not None else None
         lvl = self.level_points(ranges)
         border = border_beams(ranges, self.shape)
         t1 = time.perf_counter()

@@ -84,8 +84,9 @@ class CameraTable:
         return self._cache("near_k", lambda: np.argmax(self.quad == self.pixel[:, None], axis=1))
 
     @property
-    def arange(self) -> np.ndarray:
-        return self._cache("arange", lambda: np.arange(self.pixel.size))
+    def near_flat(self) -> np.ndarray:
+        """(M,) int64: flat index into a C-contiguous (4, M) array of the nearest of the four neighbours."""
+        return self._cache("near_flat", lambda: self.near_k * self.pixel.size + np.arange(self.pixel.size))
 
     def _cache(self, key: str, make):
         store = self.__dict__.setdefault("_derived", {})
@@ -190,14 +191,14 @@ def gather_depth(rgba: np.ndarray, table: CameraTable, codec: Codec, sampler: Sa
     words = words_of(rgba)
     lut = decode_lut(codec)
     if sampler == "nearest":
-        return decode_words(words[table.pixel], lut)
-    z = decode_words(words[table.quad_t], lut)                             # (4, M): one gather, one decode
+        return decode_words(np.take(words, table.pixel), lut)
+    z = decode_words(np.take(words, table.quad_t), lut)                    # (4, M): one gather, one decode
     with np.errstate(invalid="ignore", divide="ignore"):
         zmin, zmax = z.min(axis=0), z.max(axis=0)                          # NaN propagates: no interpolation
         smooth = zmax - zmin <= np.float32(DISCONTINUITY_REL) * zmin + np.float32(2.0 * codec.bound_m)
         smooth &= table.interp
         z_lin = np.float32(1.0) / (table.weight_t / z).sum(axis=0)
-    z_near = z[table.near_k, table.arange]                                  # nearest pixel is one of the four
+    z_near = np.take(z, table.near_flat)                                   # nearest pixel is one of the four
     return np.where(smooth, z_lin, z_near)
 
 

@@ -138,6 +138,18 @@ def border_beams(ranges: np.ndarray, shape: tuple[int, int] | None) -> np.ndarra
     return out.ravel()
 
 
+def _has_neighbour(xy: np.ndarray, others: np.ndarray, radius: float) -> np.ndarray:
+    """(K,) bool: whether any of ``others`` (M, 2) lies closer than ``radius`` (m, strictly) to each of ``xy``
+    (K, 2). Only points inside the others' bounding box grown by the radius are looked up (k-d tree)."""
+    lo, hi = others.min(axis=0) - radius, others.max(axis=0) + radius
+    near = np.flatnonzero((xy[:, 0] >= lo[0]) & (xy[:, 0] <= hi[0]) & (xy[:, 1] >= lo[1]) & (xy[:, 1] <= hi[1]))
+    out = np.zeros(xy.shape[0], bool)
+    if near.size:
+        d, _ = cKDTree(others).query(xy[near], k=1, distance_upper_bound=radius)
+        out[near] = np.isfinite(d)
+    return out
+
+
 def _end_is_cut(flags: np.ndarray, other: np.ndarray, other_lo: float, other_hi: float) -> bool:
     """Whether one end of the rim is cut off rather than seen: many of its points come from beams at the
     pattern's edge; or many lie next to an occluder *and* they cover little of the cart's extent across that
@@ -153,6 +165,20 @@ def _end_is_cut(flags: np.ndarray, other: np.ndarray, other_lo: float, other_hi:
     nbins = max(1, int(math.ceil((other_hi - other_lo) / END_BIN_M)))
     b = np.clip(((other - other_lo) / END_BIN_M).astype(np.int64), 0, nbins - 1)
     return np.unique(b).size < MIN_END_COVER * nbins
+
+
+def _percentiles(x: np.ndarray, q: tuple[float, ...]) -> np.ndarray:
+    """``np.percentile(x, q)`` (default linear method, same formulas, same values) for a 1-D float64 ``x``
+    without NaN, by one partition: numpy's general routine costs more than the selection itself here."""
+    n = x.size
+    v = (n - 1) * (np.asarray(q, np.float64) / 100.0)
+    lo = np.floor(v).astype(np.intp)
+    hi = np.minimum(lo + 1, n - 1)
+    part = np.partition(x, np.unique(np.concatenate([lo, hi])))
+    a, b = part[lo], part[hi]
+    g = v - lo
+    diff = b - a
+    return np.where(g >= 0.5, b - diff * (1 - g), a + diff * g)
 
 
 def _outer(cart: Cart) -> tuple[float, float, float]:
@@ -178,18 +204,28 @@ def _components(xy: np.ndarray) -> list[np.ndarray]:
     return [g for g in np.split(order, bounds[:-1])[1:] if g.size]
 
 
-def _roofed(xy: np.ndarray, centre: np.ndarray, u_long: np.ndarray, long_side: float, short_side: float) -> bool:
+def _roofed(above: np.ndarray, centre: np.ndarray, u_long: np.ndarray, long_side: float, short_side: float) -> bool:
     """Whether points well above the rim cover more than :data:`MAX_ROOF_FRACTION` of the rectangle's area
-    (on a :data:`ROOF_CELL_M` raster): a cab or a roof, not the thin auger tube or stream over an open cart."""
-    d = xy - centre
-    along, across = d @ u_long, d @ np.array([-u_long[1], u_long[0]])
+    (on a :data:`ROOF_CELL_M` raster): a cab or a roof, not the thin auger tube or stream over an open cart.
+    ``above`` (2, K) float64: the points' x and y rows, m, level frame."""
+    dx, dy = above[0] - centre[0], above[1] - centre[1]
+    along = dx * u_long[0] + dy * u_long[1]
+    across = dy * u_long[0] - dx * u_long[1]
     inside = (np.abs(along) <= long_side / 2) & (np.abs(across) <= short_side / 2)
     if not inside.any():
         return False
     ni, nj = max(1, math.ceil(long_side / ROOF_CELL_M)), max(1, math.ceil(short_side / ROOF_CELL_M))
     i = np.minimum(((along[inside] + long_side / 2) / ROOF_CELL_M).astype(np.int64), ni - 1)
     j = np.minimum(((across[inside] + short_side / 2) / ROOF_CELL_M).astype(np.int64), nj - 1)
-    return np.unique(i * nj + j).size > MAX_ROOF_FRACTION * ni * nj
+    covered = np.zeros(ni * nj, bool)
+    covered[i * nj + j] = True
+    return np.count_nonzero(covered) > MAX_ROOF_FRACTION * ni * nj
+
+
+def _hull(xy32: np.ndarray) -> np.ndarray:
+    """Convex hull vertices (H, 2) float32 of points (K, 2) float32: ``cv2.minAreaRect`` of a union of pieces
+    only needs the union of their hulls (it takes the hull of its input first)."""
+    return cv2.convexHull(xy32).reshape(-1, 2)
 
 
 def _best_group(xy: np.ndarray, above: np.ndarray, lo_len: float, lo_wid: float):
@@ -197,42 +233,48 @@ def _best_group(xy: np.ndarray, above: np.ndarray, lo_len: float, lo_wid: float)
 
     The rim ring breaks into pieces (sparse rows, occlusion by the auger or the stream): each piece, largest
     first, is grown by every other piece that keeps the union cart-sized and unroofed; the largest union
-    that spans enough of the cart's length and width wins. ``above`` (K, 2): points well above the rim."""
+    that spans enough of the cart's length and width wins. ``above`` (K, 2): points well above the rim.
+    Rectangles are fitted to the union of the pieces' convex hulls (the same rectangle as of their points)."""
+    above_rows = np.ascontiguousarray(np.asarray(above, np.float64).reshape(-1, 2).T)
 
-    def fits(g: np.ndarray):
+    def fits(hull: np.ndarray):
         """(long side direction, long side m, short side m) if cart-sized and not roofed, else None."""
-        box = cv2.boxPoints(cv2.minAreaRect(xy[g].astype(np.float32))).astype(np.float64)
+        box = cv2.boxPoints(cv2.minAreaRect(hull)).astype(np.float64)
         e1, e2 = box[1] - box[0], box[2] - box[1]
         n1, n2 = float(np.hypot(*e1)), float(np.hypot(*e2))
         long_side, short_side = max(n1, n2), min(n1, n2)
         if long_side > lo_len + SIZE_TOL_M or short_side > lo_wid + SIZE_TOL_M:
             return None
         u_long = (e1 / max(n1, 1e-12)) if n1 >= n2 else (e2 / max(n2, 1e-12))
-        if above.size and _roofed(above, box.mean(axis=0), u_long, long_side, short_side):
+        if above_rows.shape[1] and _roofed(above_rows, box.mean(axis=0), u_long, long_side, short_side):
             return None
         return u_long, long_side, short_side
 
     comps = sorted((g for g in _components(xy) if g.size >= 3), key=lambda g: -g.size)
+    xy32 = xy.astype(np.float32)
+    hulls = [_hull(xy32[g]) for g in comps]
     best, best_n = None, 0
     turn = math.cos(math.radians(MAX_MERGE_TURN_DEG))
     for i, seed in enumerate(comps):
         if seed.size < MIN_RIM_POINTS // 3 or seed.size <= best_n // 4:
             break
-        if (first := fits(seed)) is None:
+        if (first := fits(hulls[i])) is None:
             continue
-        group, u_seed = seed, first[0]
+        group, hull, u_seed = [seed], hulls[i], first[0]
         for j, other in enumerate(comps):
             # a union whose rectangle axes turn (modulo 90 deg: a square seed may swap its long side) is a
             # diagonal join of unrelated pieces, not more of the rim
-            if j != i and (res := fits(merged := np.concatenate([group, other]))) is not None \
+            if j != i and (res := fits(merged := _hull(np.concatenate([hull, hulls[j]])))) is not None \
                     and max(abs(res[0] @ u_seed), abs(res[0][0] * u_seed[1] - res[0][1] * u_seed[0])) >= turn:
-                group = merged
-        res = fits(group)
-        if res is None or group.size < MIN_RIM_POINTS or res[1] < MIN_SPAN_FRACTION * lo_len \
+                group.append(other)
+                hull = merged
+        res = fits(hull) if len(group) > 1 else first
+        n = sum(g.size for g in group)
+        if res is None or n < MIN_RIM_POINTS or res[1] < MIN_SPAN_FRACTION * lo_len \
                 or res[2] < MIN_WIDTH_FRACTION * lo_wid:
             continue
-        if group.size > best_n:
-            best, best_n = (group, res[0]), group.size
+        if n > best_n:
+            best, best_n = (np.concatenate(group), res[0]), n
     return best
 
 
@@ -266,20 +308,20 @@ def find_cart(points: np.ndarray, border: np.ndarray, cart: Cart, heading_xy=(1.
     frame); returns a :class:`CartEstimate`.
     """
     p = np.asarray(points, dtype=np.float64)
-    ok = np.isfinite(p[:, 2])                                   # invalid beams are whole NaN rows
+    z = np.ascontiguousarray(p[:, 2])                           # invalid beams are whole NaN rows
     band = RIM_BAND_M + 3.0 * noise_sigma_m
     top = cart.rim_top_m
-    cand = np.flatnonzero(ok & (np.abs(p[:, 2] - top) <= band))
-    if cand.size < MIN_RIM_POINTS:
-        return _none(f"{cand.size} points at rim height, need {MIN_RIM_POINTS}", int(cand.size))
+    with np.errstate(invalid="ignore"):                         # NaN compares False: invalid rows drop out
+        cand = np.flatnonzero(np.abs(z - top) <= band)
+        if cand.size < MIN_RIM_POINTS:
+            return _none(f"{cand.size} points at rim height, need {MIN_RIM_POINTS}", int(cand.size))
+        above = p[z > top + band + ABOVE_RIM_M, :2]
+        slab = p[(z > top + band) & (z <= top + band + UNDER_SLAB_M), :2]
     lo_len, lo_wid, _ = _outer(cart)
-    above = p[ok & (p[:, 2] > top + band + ABOVE_RIM_M), :2]
-    slab = p[ok & (p[:, 2] > top + band) & (p[:, 2] <= top + band + UNDER_SLAB_M), :2]
     if slab.shape[0]:
         # a rim point has nothing right above it; a falling stream or a cab wall rising from the rim band does
         # (the auger tube passes higher over the rim, above the slab, and does not count)
-        d, _ = cKDTree(slab).query(p[cand, :2], k=1, distance_upper_bound=UNDER_RADIUS_M)
-        cand = cand[~np.isfinite(d)]
+        cand = cand[~_has_neighbour(p[cand, :2], slab, UNDER_RADIUS_M)]
         if cand.size < MIN_RIM_POINTS:
             return _none(f"{cand.size} open points at rim height, need {MIN_RIM_POINTS}", int(cand.size))
     xy = p[cand, :2]
@@ -298,13 +340,13 @@ def find_cart(points: np.ndarray, border: np.ndarray, cart: Cart, heading_xy=(1.
     centre = []
     partial = False
     for coord, known in ((s, lo_len), (t, lo_wid)):
-        lo, hi = np.percentile(coord, [0.5, 99.5])
+        lo, hi = _percentiles(coord, (0.5, 99.5))
         if hi - lo >= known - FULL_SPAN_TOL_M:
             centre.append(0.5 * (lo + hi))
             continue
         partial = True
         other = t if coord is s else s
-        o_lo, o_hi = np.percentile(other, [0.5, 99.5])
+        o_lo, o_hi = _percentiles(other, (0.5, 99.5))
         at_lo, at_hi = coord <= lo + END_STRIP_M, coord >= hi - END_STRIP_M
         cut_lo = _end_is_cut(bd[at_lo], other[at_lo], o_lo, o_hi)
         cut_hi = _end_is_cut(bd[at_hi], other[at_hi], o_lo, o_hi)

@@ -21,6 +21,10 @@ __all__ = ["T_MIN_M", "ray_boxes", "ray_cylinders", "ray_heightfield", "ray_mesh
 T_MIN_M = 1e-9
 #: primitives per bounding-sphere group in the two-level cull
 _GROUP = 8
+#: (ray, primitive) tests per block in the shared-origin cull and prism test (bounds the work arrays)
+_PAIR_WORK = 1 << 18
+#: slack on bounding-sphere radii (relative and m) and cosines in the culls: rounding never culls a hit
+_CULL_SLACK = 1e-9
 #: triangles per chunk in the mesh intersector
 _TRI_CHUNK = 256
 #: vertical padding of the height field's bounding slab, m
@@ -40,14 +44,58 @@ def _convex_pairs(ol, dl, normals, offsets) -> np.ndarray:
 
     ``ol``, ``dl`` (K, 3) local ray origins and directions; ``normals`` (P, 3) outward unit normals;
     ``offsets`` (K, P) m. Returns t (K,): entry (or exit when inside), inf on a miss."""
-    num = offsets - ol @ normals.T
-    den = dl @ normals.T
+    return _convex_t(offsets - ol @ normals.T, dl @ normals.T)
+
+
+def _convex_t(num: np.ndarray, den: np.ndarray) -> np.ndarray:
+    """The clipping of :func:`_convex_pairs` from ``num`` = offset - n . o and ``den`` = n . d, (K, P) each."""
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         t = num / den
     t_lo = np.max(np.where(den < 0.0, t, -np.inf), axis=1)
     t_hi = np.min(np.where(den > 0.0, t, np.inf), axis=1)
     parallel_out = np.any((den == 0.0) & (num < 0.0), axis=1)
     return _first_positive(t_lo, t_hi, (t_hi >= t_lo) & ~parallel_out)
+
+
+def _shared_origin(o: np.ndarray) -> np.ndarray | None:
+    """The common origin (3,) when every ray starts at the same point (a camera, the LiDAR), else None."""
+    if len(o) == 0:
+        return None
+    if o.strides[0] == 0 or not np.any(o != o[0]):
+        return np.array(o[0], dtype=np.float64)
+    return None
+
+
+def _cone_pairs(origin, d, centres, radii, best) -> tuple[np.ndarray, np.ndarray]:
+    """(primitive, ray) index pairs, (P,) int64 each, sorted by primitive then ray, of rays from one ``origin``
+    (3,) along ``d`` (N, 3) that pass within a bounding sphere (``centres`` (K, 3), ``radii`` (K,), m) and
+    could enter it before their ``best`` (N,).
+
+    From a common origin the sphere test is angular, d . u >= cos(asin(radius / distance)) with u the unit
+    direction to the centre (every ray when the origin is inside): one matrix product per block of rays for
+    all primitives at once. Radii and cosines carry :data:`_CULL_SLACK`, so the cull is conservative."""
+    m = centres - origin
+    dist = np.linalg.norm(m, axis=1)
+    rad = radii * (1.0 + _CULL_SLACK) + _CULL_SLACK
+    inside = dist <= rad
+    u = m / np.where(inside, 1.0, dist)[:, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos_half = np.where(inside, -np.inf, np.sqrt(np.maximum(1.0 - (rad / dist) ** 2, 0.0)) - _CULL_SLACK)
+    ks, rs = [], []
+    step = max(1, _PAIR_WORK // max(len(centres), 1))
+    for s0 in range(0, len(d), step):
+        dots = u @ d[s0:s0 + step].T                                   # (K, B): cosines to each centre
+        k, r = np.nonzero(dots >= cos_half[:, None])
+        near = dots[k, r] * dist[k] - rad[k]                           # entry bound along the ray
+        r += s0
+        keep = near < best[r]
+        ks.append(k[keep])
+        rs.append(r[keep])
+    k, r = np.concatenate(ks), np.concatenate(rs)
+    if len(ks) > 1:
+        order = np.argsort(k, kind="stable")
+        k, r = k[order], r[order]
+    return k, r
 
 
 def _sphere_rays(o, d, centre, rad: float, best) -> np.ndarray:
@@ -62,11 +110,21 @@ def ray_boxes(o: np.ndarray, d: np.ndarray, boxes: Boxes, t_max: np.ndarray | No
     """Distance to the nearest oriented box (slab test in each box frame). o, d (N, 3) -> t (N,).
 
     Per box, only rays that pass its bounding sphere and could still beat the best hit so far (initially
-    ``t_max`` (N,), a known nearer hit, if given) are tested."""
+    ``t_max`` (N,), a known nearer hit, if given) are tested; rays from one origin are culled for all boxes
+    at once (:func:`_cone_pairs`)."""
     best = np.full(len(o), np.inf) if t_max is None else np.array(t_max, dtype=np.float64)
+    origin = _shared_origin(o)
+    if origin is not None and len(boxes):
+        # one angular cull for every box; the best hits of the other primitives still prune it
+        ks, rs = _cone_pairs(origin, d, boxes.world_from_box[:, :3, 3], np.linalg.norm(boxes.half_extents, axis=1),
+                             best)
+        bounds = np.searchsorted(ks, np.arange(len(boxes) + 1))
     for k in range(len(boxes)):
         rot, c, h = boxes.world_from_box[k, :3, :3], boxes.world_from_box[k, :3, 3], boxes.half_extents[k]
-        rays = _sphere_rays(o, d, c, float(np.linalg.norm(h)), best)
+        if origin is not None:
+            rays = rs[bounds[k]:bounds[k + 1]]
+        else:
+            rays = _sphere_rays(o, d, c, float(np.linalg.norm(h)), best)
         if len(rays) == 0:
             continue
         ol = (o[rays] - c) @ rot
@@ -85,7 +143,9 @@ def ray_cylinders(o: np.ndarray, d: np.ndarray, cyl: Cylinders, t_max: np.ndarra
     """Distance to the nearest cylinder, drawn and cast as a capped regular prism (CYLINDER_SIDES facets,
     vertices on the circle, local frame from ``orthonormal_frames``: x, y across, z along p0 -> p1).
 
-    Culled by group, then per-cylinder bounding spheres, and by ``t_max`` (N,), a known nearer hit."""
+    Culled by group, then per-cylinder bounding spheres, and by ``t_max`` (N,), a known nearer hit. Rays from
+    one origin are culled for all cylinders at once (:func:`_cone_pairs`) and the prisms are clipped for all
+    (ray, cylinder) pairs together."""
     best = np.full(len(o), np.inf) if t_max is None else np.array(t_max, dtype=np.float64)
     if len(cyl) == 0:
         return best
@@ -97,6 +157,13 @@ def ray_cylinders(o: np.ndarray, d: np.ndarray, cyl: Cylinders, t_max: np.ndarra
     phi = 2.0 * np.pi * (np.arange(CYLINDER_SIDES) + 0.5) / CYLINDER_SIDES
     normals = np.concatenate([np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], axis=1),
                               [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]])
+    origin = _shared_origin(o)
+    if origin is not None:
+        offsets = np.zeros((len(cyl), CYLINDER_SIDES + 2))
+        offsets[:, :CYLINDER_SIDES] = (cyl.radius * np.cos(np.pi / CYLINDER_SIDES))[:, None]
+        offsets[:, CYLINDER_SIDES] = length
+        _prisms_shared(origin, d, frames, cyl.p0, centre, rad, normals, offsets, best)
+        return best
     for g0 in range(0, len(cyl), _GROUP):
         sl = slice(g0, min(g0 + _GROUP, len(cyl)))
         gc = centre[sl].mean(axis=0)
@@ -111,6 +178,22 @@ def ray_cylinders(o: np.ndarray, d: np.ndarray, cyl: Cylinders, t_max: np.ndarra
             off = np.array([cyl.radius[k] * np.cos(np.pi / CYLINDER_SIDES)] * CYLINDER_SIDES + [length[k], 0.0])
             best[rays] = np.minimum(best[rays], _convex_pairs(ol, dl, normals, off[None]))
     return best
+
+
+def _prisms_shared(origin, d, frames, p0, centre, rad, normals, offsets, best) -> None:
+    """Prisms (local ``frames`` (K, 3, 3), base centres ``p0`` (K, 3), bounding spheres ``centre``, ``rad``,
+    facet ``normals`` (F, 3) and ``offsets`` (K, F)) against rays from one ``origin``: ``best`` (N,) lowered in
+    place, vectorised over (ray, prism) pairs. The local origin and n . o are per prism, computed once."""
+    ks, rs = _cone_pairs(origin, d, centre, rad, best)
+    if ks.size == 0:
+        return
+    ol = np.einsum("ki,kij->kj", origin - p0, frames)                  # (K, 3) the origin in each prism frame
+    num_k = offsets - ol @ normals.T                                    # (K, F)
+    step = max(1, _PAIR_WORK // normals.shape[0])
+    for s0 in range(0, ks.size, step):
+        k, r = ks[s0:s0 + step], rs[s0:s0 + step]
+        dl = np.einsum("pi,pij->pj", d[r], frames[k])
+        np.minimum.at(best, r, _convex_t(num_k[k], dl @ normals.T))
 
 
 def _line_crossings(q0, dq, a, b) -> tuple[np.ndarray, np.ndarray]:
