@@ -36,7 +36,8 @@ def render_markdown(section: dict, title: str = "Perception accuracy") -> str:
     lines = [
         f"# {title}", "",
         f"Sampler: `{section.get('sampler', '?')}`; frames evaluated against an exact ray cast: "
-        f"{re.get('frames_evaluated', 0)}; beams compared: {re.get('beams', 0):.0f}.", "",
+        f"{re.get('frames_evaluated', 0)}; beams compared: {re.get('beams', 0):.0f} (per evaluated frame: "
+        f"{re.get('beams_per_frame', 'all')}, a stratified random sample of the pattern unless all).", "",
         "## LiDAR range error (noise-free ranges vs exact ray cast of the same beams)", "",
         "| band (m) | beams | mean (mm) | p99 (mm) | > 5 cm (%) |", "|---|---:|---:|---:|---:|",
     ]

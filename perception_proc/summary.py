@@ -82,6 +82,7 @@ def summarize(scenario: Scenario, series: Mapping[str, np.ndarray], heightmap_tr
     maxes = _col(series, "range_err_max_m")
     range_error = {
         "frames_evaluated": int(np.nansum(evaluated)) if evaluated.size else 0,
+        "beams_per_frame": scenario.perception.accuracy_beams or "all",
         "beams": float(np.nansum(n)) if n.size else 0.0,
         "mean_m": _weighted(_col(series, "range_err_mean_m"), n),
         "median_m": _median(_col(series, "range_err_median_m")),
