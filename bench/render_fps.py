@@ -3,11 +3,16 @@
 Runs the renderer participant in-process over ``Segment.local`` (the same code path as a run: scene from the
 dynamics blocks, upload, draw, ``read_into`` the image blocks under their seqlocks) on the sample frame of
 the default scenario, for 640 x 480 and 1024 x 768, one and two cameras, plus the auto-planned rig and the
-mock renderer. Prints a Markdown table. Usage: ``python bench/render_fps.py [--frames N]``.
+mock renderer. Prints a Markdown table with the load average before and after (on a shared machine the
+"best" and CPU columns are the steadier figures). Usage: ``python bench/render_fps.py [--frames N]``.
+
+llvmpipe reads ``LP_NUM_THREADS`` (rasteriser threads, default: one per CPU) and ``LP_NATIVE_VECTOR_WIDTH``;
+the renderer sets neither (on 2 cores neither 0-4 threads nor 128-bit vectors beat the defaults measurably).
 """
 from __future__ import annotations
 
 import argparse
+import os
 import platform
 import statistics
 import sys
@@ -19,6 +24,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from cosim.config import Scenario  # noqa: E402
 from renderer_proc.blocks import declare_blocks  # noqa: E402
+from renderer_proc.heightfield import padded_heights  # noqa: E402
+from renderer_proc.hfmesh import SurfaceMesh  # noqa: E402
 from renderer_proc.meshes import unit_cube, unit_cylinder  # noqa: E402
 from renderer_proc.participant import create  # noqa: E402
 from renderer_proc.rig import plan_rig  # noqa: E402
@@ -30,13 +37,20 @@ from shm_schema import ArrayBlock, Field, Schema, Segment, StructBlock  # noqa: 
 WARMUP_FRAMES = 5
 
 
-def triangles(s: Scenario) -> int:
-    """Triangles drawn for the default scene's sample frame."""
+def triangles(s: Scenario) -> tuple[int, int]:
+    """(triangles drawn per camera, triangles of the full scene) for the default scene's sample frame: the
+    grain surface with its flat blocks merged (``renderer_proc.hfmesh``) and without the hidden floor top,
+    against every grid triangle and every box face."""
     state, h, stream = sample_frame(s)
     sc = scene_from_state(s, state, h, stream)
     nx, ny = h.shape
-    return (len(sc.boxes) * len(unit_cube()[1]) + len(sc.cylinders) * len(unit_cylinder()[1])
-            + 2 * (nx + 1) * (ny + 1) + sum(len(m.faces) for m in sc.meshes))
+    hf = sc.heightfield
+    merged = len(SurfaceMesh(nx, ny, hf.cell_m, hf.length_m, hf.width_m).triangles(padded_heights(h))[0])
+    rest = len(sc.cylinders) * len(unit_cylinder()[1]) + sum(len(m.faces) for m in sc.meshes)
+    boxes = len(sc.boxes) * len(unit_cube()[1])
+    hidden = 0 if sc.boxes.hidden_top is None else int(sc.boxes.hidden_top.sum())
+    drawn = rest + boxes - hidden * (len(unit_cube()[1]) - len(unit_cube(open_top=True)[1])) + merged
+    return drawn, rest + boxes + 2 * (nx + 1) * (ny + 1)
 
 
 def measure(s: Scenario, frames: int) -> tuple[float, float, float, str]:
@@ -76,6 +90,7 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=60)
     args = ap.parse_args()
     base = Scenario(format_version=1)
+    load0 = os.getloadavg()
     rows = []
     for backend, w, h, n, extra in [("gl", 640, 480, 1, {}), ("gl", 640, 480, 2, {}), ("gl", 1024, 768, 1, {}),
                                     ("gl", 1024, 768, 2, {}), ("gl", 640, 480, 1, {"rgb": "on"}),
@@ -88,8 +103,11 @@ def main() -> None:
         med, best, cpu, desc = measure(s, frames)
         label = ", ".join(f"{k}={v}" for k, v in extra.items()) or "depth only"
         rows.append((backend, desc + (" (auto rig)" if n == 0 else ""), label, med, best, cpu))
-    print(f"Renderer benchmark: default scene ({triangles(base)} triangles), render + read into shared memory; "
-          f"{platform.machine()}, {frames_note(args.frames)}\n")
+    load1 = os.getloadavg()
+    drawn, full = triangles(base)
+    print(f"Renderer benchmark: default scene ({drawn} triangles drawn of {full}), render + read into shared "
+          f"memory; {platform.machine()}, {os.cpu_count()} CPUs, {frames_note(args.frames)}; load average "
+          f"(1 min) {load0[0]:.2f} before, {load1[0]:.2f} after\n")
     print("| backend | cameras | outputs | wall ms/frame (median) | frames/s (median) | wall ms (best) | "
           "frames/s (best) | CPU ms/frame |")
     print("|---|---|---|---:|---:|---:|---:|---:|")

@@ -1,6 +1,6 @@
 """Depth-in-colour codec of the paper's Eqs 1-2: the numpy reference encoder (DESIGN.md section 4).
 
-The GL fragment shader (``shaders/scene.frag``) computes exactly these bytes; this module is the reference the
+The GL fragment shader (``shaders/encode.frag``) computes exactly these bytes; this module is the reference the
 mock renderer uses and the GL tests compare against. Decoding (Eq 3) lives in perception_proc and is written
 independently; :func:`decode_depth` here is only a test oracle for the encoder.
 

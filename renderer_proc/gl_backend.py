@@ -9,9 +9,17 @@ owns one framebuffer of renderbuffers (no textures, so nothing can mipmap or fil
 
 The image is flipped in the projection (``renderer_proc.projection``), so ``read_into`` fills a top-down
 (H, W, 4) destination, e.g. a shared-memory view, directly.
+
+Throughput on llvmpipe (bench/README.md, "Renderer"): the cost is rasterisation, per 4 x 4 pixel block each
+triangle touches, hidden or not. So the grain surface is drawn with its flat blocks merged
+(``renderer_proc.hfmesh``), box faces that other parts always cover are skipped (``Boxes.hidden_top``), the
+ground slab, which fills every image, is drawn once per camera and copied into each frame while the camera's
+pose relative to the ground plane is unchanged (:meth:`GLRenderer._ground_key`), and the encoding shader reads
+no varying in the depth-only pass.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -21,9 +29,19 @@ import numpy as np
 from cosim.camera import Rig
 from cosim.config.sensing import Codec
 from cosim.errors import RendererUnavailable
+from cosim.geometry import invert
 
-from .heightfield import grid_triangles, grid_vertices, padded_heights
-from .meshes import INSTANCE_FLOATS, box_instances, cylinder_instances, pack_instances, unit_cube, unit_cylinder
+from .codec import BYTE_MAX, CM_PER_M
+from .heightfield import padded_heights
+from .hfmesh import SurfaceMesh
+from .meshes import (
+    INSTANCE_FLOATS,
+    box_instances,
+    cylinder_instances,
+    pack_instances,
+    unit_cube,
+    unit_cylinder,
+)
 from .projection import NEAR_M, far_plane_m, gl_projection, gl_view
 from .scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
 
@@ -72,16 +90,40 @@ def _mat(m: np.ndarray) -> bytes:
 
 
 @dataclass
-class _Target:
-    """One camera's framebuffers: ``draw`` has every attachment; ``clears`` pairs a framebuffer with its
-    clear colour (integer, float and unorm attachments are cleared separately)."""
+class _Buffers:
+    """A set of renderbuffers: ``draw`` has every attachment; ``clears`` pairs a framebuffer of each attachment
+    (the first with the depth buffer) with its clear colour (integer, float and unorm are cleared separately)."""
 
     draw: Any
     clears: list
+
+
+@dataclass
+class _Target:
+    """One camera's framebuffers (``frame``), its projection, the farthest a drawn point can be from the camera
+    (``reach_m``: far plane times the corner ray's length per unit planar depth), and the cached ground image
+    (``ground``, made on first use) with the key it was drawn for."""
+
+    frame: _Buffers
     size: tuple[int, int]
     proj: bytes
+    reach_m: float
     rgb_attachment: int
     zf_attachment: int
+    ground: _Buffers | None = None
+    ground_key: tuple | None = None
+
+
+@dataclass
+class _Surface:
+    """The grain surface's GL objects: its :class:`SurfaceMesh`, vertex array, height and index buffers and
+    the index count of the current triangle list."""
+
+    mesh: SurfaceMesh
+    vao: Any
+    heights: Any
+    indices: Any
+    count: int = 0
 
 
 class GLRenderer:
@@ -101,13 +143,15 @@ class GLRenderer:
         self.prog_inst = self._m(ctx.program(vertex_shader=_source("instanced.vert"), fragment_shader=frag))
         self.prog_hf = self._m(ctx.program(vertex_shader=_source("heightfield.vert"), fragment_shader=frag))
         for prog in (self.prog_inst, self.prog_hf):
-            self._set(prog, "u_alpha_cm", codec.alpha_cm)
-            self._set(prog, "u_beta_cm", codec.beta_cm)
-            self._set(prog, "u_r_per_period", 255.0 * codec.beta_cm / codec.alpha_cm)
+            self._set(prog, "u_q_per_m", CM_PER_M / codec.beta_cm)
+            self._set(prog, "u_q_max", codec.alpha_cm / codec.beta_cm)
+            self._set(prog, "u_r_per_period", BYTE_MAX * codec.beta_cm / codec.alpha_cm)
             self._set(prog, "u_gamma", codec.gamma)
         self._set(self.prog_hf, "u_colour", GRAIN_COLOUR)
         self._unit = {}
-        for key, (v, f) in {"box": unit_cube(), "cyl": unit_cylinder()}.items():
+        units = {"box": unit_cube(), "box_open": unit_cube(open_top=True), "ground": unit_cube(),
+                 "cyl": unit_cylinder()}
+        for key, (v, f) in units.items():
             vbo, ibo = self._m(ctx.buffer(v.tobytes())), self._m(ctx.buffer(f.tobytes()))
             inst = self._m(ctx.buffer(reserve=64 * INSTANCE_FLOATS * 4, dynamic=True))
             vao = self._m(ctx.vertex_array(self.prog_inst, [(vbo, "3f", "in_pos"), self._instance_format(inst)],
@@ -117,6 +161,7 @@ class GLRenderer:
         self._mesh_names: list[str] = []
         self._origin = np.zeros(3)
         self._hf = None
+        self._ground: tuple[np.ndarray, np.ndarray, tuple] | None = None
         far = far_plane_m(codec.max_depth_m)
         self.targets = [self._target(c.intrinsics, far) for c in rig.cameras]
         ctx.enable(moderngl.DEPTH_TEST)
@@ -139,24 +184,24 @@ class GLRenderer:
         if name in prog:
             prog[name].value = value
 
-    def _target(self, cam, far: float) -> _Target:
-        ctx, size = self.ctx, (cam.width, cam.height)
+    def _buffers(self, size: tuple[int, int]) -> _Buffers:
+        ctx = self.ctx
         depth = self._m(ctx.depth_renderbuffer(size))
         enc = self._m(ctx.renderbuffer(size, 4, dtype="u1"))
         atts, clears = [enc], [(self._m(ctx.framebuffer([enc], depth)), (0.0, 0.0, 0.0, 0.0))]
-        rgb_at = zf_at = -1
         if self.rgb:
-            rb = self._m(ctx.renderbuffer(size, 4, dtype="f1"))
-            rgb_at = len(atts)
-            atts.append(rb)
-            clears.append((self._m(ctx.framebuffer([rb])), SKY_RGBA))
+            atts.append(self._m(ctx.renderbuffer(size, 4, dtype="f1")))
+            clears.append((self._m(ctx.framebuffer([atts[-1]])), SKY_RGBA))
         if self.float_depth:
-            rb = self._m(ctx.renderbuffer(size, 1, dtype="f4"))
-            zf_at = len(atts)
-            atts.append(rb)
-            clears.append((self._m(ctx.framebuffer([rb])), (float("nan"),) * 4))
-        return _Target(self._m(ctx.framebuffer(atts, depth)), clears, size, _mat(gl_projection(cam, NEAR_M, far)),
-                       rgb_at, zf_at)
+            atts.append(self._m(ctx.renderbuffer(size, 1, dtype="f4")))
+            clears.append((self._m(ctx.framebuffer([atts[-1]])), (float("nan"),) * 4))
+        return _Buffers(self._m(ctx.framebuffer(atts, depth)), clears)
+
+    def _target(self, cam, far: float) -> _Target:
+        size = (cam.width, cam.height)
+        corner = math.hypot(1.0, cam.width / (2.0 * cam.f), cam.height / (2.0 * cam.f))
+        return _Target(self._buffers(size), size, _mat(gl_projection(cam, NEAR_M, far)), far * corner,
+                       1 if self.rgb else -1, (2 if self.rgb else 1) if self.float_depth else -1)
 
     def _upload(self, key: str, records: np.ndarray) -> None:
         vao, buf, _ = self._unit[key]
@@ -168,17 +213,26 @@ class GLRenderer:
         self._unit[key][2] = len(data)
 
     def _heightfield(self, scene: Scene) -> None:
+        """Upload the grain surface: vertex heights every frame, the triangle list when the flat blocks change."""
         hf = scene.heightfield
         hp = padded_heights(np.asarray(hf.heights, dtype=np.float32))
-        if self._hf is None or self._hf[2] != hp.shape:
+        if self._hf is None or self._hf.mesh.shape != hf.heights.shape:
             nx, ny = hf.heights.shape
-            xy = self._m(self.ctx.buffer(grid_vertices(nx, ny, hf.cell_m, hf.length_m, hf.width_m).tobytes()))
-            hbuf = self._m(self.ctx.buffer(reserve=hp.nbytes, dynamic=True))
-            ibo = self._m(self.ctx.buffer(grid_triangles(nx, ny).tobytes()))
+            mesh = SurfaceMesh(nx, ny, hf.cell_m, hf.length_m, hf.width_m)
+            xy = self._m(self.ctx.buffer(mesh.vertices.tobytes()))
+            hbuf = self._m(self.ctx.buffer(reserve=len(mesh.vertices) * 4, dynamic=True))
+            ibo = self._m(self.ctx.buffer(reserve=2 * (nx + 1) * (ny + 1) * 3 * 4, dynamic=True))
             vao = self._m(self.ctx.vertex_array(self.prog_hf, [(xy, "2f", "in_xy"), (hbuf, "1f", "in_h")],
                                                 index_buffer=ibo, index_element_size=4))
-            self._hf = (vao, hbuf, hp.shape)
-        self._hf[1].write(np.ascontiguousarray(hp))
+            self._hf = _Surface(mesh, vao, hbuf, ibo)
+        surf = self._hf
+        surf.heights.write(surf.mesh.heights(hp))
+        tri, changed = surf.mesh.triangles(hp)
+        if changed:
+            if tri.nbytes > surf.indices.size:
+                surf.indices.orphan(tri.nbytes)
+            surf.indices.write(tri)
+            surf.count = tri.size
         local = hf.world_from_grid.copy()
         local[:3, 3] -= self._origin
         self.prog_hf["u_model"].write(_mat(local))
@@ -195,22 +249,55 @@ class GLRenderer:
                                                            self._origin))
 
     def set_scene(self, scene: Scene) -> None:
-        """Upload one frame: box / cylinder instance records, mesh poses, the grain heights (a buffer write)."""
+        """Upload one frame: box / cylinder instance records (boxes with a hidden top face drawn without it),
+        mesh poses, the grain heights (a buffer write; the triangle list only when its flat blocks change)."""
         # GPU coordinates are relative to the cart grid origin (float64 here, float32 there)
         self._origin = scene.heightfield.world_from_grid[:3, 3].copy()
-        self._upload("box", box_instances(scene.boxes, self._origin))
+        boxes = box_instances(scene.boxes, self._origin)
+        hidden = scene.boxes.hidden_top
+        if hidden is None:
+            hidden = np.zeros(len(boxes), dtype=bool)
+        ground = np.zeros(len(boxes), dtype=bool)
+        self._ground = None
+        if scene.ground_box is not None:
+            g = scene.ground_box
+            ground[g] = True
+            self._ground = (scene.boxes.world_from_box[g], scene.boxes.half_extents[g],
+                            tuple(scene.boxes.colour[g].tolist()))
+        self._upload("box", boxes[~hidden & ~ground])
+        self._upload("box_open", boxes[hidden & ~ground])
+        self._upload("ground", boxes[ground])
         self._upload("cyl", cylinder_instances(scene.cylinders, self._origin))
         self._heightfield(scene)
         for mesh in scene.meshes:
             self._mesh(mesh)
         self._mesh_names = [m.name for m in scene.meshes]
 
+    def _ground_key(self, t: _Target, world_from_camera: np.ndarray) -> tuple | None:
+        """What the ground slab looks like from this camera, or None when the cached image cannot be used.
+
+        Seen from a camera whose farthest visible point (``reach_m``) stays inside the slab's top face, the slab
+        is an unbounded plane (and the plane below it): its image depends only on the camera's pose modulo
+        turns about the slab's z axis and shifts along x and y, i.e. on the third row of slab_from_camera (and
+        the slab's thickness and colour). A camera on a vehicle keeps that row bit for bit while the vehicle
+        drives and turns on the ground, so the image is drawn once and copied into each frame."""
+        if self._ground is None:
+            return None
+        world_from_slab, half, colour = self._ground
+        slab_from_camera = invert(world_from_slab) @ world_from_camera
+        x, y = slab_from_camera[0, 3], slab_from_camera[1, 3]
+        if abs(x) + t.reach_m > half[0] or abs(y) + t.reach_m > half[1]:
+            return None
+        return (*slab_from_camera[2].tolist(), float(half[2]), colour)
+
+    def _draw_ground(self) -> None:
+        vao, _, n = self._unit["ground"]
+        if n:
+            vao.render(instances=n)
+
     def draw(self, k: int, world_from_camera: np.ndarray) -> None:
         """Render camera ``k`` of the rig at pose ``world_from_camera`` (4 x 4) into its framebuffer."""
         t = self.targets[k]
-        for fbo, colour in t.clears:
-            fbo.clear(*colour, depth=1.0)
-        t.draw.use()
         view = gl_view(world_from_camera)
         view[:3, 3] += view[:3, :3] @ self._origin          # view @ world_from_local, in float64
         # the projection flips the image vertically, which turns counter-clockwise (outward) faces clockwise;
@@ -222,17 +309,39 @@ class GLRenderer:
             self._set(prog, "u_light", tuple(view[:3, :3] @ SUN_WORLD))
         # closed, outward-wound solids and the height field (seen from above only) cull their back faces;
         # mesh files have unknown winding and are drawn two-sided
-        # drawn roughly front to back (stream and auger, grain, then boxes with the ground slab last) so that
-        # early depth rejection skips most hidden fragments
         self.ctx.enable(self._cull)
+        key = self._ground_key(t, world_from_camera)
+        if key is not None:
+            # the ground as a cached image: the copy (colour and depth, nearest, same size and format: the
+            # bytes themselves) costs what a clear costs, the slab's rasterisation (the whole image) is skipped
+            if t.ground is None:
+                t.ground = self._buffers(t.size)
+            if key != t.ground_key:
+                for fbo, colour in t.ground.clears:
+                    fbo.clear(*colour, depth=1.0)
+                t.ground.draw.use()
+                self._draw_ground()
+                t.ground_key = key
+            for (dst, _), (src, _) in zip(t.frame.clears, t.ground.clears):
+                self.ctx.copy_framebuffer(dst, src)
+        else:
+            for fbo, colour in t.frame.clears:
+                fbo.clear(*colour, depth=1.0)
+        t.frame.draw.use()
+        # drawn roughly front to back (stream and auger, grain, boxes, the ground slab last when not cached) so
+        # that early depth rejection skips the shading of hidden fragments; llvmpipe still rasterises and
+        # depth-tests them (a hidden layer costs about 3/4 of a visible one), hence the skipped hidden faces
         vao, _, n = self._unit["cyl"]
         if n:
             vao.render(instances=n)
         if self._hf is not None:
-            self._hf[0].render()
-        vao, _, n = self._unit["box"]
-        if n:
-            vao.render(instances=n)
+            self._hf.vao.render(vertices=self._hf.count)
+        for name in ("box_open", "box"):
+            vao, _, n = self._unit[name]
+            if n:
+                vao.render(instances=n)
+        if key is None:
+            self._draw_ground()
         self.ctx.disable(self._cull)
         for name in self._mesh_names:
             self._meshes[name][0].render(instances=1)
@@ -247,7 +356,7 @@ class GLRenderer:
         """Read camera k's encoded bytes into ``out`` (H, W, 4) uint8 in place (e.g. a shared-memory view)."""
         t = self.targets[k]
         self._check(out, (t.size[1], t.size[0], 4), np.uint8)
-        t.draw.read_into(out, components=4, attachment=0, alignment=1, dtype="u1")
+        t.frame.draw.read_into(out, components=4, attachment=0, alignment=1, dtype="u1")
 
     def read_rgb(self, k: int, out: np.ndarray) -> None:
         """Read camera k's shaded image into ``out`` (H, W, 4) uint8 in place."""
@@ -255,7 +364,7 @@ class GLRenderer:
         if t.rgb_attachment < 0:
             raise ValueError("this renderer was made without the rgb output")
         self._check(out, (t.size[1], t.size[0], 4), np.uint8)
-        t.draw.read_into(out, components=4, attachment=t.rgb_attachment, alignment=1, dtype="f1")
+        t.frame.draw.read_into(out, components=4, attachment=t.rgb_attachment, alignment=1, dtype="f1")
 
     def read_zf(self, k: int, out: np.ndarray) -> None:
         """Read camera k's planar depth into ``out`` (H, W) float32 m (NaN invalid) in place."""
@@ -263,7 +372,7 @@ class GLRenderer:
         if t.zf_attachment < 0:
             raise ValueError("this renderer was made without the float depth output")
         self._check(out, (t.size[1], t.size[0]), np.float32)
-        t.draw.read_into(out, components=1, attachment=t.zf_attachment, alignment=1, dtype="f4")
+        t.frame.draw.read_into(out, components=1, attachment=t.zf_attachment, alignment=1, dtype="f4")
 
     def close(self) -> None:
         """Release the GL context (when this renderer made it), else every object made in it."""

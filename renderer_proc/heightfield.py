@@ -23,8 +23,14 @@ __all__ = ["grid_triangles", "grid_vertices", "padded_heights", "surface_height"
 
 
 def padded_heights(heights: np.ndarray) -> np.ndarray:
-    """(nx, ny) cell heights -> (nx + 2, ny + 2) vertex heights with an edge-replicated ring, same dtype."""
-    return np.pad(np.asarray(heights), 1, mode="edge")
+    """(nx, ny) cell heights -> (nx + 2, ny + 2) vertex heights with an edge-replicated ring, same dtype
+    (``np.pad(h, 1, mode="edge")``, written out: it runs every frame and np.pad's overhead is most of it)."""
+    h = np.asarray(heights)
+    out = np.empty((h.shape[0] + 2, h.shape[1] + 2), dtype=h.dtype)
+    out[1:-1, 1:-1] = h
+    out[0, 1:-1], out[-1, 1:-1] = h[0], h[-1]
+    out[:, 0], out[:, -1] = out[:, 1], out[:, -2]
+    return out
 
 
 def surface_height(padded: np.ndarray, cell_m: float, x: np.ndarray, y: np.ndarray) -> np.ndarray:

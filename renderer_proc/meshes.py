@@ -29,10 +29,13 @@ CYLINDER_SIDES = 16
 INSTANCE_FLOATS = 19
 
 
-def unit_cube() -> tuple[np.ndarray, np.ndarray]:
-    """Cube [-1, 1]^3: vertices (8, 3) float32, triangles (12, 3) int32."""
+def unit_cube(open_top: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Cube [-1, 1]^3: vertices (8, 3) float32, triangles (12, 3) int32 (10 without the +z face when
+    ``open_top``), wound counter-clockwise seen from outside."""
     v = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=np.float32)
     quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    if open_top:
+        quads = quads[:-1]                 # (1, 5, 7, 3): the four z = +1 vertices
     tri = [(a, b, c) for a, b, c, d in quads] + [(a, c, d) for a, b, c, d in quads]
     return v, np.array(tri, dtype=np.int32)
 
@@ -63,7 +66,7 @@ def pack_instances(world_from_unit: np.ndarray, colour: np.ndarray, origin=None)
 
 
 def box_instances(boxes: Boxes, origin=None) -> np.ndarray:
-    """(N, 19) float32 instance records of the unit cube for ``boxes`` (relative to ``origin``, m)."""
+    """(N, 19) float32 instance records of the unit cube for ``boxes`` (relative to ``origin``, m), in order."""
     scale = np.zeros((len(boxes), 4, 4))
     scale[:, [0, 1, 2], [0, 1, 2]] = boxes.half_extents
     scale[:, 3, 3] = 1.0
@@ -73,10 +76,15 @@ def box_instances(boxes: Boxes, origin=None) -> np.ndarray:
 def orthonormal_frames(axis: np.ndarray) -> np.ndarray:
     """(M, 3, 3) rotations whose third column is the unit ``axis`` (M, 3)."""
     z = axis / np.linalg.norm(axis, axis=1, keepdims=True)
-    helper = np.where(np.abs(z[:, 0:1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    x = np.cross(helper, z)
+    # x = unit(helper x z) with helper = e_x where |z_x| < 0.9, else e_y; written out (np.cross costs more
+    # in overhead than the arithmetic for a few dozen rows)
+    zx, zy, zz = z[:, 0], z[:, 1], z[:, 2]
+    use_ex = np.abs(zx) < 0.9
+    zero = np.zeros_like(zx)
+    x = np.where(use_ex[:, None], np.stack([zero, -zz, zy], axis=1), np.stack([zz, zero, -zx], axis=1))
     x /= np.linalg.norm(x, axis=1, keepdims=True)
-    return np.stack([x, np.cross(z, x), z], axis=2)
+    y = np.stack([zy * x[:, 2] - zz * x[:, 1], zz * x[:, 0] - zx * x[:, 2], zx * x[:, 1] - zy * x[:, 0]], axis=1)
+    return np.stack([x, y, z], axis=2)
 
 
 def cylinder_instances(cyl: Cylinders, origin=None) -> np.ndarray:

@@ -16,7 +16,7 @@ import numpy as np
 from cosim.config.scenario import Scenario
 from cosim.geometry import make_transform
 
-__all__ = ["EntityParts", "box_from_bounds", "cart_boxes", "entity_parts"]
+__all__ = ["CART_FLOOR_BOX", "CART_WALL_BOXES", "EntityParts", "box_from_bounds", "cart_boxes", "entity_parts"]
 
 #: combine: ground clearance of the body, header depth / bottom / top, cab height and width (m)
 COMBINE_CLEARANCE_M = 0.5
@@ -41,6 +41,9 @@ CART_WHEEL_WIDTH_M = 0.5
 CART_WHEEL_GAP_M = 0.05
 CART_TONGUE_HALF_WIDTH_M = 0.1
 CART_TONGUE_HEIGHT_M = 0.2
+#: indices of the floor and of the four walls in :func:`cart_boxes`
+CART_FLOOR_BOX = 0
+CART_WALL_BOXES = (1, 2, 3, 4)
 
 COMBINE_COLOUR = (0.20, 0.55, 0.15)
 TRACTOR_COLOUR = (0.25, 0.60, 0.20)
@@ -51,8 +54,10 @@ WHEEL_COLOUR = (0.08, 0.08, 0.08)
 @dataclass(frozen=True)
 class EntityParts:
     """One entity's parts in its body frame. Boxes: ``body_from_box`` (N, 4, 4), ``half_extents`` (N, 3) m,
-    ``box_colour`` (N, 3). Cylinders: ``cyl_p0``/``cyl_p1`` (M, 3) m, ``cyl_radius`` (M,) m, ``cyl_colour``
-    (M, 3). ``mesh_file`` replaces the boxes when set (drawn with ``mesh_colour``)."""
+    ``box_colour`` (N, 3), ``box_hidden_top`` (N,) bool: the box's top (+z) face lies under other parts (the
+    cart floor's under the grain surface and the walls, the walls' under the rim bars). Cylinders:
+    ``cyl_p0``/``cyl_p1`` (M, 3) m, ``cyl_radius`` (M,) m, ``cyl_colour`` (M, 3). ``mesh_file`` replaces the
+    boxes when set (drawn with ``mesh_colour``)."""
 
     body_from_box: np.ndarray
     half_extents: np.ndarray
@@ -63,6 +68,7 @@ class EntityParts:
     cyl_colour: np.ndarray
     mesh_file: Path | None
     mesh_colour: tuple[float, float, float]
+    box_hidden_top: np.ndarray
 
 
 def box_from_bounds(lo, hi) -> tuple[np.ndarray, np.ndarray]:
@@ -73,14 +79,18 @@ def box_from_bounds(lo, hi) -> tuple[np.ndarray, np.ndarray]:
     return make_transform(np.eye(3), (lo + hi) / 2.0), (hi - lo) / 2.0
 
 
-def _pack(boxes, colour, cyls, cyl_colour, mesh_file) -> EntityParts:
+def _pack(boxes, colour, cyls, cyl_colour, mesh_file, hidden_top=()) -> EntityParts:
+    """Stack ``boxes`` [(body_from_box, half_extents)] and ``cyls`` [(p0, p1, radius)]; ``hidden_top``: indices
+    of boxes whose top face is covered (see :class:`EntityParts`)."""
     t = np.stack([b[0] for b in boxes])
     h = np.stack([b[1] for b in boxes])
     p0 = np.array([c[0] for c in cyls], dtype=np.float64).reshape(-1, 3)
     p1 = np.array([c[1] for c in cyls], dtype=np.float64).reshape(-1, 3)
     r = np.array([c[2] for c in cyls], dtype=np.float64)
+    hidden = np.zeros(len(h), dtype=bool)
+    hidden[list(hidden_top)] = True
     return EntityParts(t, h, np.tile(np.array(colour, np.float32), (len(h), 1)), p0, p1, r,
-                       np.tile(np.array(cyl_colour, np.float32), (len(r), 1)), mesh_file, colour)
+                       np.tile(np.array(cyl_colour, np.float32), (len(r), 1)), mesh_file, colour, hidden)
 
 
 def _wheel_pair(x: float, half_track: float, radius: float, width: float):
@@ -145,10 +155,27 @@ def _cart(s: Scenario) -> EntityParts:
     c = s.cart
     half_track = c.interior_width_m / 2.0 + c.wall_thickness_m + CART_WHEEL_GAP_M + CART_WHEEL_WIDTH_M / 2.0
     wheels = _wheel_pair(0.0, half_track, CART_WHEEL_RADIUS_M, CART_WHEEL_WIDTH_M)
-    return _pack(cart_boxes(s), CART_COLOUR, wheels, WHEEL_COLOUR, c.mesh_file)
+    # the floor's top face is covered by the grain surface (heights >= 0 over the whole interior) and, around
+    # it, lies inside the walls (which reach down to the floor's underside); a wall's top face lies under its
+    # rim bar when the rim is at least as wide as the wall: no outside camera sees either
+    hidden = [CART_FLOOR_BOX]
+    if c.rim_width_m >= c.wall_thickness_m:
+        hidden += list(CART_WALL_BOXES)
+    return _pack(cart_boxes(s), CART_COLOUR, wheels, WHEEL_COLOUR, c.mesh_file, hidden_top=hidden)
 
 
 @functools.lru_cache(maxsize=8)
+def _entity_parts(scenario: Scenario) -> dict[str, EntityParts]:
+    return {"combine": _combine(scenario), "tractor": _tractor(scenario), "cart": _cart(scenario)}
+
+
+#: the scenario of the last call and its parts: the renderer asks every frame with the same object, and hashing
+#: a scenario (for the lru_cache) costs more than building the rest of the frame's scene record
+_last: list = [None, None]
+
+
 def entity_parts(scenario: Scenario) -> dict[str, EntityParts]:
     """Parts of ``combine``, ``tractor`` and ``cart`` in their body frames (cached per scenario)."""
-    return {"combine": _combine(scenario), "tractor": _tractor(scenario), "cart": _cart(scenario)}
+    if _last[0] is not scenario:
+        _last[:] = [scenario, _entity_parts(scenario)]
+    return _last[1]

@@ -62,11 +62,15 @@ SUN_WORLD = np.array([0.3, 0.4, 0.866]) / np.linalg.norm([0.3, 0.4, 0.866])
 @dataclass(frozen=True)
 class Boxes:
     """N oriented boxes. ``world_from_box`` (N, 4, 4) float64 rigid; ``half_extents`` (N, 3) float64 m (box
-    frame); ``colour`` (N, 3) float32 linear RGB in [0, 1]."""
+    frame); ``colour`` (N, 3) float32 linear RGB in [0, 1]. ``hidden_top`` (N,) bool or None (none): boxes
+    whose top (+z, box frame) face no camera outside the solids can see, because other parts cover it; the
+    GL renderer skips those faces (llvmpipe pays for hidden fragments almost as much as for visible ones),
+    the ray caster need not."""
 
     world_from_box: np.ndarray
     half_extents: np.ndarray
     colour: np.ndarray
+    hidden_top: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.half_extents)
@@ -113,12 +117,15 @@ class MeshInstance:
 
 @dataclass(frozen=True)
 class Scene:
-    """Everything the renderers draw for one frame (world frame)."""
+    """Everything the renderers draw for one frame (world frame). ``ground_box``: index in ``boxes`` of the
+    ground slab (its top face is the ground plane), or None; the GL renderer keeps a per-camera image of it
+    while the camera's pose relative to the slab's plane does not change (``renderer_proc.gl_backend``)."""
 
     boxes: Boxes
     cylinders: Cylinders
     heightfield: HeightField
     meshes: tuple[MeshInstance, ...] = ()
+    ground_box: int | None = None
 
 
 @functools.lru_cache(maxsize=8)
@@ -172,7 +179,7 @@ def scene_from_state(scenario: Scenario, state: Mapping[str, float], heightmap: 
                          f"{scenario.grain.cell_m} m")
     poses = _poses(state)
     parts: dict[str, EntityParts] = entity_parts(scenario)
-    w_from_box, half, colour = [], [], []
+    w_from_box, half, colour, hidden = [], [], [], []
     c0, c1, rad, ccol = [], [], [], []
     meshes = []
     for name, p in parts.items():
@@ -184,6 +191,7 @@ def scene_from_state(scenario: Scenario, state: Mapping[str, float], heightmap: 
             w_from_box.append(pose[None] @ p.body_from_box)
             half.append(p.half_extents)
             colour.append(p.box_colour)
+            hidden.append(p.box_hidden_top)
         c0.append(apply(pose, p.cyl_p0))
         c1.append(apply(pose, p.cyl_p1))
         rad.append(p.cyl_radius)
@@ -191,9 +199,11 @@ def scene_from_state(scenario: Scenario, state: Mapping[str, float], heightmap: 
     # ground slab under the combine: its top face z = 0 is the ground plane
     size = scenario.render.ground_size_m
     g = vehicle_pose(float(state["combine_x_m"]), float(state["combine_y_m"]), 0.0, -GROUND_THICKNESS_M / 2.0)
+    ground_box = sum(len(x) for x in half)
     w_from_box.append(g[None])
     half.append(np.array([[size / 2.0, size / 2.0, GROUND_THICKNESS_M / 2.0]]))
     colour.append(np.array([GROUND_COLOUR], dtype=np.float32))
+    hidden.append(np.zeros(1, dtype=bool))
     # auger tube: pivot (combine body) -> spout (world)
     pivot = apply(poses["combine"], np.asarray(scenario.auger.pivot_xyz_m, dtype=np.float64))
     spout = np.array([state["spout_x_m"], state["spout_y_m"], state["spout_z_m"]], dtype=np.float64)
@@ -210,8 +220,9 @@ def scene_from_state(scenario: Scenario, state: Mapping[str, float], heightmap: 
     hf = HeightField(poses["cart"] @ cart_body_from_grid(cart), h.astype(np.float32, copy=False),
                      scenario.grain.cell_m, cart.interior_length_m, cart.interior_width_m)
     return Scene(
-        Boxes(np.concatenate(w_from_box), np.concatenate(half), np.concatenate(colour).astype(np.float32)),
+        Boxes(np.concatenate(w_from_box), np.concatenate(half), np.concatenate(colour).astype(np.float32),
+              np.concatenate(hidden)),
         Cylinders(np.concatenate(c0), np.concatenate(c1), np.concatenate(rad),
                   np.concatenate(ccol).astype(np.float32)),
-        hf, tuple(meshes),
+        hf, tuple(meshes), ground_box,
     )

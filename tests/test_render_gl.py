@@ -295,3 +295,115 @@ def test_rough_grain_surface_same_triangles_as_ray_caster(ctx):
     err = np.abs(za - zb)[both]
     assert np.mean(err < 1e-4) > 0.97
     assert np.mean(err < 0.01) > 0.99
+
+
+def test_merged_flat_blocks_render_like_the_full_grid(ctx, monkeypatch):
+    """Flat fill with a pile, an empty strip and a plateau: the merged draw mesh (flat blocks as a few large
+    triangles, fans where they meet fine blocks) gives the same depths as every grid triangle drawn, and no
+    pixel falls through a seam to the floor below (both agree with the exact cast)."""
+    import functools
+
+    from renderer_proc import gl_backend
+    from renderer_proc.hfmesh import SurfaceMesh
+
+    s = Scenario(format_version=1)
+    _, h, _ = sample_frame(s)
+    h = h.copy()
+    h[:7] = 0.0
+    h[40:44, 5:9] = 1.7
+    hf = HeightField(np.eye(4), h, 0.1, 6.0, 3.0)
+    floor = make_transform(np.eye(3), (3.0, 1.5, -0.5))
+    scene = Scene(Boxes(floor[None], np.array([[3.0, 1.5, 0.5]]), np.ones((1, 3), np.float32)),
+                  Cylinders(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3), np.float32)), hf)
+    cam = Pinhole(200, 150, math.radians(60.0))
+    fwd = np.array([math.cos(0.9), 0.0, -math.sin(0.9)])
+    right = np.array([0.0, -1.0, 0.0])
+    pose = np.eye(4)
+    pose[:3, :3] = np.stack([right, np.cross(right, fwd), fwd], axis=1)
+    pose[:3, 3] = (0.5, 1.5, 4.0)
+    rig = Rig((RigCamera("cam0", cam, np.eye(4)),))
+    z = {}
+    for name, block in (("merged", None), ("grid", 1)):
+        if block is not None:
+            monkeypatch.setattr(gl_backend, "SurfaceMesh", functools.partial(SurfaceMesh, block=block))
+        r = renderer(ctx, rig, float_depth=True)
+        r.set_scene(scene)
+        r.draw(0, pose)
+        z[name] = np.zeros((150, 200), np.float32)
+        r.read_zf(0, z[name])
+        if block is None:
+            assert r._hf.count < 3 * (61 * 31)         # merged: fewer than half the grid's triangles drawn
+        r.close()
+    mock = MockRenderer(rig, CODEC, float_depth=True)
+    mock.set_scene(scene)
+    mock.draw(0, pose)
+    z["exact"] = np.zeros((150, 200), np.float32)
+    mock.read_zf(0, z["exact"])
+    np.testing.assert_array_equal(np.isfinite(z["merged"]), np.isfinite(z["grid"]))
+    both = np.isfinite(z["merged"])
+    assert both.mean() > 0.6
+    assert np.abs(z["merged"] - z["grid"])[both].max() < 1e-4
+    err = np.abs(z["merged"] - z["exact"])[both & np.isfinite(z["exact"])]
+    assert np.mean(err < 1e-4) > 0.99 and np.mean(err < 0.01) > 0.999
+
+
+def test_cached_ground_image_matches_a_fresh_render(ctx):
+    """The ground slab is drawn once per camera and copied into later frames while the camera's pose relative
+    to the ground plane is unchanged (a mounted camera on a vehicle driving and turning on flat ground): a
+    later frame, vehicles elsewhere and turned, equals what a fresh renderer draws for it."""
+    from renderer_proc.rig import plan_rig
+
+    s0 = Scenario.model_validate({"format_version": 1, "sensor": {"max_angular_error_deg": 0.5}})
+    s1 = Scenario.model_validate({"format_version": 1, "sensor": {"max_angular_error_deg": 0.5},
+                                  "combine": {"heading_deg": 37.0}})
+    rig = plan_rig(s0)
+    cached, fresh = renderer(ctx, rig, rgb=True, float_depth=True), renderer(ctx, rig, rgb=True, float_depth=True)
+    imgs, zfs, rgbs = {}, {}, {}
+    for name, r, s, t_s in (("first", cached, s0, 0.0), ("cached", cached, s1, 40.0), ("fresh", fresh, s1, 40.0)):
+        state, h, stream = sample_frame(s, t_s=t_s)
+        r.set_scene(scene_from_state(s, state, h, stream))
+        imgs[name], zfs[name], rgbs[name] = [], [], []
+        for k, pose in enumerate(camera_poses(s, state, rig)):
+            c = rig.cameras[k].intrinsics
+            img, rgb = np.zeros((c.height, c.width, 4), np.uint8), np.zeros((c.height, c.width, 4), np.uint8)
+            zf = np.zeros((c.height, c.width), np.float32)
+            r.draw(k, pose)
+            r.read_depth(k, img)
+            r.read_rgb(k, rgb)
+            r.read_zf(k, zf)
+            imgs[name].append(img)
+            zfs[name].append(zf)
+            rgbs[name].append(rgb)
+        if name == "first":
+            keys = [t.ground_key for t in cached.targets]
+    assert all(k is not None for k in keys)
+    assert [t.ground_key for t in cached.targets] == keys      # the heading changed, the ground image did not
+    for a, b in zip(imgs["cached"], imgs["fresh"]):
+        np.testing.assert_array_equal(a[..., 3], b[..., 3])
+        da, db = decode_depth(a, CODEC), decode_depth(b, CODEC)
+        valid = np.isfinite(da)
+        assert valid.mean() > 0.5
+        # equal bytes but where float32 rounding of the (differently placed) slab tips B by one
+        assert np.mean(np.abs(da - db)[valid] > 1e-9) < 1e-3
+        assert np.abs(da - db)[valid].max() <= CODEC.beta_cm / 100.0 / 255.0 + 1e-9
+    for a, b in zip(zfs["cached"], zfs["fresh"]):
+        np.testing.assert_array_equal(np.isnan(a), np.isnan(b))
+        np.testing.assert_allclose(a, b, rtol=1e-5)
+    for a, b in zip(rgbs["cached"], rgbs["fresh"]):
+        assert np.mean(np.abs(a.astype(int) - b.astype(int)) > 1) < 1e-3     # the same shading
+    cached.close()
+    fresh.close()
+
+
+def test_ground_drawn_directly_when_its_edge_is_in_reach(ctx):
+    """A ground square too small for the camera's reach has visible edges: no cached image, drawn per frame."""
+    s = Scenario.model_validate({"format_version": 1, "render": {"ground_size_m": 60.0}})
+    from renderer_proc.rig import plan_rig
+
+    rig = plan_rig(s)
+    state, h, stream = sample_frame(s)
+    r = renderer(ctx, rig)
+    r.set_scene(scene_from_state(s, state, h, stream))
+    r.draw(0, camera_poses(s, state, rig)[0])
+    assert r.targets[0].ground is None and r.targets[0].ground_key is None
+    r.close()

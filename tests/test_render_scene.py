@@ -100,3 +100,93 @@ def test_sample_frame_puts_stream_into_cart():
     g = np.linalg.inv(scene.heightfield.world_from_grid) @ np.r_[end, 1.0]
     assert 0.0 < g[0] < s.cart.interior_length_m and 0.0 < g[1] < s.cart.interior_width_m
     assert math.isclose(h.max(), s.grain.initial_fill_m + 0.6, abs_tol=0.05)
+
+
+def test_hidden_top_faces_are_covered():
+    """The top faces the GL renderer skips (cart floor and walls) are covered: each point of them lies on the
+    grain grid's floor inside the interior (under the grain surface, heights >= 0) or inside another box."""
+    from renderer_proc.parts import CART_WALL_BOXES
+
+    s = Scenario(format_version=1)
+    state, h, stream = sample_frame(s)
+    scene = scene_from_state(s, state, h, stream)
+    boxes, hidden = scene.boxes, scene.boxes.hidden_top
+    assert hidden is not None and hidden.shape == (len(boxes),) and hidden.sum() == 1 + len(CART_WALL_BOXES)
+    assert scene.ground_box is not None and not hidden[scene.ground_box]
+    rng = np.random.default_rng(3)
+    grid_from_world = np.linalg.inv(scene.heightfield.world_from_grid)
+    n_grain = 0
+    for k in np.flatnonzero(hidden):
+        top = boxes.world_from_box[k] @ np.diag([*boxes.half_extents[k], 1.0])
+        uv = rng.uniform(-1.0, 1.0, (500, 2))
+        pts = apply(top, np.c_[uv, np.ones(len(uv))])             # points on the top face, world
+        g = apply(grid_from_world, pts)
+        covered = ((np.abs(g[:, 2]) < 1e-9) & (g[:, 0] >= 0) & (g[:, 0] <= s.cart.interior_length_m)
+                   & (g[:, 1] >= 0) & (g[:, 1] <= s.cart.interior_width_m))
+        n_grain += int(covered.sum())
+        for j in range(len(boxes)):
+            if j != k:
+                local = apply(np.linalg.inv(boxes.world_from_box[j]), pts)
+                covered |= np.all(np.abs(local) <= boxes.half_extents[j] + 1e-9, axis=1)
+        assert np.all(covered), k
+    assert n_grain > 0
+    # a rim narrower than the wall leaves the wall tops in view: only the floor's top is skipped
+    narrow = scene_from_state(scenario(cart={"rim_width_m": 0.05}), state, h, stream)
+    assert np.flatnonzero(narrow.boxes.hidden_top).tolist() == [int(np.flatnonzero(hidden)[0])]
+
+
+def _surface_checks(h: np.ndarray, cell: float, block: int) -> int:
+    """Build the merged draw mesh of ``h`` and check it: counter-clockwise, area L x W, every interior edge
+    shared by exactly two triangles in opposite directions (no T-junction, no crack), the same surface as
+    ``surface_height``. Returns the triangle count."""
+    from renderer_proc.heightfield import padded_heights, surface_height
+    from renderer_proc.hfmesh import SurfaceMesh
+
+    nx, ny = h.shape
+    length, width = nx * cell, ny * cell
+    mesh = SurfaceMesh(nx, ny, cell, length, width, block)
+    hp = padded_heights(h)
+    tri, changed = mesh.triangles(hp)
+    assert changed and tri.dtype == np.int32
+    xy, z = mesh.vertices.astype(np.float64), mesh.heights(hp).astype(np.float64)
+    p = xy[tri]
+    area = 0.5 * ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+                  - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
+    assert np.all(area > 0.0)
+    assert math.isclose(area.sum(), length * width, rel_tol=1e-6)
+    directed = {}
+    for t in tri:
+        for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
+            directed[(a, b)] = directed.get((a, b), 0) + 1
+    assert max(directed.values()) == 1
+    for a, b in directed:
+        if (b, a) not in directed:         # a boundary edge: both ends on the interior's outline
+            (xa, ya), (xb, yb) = xy[a], xy[b]
+            assert (xa == xb and xa in (0.0, np.float32(length))) or (ya == yb and ya in (0.0, np.float32(width)))
+    bary = np.random.default_rng(0).dirichlet([1.0, 1.0, 1.0], len(tri))
+    q = np.einsum("tk,tkd->td", bary, p)
+    # vertex positions are float32 (~1e-8 m), which on a 7 m/m plateau edge moves the height ~1e-6 m
+    np.testing.assert_allclose(np.einsum("tk,tk->t", bary, z[tri]), surface_height(hp, cell, q[:, 0], q[:, 1]),
+                               atol=1e-5)
+    assert not mesh.triangles(hp)[1]       # same flat blocks: the index buffer need not be written again
+    return len(tri)
+
+
+@pytest.mark.parametrize("block", [1, 3, 4, 8])
+def test_merged_grain_surface_is_watertight_and_exact(block):
+    s = Scenario(format_version=1)
+    _, h, _ = sample_frame(s)                        # flat fill with a cone under the impact point
+    h = h.copy()
+    h[:7] = 0.0                                      # an empty strip at the front
+    h[40:44, 5:9] = 1.7                              # a raised plateau
+    n = _surface_checks(h, s.grain.cell_m, block)
+    nx, ny = h.shape
+    if block == 1:
+        assert n == 2 * (nx + 1) * (ny + 1)          # block 1 is the plain grid
+    else:
+        assert n < (nx + 1) * (ny + 1)               # mostly flat: far fewer triangles than the grid
+
+
+def test_rough_grain_surface_keeps_every_grid_triangle():
+    h = np.random.default_rng(5).uniform(0.0, 1.0, (13, 7)).astype(np.float32)
+    assert _surface_checks(h, 0.1, 4) == 2 * 14 * 8
