@@ -128,8 +128,9 @@ KNOBS: dict[str, Knob] = {
         tuple(Setting(f"{n} cam {w}x{h}", {"render.rig": "fixed", "render.cameras": n, "render.width_px": w,
                                             "render.height_px": h, "render.hfov_deg": 100.0 / n})
               for n in (1, 2) for (w, h) in ((320, 240), (640, 480), (1024, 768)))
-        + (Setting("auto rig", {"render.rig": "auto"}),),
-        "auto rig", _range_error, None, {"feedback": "perception"}),
+        + tuple(Setting(f"auto rig {b:g} deg", {"render.rig": "auto", "sensor.max_angular_error_deg": b})
+                for b in (0.05, 0.1, 0.2, 0.4)),
+        "auto rig 0.1 deg", _range_error, None, {"feedback": "perception"}),
     "beams": Knob(
         "beams", "perceived height map RMSE (m)",
         tuple(Setting(f"{a}x{e} beams", {"sensor.pattern.azimuth_count": a, "sensor.pattern.elevation_count": e})
