@@ -1,19 +1,23 @@
 """Cost of the live viewer and of MCAP recording to a run's real-time factor (issue 7 benchmark).
 
-Five configurations, interleaved and repeated: plain, ``viewer`` (the observer process attached, with a
-client polling the dashboard like the page does: state every 250 ms, each changed image panel at most every
-500 ms), ``record`` (the MCAP sink, images every frame), ``record-img5`` (images every 5th frame) and
-``viewer+record``. Two workloads:
+Five configurations, interleaved and repeated (``--configs`` picks some): plain, ``viewer`` (the observer
+process attached, with a client polling the dashboard like the page does: state every 250 ms, each changed
+image panel at most every 500 ms), ``record`` (the MCAP sink, images every frame), ``record-img5`` (images
+every 5th frame) and ``viewer+record``. Recording runs also report the supervisor's time in the recording sink
+per frame (mean, ms: the copy into a frame slot plus any wait for a free slot), the recorder's CPU time per
+frame (its process CPU time: encode, compress, write; from the file's ``recorder`` metadata; older recorders
+lack it) and the file
+size per frame. Two workloads:
 
 * ``payload``: a CPU-bound stand-in ring with the real runs' payload sizes: 2 cameras of 640 x 480 depth-encoded
-  and RGB images, 32768 LiDAR rows, 60 x 30 and 30 x 15 height maps, a 60-field dyn_state; each step burns
+  (the renderer's codec applied to a view of flat ground) and RGB images, 32768 LiDAR rows, 60 x 30 and 30 x 15 height maps, a 60-field dyn_state; each step burns
   ``--work-ms`` of CPU time (thread time, so contention shows as lost real time).
 * ``dynamics``: the real dynamics participant alone (ground-truth feedback, no renderer), if it runs.
 
 The real-time factor is measured in steady state by a timing sink: frames completed more than ``SETTLE_S``
 after frame 0 (so the children's and the viewer's start-up, imports included, does not count), to the end.
-Usage: ``python bench/viewer_bench.py [--reps 3] [--frames 250] [--work-ms 10] [--skip-dynamics]``; prints a
-Markdown table. Figures: bench/README.md.
+Usage: ``python bench/viewer_bench.py [--reps 3] [--frames 250] [--work-ms 10] [--skip-dynamics]
+[--configs plain,record]``; prints a Markdown table. Figures: bench/README.md.
 """
 from __future__ import annotations
 
@@ -44,6 +48,25 @@ BEAMS = 32768
 CONFIGS = ("plain", "viewer", "record", "record-img5", "viewer+record")
 
 
+def depth_image() -> np.ndarray:
+    """(H, W, 4) uint8 depth-encoded image (the renderer's codec, DESIGN.md 4) of what a camera 3 m above
+    undulating ground (+-5 % in depth: a heap), pitched 20 degrees down, sees (60 degree field of view): rows
+    near the horizon are out of the codec's range (invalid, A = 0), like a real frame."""
+    from cosim.config.sensing import Codec
+    from renderer_proc.codec import encode_depth
+
+    f_px = (W / 2) / np.tan(np.radians(30.0))
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float64)
+    # ray direction in camera axes (x right, y down, z forward), then pitched down about x
+    ray = np.stack([(xx - W / 2) / f_px, (yy - H / 2) / f_px, np.ones_like(xx)], axis=-1)
+    pitch = np.radians(20.0)
+    down = ray[..., 1] * np.cos(pitch) + ray[..., 2] * np.sin(pitch)  # world-down component per unit forward z
+    with np.errstate(divide="ignore", invalid="ignore"):
+        depth_m = np.where(down > 1e-6, 3.0 / down, np.inf)  # planar depth (along z) to the ground
+    depth_m *= 1.0 + 0.05 * np.sin(xx / 23.0) * np.cos(yy / 17.0)
+    return encode_depth(depth_m, Codec())
+
+
 def blocks_dynamics(scenario):
     fields = [Field("t_s", "s")] + [Field(f"f{k}_m", "m") for k in range(40)]
     fields += [Field("desired_auger_x_m", "m"), Field("actual_auger_x_m", "m")]
@@ -71,9 +94,10 @@ class Payload:
         self.name, self.scenario, self.work_s = role, scenario, work_ms / 1e3
         rng = np.random.default_rng(0)
         yy, xx = np.mgrid[0:H, 0:W]
-        # smooth like a rendered scene (a depth-encoded image's fine channel wraps every period), not noise
+        # RGB: smooth like a rendered scene, not noise
         self.image = np.stack([(xx // 3) % 256, (yy // 2) % 256, (xx * 7 + yy * 3) % 256, np.full_like(xx, 255)],
                               axis=-1).astype(np.uint8)
+        self.depth = depth_image()
         self.points = rng.normal(0, 5, (BEAMS, 4)).astype(np.float32)
         self.points[::10] = np.nan
         self.buf = rng.normal(size=20000)
@@ -99,8 +123,9 @@ class Payload:
             for c in range(CAMS):
                 for kind in ("depth", "rgb"):
                     with seg.write(f"cam{c}_{kind}", frame) as img:
-                        np.copyto(img, self.image)
-                        img[(frame * 7) % H:(frame * 7) % H + 40] = 255 - img[(frame * 7) % H:(frame * 7) % H + 40]
+                        np.copyto(img, self.depth if kind == "depth" else self.image)
+                        band = slice((frame * 7) % H, (frame * 7) % H + 40)  # something moves every frame
+                        img[band, :, :3] = 255 - img[band, :, :3]
         else:
             with seg.write("lidar_points", frame) as p:
                 np.copyto(p, self.points)
@@ -159,10 +184,43 @@ while True:
 """
 
 
+class TimedSink:
+    """Sink factory wrapper recording how long each call of the wrapped sink takes (supervisor time, s)."""
+
+    def __init__(self, factory):
+        self.factory, self.calls = factory, []
+
+    def __call__(self, scenario, run_dir, segment):
+        inner = self.factory(scenario, run_dir, segment)
+        calls = self.calls
+
+        class Sink:
+            def __call__(self, seg, frame):
+                t0 = time.perf_counter()
+                inner(seg, frame)
+                calls.append(time.perf_counter() - t0)
+
+            def close(self):
+                inner.close()
+        return Sink()
+
+
+def recorder_metadata(path: Path) -> dict:
+    """The ``recorder`` metadata record of a finished recording ({} if it has none)."""
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as f:
+        for m in make_reader(f).iter_metadata():
+            if m.name == "recorder":
+                return dict(m.metadata)
+    return {}
+
+
 def one_run(scenario: Scenario, specs, config: str, tmp: Path) -> float:
     timing = Timing()
     options = RecordOptions(image_every=5 if config.endswith("img5") else 1)
-    sinks = [timing] + ([mcap_sink(options)] if "record" in config else [])
+    record = TimedSink(mcap_sink(options))
+    sinks = [timing] + ([record] if "record" in config else [])
     observers, client = [], None
     announce = tmp / "viewer.json"
     announce.unlink(missing_ok=True)
@@ -190,27 +248,40 @@ def one_run(scenario: Scenario, specs, config: str, tmp: Path) -> float:
         raise RuntimeError("the viewer never announced itself; no client polled it")
     size = (out / "recording.mcap").stat().st_size if "record" in config else 0
     one_run.sizes[config] = size / (len(timing.stamps) or 1)
+    if record.calls:
+        one_run.sink_ms.setdefault(config, []).append(1e3 * statistics.mean(record.calls))
+        meta = recorder_metadata(out / "recording.mcap")
+        if meta:
+            one_run.cpu_ms.setdefault(config, []).append(1e3 * float(meta["process_cpu_s"]) / int(meta["frames"]))
     return timing.rtf(scenario.timing.sensor_period_s)
 
 
 one_run.sizes = {}
+one_run.sink_ms = {}
+one_run.cpu_ms = {}
 
 
-def bench(name: str, scenario: Scenario, specs, reps: int) -> list[str]:
-    results = {c: [] for c in CONFIGS}
+def bench(name: str, scenario: Scenario, specs, reps: int, configs=CONFIGS) -> list[str]:
+    results = {c: [] for c in configs}
+    one_run.sink_ms.clear()
+    one_run.cpu_ms.clear()
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(reps):
-            for c in CONFIGS:
+            for c in configs:
                 results[c].append(one_run(scenario, specs, c, Path(tmp)))
     base = statistics.median(results["plain"])
     rows = []
-    for c in CONFIGS:
+    for c in configs:
         med = statistics.median(results[c])
         spread = f"{min(results[c]):.2f}-{max(results[c]):.2f}"
-        kb = one_run.sizes.get(c, 0) / 1024
-        rows.append(f"| {name} | {c} | {med:.2f} | {spread} | {100 * (med / base - 1):+.1f} % | "
-                    f"{kb:.0f} |" if "record" in c else
-                    f"| {name} | {c} | {med:.2f} | {spread} | {100 * (med / base - 1):+.1f} % | - |")
+        ratio = f"{100 * (med / base - 1):+.1f} %"
+        if "record" in c:
+            cpu = one_run.cpu_ms.get(c)
+            rec = (f"{statistics.median(one_run.sink_ms[c]):.2f} | "
+                   f"{f'{statistics.median(cpu):.1f}' if cpu else '?'} | {one_run.sizes.get(c, 0) / 1024:.0f}")
+        else:
+            rec = "- | - | -"
+        rows.append(f"| {name} | {c} | {med:.2f} | {spread} | {ratio} | {rec} |")
     return rows
 
 
@@ -220,21 +291,28 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=250, help="payload frames (dynamics runs 15x as many)")
     ap.add_argument("--work-ms", type=float, default=10.0, help="CPU time per payload step, ms")
     ap.add_argument("--skip-dynamics", action="store_true")
+    ap.add_argument("--configs", default=",".join(CONFIGS),
+                    help="comma-separated subset of %(default)s (plain is always run: the reference)")
     args = ap.parse_args()
+    configs = ("plain",) + tuple(c for c in args.configs.split(",") if c and c != "plain")
+    unknown = set(configs) - set(CONFIGS)
+    if unknown:
+        ap.error(f"unknown configs {sorted(unknown)}; choose from {CONFIGS}")
     period = 0.1
     sc = Scenario(format_version=1, duration_s=args.frames * period, renderer="mock", viewer=True)
-    rows = bench("payload", sc, payload_specs(args.work_ms), args.reps)
+    rows = bench("payload", sc, payload_specs(args.work_ms), args.reps, configs)
     if not args.skip_dynamics:
         gt = Scenario(format_version=1, duration_s=15 * args.frames * period, feedback="ground_truth",
                       renderer="none")
         try:
-            rows += bench("dynamics", gt, None, args.reps)
+            rows += bench("dynamics", gt, None, args.reps, configs)
         except Exception as exc:  # noqa: BLE001 - the real participant is someone else's work in progress
-            rows.append(f"| dynamics | (failed: {type(exc).__name__}: {exc}) | | | | |")
+            rows.append(f"| dynamics | (failed: {type(exc).__name__}: {exc}) | | | | | |")
     print(f"machine: {os.cpu_count()} cores; {args.reps} runs each, interleaved; {args.frames} payload frames; "
           f"steady state from {SETTLE_S:g} s after frame 0; payload work {args.work_ms:g} ms CPU per step")
-    print("| workload | config | real-time factor (median) | range | vs plain | recording KiB/frame |")
-    print("|---|---|---|---|---|---|")
+    print("| workload | config | real-time factor (median) | range | vs plain | sink ms/frame | recorder CPU ms/frame "
+          "| recording KiB/frame |")
+    print("|---|---|---|---|---|---|---|---|")
     print("\n".join(rows))
 
 

@@ -43,8 +43,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="port of the --viewer dashboard (default %(default)s)")
     run.add_argument("--record", nargs="?", const=True, default=None, type=Path, metavar="FILE",
                      help="write an MCAP recording (Foxglove schemas) to FILE (default <run dir>/recording.mcap)")
-    run.add_argument("--record-image-every", type=int, default=1, metavar="N",
-                     help="record camera images every N frames (default %(default)s: every frame)")
+    run.add_argument("--record-image-every", type=int, default=None, metavar="N",
+                     help="record camera images every N frames (default 5; LiDAR, maps and scalars every frame)")
     run.add_argument("--quiet", action="store_true", help="no progress output")
     val = sub.add_parser("validate", help="validate a scenario and print the resolved result")
     _scenario_options(val)
@@ -83,7 +83,8 @@ def run_extras(args: argparse.Namespace) -> tuple[list, list]:
         from .recording import RecordOptions, mcap_sink
 
         path = None if args.record is True else args.record
-        sinks.append(mcap_sink(RecordOptions(path=path, image_every=args.record_image_every)))
+        every = {} if args.record_image_every is None else {"image_every": args.record_image_every}
+        sinks.append(mcap_sink(RecordOptions(path=path, **every)))
     return observers, sinks
 
 

@@ -1,4 +1,7 @@
-"""MCAP recording of a run: channels, point counts, image sizes, time stamps; killed runs; reading back."""
+"""MCAP recording of a run: channels, point counts, image sizes, time stamps; killed runs; reading back.
+
+Foxglove's channels are protobuf, checked against the protobuf package in tests/test_recording_proto.py.
+"""
 from __future__ import annotations
 
 import csv
@@ -23,7 +26,7 @@ from cosim.recording.encode import heights_from_grid, image_from_msg, points_fro
 
 TOPICS = {"/tf": "foxglove.FrameTransform", "/dyn_state": "cosim.struct.dyn_state",
           "/render_state": "cosim.struct.render_state", "/perc_state": "cosim.struct.perc_state",
-          "/cam0/rgb": "foxglove.CompressedImage", "/cam0/depth_encoded": "foxglove.CompressedImage",
+          "/cam0/rgb": "foxglove.CompressedImage", "/cam0/depth_encoded": "foxglove.RawImage",
           "/lidar/points": "foxglove.PointCloud", "/heightmap/truth": "foxglove.Grid",
           "/heightmap/perceived": "foxglove.Grid", "/cosim/frame": "cosim.Frame"}
 
@@ -33,8 +36,9 @@ def recorded(tmp_path_factory):
     out = tmp_path_factory.mktemp("rec") / "run"
     sc = standins.scenario(1.0)
     # flush every frame (the default batches up to 0.5 s per chunk), so that where a cut keeps whole frames
-    # does not depend on how loaded the machine was while recording
-    res = launch(sc, out, specs=standins.specs(), console_log=False, sinks=[mcap_sink(RecordOptions(flush_s=0.0))])
+    # does not depend on how loaded the machine was while recording; images every frame (the default: every 5th)
+    res = launch(sc, out, specs=standins.specs(), console_log=False,
+                 sinks=[mcap_sink(RecordOptions(flush_s=0.0, image_every=1))])
     assert res.completed, res.error
     return sc, out, read_recording(out / "recording.mcap")
 
@@ -42,7 +46,8 @@ def recorded(tmp_path_factory):
 def test_channels_and_schemas(recorded):
     _, _, rec = recorded
     assert {t: c.schema for t, c in rec.channels.items()} == TOPICS
-    assert all(c.encoding == "json" for c in rec.channels.values())
+    assert all(c.encoding == ("protobuf" if c.schema.startswith("foxglove.") else "json")
+               for c in rec.channels.values())
     assert rec.truncated is False
 
 
@@ -75,11 +80,15 @@ def test_image_sizes_and_lossless_depth(recorded):
     _, _, rec = recorded
     _, rgb = rec.topic("/cam0/rgb")[3]
     assert rgb["format"] == "jpeg" and image_from_msg(rgb).shape == (standins.IMG_H, standins.IMG_W, 3)
-    _, depth = rec.topic("/cam0/depth_encoded")[3]
-    assert depth["format"] == "png"
-    img = image_from_msg(depth)
-    assert img.shape == (standins.IMG_H, standins.IMG_W, 3)
-    assert np.array_equal(img[0, :, 0], (np.arange(standins.IMG_W) + 3) % 256), "depth bytes must be lossless"
+    for k, (_, depth) in enumerate(rec.topic("/cam0/depth_encoded")):
+        assert (depth["encoding"], depth["width"], depth["height"], depth["step"]) == \
+            ("rgba8", standins.IMG_W, standins.IMG_H, 4 * standins.IMG_W)
+        assert depth["frame_id"] == "cam0"
+        want = np.zeros((standins.IMG_H, standins.IMG_W, 4), np.uint8)
+        want[..., :3] = (np.arange(standins.IMG_W)[None, :, None] + k) % 256
+        want[..., 3] = 255
+        assert depth["data"] == want.tobytes(), "depth-encoded bytes (alpha = validity included) must be lossless"
+        np.testing.assert_array_equal(image_from_msg(depth), want)
 
 
 def test_grids_and_transforms(recorded):
@@ -98,6 +107,68 @@ def test_grids_and_transforms(recorded):
     assert cart["translation"]["x"] == pytest.approx(2.0 * last * sc.timing.sensor_period_s - 6.0)
     q = cart["rotation"]
     assert q["z"] == pytest.approx(np.sin(0.01), abs=1e-9) and q["w"] == pytest.approx(np.cos(0.01), abs=1e-9)
+
+
+def test_grids_every_frame_are_the_blocks(recorded):
+    sc, _, rec = recorded
+    truth, perceived = rec.topic("/heightmap/truth"), rec.topic("/heightmap/perceived")
+    assert len(truth) == len(perceived) == sc.frames + 1
+    for k, ((_, g), (_, gp)) in enumerate(zip(truth, perceived)):
+        assert (g["row_stride"], g["cell_stride"], g["fields"][0]["type"]) == (4 * standins.NX, 4, 7)
+        assert g["data"] == np.ascontiguousarray(standins.truth(k).T).tobytes()
+        want = standins.truth(k)[::2, ::2]
+        want[(np.arange(standins.NXC) + k) % 5 == 0, :] = np.nan
+        np.testing.assert_array_equal(heights_from_grid(gp), want)
+
+
+def test_foxglove_channels_parse_with_protobuf_from_the_files_own_schemas(recorded):
+    """What Foxglove does: build the message type from the channel's schema record, parse each message."""
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+    from mcap.reader import make_reader
+
+    _, out, rec = recorded
+    classes, count = {}, {}
+    with open(out / "recording.mcap", "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            if not schema.name.startswith("foxglove."):
+                continue
+            assert (schema.encoding, channel.message_encoding) == ("protobuf", "protobuf")
+            if schema.name not in classes:
+                pool = descriptor_pool.DescriptorPool()
+                for fd in descriptor_pb2.FileDescriptorSet.FromString(schema.data).file:
+                    pool.Add(fd)
+                classes[schema.name] = message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name))
+            m = classes[schema.name].FromString(message.data)
+            k = count.get(channel.topic, 0)
+            count[channel.topic] = k + 1
+            ours = rec.topic(channel.topic)[k][1]
+            assert m.timestamp.seconds * 10**9 + m.timestamp.nanos == message.log_time
+            assert {"sec": m.timestamp.seconds, "nsec": m.timestamp.nanos} == ours["timestamp"]
+            if schema.name == "foxglove.FrameTransform":
+                assert (m.child_frame_id, m.translation.x, m.rotation.w) == \
+                    (ours["child_frame_id"], ours["translation"]["x"], ours["rotation"]["w"])
+            else:
+                assert m.data == ours["data"] and m.frame_id == ours["frame_id"]
+    assert set(count) == {t for t, s in TOPICS.items() if s.startswith("foxglove.")}
+    assert count["/lidar/points"] == len(rec.frames)
+
+
+def test_json_channels_validate_against_their_schemas(recorded):
+    import jsonschema
+    from mcap.reader import make_reader
+
+    _, out, rec = recorded
+    with open(out / "recording.mcap", "rb") as f:
+        summary = make_reader(f).get_summary()
+    json_channels = [c for c in summary.channels.values() if c.message_encoding == "json"]
+    assert {c.topic for c in json_channels} == {"/dyn_state", "/render_state", "/perc_state", "/cosim/frame"}
+    for c in json_channels:
+        schema = summary.schemas[c.schema_id]
+        assert schema.encoding == "jsonschema"
+        validator = jsonschema.Draft202012Validator(json.loads(schema.data))
+        for _, m in rec.topic(c.topic):
+            validator.validate(m)
+        assert set(json.loads(schema.data)["properties"]) >= set(rec.topic(c.topic)[0][1])
 
 
 def test_scalars_match_timeseries_csv(recorded):
@@ -132,11 +203,55 @@ def test_image_decimation(tmp_path, shm_clean):
     assert len(rec.topic("/lidar/points")) == sc.frames + 1
 
 
+def test_default_records_images_every_fifth_frame(tmp_path, shm_clean):
+    sc = standins.scenario(1.0)
+    launch(sc, tmp_path / "run", specs=standins.specs(), console_log=False, sinks=[mcap_sink()])
+    rec = read_recording(tmp_path / "run" / "recording.mcap")
+    assert RecordOptions().image_every == 5
+    stamps = [m["timestamp"]["sec"] * 10**9 + m["timestamp"]["nsec"] for _, m in rec.topic("/cam0/depth_encoded")]
+    assert stamps == [round(k * sc.timing.sensor_period_s * 1e9) for k in range(0, sc.frames + 1, 5)]
+    assert len(rec.topic("/cam0/rgb")) == len(stamps) and len(rec.topic("/lidar/points")) == sc.frames + 1
+    assert rec.metadata["recorder"]["frames"] == str(sc.frames + 1)
+    assert float(rec.metadata["recorder"]["process_cpu_s"]) > 0
+
+
+@pytest.mark.parametrize("compression", ["zstd", "none"])
+def test_raw_rgb_and_other_chunk_compressions_read_back(tmp_path, shm_clean, compression):
+    sc = standins.scenario(0.5)
+    launch(sc, tmp_path / "run", specs=standins.specs(), console_log=False,
+           sinks=[mcap_sink(RecordOptions(image_every=1, rgb_format="raw", compression=compression, queue_frames=0))])
+    rec = read_recording(tmp_path / "run" / "recording.mcap")
+    assert rec.channels["/cam0/rgb"].schema == "foxglove.RawImage" and rec.frames == list(range(sc.frames + 1))
+    for k, (_, m) in enumerate(rec.topic("/cam0/rgb")):
+        img = image_from_msg(m)
+        assert img.shape == (standins.IMG_H, standins.IMG_W, 4) and (img[..., 0] == k % 256).all()
+        np.testing.assert_array_equal(img[:, 0, 1], np.arange(standins.IMG_H) * 4)
+    from mcap.reader import make_reader
+
+    with open(tmp_path / "run" / "recording.mcap", "rb") as f:
+        summary = make_reader(f).get_summary()
+    topic = {c.id: c.topic for c in summary.channels.values()}
+    want = {"/cam0/rgb": "" if compression == "none" else compression, "/lidar/points": ""}  # cloud: none
+    seen = {t: set() for t in want}
+    for chunk in summary.chunk_indexes:
+        for t in {topic[c] for c in chunk.message_index_offsets} & set(want):
+            seen[t].add(chunk.compression)
+    assert seen == {t: {c} for t, c in want.items()}, "images and the LiDAR cloud go into chunks of their own kind"
+
+
 def test_options_are_checked():
     with pytest.raises(ValueError, match="image_every must be >= 1"):
         RecordOptions(image_every=0)
     with pytest.raises(ValueError, match="jpeg_quality must be in 1..100"):
         RecordOptions(jpeg_quality=0)
+    with pytest.raises(ValueError, match="rgb_format must be jpeg, png or raw"):
+        RecordOptions(rgb_format="webp")
+    with pytest.raises(ValueError, match="compression must be lz4, zstd or none"):
+        RecordOptions(compression="gzip")
+    with pytest.raises(ValueError, match="cloud_compression must be lz4, zstd or none"):
+        RecordOptions(cloud_compression="brotli")
+    with pytest.raises(ValueError, match="nice must be in 0..19"):
+        RecordOptions(nice=-1)
 
 
 def test_not_a_recording(tmp_path):
@@ -222,9 +337,11 @@ def test_launcher_killed_mid_run_leaves_a_readable_recording(tmp_path):
     assert rec.truncated is False, "the recorder finishes the file after the launcher died"
     n = len(rec.frames)
     assert n >= 5 and rec.frames == list(range(n))
+    every = RecordOptions().image_every  # the default decimates the camera images
     for topic in TOPICS:
         if topic != "/tf":
-            assert len(rec.topic(topic)) == n, topic
+            want = len(range(0, n, every)) if TOPICS[topic].endswith("Image") else n
+            assert len(rec.topic(topic)) == want, topic
     assert rec.topic("/cosim/frame")[-1][1]["frame"] == n - 1
 
 

@@ -1,9 +1,11 @@
 """MCAP recording of a run with Foxglove's well-known schemas, reading it back, and replaying it (issue 7).
 
-``launch(..., sinks=[mcap_sink()])`` (``launch.py run ... --record``) writes ``<run_dir>/recording.mcap``: JSON
-messages with the JSON-schema definitions of foxglove.PointCloud (LiDAR), foxglove.CompressedImage (cameras),
-foxglove.Grid (height maps), foxglove.FrameTransform (vehicle and sensor poses) and one scalar topic per struct
-block, so a run opens in Foxglove, Lichtblick or Rerun without ROS. :func:`read_recording` reads it back (also
+``launch(..., sinks=[mcap_sink()])`` (``launch.py run ... --record``) writes ``<run_dir>/recording.mcap`` with
+Foxglove's well-known schemas in protobuf encoding: foxglove.PointCloud (LiDAR), foxglove.RawImage (depth-encoded
+images, lossless) and CompressedImage (RGB), foxglove.Grid (height maps), foxglove.FrameTransform (vehicle and
+sensor poses), plus one JSON scalar topic per struct block, so a run opens in Foxglove or Lichtblick without
+ROS. The sink copies each completed frame into a shared-memory frame slot; a recorder process encodes and
+writes (:mod:`.sink`, :mod:`.slots`, :mod:`.writer`, :mod:`.proto`). :func:`read_recording` reads it back (also
 a file cut off by a killed run, up to its last completed frame); :class:`ReplaySource` serves it to the
 viewer's dashboard.
 """

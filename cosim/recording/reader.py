@@ -1,5 +1,8 @@
 """Reading a recording back: every message of every completed frame, also from a file cut off mid-write.
 
+Messages come back as dicts: JSON channels as parsed, protobuf channels (Foxglove's schemas) through
+:func:`cosim.recording.proto.decode` (``bytes`` fields as bytes, timestamps as ``{sec, nsec}``).
+
 A finished file has a summary and an index; a file of a run that was killed has neither and may end inside a
 record. :func:`read_recording` therefore reads the data section in file order with mcap's non-seeking reader,
 stops at the first damaged record, and keeps only the frames whose end-of-frame marker (``/cosim/frame``) was
@@ -12,6 +15,7 @@ import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from . import proto
 from .writer import FRAME_TOPIC
 
 __all__ = ["Channel", "Recording", "read_recording", "RecordingError"]
@@ -23,7 +27,7 @@ class RecordingError(ValueError):
 
 @dataclass(frozen=True)
 class Channel:
-    """One topic of a recording: its schema name and message encoding."""
+    """One topic of a recording: its schema name and message encoding (``json`` or ``protobuf``)."""
 
     topic: str
     schema: str
@@ -32,7 +36,7 @@ class Channel:
 
 @dataclass
 class Recording:
-    """Decoded JSON messages by topic, in file order, as (log_time_ns, message dict) pairs."""
+    """Decoded messages by topic, in file order, as (log_time_ns, message dict) pairs."""
 
     path: Path
     channels: dict[str, Channel]
@@ -55,10 +59,19 @@ class Recording:
         return sorted(t for t, c in self.channels.items() if c.schema == schema)
 
 
+def _decode(ch: Channel, data: bytes) -> dict:
+    if ch.encoding == "json":
+        return json.loads(data)
+    if ch.encoding == "protobuf" and ch.schema in proto.MESSAGES:
+        return proto.decode(ch.schema, data)
+    raise RecordingError(f"topic {ch.topic}: cannot decode {ch.encoding!r} messages of schema {ch.schema!r}")
+
+
 def read_recording(path: Path | str) -> Recording:
     """Read ``path`` (finished or cut off) up to its last completed frame."""
     from mcap.exceptions import McapError
-    from mcap.records import Channel as ChannelRecord, Footer, Message, Metadata, Schema
+    from mcap.records import Channel as ChannelRecord
+    from mcap.records import Footer, Message, Metadata, Schema
     from mcap.stream_reader import StreamReader
 
     path = Path(path)
@@ -77,7 +90,7 @@ def read_recording(path: Path | str) -> Recording:
                     channels[rec.id] = Channel(rec.topic, schemas.get(rec.schema_id, ""), rec.message_encoding)
                 elif isinstance(rec, Message):
                     ch = channels[rec.channel_id]
-                    order.append((ch.topic, rec.log_time, json.loads(rec.data)))
+                    order.append((ch.topic, rec.log_time, _decode(ch, rec.data)))
                 elif isinstance(rec, Metadata):
                     metadata[rec.name] = dict(rec.metadata)
                 elif isinstance(rec, Footer):

@@ -3,7 +3,8 @@
 :class:`ReplaySource` has the viewer source interface (``name``, ``frames_planned``, ``history``,
 ``snapshot()``, ``check_end()``, ``close()``) and plays the recorded frames back at ``speed`` times the
 simulation's pace, holding the last frame at the end (or looping). Topics map back to block names: ``/<block>``
-(cosim.struct) -> struct block, ``/<cam>/rgb`` -> ``<cam>_rgb``, ``/<cam>/depth_encoded`` -> ``<cam>_depth``,
+(cosim.struct) -> struct block, ``/<cam>/rgb`` -> ``<cam>_rgb`` ((H, W, 3) from a CompressedImage, (H, W, 4)
+from a RawImage), ``/<cam>/depth_encoded`` -> ``<cam>_depth`` ((H, W, 4) uint8, the block's bytes),
 ``/lidar/points`` -> ``lidar_points`` (camera axes again), ``/heightmap/<kind>`` -> ``heightmap_<kind>``.
 """
 from __future__ import annotations
@@ -27,7 +28,7 @@ def block_of_topic(topic: str, schema: str) -> tuple[str, str] | None:
     parts = topic.strip("/").split("/")
     if schema.startswith("cosim.struct."):
         return schema[len("cosim.struct."):], "struct"
-    if schema == "foxglove.CompressedImage" and len(parts) == 2:
+    if schema in ("foxglove.CompressedImage", "foxglove.RawImage") and len(parts) == 2:
         return f"{parts[0]}_{'depth' if parts[1] == 'depth_encoded' else parts[1]}", "image"
     if schema == "foxglove.PointCloud" and topic == "/lidar/points":
         return "lidar_points", "array"
@@ -109,7 +110,7 @@ class ReplaySource:
         cached = self._decoded.get(topic)
         if cached is not None and cached[0] == frame:
             return cached[1]
-        if self.rec.channels[topic].schema == "foxglove.CompressedImage":
+        if self.rec.channels[topic].schema in ("foxglove.CompressedImage", "foxglove.RawImage"):
             data = image_from_msg(msg)
         elif kind_block == "lidar_points":
             data = points_from_cloud(msg)

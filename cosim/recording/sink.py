@@ -1,31 +1,43 @@
 """The recording sink of the launcher (``launch(..., sinks=[mcap_sink()])``) and its recorder process.
 
 The supervisor calls the sink after each completed frame while it holds the token, so it sees every frame
-consistently without a seqlock retry. The sink only copies the frame's blocks (:func:`capture`, a memcpy) and
-sends them down a pipe; a recorder process (spawned, like the ring's children) encodes (PNG/JPEG, base64, JSON,
-zstd) and writes. The ring is sequential, so on a 2-core machine the recorder uses the core the ring leaves
-idle, and it shares no GIL with the supervisor. At most ``queue_frames`` frames are in flight (a semaphore of
-credits): when encoding cannot keep up, the sink waits, so a recording never loses a frame. ``queue_frames=0``
-writes synchronously inside the sink, with no process.
+consistently without a seqlock retry. The sink only copies the frame's recorded blocks into a free frame slot
+(:mod:`cosim.recording.slots`, shared memory: one memcpy per block, nothing pickled) and sends the recorder
+process ``(frame, slot, blocks)``, a few bytes; the recorder (spawned, like the ring's children) encodes and
+writes straight from the slot, then gives the slot back. The ring is sequential, so on a 2-core machine the
+recorder uses the core the ring leaves idle, and it shares no GIL with the supervisor. At most ``queue_frames``
+frames are in flight (a semaphore of credits, one per slot; by default as many slots as fit in QUEUE_BYTES): when
+encoding cannot keep up, the sink waits, so a recording never loses a frame. The recorder runs at nice 10, like
+the viewer: it takes the CPU the ring leaves, and the slots absorb its delays. ``queue_frames=0`` writes
+synchronously inside the sink, with no process.
 
 Ends: ``close`` (end of run, failure, stop) sends the end mark and waits for the recorder to write every frame
 it was sent and finish the file. If the launcher itself is killed, the recorder sees the pipe close, writes
-what it has received and finishes the file. A recording failure (disk full, a dead recorder) is logged once and
-recording stops; the run goes on.
+what it has received (its mapping of the slots outlives their name) and finishes the file. A recording failure
+(disk full, a dead recorder) is logged once and recording stops; the run goes on.
 """
 from __future__ import annotations
 
 import logging
 import multiprocessing as mp
-import queue
-import threading
+import os
+import time
 from pathlib import Path
 
 from shm_schema import Schema, Segment
 
-from .writer import DEFAULT_NAME, McapWriter, Recorded, RecordOptions, capture
+from .slots import FrameSlots
+from .writer import (
+    DEFAULT_NAME,
+    McapWriter,
+    Recorded,
+    RecordOptions,
+    RunInfo,
+    frame_data,
+)
 
-__all__ = ["McapRecorder", "mcap_sink", "CREDIT_POLL_S", "CLOSE_TIMEOUT_S"]
+__all__ = ["McapRecorder", "mcap_sink", "slot_count", "CREDIT_POLL_S", "CLOSE_TIMEOUT_S", "QUEUE_BYTES", "MIN_SLOTS",
+           "MAX_SLOTS"]
 
 log = logging.getLogger("cosim.recording")
 
@@ -33,47 +45,54 @@ log = logging.getLogger("cosim.recording")
 CREDIT_POLL_S = 0.5
 #: how long ``close`` waits for the recorder to write what it was sent and finish the file, s
 CLOSE_TIMEOUT_S = 120.0
+#: shared memory for frame slots when ``queue_frames`` is None, bytes: many slots absorb the recorder's
+#: scheduling delays (it runs at a lower priority than the ring) without holding up the ring
+QUEUE_BYTES = 64 * 2**20
+#: fewest and most frame slots when sized by QUEUE_BYTES
+MIN_SLOTS, MAX_SLOTS = 4, 256
 
 
-def _recorder_main(conn, credits, scenario_json: str, schema_bytes: bytes, path: str, options: RecordOptions,
-                   run_id: str, fingerprint: str) -> None:
-    """Recorder process: a receiving thread keeps the pipe drained; this thread encodes and writes."""
+def slot_count(options: RecordOptions, frame_bytes: int) -> int:
+    """Frame slots for frames of ``frame_bytes`` (0: record synchronously, no recorder process)."""
+    if options.queue_frames is not None:
+        return options.queue_frames
+    return max(MIN_SLOTS, min(MAX_SLOTS, QUEUE_BYTES // max(1, frame_bytes)))
+
+
+def _recorder_main(conn, credits, run: RunInfo, schema_bytes: bytes, slots_name: str, n_slots: int, path: str,
+                   options: RecordOptions, run_id: str, fingerprint: str) -> None:
+    """Recorder process: encode and write each frame from its slot, give the slot back; flush whenever
+    ``flush_s`` has passed since the last flush (busy or idle), so a frame is on disk at most that late."""
     import signal
 
-    from cosim.config import Scenario
-
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the launcher handles Ctrl-C and then closes us
-    scenario = Scenario.model_validate_json(scenario_json)
-    writer = McapWriter(scenario, Schema.decode(schema_bytes), Path(path), options, run_id, fingerprint,
-                        flush_s=options.flush_s)
-    inbox: queue.Queue = queue.Queue()
-
-    def receive() -> None:
-        while True:
-            try:
-                item = conn.recv()
-            except (EOFError, OSError):
-                item = None
-            inbox.put(item)
-            if item is None:
-                return
-
-    threading.Thread(target=receive, name="recorder-recv", daemon=True).start()
+    schema = Schema.decode(schema_bytes)
+    writer = McapWriter(run, schema, Path(path), options, run_id, fingerprint, flush_s=options.flush_s)
+    slots = FrameSlots.attach(slots_name, schema, Recorded.of(schema).names, n_slots)
+    cpu0 = time.process_time()  # start-up (interpreter, imports, writer, slots) ends here
     try:
         while True:
-            item = inbox.get()
+            # the pipe holds at most queue_frames small tuples (credits), so it never needs draining ahead
+            if not conn.poll(writer.flush_due_in()):
+                writer.flush()
+                continue
+            try:
+                item = conn.recv()
+            except (EOFError, OSError):  # the launcher is gone: finish what was sent
+                break
             if item is None:
                 break
-            writer.write(item)
+            frame, slot, names = item
+            writer.write(frame, *slots.frame(slot, names))
             credits.release()
-            if inbox.empty():
-                writer.flush()  # idle: put everything on disk; busy: at most every flush_s
     finally:
-        writer.close()
+        # what recording cost: this process's CPU time since it was ready (encode, compress, write), s
+        writer.close({"process_cpu_s": repr(time.process_time() - cpu0), "startup_cpu_s": repr(cpu0)})
+        slots.close()
 
 
 class McapRecorder:
-    """The per-frame sink: capture in the supervisor, encode and write in the recorder process."""
+    """The per-frame sink: copy into a frame slot in the supervisor, encode and write in the recorder process."""
 
     def __init__(self, scenario, run_dir: Path, segment: Segment, options: RecordOptions | None = None):
         self.options = options or RecordOptions()
@@ -83,35 +102,58 @@ class McapRecorder:
         self._closed = False
         self._writer: McapWriter | None = None
         self._proc = None
-        if self.options.queue_frames == 0:
+        self._slots: FrameSlots | None = None
+        self._sent = 0
+        n_slots = slot_count(self.options, sum(segment.schema.block(n).nbytes for n in self.recorded.names))
+        if n_slots == 0:
             self._writer = McapWriter(scenario, segment.schema, self.path, self.options, segment.run_id,
                                       segment.fingerprint)
             return
         ctx = mp.get_context("spawn")
-        self._credits = ctx.Semaphore(self.options.queue_frames)
+        self._slots = FrameSlots.create(segment.schema, self.recorded.names, n_slots)
+        self._credits = ctx.Semaphore(n_slots)
         recv, self._conn = ctx.Pipe(duplex=False)
         self._proc = ctx.Process(target=_recorder_main, name="cosim-recorder", daemon=True,
-                                 args=(recv, self._credits, scenario.model_dump_json(), segment.schema.encoded,
-                                       str(self.path), self.options, segment.run_id, segment.fingerprint))
-        self._proc.start()
+                                 args=(recv, self._credits, RunInfo.of(scenario), segment.schema.encoded,
+                                       self._slots.name, n_slots, str(self.path), self.options, segment.run_id,
+                                       segment.fingerprint))
+        try:
+            self._proc.start()
+        except BaseException:
+            self._release_slots()
+            raise
         recv.close()
+        if self.options.nice:  # from its start: its imports then yield to the ring's children starting up too
+            try:
+                os.setpriority(os.PRIO_PROCESS, self._proc.pid, os.getpriority(os.PRIO_PROCESS, 0) + self.options.nice)
+            except OSError as exc:
+                log.warning("could not lower the recorder's priority: %s", exc)
 
     def __call__(self, seg: Segment, frame: int) -> None:
         """Record completed frame ``frame`` (called by the supervisor while it holds the token)."""
         if self._failed or self._closed:
             return
         try:
-            item = capture(seg, self.recorded, frame, self.options.image_every)
+            names = self.recorded.due(frame, self.options.image_every)
             if self._writer is not None:
-                self._writer.write(item)
+                self._writer.write(frame, *frame_data(seg, names))
                 return
             while not self._credits.acquire(timeout=CREDIT_POLL_S):
                 if not self._proc.is_alive():
                     raise RuntimeError(f"the recorder process died (exit {self._proc.exitcode})")
-            self._conn.send(item)
+            slot = self._sent % self._slots.slots  # credits come back in order: this slot is free
+            copied = self._slots.put(seg, slot, frame, names)
+            self._conn.send((frame, slot, copied))
+            self._sent += 1
         except Exception:  # noqa: BLE001 - a recording failure must not end the run
             self._failed = True
             log.exception("recording to %s failed at frame %d; the run goes on without recording", self.path, frame)
+
+    def _release_slots(self) -> None:
+        if self._slots is not None:
+            self._slots.close()
+            self._slots.unlink()
+            self._slots = None
 
     def close(self) -> None:
         """Let the recorder write everything it was sent, finish the file, and end. Idempotent."""
@@ -133,6 +175,7 @@ class McapRecorder:
             self._proc.join(5)
         elif self._proc.exitcode != 0:
             log.error("the recorder of %s ended with exit %s", self.path, self._proc.exitcode)
+        self._release_slots()
 
 
 def mcap_sink(options: RecordOptions | None = None):

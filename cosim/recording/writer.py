@@ -1,19 +1,24 @@
-"""The MCAP writer: channels planned from a run's schema, one frame's copied blocks encoded and written.
+"""The MCAP writer: channels planned from a run's schema, one frame's blocks encoded and written.
 
 Per frame, with the frame's simulation time as log time and message timestamp:
 
 * ``/tf`` foxglove.FrameTransform: world -> combine, tractor, cart (from the struct fields ``<v>_x_m``,
   ``<v>_y_m``, ``<v>_yaw_rad`` where they exist), cart -> cart_grid and the LiDAR mount parent -> lidar.
-* ``/<block>`` ``cosim.struct.<block>``: every struct block's fields (the scalar time series).
-* ``/<cam>/rgb`` (JPEG) and ``/<cam>/depth_encoded`` (PNG, lossless) foxglove.CompressedImage, every
-  ``image_every``-th frame.
+* ``/<block>`` ``cosim.struct.<block>`` (JSON): every struct block's fields (the scalar time series).
+* ``/<cam>/depth_encoded`` foxglove.RawImage ``rgba8``, the image block's bytes unchanged (lossless, alpha =
+  validity), and ``/<cam>/rgb`` foxglove.CompressedImage JPEG (or PNG, or RawImage: ``rgb_format``), every
+  ``image_every``-th frame (default 5).
 * ``/lidar/points`` foxglove.PointCloud (valid beams), ``/heightmap/<kind>`` foxglove.Grid.
-* ``/cosim/frame`` ``cosim.Frame``, last: the frame is complete in the file once its marker is there.
+* ``/cosim/frame`` ``cosim.Frame`` (JSON), last: the frame is complete in the file once its marker is there.
 
-The writer closes its chunk and flushes the file after each frame (``flush_s=0``) or at most every ``flush_s``
-seconds (the recorder process, which outlives a killed launcher and finishes the file itself), so a file cut
-off at any point reads up to its last whole frame flushed. :func:`capture` takes the copies (in the
-supervisor, while it holds the token); :class:`McapWriter` encodes and writes them (in the recorder process, :mod:`cosim.recording.sink`).
+Foxglove's messages are protobuf (:mod:`cosim.recording.proto`): their bytes fields are written as they are,
+without base64. Chunks holding camera images are lz4-compressed (``compression``: raw depth images shrink ~18 x),
+chunks holding the LiDAR cloud are not (``cloud_compression``: float32 points gain ~3 % from lz4 for ~2 ms per
+frame); the small messages go into whichever chunk is open (a run without camera images or cloud: ``compression``). Camera images are recorded every
+5th frame by default (``image_every``), everything else every frame. The writer closes its chunk and flushes the
+file at most every ``flush_s`` seconds (0: after each frame), so a file cut off at any point reads up to its last
+whole frame flushed. :func:`frame_data` takes a frame's blocks from a segment (the synchronous path) and
+:meth:`cosim.recording.slots.FrameSlots.frame` from a frame slot; :class:`McapWriter` encodes and writes them.
 """
 from __future__ import annotations
 
@@ -27,10 +32,22 @@ import numpy as np
 
 from shm_schema import Schema, Segment, StructBlock
 
+from . import proto
 from . import schemas as S
-from .encode import grid_msg, image_msg, point_cloud_msg, scalars_msg, stamp, to_json, transform_msg
+from .encode import (
+    compressed_image_msg,
+    grid_msg,
+    planar_transform_msg,
+    point_cloud_msg,
+    raw_image_msg,
+    scalars_msg,
+    stamp,
+    to_json,
+    transform_msg,
+)
 
-__all__ = ["RecordOptions", "McapWriter", "Recorded", "capture", "DEFAULT_NAME", "PROFILE", "VEHICLES", "FRAME_TOPIC"]
+__all__ = ["RecordOptions", "RunInfo", "McapWriter", "Recorded", "frame_data", "DEFAULT_NAME", "PROFILE", "VEHICLES",
+           "FRAME_TOPIC"]
 
 log = logging.getLogger("cosim.recording")
 
@@ -49,31 +66,49 @@ class RecordOptions:
     """What and how to record. ``path`` None: ``<run_dir>/recording.mcap``."""
 
     path: Path | None = None
-    #: record images every this many frames (1: every frame); other topics are recorded every frame
-    image_every: int = 1
-    rgb_format: Literal["jpeg", "png"] = "jpeg"
+    #: record camera images every this many frames (1: every frame; 5: 2 Hz at the default 0.1 s frames); every
+    #: other topic is recorded every frame. Images are ~80 % of a default frame's bytes (2 x 1.3 MB raw depth)
+    image_every: int = 5
+    #: RGB camera images (``<cam>_rgb``, present when the viewer asked for them): JPEG or PNG CompressedImage, or
+    #: a RawImage rgba8 (no encoding work, larger); depth-encoded images are always RawImage (lossless)
+    rgb_format: Literal["jpeg", "png", "raw"] = "jpeg"
     jpeg_quality: int = 90
-    #: per-frame chunk compression
-    compression: Literal["zstd", "lz4", "none"] = "zstd"
-    #: frames in flight to the recorder process (0: no process, write synchronously inside the sink)
-    queue_frames: int = 4
-    #: the recorder process closes a chunk and flushes at most this often, s (the synchronous writer: every frame)
+    #: compression of the chunks holding camera images (raw depth-encoded images shrink ~18 x with lz4), and of
+    #: every chunk of a run without a LiDAR cloud
+    compression: Literal["lz4", "zstd", "none"] = "lz4"
+    #: compression of the chunks holding the LiDAR cloud: float32 points gain ~3 % from lz4 for ~2 ms per frame;
+    #: zstd saves ~60 % (points repeat across frames) for several ms per frame
+    cloud_compression: Literal["lz4", "zstd", "none"] = "none"
+    #: frame slots in flight to the recorder process (0: no process, write synchronously inside the sink; None:
+    #: as many as fit in QUEUE_BYTES, within MIN_SLOTS..MAX_SLOTS: ~20 for a default frame, 256 for small ones)
+    queue_frames: int | None = None
+    #: the recorder process closes a chunk and flushes at most this often, s (0: after every frame)
     flush_s: float = 0.5
+    #: niceness added to the recorder process: it yields the CPU to the ring (the credits still guarantee that
+    #: it gets every frame: when all slots are full the ring waits for it)
+    nice: int = 10
 
     def __post_init__(self) -> None:
+        if not 0 <= self.nice <= 19:
+            raise ValueError(f"nice must be in 0..19, got {self.nice}")
         if self.flush_s < 0:
             raise ValueError(f"flush_s must be >= 0, got {self.flush_s}")
-        if self.queue_frames < 0:
+        if self.queue_frames is not None and self.queue_frames < 0:
             raise ValueError(f"queue_frames must be >= 0, got {self.queue_frames}")
         if self.image_every < 1:
             raise ValueError(f"image_every must be >= 1, got {self.image_every}")
         if not 1 <= self.jpeg_quality <= 100:
             raise ValueError(f"jpeg_quality must be in 1..100, got {self.jpeg_quality}")
+        if self.rgb_format not in ("jpeg", "png", "raw"):
+            raise ValueError(f"rgb_format must be jpeg, png or raw, got {self.rgb_format!r}")
+        for name in ("compression", "cloud_compression"):
+            if getattr(self, name) not in ("lz4", "zstd", "none"):
+                raise ValueError(f"{name} must be lz4, zstd or none, got {getattr(self, name)!r}")
 
 
 @dataclass(frozen=True)
 class Recorded:
-    """Which blocks a run's recording takes, from its schema alone (the capture and the writer agree on it)."""
+    """Which blocks a run's recording takes, from its schema alone (the sink and the writer agree on it)."""
 
     structs: tuple[str, ...]
     images: tuple[str, ...]
@@ -89,24 +124,67 @@ class Recorded:
                    tuple(b.name for b in blocks if b.name.startswith("heightmap") and not isinstance(b, StructBlock)
                          and len(b.shape) == 2))
 
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Every recorded block."""
+        return self.due(0, 1)
+
+    def due(self, frame: int, image_every: int) -> tuple[str, ...]:
+        """The blocks frame ``frame`` records: every struct, the LiDAR points and the height maps, and the
+        images on every ``image_every``-th frame."""
+        images = self.images if frame % image_every == 0 else ()
+        return self.structs + (("lidar_points",) if self.lidar else ()) + self.grids + images
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """What the writer needs from the scenario, as plain values (the recorder process then imports no config)."""
+
+    scenario: str
+    #: frame period, s
+    period_s: float
+    #: constant transforms (parent, child, 4 x 4 parent_from_child, m): cart -> cart_grid, mount parent -> lidar
+    static: tuple[tuple[str, str, np.ndarray], ...]
+    #: cart interior length (along grid x) and width (along grid y), m
+    cart_interior_m: tuple[float, float]
+
+    @classmethod
+    def of(cls, scenario) -> "RunInfo":
+        from cosim.geometry import cart_body_from_grid, mount_transform
+
+        mount, cart = scenario.sensor.mount, scenario.cart
+        return cls(scenario.name, float(scenario.timing.sensor_period_s),
+                   (("cart", "cart_grid", np.asarray(cart_body_from_grid(cart), float)),
+                    (mount.parent, "lidar", np.asarray(mount_transform(mount), float))),
+                   (float(cart.interior_length_m), float(cart.interior_width_m)))
+
+
+def _compression_type(name: str):
+    from mcap.writer import CompressionType
+
+    return {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[name]
+
 
 def _writer(stream, compression: str):
-    from mcap.writer import CompressionType, Writer
+    from mcap.writer import Writer
 
-    comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[compression]
-    if hasattr(Writer, "flush"):
-        # chunked and indexed; each frame becomes its own chunk via Writer.flush()
-        return Writer(stream, compression=comp), True
-    return Writer(stream, use_chunking=False, compression=CompressionType.NONE), False
+    return Writer(stream, compression=_compression_type(compression))
+
+
+#: where mcap's Writer keeps the compression of the chunks it finalizes (private: mcap 1.x). The writer switches
+#: it between chunks so that images and the LiDAR cloud can be compressed differently; without it (another mcap
+#: version) every chunk gets ``compression``.
+_WRITER_COMPRESSION = "_Writer__compression"
 
 
 class McapWriter:
     """Writes one run's frames to an MCAP file (see the module docstring for the channels).
 
-    ``schema`` is the run's segment schema; ``run_id`` and ``fingerprint`` go into the file's metadata.
+    ``run`` is a :class:`RunInfo` (or a scenario, turned into one); ``schema`` is the run's segment schema;
+    ``run_id`` and ``fingerprint`` go into the file's metadata.
     """
 
-    def __init__(self, scenario, schema: Schema, path: Path, options: RecordOptions, run_id: str = "",
+    def __init__(self, run, schema: Schema, path: Path, options: RecordOptions, run_id: str = "",
                  fingerprint: str = "", flush_s: float = 0.0):
         self.options = options
         self.flush_s = float(flush_s)
@@ -114,32 +192,38 @@ class McapWriter:
         self._dirty = False
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.period_s = float(scenario.timing.sensor_period_s)
+        run = run if isinstance(run, RunInfo) else RunInfo.of(run)
+        self.period_s = run.period_s
         self.frames_written = 0
-        self._scenario = scenario
+        self._run = run
         self._closed = False
         self._file = open(self.path, "wb")
-        self._w, self._chunked = _writer(self._file, options.compression)
+        self._w = _writer(self._file, options.compression)
+        self._chunk_compression = options.compression
+        self._switchable = hasattr(self._w, _WRITER_COMPRESSION)
         self._w.start(PROFILE, "graincosim.cosim.recording")
         self._schemas: dict[str, int] = {}
         self._plan(schema)
-        self._w.add_metadata("run", {"run_id": run_id, "fingerprint": fingerprint, "scenario": scenario.name,
+        self._w.add_metadata("run", {"run_id": run_id, "fingerprint": fingerprint, "scenario": run.scenario,
                                      "sensor_period_s": repr(self.period_s)})
-        self._flush()
+        self._w.flush()
 
     # -- channels ----------------------------------------------------------------------------------------
-    def _channel(self, topic: str, schema: dict) -> int:
+    def _json_channel(self, topic: str, schema: dict) -> int:
         name = schema["title"]
         if name not in self._schemas:
             self._schemas[name] = self._w.register_schema(name, "jsonschema", S.encode_schema(schema))
         return self._w.register_channel(topic, "json", self._schemas[name])
 
-    def _plan(self, schema: Schema) -> None:
-        from cosim.geometry import cart_body_from_grid, mount_transform
+    def _proto_channel(self, topic: str, name: str) -> int:
+        if name not in self._schemas:
+            self._schemas[name] = self._w.register_schema(name, "protobuf", proto.descriptor_set(name))
+        return self._w.register_channel(topic, "protobuf", self._schemas[name])
 
-        rec = Recorded.of(schema)
+    def _plan(self, schema: Schema) -> None:
+        rec = self.recorded = Recorded.of(schema)
         fields = {b.name: b.fields for b in schema.blocks if isinstance(b, StructBlock)}
-        self._structs = [(n, self._channel(f"/{n}", S.struct_schema(n, [(f.name, f.unit) for f in fields[n]])))
+        self._structs = [(n, self._json_channel(f"/{n}", S.struct_schema(n, [(f.name, f.unit) for f in fields[n]])))
                          for n in rec.structs]
         self._vehicles = []
         for v in VEHICLES:
@@ -147,98 +231,126 @@ class McapWriter:
                 if {f"{v}_x_m", f"{v}_y_m", f"{v}_yaw_rad"} <= {f.name for f in fields[n]}:
                     self._vehicles.append((v, n))
                     break
-        mount = self._scenario.sensor.mount
-        self._static = [("cart", "cart_grid", cart_body_from_grid(self._scenario.cart)),
-                        (mount.parent, "lidar", mount_transform(mount))]
-        self._tf = self._channel("/tf", S.FRAME_TRANSFORM)
+        self._tf = self._proto_channel("/tf", "foxglove.FrameTransform")
+        # constant transforms: encoded once without their timestamp; a frame prepends its timestamp field
+        # (concatenated protobuf messages merge)
+        self._static = [proto.encode("foxglove.FrameTransform", {**transform_msg(0, parent, child, tf),
+                                                                 "timestamp": None})
+                        for parent, child, tf in self._run.static]
         self._images: dict[str, tuple[str, str, int]] = {}
         for name in rec.images:
             cam, _, kind = name.rpartition("_")
-            if kind == "rgb":
-                fmt, topic = self.options.rgb_format, f"/{cam}/rgb"
-            elif kind == "depth":
-                fmt, topic = "png", f"/{cam}/depth_encoded"
+            if kind == "rgb" and self.options.rgb_format != "raw":
+                fmt, topic, schema_name = self.options.rgb_format, f"/{cam}/rgb", "foxglove.CompressedImage"
             else:
-                fmt, topic = "png", f"/{name}"
-            self._images[name] = (fmt, cam or name, self._channel(topic, S.COMPRESSED_IMAGE))
-        self._lidar = self._channel("/lidar/points", S.POINT_CLOUD) if rec.lidar else None
+                topic = {"rgb": f"/{cam}/rgb", "depth": f"/{cam}/depth_encoded"}.get(kind, f"/{name}")
+                fmt, schema_name = "raw", "foxglove.RawImage"
+            self._images[name] = (fmt, cam or name, self._proto_channel(topic, schema_name))
+        self._lidar = self._proto_channel("/lidar/points", "foxglove.PointCloud") if rec.lidar else None
         self._grids: dict[str, tuple[tuple[float, float], int]] = {}
-        cart = self._scenario.cart
+        length_m, width_m = self._run.cart_interior_m
         for name in rec.grids:
             shape = schema.block(name).shape
             kind = name[len("heightmap"):].lstrip("_") or "map"
-            cell = (cart.interior_length_m / shape[0], cart.interior_width_m / shape[1])
-            self._grids[name] = (cell, self._channel(f"/heightmap/{kind}", S.GRID))
-        self._marker = self._channel(FRAME_TOPIC, S.FRAME_MARKER)
+            cell = (length_m / shape[0], width_m / shape[1])
+            self._grids[name] = (cell, self._proto_channel(f"/heightmap/{kind}", "foxglove.Grid"))
+        self._marker = self._json_channel(FRAME_TOPIC, S.FRAME_MARKER)
 
     # -- frames ------------------------------------------------------------------------------------------
-    def _put(self, channel: int, t_ns: int, msg: dict) -> None:
-        self._w.add_message(channel, log_time=t_ns, data=to_json(msg), publish_time=t_ns)
+    def _put(self, channel: int, t_ns: int, data) -> None:
+        self._w.add_message(channel, log_time=t_ns, data=data, publish_time=t_ns)
 
-    def _flush(self) -> None:
-        if self._chunked:
-            self._w.flush()
-        else:
-            self._file.flush()
+    def _compress_next_with(self, compression: str) -> None:
+        """Finish the chunk in progress and compress the following chunks with ``compression``."""
+        if compression == self._chunk_compression or not self._switchable:
+            return
+        self._w.flush()
+        setattr(self._w, _WRITER_COMPRESSION, _compression_type(compression))
+        self._chunk_compression = compression
 
-    def write(self, item: tuple) -> None:
-        """Encode and write one frame captured by :func:`capture`, then flush."""
-        frame, structs, images, lidar, grids = item
+    def write(self, frame: int, structs: dict[str, dict], arrays: dict[str, np.ndarray]) -> None:
+        """Encode and write frame ``frame``: ``structs`` {block: {field: value}}; ``arrays`` {block: array} of the
+        non-struct blocks this frame records (images only on their beat; blocks never written left out). The
+        arrays are only read during the call (they may be views of a frame slot)."""
         t_ns = round(frame * self.period_s * 1e9)
-        for parent, child, tf in self._static:
-            self._put(self._tf, t_ns, transform_msg(t_ns, parent, child, tf))
+        ts = stamp(t_ns)
+        ts_field = proto.encode("foxglove.FrameTransform", {"timestamp": ts})
+        for rest in self._static:
+            self._put(self._tf, t_ns, ts_field + rest)
         for v, block in self._vehicles:
-            s = structs[block]
-            c, sn = np.cos(s[f"{v}_yaw_rad"]), np.sin(s[f"{v}_yaw_rad"])
-            tf = np.array([[c, -sn, 0.0, s[f"{v}_x_m"]], [sn, c, 0.0, s[f"{v}_y_m"]], [0, 0, 1, 0], [0, 0, 0, 1]])
-            if np.isfinite(tf).all():
-                self._put(self._tf, t_ns, transform_msg(t_ns, "world", v, tf))
+            s = structs.get(block)
+            if s is None:
+                continue
+            x, y, yaw = s[f"{v}_x_m"], s[f"{v}_y_m"], s[f"{v}_yaw_rad"]
+            if np.isfinite((x, y, yaw)).all():
+                self._put(self._tf, t_ns, proto.encode("foxglove.FrameTransform",
+                                                       planar_transform_msg(t_ns, "world", v, x, y, yaw)))
         for name, channel in self._structs:
-            self._put(channel, t_ns, scalars_msg(t_ns, frame, structs[name]))
-        for name, rgb in images:
+            if name in structs:
+                self._put(channel, t_ns, to_json(scalars_msg(t_ns, frame, structs[name])))
+        for name, ((cx, cy), channel) in self._grids.items():
+            if name in arrays:
+                self._put(channel, t_ns, proto.encode("foxglove.Grid", grid_msg(t_ns, arrays[name], cx, cy)))
+        images = [(name, arrays[name]) for name in self._images if name in arrays]
+        if images:
+            self._compress_next_with(self.options.compression)
+        for name, img in images:
             fmt, cam, channel = self._images[name]
-            self._put(channel, t_ns, image_msg(t_ns, rgb, cam, fmt, self.options.jpeg_quality))
+            if fmt == "raw":
+                self._put(channel, t_ns, proto.encode("foxglove.RawImage", raw_image_msg(t_ns, img, cam)))
+            else:
+                msg = compressed_image_msg(t_ns, img, cam, fmt, self.options.jpeg_quality)
+                self._put(channel, t_ns, proto.encode("foxglove.CompressedImage", msg))
+        lidar = arrays.get("lidar_points")
         if lidar is not None and self._lidar is not None:
-            self._put(self._lidar, t_ns, point_cloud_msg(t_ns, lidar))
-        for name, h in grids:
-            (cx, cy), channel = self._grids[name]
-            self._put(channel, t_ns, grid_msg(t_ns, h, cx, cy))
-        self._put(self._marker, t_ns, {"timestamp": stamp(t_ns), "frame": int(frame), "t_s": frame * self.period_s})
+            self._compress_next_with(self.options.cloud_compression)
+            self._put(self._lidar, t_ns, proto.encode("foxglove.PointCloud", point_cloud_msg(t_ns, lidar)))
+        self._put(self._marker, t_ns, to_json({"timestamp": ts, "frame": int(frame), "t_s": frame * self.period_s}))
         self.frames_written += 1
         self._dirty = True
         if time.monotonic() - self._t_flush >= self.flush_s:
             self.flush()
+
+    def flush_due_in(self) -> float | None:
+        """Seconds until a flush is due (0: now), None when nothing is waiting to be flushed."""
+        if not self._dirty:
+            return None
+        return max(0.0, self.flush_s - (time.monotonic() - self._t_flush))
 
     def flush(self) -> None:
         """Close the chunk and flush the file now, if any frame was written since the last flush."""
         if self._dirty:
             self._t_flush = time.monotonic()
             self._dirty = False
-            self._flush()
+            self._w.flush()
 
-    def close(self) -> None:
-        """Write the summary and close the file. Idempotent."""
+    def close(self, stats: dict[str, str] | None = None) -> None:
+        """Write ``stats`` (if given) as the ``recorder`` metadata record, the summary, and close the file.
+        Idempotent."""
         if self._closed:
             return
         self._closed = True
         try:
+            if stats:
+                self._w.add_metadata("recorder", {"frames": str(self.frames_written), **stats})
             self._w.finish()
         finally:
             self._file.close()
         log.info("recording %s: %d frames", self.path, self.frames_written)
 
 
-def capture(seg: Segment, rec: Recorded, frame: int, image_every: int = 1) -> tuple:
-    """Copies of what frame ``frame`` records (blocks are quiescent while the supervisor holds the token).
-
-    Returns ``(frame, structs, images, lidar, grids)``: {block: {field: value}}; [(block, (H, W, 3) uint8)] for
-    the images due this frame; the (N, 4) float32 LiDAR rows or None; [(block, (nx, ny) float32)]. Blocks never
-    written yet are left out.
-    """
-    structs = {name: seg.view(name).as_dict() for name in rec.structs}
-    images = []
-    if frame % image_every == 0:
-        images = [(name, np.array(seg.view(name)[..., :3])) for name in rec.images if seg.frame_of(name) >= 0]
-    lidar = np.array(seg.view("lidar_points")) if rec.lidar and seg.frame_of("lidar_points") >= 0 else None
-    grids = [(name, np.array(seg.view(name))) for name in rec.grids if seg.frame_of(name) >= 0]
-    return frame, structs, images, lidar, grids
+def frame_data(seg: Segment, names) -> tuple[dict[str, dict], dict[str, np.ndarray]]:
+    """(structs, arrays) of blocks ``names`` of ``seg`` for :meth:`McapWriter.write`: struct fields copied into
+    dicts, arrays as zero-copy views (valid while the blocks are quiescent: the supervisor holds the token, or
+    they are a frame slot the recorder owns). Blocks never written are left out."""
+    structs, arrays = {}, {}
+    for n in names:
+        if seg.frame_of(n) < 0:
+            continue
+        v = seg.view(n)
+        if isinstance(seg.schema.block(n), StructBlock):
+            arr = v.array
+            structs[n] = dict(zip(arr.dtype.names, arr.item()))
+        else:
+            arrays[n] = v
+    return structs, arrays
