@@ -45,6 +45,12 @@ def check(series: dict, summary: dict) -> None:
 def test_first_seconds_with_perception(name):
     sc, series, summary = run(name, 8.0)
     check(series, summary)
+    if name == "grazing_sensor":
+        # the mast sees the cart only at grazing angles: perception must say it has no answer, and the
+        # controller must then never start the auger blind
+        assert series["perc_state.cart_valid"].max() == 0
+        assert summary["mass_balance"]["delivered_m3"] == 0.0 and series["dyn_state.auger_on"].max() == 0
+        return
     assert series["dyn_state.measurement_seen"][-1] == 1, "no perceived map ever reached the controller"
     assert summary["mass_balance"]["delivered_m3"] > 0.05, "the auger never started"
     found = series["perc_state.cart_valid"][1:]
@@ -58,6 +64,9 @@ def test_whole_run_with_perception(name):
     ~15 cm of transit grain even with ideal feedback, within 20 cm)."""
     sc, series, summary = run(name, None)
     check(series, summary)
+    if name == "grazing_sensor":
+        assert summary["mass_balance"]["delivered_m3"] == 0.0
+        return
     assert series["dyn_state.all_full"][-1] == 1
     over = summary["fill"]["max_overfill_m"]
     assert over <= (0.20 if name == "high_flow" else 0.05), over
