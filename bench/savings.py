@@ -54,6 +54,12 @@ def run_once(overlay: dict, duration: float, out: Path) -> dict:
     return {"wall": s["wall_time_s"], "rtf": s["real_time_factor"], **{k: v for k, v in s["timing_ms"].items()}}
 
 
+def median_of(rows: list[dict], key: str) -> float:
+    """Median of ``key`` over the runs that have it (a stage absent from the ring: NaN)."""
+    values = [r[key] for r in rows if r.get(key) is not None]
+    return statistics.median(values) if values else float("nan")
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=20.0, help="simulated seconds per run")
@@ -70,9 +76,8 @@ def main(argv: list[str] | None = None) -> None:
             for rep in range(args.reps):
                 for label, overlay in (("with", on), ("without", off)):
                     got[label].append(run_once(overlay, args.duration, Path(tmp) / f"{label}{rep}"))
-            med = {label: {k: statistics.median(r[k] for r in rows if r.get(k) is not None)
-                           if any(r.get(k) is not None for r in rows) else float("nan")
-                           for k in ("wall", "rtf", "render", "perception")} for label, rows in got.items()}
+            med = {label: {k: median_of(rows, k) for k in ("wall", "rtf", "render", "perception")}
+                   for label, rows in got.items()}
             saved = 1.0 - med["with"]["wall"] / med["without"]["wall"]
             for label in ("with", "without"):
                 m = med[label]

@@ -265,6 +265,17 @@ def test_lidar_beams_land_on_their_pixels(ctx):
     assert np.percentile(err, 75) < 0.05
 
 
+def looking_down(tilt_rad: float, position) -> np.ndarray:
+    """World-from-camera pose (4, 4) of a camera at ``position`` (m) facing +x tilted ``tilt_rad`` down: camera
+    X right = -y, Y up, Z forward; [right, up, forward] has det -1 (the paper's left-handed camera frame)."""
+    fwd = np.array([math.cos(tilt_rad), 0.0, -math.sin(tilt_rad)])
+    right = np.array([0.0, -1.0, 0.0])
+    pose = np.eye(4)
+    pose[:3, :3] = np.stack([right, np.cross(right, fwd), fwd], axis=1)
+    pose[:3, 3] = position
+    return pose
+
+
 def test_rough_grain_surface_same_triangles_as_ray_caster(ctx):
     """Random heights seen obliquely from above: GL and the exact cast agree to float precision almost
     everywhere, which holds only if both split every quad along the same diagonal and clamp the edge ring."""
@@ -275,13 +286,7 @@ def test_rough_grain_surface_same_triangles_as_ray_caster(ctx):
     scene = Scene(Boxes(far[None], np.array([[0.1, 0.1, 0.1]]), np.ones((1, 3), np.float32)),
                   Cylinders(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3), np.float32)), hf)
     cam = Pinhole(160, 120, math.radians(50.0))
-    # camera above the cart's middle, looking down and forward: X right = -y, Y up, Z forward = down-tilted +x
-    fwd = np.array([math.cos(1.0), 0.0, -math.sin(1.0)])
-    right = np.array([0.0, -1.0, 0.0])
-    up = np.cross(right, fwd)                     # (sin, 0, cos): upward; [right, up, fwd] has det -1
-    pose = np.eye(4)
-    pose[:3, :3] = np.stack([right, up, fwd], axis=1)
-    pose[:3, 3] = (1.0, 1.5, 4.5)
+    pose = looking_down(1.0, (1.0, 1.5, 4.5))     # above the cart's middle, looking down and forward
     rig = Rig((RigCamera("cam0", cam, np.eye(4)),))
     gl, mock = renderer(ctx, rig, float_depth=True), MockRenderer(rig, CODEC, float_depth=True)
     za, zb = np.zeros((120, 160), np.float32), np.zeros((120, 160), np.float32)
@@ -316,11 +321,7 @@ def test_merged_flat_blocks_render_like_the_full_grid(ctx, monkeypatch):
     scene = Scene(Boxes(floor[None], np.array([[3.0, 1.5, 0.5]]), np.ones((1, 3), np.float32)),
                   Cylinders(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3), np.float32)), hf)
     cam = Pinhole(200, 150, math.radians(60.0))
-    fwd = np.array([math.cos(0.9), 0.0, -math.sin(0.9)])
-    right = np.array([0.0, -1.0, 0.0])
-    pose = np.eye(4)
-    pose[:3, :3] = np.stack([right, np.cross(right, fwd), fwd], axis=1)
-    pose[:3, 3] = (0.5, 1.5, 4.0)
+    pose = looking_down(0.9, (0.5, 1.5, 4.0))
     rig = Rig((RigCamera("cam0", cam, np.eye(4)),))
     z = {}
     for name, block in (("merged", None), ("grid", 1)):
