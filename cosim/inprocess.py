@@ -37,7 +37,8 @@ def simulate(scenario: Scenario, specs: Mapping[str, ParticipantSpec] | None = N
     n = scenario.frames if frames is None else frames
     seg = Segment.local(schema, frames=n)
     members = tuple(s.name for s in ring)
-    recorder = Recorder(seg, members)
+    deferred = tuple(s.name for s in ring if s.defers_outputs(scenario))
+    recorder = Recorder(seg, members, deferred=bool(deferred))
     participants = []
     t0 = time.perf_counter()
     try:
@@ -45,7 +46,7 @@ def simulate(scenario: Scenario, specs: Mapping[str, ParticipantSpec] | None = N
             p = spec.create(scenario)
             participants.append(p)
             p.start(seg)
-        run_inprocess(seg, participants, n, recorder.record)
+        run_inprocess(seg, participants, n, recorder.record, deferred=deferred, on_flush=recorder.record_flush)
     finally:
         for p in participants:
             p.close()

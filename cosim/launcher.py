@@ -61,7 +61,9 @@ class ObserverSpec:
 
 #: a per-frame sink, called by the supervisor after each completed frame as ``sink(segment, frame)``; created by
 #: ``factory(scenario, run_dir, segment) -> sink`` with an optional ``close()``. Sinks run inside the ring turn
-#: (they see every frame, consistently) so they must be cheap; a sink's exception ends the run.
+#: (they see every frame, consistently) so they must be cheap; a sink's exception ends the run. A block may hold
+#: an earlier frame than the call's (a deferred member publishes one turn late): ``segment.frame_of(block)``
+#: says which; when a member defers, one more call with frame = last frame + 1 follows the flush turn.
 SinkFactory = Callable[..., Callable]
 
 
@@ -131,7 +133,8 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
     write_scenario(run_dir, scenario)
     ring = ring_specs(scenario, specs)
     schema = build_schema(scenario, ring)
-    plan = RingPlan(tuple(s.name for s in ring), scenario.frames, SUPERVISOR)
+    plan = RingPlan(tuple(s.name for s in ring), scenario.frames, SUPERVISOR,
+                    tuple(s.name for s in ring if s.defers_outputs(scenario)))
     name = f"cosim-{os.getpid()}-{secrets.token_hex(3)}"
     ctx = mp.get_context("spawn")
     sems = {n: ctx.Semaphore(0) for n in (*plan.members, SUPERVISOR)}
@@ -168,7 +171,7 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
             p = ctx.Process(target=child_main, args=(args,), name=f"cosim-{spec.name}", daemon=True)
             p.start()
             procs[spec.name] = p
-        recorder = Recorder(seg, plan.members)
+        recorder = Recorder(seg, plan.members, deferred=bool(plan.deferred))
         finished: set[str] = set()
 
         def check_stop() -> None:
@@ -212,6 +215,15 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
             if frame < plan.frames:
                 t_turn = time.monotonic_ns()
                 token.give(first, frame + 1)
+        if plan.flush_frame is not None:
+            # the deferred members publish their last frame's outputs
+            sw[phase] = Phase.WAITING
+            token.give(plan.flush_next_of(SUPERVISOR), plan.flush_frame)
+            token.take(SUPERVISOR, plan.flush_frame, scenario.timing.handoff_timeout_s, check)
+            sw[phase] = Phase.STEPPING
+            recorder.record_flush()
+            for sink in frame_sinks:
+                sink(seg, plan.flush_frame)
         sup["phase"] = Phase.DONE
     except RunError as exc:
         error = exc

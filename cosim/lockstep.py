@@ -3,7 +3,9 @@
 One turn per frame: dynamics -> renderer -> perception -> supervisor -> dynamics ... Each member blocks on its
 own semaphore; the sender writes the frame id into the receiver's header slot before releasing it, and the
 receiver checks it. Every wait has a deadline and raises a named error. Waits are sliced (``POLL_S``) only to
-check liveness between slices; nothing spins and nothing sleeps to synchronise.
+check liveness between slices; nothing spins and nothing sleeps to synchronise. A deferred member
+(``RingPlan.deferred``, see cosim.participant) passes the token on before the rest of its step, so its work
+overlaps the next members' turns; a flush turn after the last frame lets it publish its final outputs.
 
 The same member code runs over OS processes (:class:`Token` over multiprocessing semaphores) or in one process
 (:func:`run_inprocess`, the ring unrolled into a loop).
@@ -35,6 +37,15 @@ class RingPlan:
     members: tuple[str, ...]
     frames: int
     supervisor: str = "supervisor"
+    #: members that publish one turn late (cosim.participant): after the last frame a flush turn passes the
+    #: token through them, in ring order, and back to the supervisor
+    deferred: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        unknown = [n for n in self.deferred if n not in self.members]
+        if unknown:
+            raise ValueError(f"deferred members {unknown} are not in the ring {self.members}")
+        object.__setattr__(self, "deferred", tuple(n for n in self.members if n in self.deferred))
 
     def next_of(self, name: str) -> str:
         """Who receives the token after ``name``."""
@@ -42,6 +53,18 @@ class RingPlan:
             return self.members[0]
         i = self.members.index(name)
         return self.members[i + 1] if i + 1 < len(self.members) else self.supervisor
+
+    @property
+    def flush_frame(self) -> int | None:
+        """Frame id of the flush turn (one past the last frame), or None when no member defers."""
+        return self.frames + 1 if self.deferred else None
+
+    def flush_next_of(self, name: str) -> str:
+        """Who receives the flush turn's token after ``name`` (the supervisor starts it)."""
+        if name == self.supervisor:
+            return self.deferred[0]
+        i = self.deferred.index(name)
+        return self.deferred[i + 1] if i + 1 < len(self.deferred) else self.supervisor
 
 
 class Token:
@@ -104,27 +127,54 @@ def describe_stall(seg: Segment, exclude: str = "") -> str:
 
 def member_loop(name: str, participant, seg: Segment, token: Token, plan: RingPlan, *,
                 startup_timeout_s: float, handoff_timeout_s: float, check: Callable[[], None] | None = None) -> None:
-    """Run one ring member for frames 0..plan.frames: take the token, step, pass it on."""
+    """Run one ring member for frames 0..plan.frames: take the token, step, pass it on; a deferred member runs
+    the rest of its step after passing the token, and takes part in the flush turn at the end."""
     w = seg.slot_words(name)
     nxt = plan.next_of(name)
     clock = time.monotonic_ns
     step = participant.step
+    deferred = name in plan.deferred
     for frame in range(plan.frames + 1):
         w[_PHASE] = Phase.WAITING
         token.take(name, frame, startup_timeout_s if frame == 0 else handoff_timeout_s, check)
         w[_FRAME] = frame
         w[_PHASE] = Phase.STEPPING
         t0 = w[_HEARTBEAT] = clock()
-        step(frame)
+        rest = step(frame)
+        if rest is not None:
+            _check_deferred(name, deferred)
+            token.give(nxt, frame)
+            rest()
         t1 = w[_HEARTBEAT] = clock()
         w[_STEP] = t1 - t0
-        token.give(nxt, frame)
+        if rest is None:
+            token.give(nxt, frame)
+    if deferred:
+        flush = plan.flush_frame
+        w[_PHASE] = Phase.WAITING
+        token.take(name, flush, handoff_timeout_s, check)
+        w[_FRAME] = flush
+        w[_PHASE] = Phase.STEPPING
+        w[_HEARTBEAT] = clock()
+        participant.flush()
+        w[_HEARTBEAT] = clock()
+        token.give(plan.flush_next_of(name), flush)
     w[_PHASE] = Phase.DONE
 
 
+def _check_deferred(name: str, deferred: bool) -> None:
+    if not deferred:
+        raise RuntimeError(f"{name} returned work to run after its turn, but the ring plan does not defer its "
+                           "outputs (ParticipantSpec.defers)")
+
+
 def run_inprocess(seg: Segment, participants: Sequence, frames: int,
-                  on_frame: Callable[[int], None] | None = None) -> None:
-    """The ring unrolled in one process: for each frame, step every participant in order, then ``on_frame``.
+                  on_frame: Callable[[int], None] | None = None, *, deferred: Sequence[str] = (),
+                  on_flush: Callable[[], None] | None = None) -> None:
+    """The ring unrolled in one process: for each frame, step every participant in order (a deferred member's
+    rest right after its step), then ``on_frame``; then the flush turn of the ``deferred`` members and
+    ``on_flush``. Every block is read and written at the same point of the token order as in the process
+    ring, so both give the same results.
 
     Participants must already be started. Header slots are kept as in the OS-process ring so that recorders
     and diagnostics read the same fields.
@@ -135,8 +185,18 @@ def run_inprocess(seg: Segment, participants: Sequence, frames: int,
             slot["frame"] = frame
             slot["phase"] = Phase.STEPPING
             t0 = time.monotonic_ns()
-            p.step(frame)
+            rest = p.step(frame)
+            if rest is not None:
+                _check_deferred(p.name, p.name in deferred)
+                rest()
             slot["step_ns"] = time.monotonic_ns() - t0
             slot["phase"] = Phase.WAITING
         if on_frame is not None:
             on_frame(frame)
+    if deferred:
+        for p, slot in zip(participants, slots):
+            if p.name in deferred:
+                slot["frame"] = frames + 1
+                p.flush()
+        if on_flush is not None:
+            on_flush()

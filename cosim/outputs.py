@@ -92,12 +92,16 @@ def compose_summary(scenario: Scenario, recorder: Recorder | None, ring: Sequenc
         return summary
     med = recorder.timing_medians_ms()
     summary["timing_ms"] = {STAGE_KEYS.get(m, m): med[m] for m in members}
-    summary["timing_ms"]["handoff"] = med["handoff"]
+    if not recorder.deferred:
+        summary["timing_ms"]["handoff"] = med["handoff"]
+    summary["timing_ms"]["frame"] = med["frame"]
     if recorder.turn_ms:
         turns = np.asarray(recorder.turn_ms)
         summary["ring"] = {"turn_median_ms": float(np.median(turns)),
                            "turn_p99_ms": float(np.percentile(turns, 99)),
-                           "handoff_median_ms": med["handoff"]}
+                           "overlapped": recorder.deferred}
+        if not recorder.deferred:
+            summary["ring"]["handoff_median_ms"] = med["handoff"]
     if recorder.frames:
         series = recorder.series()
         for spec in ring:

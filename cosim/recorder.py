@@ -4,6 +4,11 @@ Every struct-block field becomes a timeseries column ``"<block>.<field>"`` (fiel
 Non-image arrays up to ``ARRAY_COPY_LIMIT`` bytes are copied each frame so the run's final arrays are those of
 the last *completed* frame, whatever happens to a writer afterwards. Wall-clock figures are kept apart from the
 timeseries, so two runs of the same scenario and seed write byte-identical CSV files.
+
+A struct row goes to the frame of its block's stamp (``Segment.frame_of``), not to the frame being recorded: a
+deferred member (cosim.participant) publishes frame m's outputs at the next turn, and the flush turn's
+:meth:`Recorder.record_flush` adds the last. A frame whose block was not (re)written repeats the block's
+latest earlier row, as a block that is not rewritten would read.
 """
 from __future__ import annotations
 
@@ -25,13 +30,15 @@ ARRAY_COPY_LIMIT = 4 << 20
 class Recorder:
     """Collects struct rows and last-frame array copies from a segment, plus per-stage step times."""
 
-    def __init__(self, seg: Segment, members: tuple[str, ...]):
+    def __init__(self, seg: Segment, members: tuple[str, ...], *, deferred: bool = False):
         self._seg = seg
         self.members = members
+        #: whether a member publishes one turn late: the hand-off time is then not turn minus steps
+        self.deferred = deferred
         self._structs = [(b.name, seg.view(b.name).array, b) for b in seg.schema.blocks
                          if isinstance(b, StructBlock)]
         self.columns: list[str] = ["frame"] + [f"{name}.{f.name}" for name, _, b in self._structs for f in b.fields]
-        self._rows: dict[str, list[np.ndarray]] = {name: [] for name, _, _ in self._structs}
+        self._rows: dict[str, dict[int, np.ndarray]] = {name: {} for name, _, _ in self._structs}
         self.frames: list[int] = []
         self.arrays: dict[str, np.ndarray] = {}
         self._array_views = {}
@@ -45,36 +52,59 @@ class Recorder:
         self.turn_ms: list[float] = []
 
     def record(self, frame: int, turn_ns: int | None = None) -> None:
-        """Copy frame ``frame``'s struct rows, small arrays and step times."""
+        """Copy frame ``frame``'s struct rows (each to its stamp's frame), small arrays and step times."""
         self.frames.append(frame)
-        for name, arr, _ in self._structs:
-            self._rows[name].append(arr.copy())
-        for name, view in self._array_views.items():
-            np.copyto(self.arrays[name], view)
-            self.array_frames[name] = self._seg.frame_of(name)
+        self._take()
         step = SLOT_WORD["step_ns"]
         for m, words in self._step_words:
             self.step_ms[m].append(words[step] / 1e6)
         if turn_ns is not None:
             self.turn_ms.append(turn_ns / 1e6)
 
+    def record_flush(self) -> None:
+        """After the flush turn: take the rows and arrays the deferred members published last."""
+        self._take()
+
+    def _take(self) -> None:
+        seg = self._seg
+        for name, arr, _ in self._structs:
+            stamp = seg.frame_of(name)
+            if stamp >= 0:
+                self._rows[name][stamp] = arr.copy()
+        for name, view in self._array_views.items():
+            np.copyto(self.arrays[name], view)
+            self.array_frames[name] = seg.frame_of(name)
+
+    def _aligned(self, name: str, dtype) -> list[np.ndarray]:
+        """Block ``name``'s row for each recorded frame: its own, else the latest earlier one (zeros before the
+        first)."""
+        rows, out = self._rows[name], []
+        last = np.zeros((), dtype)
+        for f in self.frames:
+            last = rows.get(f, last)
+            out.append(last)
+        return out
+
     def series(self) -> dict[str, np.ndarray]:
         """Column name -> (completed frames,) float64 array (the ``frame`` column included)."""
         out = {"frame": np.asarray(self.frames, dtype=np.float64)}
         for name, _, b in self._structs:
-            rows = np.array(self._rows[name], dtype=b.dtype) if self._rows[name] else np.zeros(0, b.dtype)
+            aligned = self._aligned(name, b.dtype)
+            rows = np.array(aligned, dtype=b.dtype) if aligned else np.zeros(0, b.dtype)
             for f in b.fields:
                 out[f"{name}.{f.name}"] = rows[f.name].astype(np.float64)
         return out
 
     def timing_medians_ms(self) -> dict[str, float]:
-        """Median per-frame time of each member's step and of the hand-offs (turn minus steps), ms."""
-        out = {m: float(np.median(v)) if v else float("nan") for m, v in self.step_ms.items()}
-        if self.turn_ms:
+        """Median per-frame time of each member's step, of the whole turn (``frame``) and of the hand-offs
+        (turn minus steps; NaN with a deferred member, whose step overlaps the others'), ms."""
+        nan = float("nan")
+        out = {m: float(np.median(v)) if v else nan for m, v in self.step_ms.items()}
+        out["frame"] = float(np.median(self.turn_ms)) if self.turn_ms else nan
+        out["handoff"] = nan
+        if self.turn_ms and not self.deferred:
             steps = np.sum([self.step_ms[m][-len(self.turn_ms):] for m in self.members], axis=0)
             out["handoff"] = float(np.median(np.asarray(self.turn_ms) - steps))
-        else:
-            out["handoff"] = float("nan")
         return out
 
     def write_csv(self, path: Path) -> None:
@@ -84,7 +114,7 @@ class Recorder:
         w.writerow(self.columns)
         cols = []
         for name, _, b in self._structs:
-            rows = self._rows[name]
+            rows = self._aligned(name, b.dtype)
             for f in b.fields:
                 cols.append([r[f.name].item() for r in rows])
         for i, frame in enumerate(self.frames):

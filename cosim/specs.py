@@ -24,10 +24,16 @@ class ParticipantSpec:
     factory: str
     blocks: str
     summary: str | None = None
+    #: ``predicate(scenario) -> bool``: whether this member publishes one turn late (cosim.participant)
+    defers: str | None = None
     kwargs: Mapping[str, Any] = field(default_factory=dict)
 
     def create(self, scenario: Scenario):
         return load_callable(self.factory)(scenario, **dict(self.kwargs))
+
+    def defers_outputs(self, scenario: Scenario) -> bool:
+        """Whether this member overlaps the next frame and publishes its outputs at its next turn."""
+        return self.defers is not None and bool(load_callable(self.defers)(scenario))
 
     def declare_blocks(self, scenario: Scenario) -> list:
         return list(load_callable(self.blocks)(scenario))
@@ -38,7 +44,8 @@ DEFAULT_SPECS: dict[str, ParticipantSpec] = {
                                 "dynamics_proc.summary:summarize"),
     "renderer": ParticipantSpec("renderer", "renderer_proc.participant:create", "renderer_proc.blocks:declare_blocks"),
     "perception": ParticipantSpec("perception", "perception_proc.participant:create",
-                                  "perception_proc.blocks:declare_blocks", "perception_proc.summary:summarize"),
+                                  "perception_proc.blocks:declare_blocks", "perception_proc.summary:summarize",
+                                  defers="cosim.participant:perception_overlaps"),
 }
 
 

@@ -3,7 +3,8 @@
 ``start`` binds the views, ``step(frame)`` runs one frame and publishes ``dyn_state``, ``stream`` and
 ``heightmap_truth``; frame 0 publishes the initial state without integrating. Feedback (CONTRACTS.md): with
 ``feedback: perception`` the controller reads ``heightmap_perceived`` and acts on P(m - 1 - L) at frame m
-(L = ``timing.latency_frames``; a copy of each perception output is kept until used; a missing or stale
+(L = ``timing.latency_frames``; a copy of each perception output is kept until used, read from the blocks as
+soon as published, which is one frame later when perception overlaps; a missing or stale
 output, or ``perc_state.cart_valid == 0``, is "no measurement"). With ``ground_truth`` it acts on the truth
 height map of frame m - 1 - L resampled to the controller grid. The participant also keeps its own record
 (``rows``, ``heights``) for in-process use.
@@ -16,6 +17,7 @@ import numpy as np
 
 from cosim.config import Scenario
 from cosim.errors import FrameMismatch
+from cosim.participant import perception_overlaps
 
 from .blocks import WRITER, state_fields
 from .model import ModelParams, World, initial_world, signals, step_frame, truth_measurement
@@ -36,6 +38,8 @@ class DynamicsParticipant:
         self.params = ModelParams.from_scenario(scenario)
         self.latency = scenario.timing.latency_frames
         self.perception = scenario.feedback == "perception"
+        #: perception publishes one turn late (cosim.participant): the block holds P(m - 2) at frame m
+        self._lag = 1 if perception_overlaps(scenario) else 0
         self.world: World | None = None
         self.rows: list[dict[str, float]] = []
         self._names = tuple(f.name for f in state_fields(scenario.controller.sections))
@@ -77,7 +81,9 @@ class DynamicsParticipant:
             self.world = initial_world(self.scenario, self.params)
         else:
             if self.perception:
-                self._history[frame - 1] = self._read_perception(frame - 1)
+                # the freshest published output: P(frame - 1), or P(frame - 2) when perception overlaps
+                newest = frame - 1 - self._lag
+                self._history[newest] = self._read_perception(newest)
             meas = self._history.pop(frame - 1 - self.latency, None)
             for k in [k for k in self._history if k < frame - 1 - self.latency]:
                 del self._history[k]
@@ -106,7 +112,7 @@ class DynamicsParticipant:
     # -- internals ---------------------------------------------------------------------------------------
     def _read_perception(self, want: int) -> np.ndarray | None:
         seg = self._seg
-        if self._perceived is None or seg.frame_of("heightmap_perceived") != want:
+        if want < 0 or self._perceived is None or seg.frame_of("heightmap_perceived") != want:
             return None
         if self._cart_valid is not None and (seg.frame_of("perc_state") != want
                                              or not self._cart_valid.cart_valid):

@@ -12,11 +12,18 @@ never feeds an estimate.
 
 The sensor's parent pose (the combine's GNSS) comes from ``dyn_state``; it places the perceived cart in the
 world and orients the towing direction. The cart itself is found from the points alone.
+
+Overlap (``cosim.participant.perception_overlaps``, on by default when the latency allows): ``step(frame)``
+publishes the outputs kept from the previous frame, copies what it reads from the dynamics blocks, resamples
+the images (the only use of them) and returns the rest (noise, algorithms, accuracy) as a callable that the
+ring runs after passing the token on; the outputs go into private buffers and are published at the next turn
+or by ``flush()``. The numbers are the same as without overlap.
 """
 from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -25,6 +32,7 @@ from cosim.camera import Rig
 from cosim.config import Scenario
 from cosim.errors import FrameMismatch
 from cosim.geometry import invert
+from cosim.participant import perception_overlaps
 
 from . import accuracy as acc
 from .blocks import ACCURACY_FIELDS, HEIGHTS_BLOCK, POINTS_BLOCK, STATE_BLOCK, WRITER
@@ -51,6 +59,9 @@ class PerceptionParticipant:
         self.pipeline: Perception | None = None
         self.segment: "Segment | None" = None
         self.last: FrameResult | None = None
+        #: publish one turn late, overlapping the next frame (cosim.participant)
+        self.deferred = perception_overlaps(scenario)
+        self._pending: _Outputs | None = None
 
     # -- contract -------------------------------------------------------------------------------------------
     def start(self, segment: "Segment") -> None:
@@ -78,10 +89,13 @@ class PerceptionParticipant:
                              f"{self.pipeline.n_beams} beams")
         self._state = segment.view("dyn_state") if segment.has("dyn_state") else None
         self._ranges = np.empty(self.pipeline.n_beams, np.float32)
+        self._out = _Outputs(np.empty_like(segment.view(POINTS_BLOCK)), np.empty_like(segment.view(HEIGHTS_BLOCK)))
         self.segment = segment
 
-    def step(self, frame: int) -> None:
-        """Perceive frame ``frame``: the images I(frame) into the outputs P(frame)."""
+    def step(self, frame: int):
+        """Perceive frame ``frame``: the images I(frame) into the outputs P(frame). Overlapping, returns the work
+        after the resampling as a callable and publishes P(frame) at the next turn (see the module docstring);
+        else does everything and returns None."""
         seg, pipe = self.segment, self.pipeline
         if seg is None or pipe is None:
             raise RuntimeError("perception stepped before start")
@@ -90,10 +104,43 @@ class PerceptionParticipant:
             if got != frame:
                 raise FrameMismatch(f"perception expected {name} of frame {frame}, found frame {got}",
                                     process=WRITER, frame=frame)
+        self.flush()
         t0 = time.perf_counter()
+        # everything read from the segment is read now: with overlap the rest runs while dynamics and the
+        # renderer write the next frame
         state = self._state.as_dict() if self._state is not None else {}
-        clean = pipe.resample([img for _, img in self._images], out=self._ranges)
         beams = self._accuracy_beams(frame)
+        truth = None
+        if beams is not None and state:
+            truth = (np.array(seg.view("heightmap_truth"), copy=True), np.array(seg.view("stream"), copy=True))
+        clean = pipe.resample([img for _, img in self._images], out=self._ranges)
+
+        def rest() -> None:
+            self._finish(frame, t0, state, clean, beams, truth)
+
+        if self.deferred:
+            return rest
+        rest()
+        self.flush()
+        return None
+
+    def flush(self) -> None:
+        """Publish the outputs computed but not yet written (the last frame's, when overlapping)."""
+        out, seg = self._pending, self.segment
+        if out is None or seg is None:
+            return
+        with seg.write(POINTS_BLOCK, out.frame) as pts:
+            np.copyto(pts, out.points)
+        with seg.write(HEIGHTS_BLOCK, out.frame) as hv:
+            np.copyto(hv, out.heights)
+        with seg.write(STATE_BLOCK, out.frame) as st:
+            st.update(out.values)
+        self._pending = None
+
+    def _finish(self, frame: int, t0: float, state: dict, clean: np.ndarray, beams: np.ndarray | None,
+                truth: tuple[np.ndarray, np.ndarray] | None) -> None:
+        """Noise, cart, height map, impact and accuracy of frame ``frame`` into the pending outputs."""
+        pipe, out = self.pipeline, self._out
         clean_sample = clean[beams] if beams is not None else None        # a copy: noise comes next, in place
         ranges = pipe.noisy(clean, frame)
         t1 = time.perf_counter()
@@ -101,26 +148,24 @@ class PerceptionParticipant:
         heading = self._heading(state, wfp)
         res = pipe.perceive(ranges, heading, with_points=False)
         self.last = res
-        with seg.write(POINTS_BLOCK, frame) as pts:
-            pipe.points(ranges, out=pts)                                  # straight into the shared block
+        pipe.points(ranges, out=out.points)
         t2 = time.perf_counter()
-        with seg.write(HEIGHTS_BLOCK, frame) as hv:
-            if res.heightmap is None:
-                hv.fill(np.nan)
-            else:
-                hv[...] = res.heightmap.heights
+        if res.heightmap is None:
+            out.heights.fill(np.nan)
+        else:
+            out.heights[...] = res.heightmap.heights
         values = self._outputs(frame, state, ranges, res, wfp)
         values["lidar_ms"] = _MS_PER_S * (t1 - t0)
         values["perception_ms"] = _MS_PER_S * (t2 - t0)
         values.update({n: (0 if d == "i8" else math.nan) for n, _, d, _ in ACCURACY_FIELDS})
         values["accuracy_ms"] = math.nan
-        if beams is not None and state:
+        if truth is not None:
             t3 = time.perf_counter()
-            values.update(self._accuracy(state, beams, clean_sample, res, wfp))
+            values.update(self._accuracy(state, beams, clean_sample, res, wfp, *truth))
             values["acc_evaluated"] = 1
             values["accuracy_ms"] = _MS_PER_S * (time.perf_counter() - t3)
-        with seg.write(STATE_BLOCK, frame) as st:
-            st.update(values)
+        out.frame, out.values = frame, values
+        self._pending = out
 
     def close(self) -> None:
         """Nothing to release but references; safe to call more than once."""
@@ -170,12 +215,13 @@ class PerceptionParticipant:
             v[f"{key}_ms"] = res.timing_ms.get(key, math.nan)
         return v
 
-    def _accuracy(self, state: dict, beams: np.ndarray, clean: np.ndarray, res: FrameResult, wfp: np.ndarray) -> dict:
-        """Accuracy fields of the frame: ``clean`` (K,) float32 m, the noise-free ranges of ``beams`` (K,)."""
-        sc, pipe, seg = self.scenario, self.pipeline, self.segment
+    def _accuracy(self, state: dict, beams: np.ndarray, clean: np.ndarray, res: FrameResult, wfp: np.ndarray,
+                  truth_h: np.ndarray, stream: np.ndarray) -> dict:
+        """Accuracy fields of the frame: ``clean`` (K,) float32 m, the noise-free ranges of ``beams`` (K,);
+        ``truth_h`` and ``stream``: copies of the frame's ``heightmap_truth`` and ``stream`` blocks."""
+        sc, pipe = self.scenario, self.pipeline
         wfs = wfp @ pipe.level_from_sensor
-        truth_h = np.array(seg.view("heightmap_truth"), copy=True)
-        exact = acc.exact_ranges(sc, state, truth_h, np.array(seg.view("stream")), wfs, pipe.directions[beams])
+        exact = acc.exact_ranges(sc, state, truth_h, stream, wfs, pipe.directions[beams])
         clean = np.where((clean >= sc.sensor.range_min_m) & (clean <= sc.sensor.range_max_m), clean, np.nan)
         out = acc.range_error_stats(clean, exact, sc.sensor.range_min_m, sc.sensor.range_max_m)
         truth_grid = acc.truth_on_grid(truth_h, sc.grain.cell_m, pipe.grid, sc.cart)
@@ -186,6 +232,17 @@ class PerceptionParticipant:
         out["corner_error_m"] = acc.corner_error(est, truth_corners)
         out["impact_error_m"] = acc.impact_error(res.impact.xyz, state)
         return out
+
+
+@dataclass
+class _Outputs:
+    """One frame's outputs awaiting publication: ``points`` (N, 4) float32, ``heights`` (nx, ny) float32 and the
+    ``perc_state`` values of frame ``frame``."""
+
+    points: np.ndarray
+    heights: np.ndarray
+    frame: int = -1
+    values: dict = field(default_factory=dict)
 
 
 def create(scenario: Scenario) -> PerceptionParticipant:

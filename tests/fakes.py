@@ -42,8 +42,11 @@ class Fake:
     """One stand-in role; the fault keywords pick the frame at which it misbehaves (-1: never)."""
 
     def __init__(self, scenario, role, crash_at=-1, kill_at=-1, exit_at=-1, hang_at=-1, start_delay_s=0.0,
-                 stamp_file=""):
+                 stamp_file="", defer=False, rest_s=0.0):
         self.name = role
+        #: perception only: publish one turn late and return the rest of the step (cosim.participant);
+        #: ``rest_s``: how long that rest takes (a sleep: lets a test see it overlap the next frame)
+        self.defer, self.rest_s, self.pending = defer, rest_s, None
         self.scenario = scenario
         self.faults = dict(crash_at=crash_at, kill_at=kill_at, exit_at=exit_at, hang_at=hang_at)
         self.start_delay_s = start_delay_s
@@ -88,11 +91,28 @@ class Fake:
             with seg.write("fake_ren", frame) as v:
                 v.dyn_frame = seg.frame_of("fake_dyn")
                 v.x_seen_m = x
-        else:
+        elif not self.defer:
             img = seg.view("cam0_depth")
             with seg.write("fake_perc", frame) as v:
                 v.img_frame = seg.frame_of("cam0_depth")
                 v.checksum = float(img[..., 0].astype(np.int64).sum())
+        else:
+            self.flush()
+            img, img_frame = seg.view("cam0_depth")[..., 0].copy(), seg.frame_of("cam0_depth")
+
+            def rest():
+                if self.rest_s:
+                    time.sleep(self.rest_s)
+                self.pending = (frame, img_frame, float(img.astype(np.int64).sum()))
+            return rest
+        return None
+
+    def flush(self):
+        if self.pending is not None:
+            frame, img_frame, checksum = self.pending
+            with self.seg.write("fake_perc", frame) as v:
+                v.img_frame, v.checksum = img_frame, checksum
+            self.pending = None
 
     def close(self):
         self.seg = None
@@ -102,10 +122,16 @@ def make(scenario, role="dynamics", **faults):
     return Fake(scenario, role, **faults)
 
 
+def always(scenario):
+    return True
+
+
 def specs(**faults_by_role):
-    """Stand-in specs for the three roles; ``faults_by_role={'renderer': {'crash_at': 3}}``."""
+    """Stand-in specs for the three roles; ``faults_by_role={'renderer': {'crash_at': 3}}``; a perception with
+    ``defer=True`` is planned as a deferred member."""
     out = {}
     for role in ("dynamics", "renderer", "perception"):
-        out[role] = ParticipantSpec(role, "fakes:make", f"fakes:blocks_{role}",
-                                    kwargs={"role": role, **faults_by_role.get(role, {})})
+        kw = faults_by_role.get(role, {})
+        out[role] = ParticipantSpec(role, "fakes:make", f"fakes:blocks_{role}", kwargs={"role": role, **kw},
+                                    defers="fakes:always" if kw.get("defer") else None)
     return out

@@ -72,23 +72,36 @@ def test_ground_truth_participant_equals_pure_closed_loop():
     p.close()
 
 
-@pytest.mark.parametrize("latency", [0, 1, 3])
-def test_perception_feedback_applies_latency(latency):
+@pytest.mark.parametrize("latency, overlap", [(0, False), (1, False), (3, False), (1, True), (3, True)])
+def test_perception_feedback_applies_latency(latency, overlap):
     """A stand-in perception that reports the truth (float32) must give exactly the pure loop whose
-    measurement is the same float32 truth, under the same latency rule."""
-    s = scen(feedback="perception", renderer="mock", timing={"latency_frames": latency})
+    measurement is the same float32 truth, under the same latency rule; overlapping, the stand-in publishes
+    P(m) one turn late, after dynamics' frame m + 1 (cosim.participant), with the same result."""
+    s = scen(feedback="perception", renderer="mock",
+             timing={"latency_frames": latency, "overlap_perception": overlap})
     perc = [ArrayBlock("heightmap_perceived", "perception", "f4", (60, 30), unit="m"),
             StructBlock("perc_state", "perception", (Field("t_s", "s"), Field("cart_valid", "", "i8")))]
     seg = _local(s, perc)
     p = create(s)
     p.start(seg)
     from dynamics_proc.model import truth_measurement
-    for m in range(FRAMES + 1):
-        p.step(m)
+
+    def publish(m, heights):
         with seg.write("heightmap_perceived", m) as hm:
-            hm[...] = truth_measurement(p.heights, p.params)
+            hm[...] = heights
         with seg.write("perc_state", m) as ps:
             ps.t_s, ps.cart_valid = m * 0.1, 1
+
+    pending = None
+    for m in range(FRAMES + 1):
+        p.step(m)
+        if pending is not None:
+            publish(*pending)
+            pending = None
+        if overlap:
+            pending = (m, truth_measurement(p.heights, p.params))
+        else:
+            publish(m, truth_measurement(p.heights, p.params))
     ref = simulate(s, FRAMES, measure=lambda t, f: t.astype(np.float32).astype(np.float64))
     got = p.series()
     for k in ("dyn_state.auger_on", "dyn_state.delivered_m3", "dyn_state.nudge_m", "dyn_state.section1_fullness",

@@ -46,6 +46,14 @@ def _segment():
     return Segment.local(Schema(blocks, ("dynamics", "renderer", "perception")))
 
 
+def _step(part, frame):
+    """Step ``part`` through frame ``frame`` and publish its outputs (the overlapped rest and flush included)."""
+    rest = part.step(frame)
+    if rest is not None:
+        rest()
+    part.flush()
+
+
 def _publish(seg, frame, part):
     """Dynamics and renderer stand-ins: a heaped cart, rendered exactly and encoded (Eqs 1-2)."""
     with seg.write("dyn_state", frame) as st:
@@ -74,7 +82,7 @@ def stepped():
     part = PerceptionParticipant(SCENARIO, rig=RIG)
     part.start(seg)
     _publish(seg, 1, part)
-    part.step(1)
+    _step(part, 1)
     return seg, part
 
 
@@ -130,7 +138,7 @@ def test_noise_is_reproducible_per_seed_and_frame():
         part = PerceptionParticipant(noisy, rig=RIG)
         part.start(seg)
         _publish(seg, 3, part)
-        part.step(3)
+        _step(part, 3)
         runs.append(np.array(seg.view("lidar_points")))
     np.testing.assert_array_equal(runs[0], runs[1])
     clean = part.pipeline.resample([seg.view(f"{c.name}_depth") for c in RIG.cameras])

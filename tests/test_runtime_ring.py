@@ -73,7 +73,7 @@ def test_os_ring_trace_is_strictly_ordered(tmp_path, shm_clean):
     stamps = np.stack([res.arrays[f"trace_{r}"][:, 1] for r in ROLES], axis=1)
     assert np.array_equal(frames, np.repeat(np.arange(scenario().frames + 1)[:, None], 3, axis=1))
     assert np.all(np.diff(stamps.reshape(-1)) > 0), "dynamics -> renderer -> perception, frame after frame"
-    assert set(res.summary["timing_ms"]) == {"dynamics", "render", "perception", "handoff"}
+    assert set(res.summary["timing_ms"]) == {"dynamics", "render", "perception", "handoff", "frame"}
     assert all(v >= 0 for v in res.summary["timing_ms"].values())
 
 
