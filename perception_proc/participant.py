@@ -14,8 +14,8 @@ The sensor's parent pose (the combine's GNSS) comes from ``dyn_state``; it place
 world and orients the towing direction. The cart itself is found from the points alone.
 
 Overlap (``cosim.participant.perception_overlaps``, on by default when the latency allows): ``step(frame)``
-publishes the outputs kept from the previous frame, copies what it reads from the dynamics blocks, resamples
-the images (the only use of them) and returns the rest (noise, algorithms, accuracy) as a callable that the
+publishes the outputs kept from the previous frame, copies what it reads from the dynamics blocks and the
+raw image words its beams need (``Perception.gather``: the only read of the images) and returns the rest (noise, algorithms, accuracy) as a callable that the
 ring runs after passing the token on; the outputs go into private buffers and are published at the next turn
 or by ``flush()``. The numbers are the same as without overlap.
 """
@@ -113,9 +113,10 @@ class PerceptionParticipant:
         truth = None
         if beams is not None and state:
             truth = (np.array(seg.view("heightmap_truth"), copy=True), np.array(seg.view("stream"), copy=True))
-        clean = pipe.resample([img for _, img in self._images], out=self._ranges)
+        gathered = pipe.gather([img for _, img in self._images])
 
         def rest() -> None:
+            clean = pipe.resample_gathered(gathered, out=self._ranges)
             self._finish(frame, t0, state, clean, beams, truth)
 
         if self.deferred:

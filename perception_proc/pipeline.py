@@ -25,7 +25,7 @@ from .heightmap import HeightMap, grid_shape, height_map
 from .impact import Impact, blank_under_stream, find_impact
 from .lidar import apply_noise_and_limits, frame_generator, point_basis, to_points
 from .patterns import beam_table, pattern_shape
-from .resample import build_table, resample
+from .resample import beam_words, build_table, resample, resample_words
 from .resample_offset import build_offset_table, is_offset, resample_offset
 from .rim import CartEstimate, border_beams, find_cart
 
@@ -106,6 +106,24 @@ class Perception:
                 return out
             return r
         return resample(images, self.table, codec, self.scenario.perception.sampler, out=out)
+
+    def gather(self, images: Sequence[np.ndarray]) -> list[np.ndarray]:
+        """The part of :meth:`resample` that reads the images, as copies (cheap: the beams' raw words; with an
+        offset mount, the whole resampling); :meth:`resample_gathered` finishes it without the images."""
+        if self.offset:
+            return [self.resample(images)]
+        sampler = self.scenario.perception.sampler
+        return [beam_words(img, cam, sampler) for img, cam in zip(images, self.table.cameras)]
+
+    def resample_gathered(self, gathered: list[np.ndarray], out: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`resample` from :meth:`gather`'s copies: the same ranges (N,) float32 m."""
+        if self.offset:
+            if out is None:
+                return gathered[0]
+            out[:] = gathered[0]
+            return out
+        return resample_words(gathered, self.table, self.scenario.sensor.codec, self.scenario.perception.sampler,
+                              out=out)
 
     def noisy(self, ranges: np.ndarray, frame: int | None) -> np.ndarray:
         """Apply the noise model (seeded by scenario seed and ``frame``; None: none) and the range limits, in

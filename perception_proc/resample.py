@@ -37,7 +37,7 @@ from .codec import decode_lut, decode_words
 
 __all__ = [
     "CameraTable", "ResampleTable", "build_table", "gather_depth", "resample", "beam_pixels",
-    "paper_pixel", "DISCONTINUITY_REL", "Sampler", "words_of",
+    "paper_pixel", "DISCONTINUITY_REL", "Sampler", "words_of", "beam_words", "depth_from_words", "resample_words",
 ]
 
 #: two decoded depths of a 2 x 2 neighbourhood farther apart than this fraction of the nearer one are an edge
@@ -186,13 +186,20 @@ def words_of(rgba: np.ndarray) -> np.ndarray:
     return rgba.reshape(-1).view(np.uint32)
 
 
-def gather_depth(rgba: np.ndarray, table: CameraTable, codec: Codec, sampler: Sampler = "planar") -> np.ndarray:
-    """Planar depth Z (M,) float32, m, at the camera's beams; NaN where invalid. ``rgba``: (H, W, 4) uint8."""
+def beam_words(rgba: np.ndarray, table: CameraTable, sampler: Sampler = "planar") -> np.ndarray:
+    """The raw RGBA words the camera's beams read, a copy: (4, M) uint32 (the 2 x 2 patches) for ``planar``,
+    (M,) for ``nearest``. The only read of the image: the rest (:func:`depth_from_words`) can run after the
+    image has been overwritten."""
     words = words_of(rgba)
+    return np.take(words, table.pixel if sampler == "nearest" else table.quad_t)
+
+
+def depth_from_words(words: np.ndarray, table: CameraTable, codec: Codec, sampler: Sampler = "planar") -> np.ndarray:
+    """Planar depth Z (M,) float32, m, NaN where invalid, from :func:`beam_words`' words."""
     lut = decode_lut(codec)
     if sampler == "nearest":
-        return decode_words(np.take(words, table.pixel), lut)
-    z = decode_words(np.take(words, table.quad_t), lut)                    # (4, M): one gather, one decode
+        return decode_words(words, lut)
+    z = decode_words(words, lut)                                           # (4, M): one decode
     with np.errstate(invalid="ignore", divide="ignore"):
         zmin, zmax = z.min(axis=0), z.max(axis=0)                          # NaN propagates: no interpolation
         smooth = zmax - zmin <= np.float32(DISCONTINUITY_REL) * zmin + np.float32(2.0 * codec.bound_m)
@@ -200,6 +207,11 @@ def gather_depth(rgba: np.ndarray, table: CameraTable, codec: Codec, sampler: Sa
         z_lin = np.float32(1.0) / (table.weight_t / z).sum(axis=0)
     z_near = np.take(z, table.near_flat)                                   # nearest pixel is one of the four
     return np.where(smooth, z_lin, z_near)
+
+
+def gather_depth(rgba: np.ndarray, table: CameraTable, codec: Codec, sampler: Sampler = "planar") -> np.ndarray:
+    """Planar depth Z (M,) float32, m, at the camera's beams; NaN where invalid. ``rgba``: (H, W, 4) uint8."""
+    return depth_from_words(beam_words(rgba, table, sampler), table, codec, sampler)
 
 
 def resample(images: Sequence[np.ndarray], table: ResampleTable, codec: Codec, sampler: Sampler = "planar",
@@ -211,9 +223,16 @@ def resample(images: Sequence[np.ndarray], table: ResampleTable, codec: Codec, s
     """
     if len(images) != len(table.cameras):
         raise ValueError(f"expected {len(table.cameras)} images (one per rig camera), got {len(images)}")
+    return resample_words([beam_words(img, cam, sampler) for img, cam in zip(images, table.cameras)], table, codec,
+                          sampler, out)
+
+
+def resample_words(words: Sequence[np.ndarray], table: ResampleTable, codec: Codec, sampler: Sampler = "planar",
+                   out: np.ndarray | None = None) -> np.ndarray:
+    """:func:`resample` from each camera's :func:`beam_words`, in rig order."""
     rng = np.full(table.n_beams, np.nan, dtype=np.float32) if out is None else out
     if out is not None:
         rng.fill(np.nan)
-    for img, cam in zip(images, table.cameras):
-        rng[cam.beams] = gather_depth(img, cam, codec, sampler) * cam.scale
+    for w, cam in zip(words, table.cameras):
+        rng[cam.beams] = depth_from_words(w, cam, codec, sampler) * cam.scale
     return rng

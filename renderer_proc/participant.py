@@ -27,6 +27,10 @@ __all__ = ["INPUT_BLOCKS", "RendererParticipant", "create", "make_backend"]
 
 #: blocks the renderer reads (written by dynamics)
 INPUT_BLOCKS = ("dyn_state", "heightmap_truth", "stream")
+#: an RGBA8 pixel read as one little-endian word: alpha is its top byte, non-zero exactly when the word is
+#: at least 2**24 (one comparison per pixel instead of a strided read of every fourth byte)
+_WORD = np.dtype("<u4")
+_ALPHA_SET = 1 << 24
 _MS_PER_S = 1000.0
 
 
@@ -98,7 +102,7 @@ class RendererParticipant:
             outs = self._outputs[k]
             with seg.write(outs["depth"], frame) as img:
                 self.backend.read_depth(k, img)
-                valid += int(np.count_nonzero(img[..., 3]))
+                valid += int(np.count_nonzero(img.view(_WORD) >= _ALPHA_SET))     # alpha, the word's top byte
                 total += img.shape[0] * img.shape[1]
             if "rgb" in outs:
                 with seg.write(outs["rgb"], frame) as img:

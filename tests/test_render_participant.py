@@ -87,6 +87,8 @@ def test_participant_renders_into_blocks(backend):
         assert np.nanmax(np.abs(depth - zf)) <= s.sensor.codec.bound_m + 1e-4
         st = seg.view("render_state")
         assert st.render_ms > 0 and 0.5 < st.valid_fraction <= 1.0
+        alpha = [views[n][..., 3] for n in ("cam0_depth", "cam1_depth")]
+        assert st.valid_fraction == sum(np.count_nonzero(a) for a in alpha) / sum(a.size for a in alpha)
         with pytest.raises(FrameMismatch, match="expected dyn_state of frame 1, found frame 0"):
             p.step(1)
     finally:
