@@ -8,7 +8,10 @@ Per cell the statistic is the *median of the lower cluster*: the median of the r
 :data:`CLUSTER_GAP_M` of the cell's lowest return. Why: the grain surface is single-valued, and the only
 returns above it in a cell are the falling stream's (and spill in the air). The maximum or the plain median
 would count them as grain; the bare minimum is biased low by range noise (by about 1-2 sigma for a handful of
-returns). The median of the lowest cluster rejects the stream and averages the noise.
+returns). The median of the lowest cluster rejects the stream and averages the noise. With range noise of
+sigma the cluster reaches :data:`CLUSTER_GAP_M` plus :data:`CLUSTER_NOISE_SIGMAS` sigma above the lowest
+return: a fixed gap would cut the upper tail of the noise and bias the median low (by about 1 cm at
+sigma = 5 cm, which the controller turns into overfill). The stream-return threshold widens likewise.
 
 A cell whose only returns are the stream's (the stream hides the pile beneath it) has no lower cluster on the
 grain; it is found as a cell standing more than :data:`STREAM_STEP_M` above the lower quartile of its
@@ -29,7 +32,8 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from cosim.config import Cart
 
-__all__ = ["HeightMap", "height_map", "grid_shape", "WALL_CLEAR_M", "CLUSTER_GAP_M", "STREAM_STEP_M",
+__all__ = ["HeightMap", "height_map", "grid_shape", "WALL_CLEAR_M", "CLUSTER_GAP_M", "CLUSTER_NOISE_SIGMAS",
+           "STREAM_STEP_M",
            "STREAM_MIN_HEIGHT_M", "HEAP_MAX_M", "STREAM_TOP_M"]
 
 #: returns closer than this to an inner wall are taken as wall returns, m: it must exceed the error of the
@@ -38,6 +42,9 @@ __all__ = ["HeightMap", "height_map", "grid_shape", "WALL_CLEAR_M", "CLUSTER_GAP
 WALL_CLEAR_M = 0.08
 #: returns within this of a cell's lowest return form its lower cluster, m
 CLUSTER_GAP_M = 0.10
+#: the lower cluster also spans this many sigmas of range noise (the lowest of a handful of returns lies up to
+#: about 2 sigma below the surface, the highest as far above it)
+CLUSTER_NOISE_SIGMAS = 4.0
 #: a cell more than this above its neighbourhood median holds only stream returns, m
 STREAM_STEP_M = 0.35
 #: a return more than this above its cell's grain surface is a stream return, m
@@ -154,7 +161,7 @@ def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart
     cnt = np.diff(np.r_[start, cs.size])
     uniq = cs[start]
     zmin = zs[start]
-    lower = zs <= np.repeat(zmin, cnt) + CLUSTER_GAP_M
+    lower = zs <= np.repeat(zmin, cnt) + (CLUSTER_GAP_M + CLUSTER_NOISE_SIGMAS * noise_sigma_m)
     k = np.add.reduceat(lower.astype(np.int64), start)          # lower cluster is a prefix of each cell
     med = 0.5 * (zs[start + (k - 1) // 2] + zs[start + k // 2])
     enough = k >= min_points
@@ -166,6 +173,7 @@ def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart
     heights[stream_cell] = np.nan
     surface = heights.reshape(-1)[cell]
     with np.errstate(invalid="ignore"):
-        stream = high | stream_cell.reshape(-1)[cell] | (g[:, 2] > surface + STREAM_MIN_HEIGHT_M)
+        stream = high | stream_cell.reshape(-1)[cell] | (
+            g[:, 2] > surface + (STREAM_MIN_HEIGHT_M + CLUSTER_NOISE_SIGMAS * noise_sigma_m))
     coverage = float(np.count_nonzero(np.isfinite(heights)) / heights.size)
     return HeightMap(heights, counts, g, stream, coverage)

@@ -3,7 +3,7 @@
 Works in the *level frame* (the sensor's parent vehicle body frame: x forward, y left, z up from flat ground;
 ``body_from_sensor`` is the mount, known like the GNSS pose). The cart's dimensions are known; its pose is not.
 
-1. Rim candidates: valid points within :data:`RIM_BAND_M` (plus 3 sigma of range noise) of the rim-top height
+1. Rim candidates: valid points within :data:`RIM_BAND_M` (plus :data:`BAND_NOISE_SIGMAS` sigma of range noise) of the rim-top height
    with nothing in the :data:`UNDER_SLAB_M` slab right above them within :data:`UNDER_RADIUS_M` (that would be
    the stream or a cab wall rising from the band).
 2. Top-down occupancy raster (:data:`RASTER_M` cells), dilated so that points closer than :data:`CLOSE_M`
@@ -38,10 +38,14 @@ from cosim.config import Cart
 from cosim.geometry import cart_body_from_grid, make_transform, rot_z
 
 __all__ = ["CartEstimate", "find_cart", "border_beams", "RIM_BAND_M", "RASTER_M", "SIZE_TOL_M", "NO_CART",
-           "FOV_EDGE", "OCCLUDED"]
+           "FOV_EDGE", "OCCLUDED", "BAND_NOISE_SIGMAS"]
 
 #: half-height of the slab around the rim top in which points count as rim candidates, m
 RIM_BAND_M = 0.10
+#: the rim band widens by this many sigmas of range noise. One, not three: a grain surface filled near the
+#: target lies only some 0.2 m under the rim top, and a 3-sigma band (0.25 m at sigma = 5 cm) let its points
+#: join the rim and moved a partly seen cart by up to 0.6 m (heavy_noise); the rim has points to spare
+BAND_NOISE_SIGMAS = 1.0
 #: top-down raster cell for the component search, m
 RASTER_M = 0.05
 #: dilation kernel that joins rim points across small gaps, m
@@ -309,7 +313,7 @@ def find_cart(points: np.ndarray, border: np.ndarray, cart: Cart, heading_xy=(1.
     """
     p = np.asarray(points, dtype=np.float64)
     z = np.ascontiguousarray(p[:, 2])                           # invalid beams are whole NaN rows
-    band = RIM_BAND_M + 3.0 * noise_sigma_m
+    band = RIM_BAND_M + BAND_NOISE_SIGMAS * noise_sigma_m
     top = cart.rim_top_m
     with np.errstate(invalid="ignore"):                         # NaN compares False: invalid rows drop out
         cand = np.flatnonzero(np.abs(z - top) <= band)

@@ -195,3 +195,17 @@ def test_tube_hiding_part_of_the_rim_never_gives_a_wrong_cart(x0):
         assert np.max(np.linalg.norm(cart.corners - true_corners(), axis=1)) < 0.1
     else:
         assert "no answer" in cart.reason or "rim" in cart.reason
+
+
+def test_heavy_range_noise_leaves_the_height_map_unbiased():
+    """5 cm range noise on a level fill: the lower cluster spans the noise, so the cell medians are unbiased
+    (a fixed 10 cm cluster cut the upper tail and read about 1 cm low, which the controller turned into
+    overfill)."""
+    fn = lambda gx, gy: np.full_like(gx, 1.5)                       # noqa: E731
+    dense = PATTERN.model_copy(update={"elevation_count": 330, "azimuth_count": 480})
+    cart, hm = run(cart_shapes(CART, POSE, grain_height=fn), pattern=dense,
+                   sensor_noise=Noise(range_sigma_m=0.05))
+    assert cart.valid
+    ok = np.isfinite(hm.heights) & (hm.counts >= 4)
+    assert ok.sum() > 300
+    assert abs(float(np.mean(hm.heights[ok])) - 1.5) < 0.004
