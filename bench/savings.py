@@ -9,7 +9,9 @@ Leave-outs (issue 6, point 6):
   against the same two cameras at twice the resolution each way, 2 x 672 x 1916: a rig sized like a
   1080p-class render, not by the pattern);
 * perception's accuracy evaluation against the exact ray cast, which the controller does not need
-  (``perception.accuracy_every_frames`` 10 against 0).
+  (``perception.accuracy_every_frames`` 10 against 0);
+* not a leave-out but the same kind of saving: perception off the critical path, overlapping the next frame
+  (``timing.overlap_perception`` true against false; same numbers, cosim.participant).
 
 Each pair runs interleaved ``--reps`` times through the real launcher (OS processes, GL renderer) for
 ``--duration`` simulated seconds; prints a Markdown table of medians. Usage:
@@ -42,6 +44,9 @@ PAIRS = {
     "accuracy evaluation left out": (
         {"perception": {"accuracy_every_frames": 0}},
         {"perception": {"accuracy_every_frames": 10}}),
+    "perception overlapping the next frame": (
+        {"timing": {"overlap_perception": True}},
+        {"timing": {"overlap_perception": False}}),
 }
 
 
@@ -66,8 +71,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--reps", type=int, default=2, help="interleaved repetitions of each pair")
     ap.add_argument("--only", default="", help="substring of the savings to run (default all)")
     args = ap.parse_args(argv)
-    print("| saving | config | wall s (median) | real-time factor | render ms | perception ms | wall saved |")
-    print("|---|---|---:|---:|---:|---:|---:|")
+    print("| saving | config | wall s (median) | real-time factor | render ms | perception ms | frame ms | wall saved |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|")
     with tempfile.TemporaryDirectory() as tmp:
         for name, (on, off) in PAIRS.items():
             if args.only not in name:
@@ -76,13 +81,13 @@ def main(argv: list[str] | None = None) -> None:
             for rep in range(args.reps):
                 for label, overlay in (("with", on), ("without", off)):
                     got[label].append(run_once(overlay, args.duration, Path(tmp) / f"{label}{rep}"))
-            med = {label: {k: median_of(rows, k) for k in ("wall", "rtf", "render", "perception")}
+            med = {label: {k: median_of(rows, k) for k in ("wall", "rtf", "render", "perception", "frame")}
                    for label, rows in got.items()}
             saved = 1.0 - med["with"]["wall"] / med["without"]["wall"]
             for label in ("with", "without"):
                 m = med[label]
                 print(f"| {name if label == 'with' else ''} | {label} the leave-out | {m['wall']:.1f} | "
-                      f"{m['rtf']:.2f} | {m['render']:.1f} | {m['perception']:.1f} | "
+                      f"{m['rtf']:.2f} | {m['render']:.1f} | {m['perception']:.1f} | {m['frame']:.1f} | "
                       f"{f'{saved * 100:.0f} %' if label == 'with' else ''} |", flush=True)
 
 
