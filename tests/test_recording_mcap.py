@@ -215,11 +215,12 @@ def test_default_records_images_every_fifth_frame(tmp_path, shm_clean):
     assert float(rec.metadata["recorder"]["process_cpu_s"]) > 0
 
 
-@pytest.mark.parametrize("compression", ["zstd", "none"])
-def test_raw_rgb_and_other_chunk_compressions_read_back(tmp_path, shm_clean, compression):
+@pytest.mark.parametrize("compression,cloud", [("lz4", "none"), ("none", "lz4"), ("zstd", "none")])
+def test_raw_rgb_and_other_chunk_compressions_read_back(tmp_path, shm_clean, compression, cloud):
     sc = standins.scenario(0.5)
     launch(sc, tmp_path / "run", specs=standins.specs(), console_log=False,
-           sinks=[mcap_sink(RecordOptions(image_every=1, rgb_format="raw", compression=compression, queue_frames=0))])
+           sinks=[mcap_sink(RecordOptions(image_every=1, rgb_format="raw", compression=compression,
+                                          cloud_compression=cloud, queue_frames=0))])
     rec = read_recording(tmp_path / "run" / "recording.mcap")
     assert rec.channels["/cam0/rgb"].schema == "foxglove.RawImage" and rec.frames == list(range(sc.frames + 1))
     for k, (_, m) in enumerate(rec.topic("/cam0/rgb")):
@@ -231,7 +232,8 @@ def test_raw_rgb_and_other_chunk_compressions_read_back(tmp_path, shm_clean, com
     with open(tmp_path / "run" / "recording.mcap", "rb") as f:
         summary = make_reader(f).get_summary()
     topic = {c.id: c.topic for c in summary.channels.values()}
-    want = {"/cam0/rgb": "" if compression == "none" else compression, "/lidar/points": ""}  # cloud: none
+    want = {"/cam0/rgb": "" if compression == "none" else compression,
+            "/lidar/points": "" if cloud == "none" else cloud}
     seen = {t: set() for t in want}
     for chunk in summary.chunk_indexes:
         for t in {topic[c] for c in chunk.message_index_offsets} & set(want):
@@ -359,3 +361,96 @@ def test_a_file_cut_off_mid_record_reads_up_to_its_last_whole_frame(recorded, tm
     for topic in TOPICS:
         if topic != "/tf":
             assert [m for _, m in rec.topic(topic)] == [m for _, m in full.topic(topic)[:n]], topic
+
+
+LAG_BEAMS, LAG_H, LAG_W = 8, 4, 3
+
+
+def _lag_schema():
+    from shm_schema import ArrayBlock, Field, Schema, StructBlock, image_block
+
+    return Schema([StructBlock("dyn_state", "dynamics", (Field("t_s", "s"), Field("cart_x_m", "m"),
+                                                         Field("cart_y_m", "m"), Field("cart_yaw_rad", "rad"))),
+                   ArrayBlock("heightmap_truth", "dynamics", "f4", (6, 3)),
+                   image_block("cam0_depth", "renderer", LAG_H, LAG_W),
+                   StructBlock("perc_state", "perception", (Field("t_s", "s"), Field("coverage"))),
+                   ArrayBlock("lidar_points", "perception", "f4", (LAG_BEAMS, 4))],
+                  ["dynamics", "renderer", "perception"])
+
+
+def _lag_points(k: int) -> np.ndarray:
+    pts = np.full((LAG_BEAMS, 4), float(k), np.float32)
+    pts[:, 3] = np.arange(LAG_BEAMS)
+    return pts
+
+
+def _write_lagging(seg, k: int, current: bool = True, lagging: bool = True) -> None:
+    """Frame ``k``'s current blocks (stamped k) and the lagging perception blocks of frame k - 1."""
+    if current:
+        with seg.write("dyn_state", k) as v:
+            v.t_s, v.cart_x_m, v.cart_y_m, v.cart_yaw_rad = 0.1 * k, float(k), 0.0, 0.0
+        with seg.write("heightmap_truth", k) as h:
+            h[...] = k
+        with seg.write("cam0_depth", k) as img:
+            img[...] = k
+    if lagging and k >= 1:
+        with seg.write("perc_state", k - 1) as v:
+            v.t_s, v.coverage = 0.1 * (k - 1), float(k - 1)
+        with seg.write("lidar_points", k - 1) as p:
+            p[...] = _lag_points(k - 1)
+
+
+@pytest.mark.parametrize("queue_frames", [0, 2], ids=["synchronous", "frame-slots"])
+def test_lagging_blocks_are_written_once_at_their_own_stamp(tmp_path, shm_clean, queue_frames):
+    """Perception one frame behind: at sink call m its blocks hold frame m - 1 (their stamp); a last call
+    m = last + 1 brings its final frame. Every message is logged at its block's stamp, none twice."""
+    from shm_schema import Segment
+
+    from cosim.recording import McapRecorder
+
+    sc = standins.scenario(1.0)
+    period_ns = round(sc.timing.sensor_period_s * 1e9)
+    seg = Segment.local(_lag_schema())
+    n = 7  # frames 0..6, then the extra call 7
+    rec = McapRecorder(sc, tmp_path, seg, RecordOptions(image_every=2, queue_frames=queue_frames, flush_s=0.0))
+    for m in range(n):
+        _write_lagging(seg, m)
+        rec(seg, m)
+    _write_lagging(seg, n, current=False)
+    rec(seg, n)
+    rec.close()
+    r = read_recording(tmp_path / "recording.mcap")
+    assert r.frames == list(range(n + 1)) and r.truncated is False
+    want = {"/dyn_state": range(n), "/heightmap/truth": range(n), "/cam0/depth_encoded": range(0, n, 2),
+            "/perc_state": range(n), "/lidar/points": range(n)}
+    for topic, stamps in want.items():
+        times = [t for t, _ in r.topic(topic)]
+        assert times == [k * period_ns for k in stamps], topic  # each stamp once, in order, at its own time
+        for t, m in r.topic(topic):
+            assert m["timestamp"]["sec"] * 10**9 + m["timestamp"]["nsec"] == t, topic
+    for t, m in r.topic("/perc_state"):  # contents of the frame they are stamped with
+        assert m["frame"] * period_ns == t and m["coverage"] == m["frame"]
+    for t, m in r.topic("/lidar/points"):
+        np.testing.assert_array_equal(points_from_cloud(m), _lag_points(t // period_ns))
+    for t, m in r.topic("/heightmap/truth"):
+        assert (heights_from_grid(m) == t // period_ns).all()
+    tf = r.topic("/tf")
+    cart = [(t, m) for t, m in tf if m["child_frame_id"] == "cart"]
+    assert [t for t, _ in cart] == [k * period_ns for k in range(n)]
+    assert all(m["translation"]["x"] == t // period_ns for t, m in cart)
+    lidar_tf = [t for t, m in tf if m["child_frame_id"] == "lidar"]
+    assert lidar_tf == [k * period_ns for k in range(n)], "constant transforms once per new time, none after the run"
+    assert [t for t, _ in r.topic("/cosim/frame")] == [k * period_ns for k in range(n + 1)]
+
+
+def test_frame_data_gives_each_blocks_stamp():
+    from shm_schema import Segment
+
+    from cosim.recording.writer import frame_data
+
+    seg = Segment.local(_lag_schema())
+    _write_lagging(seg, 3)
+    structs, arrays, stamps = frame_data(seg, ("dyn_state", "perc_state", "lidar_points", "cam0_depth"))
+    assert stamps == {"dyn_state": 3, "perc_state": 2, "lidar_points": 2, "cam0_depth": 3}
+    assert structs["perc_state"]["coverage"] == 2.0 and set(arrays) == {"lidar_points", "cam0_depth"}
+    assert np.shares_memory(arrays["lidar_points"], seg.view("lidar_points"))

@@ -180,3 +180,15 @@ def test_unknown_fields_are_skipped_and_damage_is_refused():
         proto.decode("foxglove.CompressedImage", data[:-1])
     with pytest.raises(proto.ProtoError, match="unsupported wire type"):
         proto.decode("foxglove.CompressedImage", bytes([1 << 3 | 3]))
+
+
+def test_scalars_json_is_scalars_msg_as_json():
+    import json
+
+    from cosim.recording.encode import scalars_json, scalars_msg, to_json
+
+    values = {"t_s": 0.1, "spilled_m3": float("nan"), "a_inf": float("inf"), "b": -float("inf"), "n": 3,
+              "NaN_count": 2.5, "x_m": -1e-300}
+    fast = scalars_json(1_500_000_000, 15, values)
+    assert fast == to_json(scalars_msg(1_500_000_000, 15, values))
+    assert json.loads(fast)["spilled_m3"] is None and json.loads(fast)["NaN_count"] == 2.5

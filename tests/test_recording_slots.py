@@ -44,7 +44,7 @@ def test_put_copies_each_block_into_its_slot_and_reads_back(shm_clean):
         fill(run, 4)
         assert slots.put(run, 1, 4, NAMES) == NAMES
         fill(run, 5)  # the run moves on: the slot keeps frame 4
-        structs, arrays = reader.frame(1, NAMES)
+        structs, arrays, stamps = reader.frame(1, NAMES)
         assert structs["dyn"] == {"t_s": 0.4, "frame": 4, "x_m": -10.0}
         np.testing.assert_array_equal(arrays["pts"], np.arange(28, dtype=np.float32).reshape(7, 4) * 4)
         assert arrays["img"].shape == (6, 5, 4) and arrays["img"][0, 0, 0] == 4
@@ -58,13 +58,28 @@ def test_put_copies_each_block_into_its_slot_and_reads_back(shm_clean):
         slots.unlink()
 
 
+def test_put_keeps_each_blocks_own_stamp(shm_clean):
+    """A block that lags the sink call (perception one frame behind) keeps its stamp in the slot."""
+    run = Segment.local(run_schema())
+    with FrameSlots.create(run.schema, NAMES, 1) as slots:
+        try:
+            fill(run, 6, ("dyn", "img"))
+            fill(run, 5, ("pts",))
+            assert slots.put(run, 0, 6, NAMES) == NAMES
+            _, arrays, stamps = slots.frame(0, NAMES)
+            assert stamps == {"dyn": 6, "img": 6, "pts": 5} and slots.stamp(0, "pts") == 5
+            np.testing.assert_array_equal(arrays["pts"], np.arange(28, dtype=np.float32).reshape(7, 4) * 5)
+        finally:
+            slots.unlink()
+
+
 def test_blocks_never_written_are_not_copied(shm_clean):
     run = Segment.local(run_schema())
     with FrameSlots.create(run.schema, NAMES, 1) as slots:
         try:
             fill(run, 0, which=("dyn",))
             assert slots.put(run, 0, 0, NAMES) == ("dyn",)
-            structs, arrays = slots.frame(0, ("dyn",))
+            structs, arrays, _ = slots.frame(0, ("dyn",))
             assert np.isnan(structs["dyn"]["x_m"]) and arrays == {}
         finally:
             slots.unlink()

@@ -18,7 +18,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["Field", "MESSAGES", "ENUMS", "FILES", "descriptor_set", "encode", "decode", "ProtoError"]
+__all__ = ["Field", "MESSAGES", "ENUMS", "FILES", "descriptor_set", "encode", "encode_parts", "decode", "ProtoError"]
 
 
 class ProtoError(ValueError):
@@ -145,17 +145,24 @@ def _encode_parts(name: str, msg: dict, out: list) -> None:
 _PLANS = {name: _plan(name) for name in MESSAGES}
 
 
+def encode_parts(name: str, msg: dict) -> list:
+    """The wire bytes of message ``name`` as a list of buffers whose concatenation is :func:`encode`'s result:
+    ``bytes`` fields given as buffers (a numpy array's memory) stay themselves, uncopied, so a writer can copy
+    them once into its destination (valid while those buffers are)."""
+    if name == _TS:
+        msg = {"seconds": msg["sec"], "nanos": msg["nsec"]}
+    parts: list = []
+    _encode_parts(name, msg, parts)
+    return parts
+
+
 def encode(name: str, msg: dict) -> bytes:
     """Wire bytes of message ``name`` from a dict of its fields (missing or None fields are left out).
 
     Messages are dicts, repeated fields lists, ``bytes`` fields any C-contiguous buffer (numpy arrays as their
     raw bytes); a Timestamp is ``{"sec", "nsec"}``.
     """
-    if name == _TS:
-        msg = {"seconds": msg["sec"], "nanos": msg["nsec"]}
-    parts: list = []
-    _encode_parts(name, msg, parts)
-    return b"".join(parts)
+    return b"".join(encode_parts(name, msg))
 
 
 def _read_varint(buf: memoryview, i: int) -> tuple[int, int]:

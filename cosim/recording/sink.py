@@ -104,6 +104,8 @@ class McapRecorder:
         self._proc = None
         self._slots: FrameSlots | None = None
         self._sent = 0
+        #: per block, the newest stamp handed to the writer
+        self._stamps: dict[str, int] = {}
         n_slots = slot_count(self.options, sum(segment.schema.block(n).nbytes for n in self.recorded.names))
         if n_slots == 0:
             self._writer = McapWriter(scenario, segment.schema, self.path, self.options, segment.run_id,
@@ -130,11 +132,17 @@ class McapRecorder:
                 log.warning("could not lower the recorder's priority: %s", exc)
 
     def __call__(self, seg: Segment, frame: int) -> None:
-        """Record completed frame ``frame`` (called by the supervisor while it holds the token)."""
+        """Record completed frame ``frame`` (called by the supervisor while it holds the token): the due blocks
+        whose stamp (``seg.frame_of``) is newer than the one last recorded, each at its own stamp. A block may
+        lag ``frame`` (perception one frame behind); a last call with ``frame`` = last frame + 1 then records
+        just the lagging blocks."""
         if self._failed or self._closed:
             return
         try:
-            names = self.recorded.due(frame, self.options.image_every)
+            # only blocks with contents newer than those last recorded (a block that lags comes a call later)
+            names = tuple(n for n in self.recorded.due(frame, self.options.image_every)
+                          if seg.frame_of(n) > self._stamps.get(n, -1))
+            self._stamps.update((n, seg.frame_of(n)) for n in names)
             if self._writer is not None:
                 self._writer.write(frame, *frame_data(seg, names))
                 return

@@ -1,8 +1,9 @@
 """Frame slots: a small shared-memory ring through which the sink hands whole frames to the recorder process.
 
 The sink (in the supervisor, while it holds the token) copies the recorded blocks of a completed frame into
-slot ``k`` (one memcpy per block, no pickling) and sends the recorder a few bytes: ``(frame, k, blocks
-copied)``. The recorder encodes straight from the slot's named views and gives the slot back (a credit) when
+slot ``k`` (one memcpy per block, no pickling; each slot block keeps its run block's stamp, the frame its
+contents belong to) and sends the recorder a few bytes: ``(frame, k, blocks copied)``. The recorder encodes
+straight from the slot's named views and gives the slot back (a credit) when
 it is done with it. The slots are a :class:`shm_schema.Segment` of their own: slot ``k`` of run block ``b`` is
 block ``s<k>_<b>``, so layout, named views, attach with fingerprint check and the creator-only unlink all come
 from ``shm_schema``; nothing here computes an offset.
@@ -16,6 +17,8 @@ import secrets
 import numpy as np
 
 from shm_schema import Schema, Segment, StructBlock
+
+from .writer import FrameData
 
 __all__ = ["FrameSlots", "SLOT_WRITER", "slot_schema", "slot_block"]
 
@@ -61,13 +64,16 @@ class FrameSlots:
         return self.segment.name
 
     def put(self, run: Segment, slot: int, frame: int, names) -> tuple[str, ...]:
-        """Copy run blocks ``names`` (those written at least once) into ``slot``; returns the names copied."""
+        """Copy run blocks ``names`` (those written at least once) into ``slot``, each with its own stamp (the
+        frame its contents belong to, ``run.frame_of``: earlier than ``frame``, the sink call's, for a block
+        that lags); returns the names copied."""
         copied = []
         for n in names:
-            if run.frame_of(n) < 0:
+            stamp = run.frame_of(n)
+            if stamp < 0:
                 continue
             src = run.view(n)
-            with self.segment.write(slot_block(slot, n), frame) as dst:
+            with self.segment.write(slot_block(slot, n), stamp) as dst:
                 if n in self._structs:
                     dst.array[...] = src.array
                 else:
@@ -79,17 +85,23 @@ class FrameSlots:
         """Zero-copy view of run block ``name`` in ``slot``: an ndarray, or a StructView for struct blocks."""
         return self.segment.view(slot_block(slot, name))
 
-    def frame(self, slot: int, names) -> tuple[dict[str, dict], dict[str, np.ndarray]]:
-        """(structs, arrays) of the run blocks ``names`` in ``slot``: struct fields copied into dicts, arrays as
-        zero-copy views of the slot (valid until the slot is given back)."""
-        structs, arrays = {}, {}
+    def stamp(self, slot: int, name: str) -> int:
+        """The frame the contents of run block ``name`` in ``slot`` belong to (-1: never put)."""
+        return self.segment.frame_of(slot_block(slot, name))
+
+    def frame(self, slot: int, names) -> FrameData:
+        """(structs, arrays, stamps) of the run blocks ``names`` in ``slot`` for
+        :meth:`cosim.recording.writer.McapWriter.write`: struct fields copied into dicts, arrays as zero-copy
+        views of the slot (valid until the slot is given back), and each block's stamp."""
+        structs, arrays, stamps = {}, {}, {}
         for n in names:
             v = self.view(slot, n)
+            stamps[n] = self.stamp(slot, n)
             if n in self._structs:
                 structs[n] = dict(zip(v.array.dtype.names, v.array.item()))
             else:
                 arrays[n] = v
-        return structs, arrays
+        return FrameData(structs, arrays, stamps)
 
     def close(self) -> None:
         self.segment.close()

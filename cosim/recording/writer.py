@@ -1,32 +1,40 @@
 """The MCAP writer: channels planned from a run's schema, one frame's blocks encoded and written.
 
-Per frame, with the frame's simulation time as log time and message timestamp:
+Each block's messages carry the simulation time of the frame its contents belong to (its stamp in the
+segment, ``Segment.frame_of``) as log time and message timestamp: a block that lags the ring (perception one
+frame behind) is written at its own time, when its new contents arrive, and a block not rewritten since it was
+last recorded is not written again. Per block stamp:
 
 * ``/tf`` foxglove.FrameTransform: world -> combine, tractor, cart (from the struct fields ``<v>_x_m``,
-  ``<v>_y_m``, ``<v>_yaw_rad`` where they exist), cart -> cart_grid and the LiDAR mount parent -> lidar.
+  ``<v>_y_m``, ``<v>_yaw_rad`` where they exist, at that struct's stamp), and the constant cart -> cart_grid
+  and LiDAR mount parent -> lidar once per new time written.
 * ``/<block>`` ``cosim.struct.<block>`` (JSON): every struct block's fields (the scalar time series).
 * ``/<cam>/depth_encoded`` foxglove.RawImage ``rgba8``, the image block's bytes unchanged (lossless, alpha =
   validity), and ``/<cam>/rgb`` foxglove.CompressedImage JPEG (or PNG, or RawImage: ``rgb_format``), every
   ``image_every``-th frame (default 5).
 * ``/lidar/points`` foxglove.PointCloud (valid beams), ``/heightmap/<kind>`` foxglove.Grid.
-* ``/cosim/frame`` ``cosim.Frame`` (JSON), last: the frame is complete in the file once its marker is there.
+* ``/cosim/frame`` ``cosim.Frame`` (JSON), last, with the sink call's frame: everything before it is in the
+  file once its marker is there.
 
 Foxglove's messages are protobuf (:mod:`cosim.recording.proto`): their bytes fields are written as they are,
-without base64. Chunks holding camera images are lz4-compressed (``compression``: raw depth images shrink ~18 x),
-chunks holding the LiDAR cloud are not (``cloud_compression``: float32 points gain ~3 % from lz4 for ~2 ms per
-frame); the small messages go into whichever chunk is open (a run without camera images or cloud: ``compression``). Camera images are recorded every
-5th frame by default (``image_every``), everything else every frame. The writer closes its chunk and flushes the
-file at most every ``flush_s`` seconds (0: after each frame), so a file cut off at any point reads up to its last
-whole frame flushed. :func:`frame_data` takes a frame's blocks from a segment (the synchronous path) and
-:meth:`cosim.recording.slots.FrameSlots.frame` from a frame slot; :class:`McapWriter` encodes and writes them.
+without base64, and copied once, straight into the chunk (:mod:`cosim.recording.mcapfile`). Chunks are
+zstd-compressed at a fast level with a window that spans a chunk's frames (``compression``): LiDAR points and
+image rows that did not change since an earlier frame of the chunk (most of them) cost next to nothing, so a
+default frame shrinks ~7 x for less CPU time than lz4 (~2 x) or than writing it uncompressed to the page cache.
+Camera images are recorded every 5th frame by default (``image_every``), everything else every frame. The
+writer closes its chunk and flushes the file at most every ``flush_s`` seconds (1 s; 0: after each frame), so a
+file cut off at any point reads up to its last whole frame flushed. :func:`frame_data` takes a frame's blocks
+from a segment (the synchronous path) and :meth:`cosim.recording.slots.FrameSlots.frame` from a frame slot;
+:class:`McapWriter` encodes and writes them.
 """
 from __future__ import annotations
 
 import logging
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 
@@ -40,14 +48,15 @@ from .encode import (
     planar_transform_msg,
     point_cloud_msg,
     raw_image_msg,
-    scalars_msg,
+    scalars_json,
     stamp,
     to_json,
     transform_msg,
 )
+from .mcapfile import McapFile
 
-__all__ = ["RecordOptions", "RunInfo", "McapWriter", "Recorded", "frame_data", "DEFAULT_NAME", "PROFILE", "VEHICLES",
-           "FRAME_TOPIC"]
+__all__ = ["RecordOptions", "RunInfo", "McapWriter", "Recorded", "FrameData", "frame_data", "DEFAULT_NAME", "PROFILE",
+           "VEHICLES", "FRAME_TOPIC"]
 
 log = logging.getLogger("cosim.recording")
 
@@ -73,17 +82,23 @@ class RecordOptions:
     #: a RawImage rgba8 (no encoding work, larger); depth-encoded images are always RawImage (lossless)
     rgb_format: Literal["jpeg", "png", "raw"] = "jpeg"
     jpeg_quality: int = 90
-    #: compression of the chunks holding camera images (raw depth-encoded images shrink ~18 x with lz4), and of
-    #: every chunk of a run without a LiDAR cloud
-    compression: Literal["lz4", "zstd", "none"] = "lz4"
-    #: compression of the chunks holding the LiDAR cloud: float32 points gain ~3 % from lz4 for ~2 ms per frame;
-    #: zstd saves ~60 % (points repeat across frames) for several ms per frame
-    cloud_compression: Literal["lz4", "zstd", "none"] = "none"
+    #: compression of the chunks holding camera images, and of every chunk of a run without a LiDAR cloud: zstd
+    #: (fast level, 8 MiB window: mcapfile.ZSTD_*) shrinks raw depth-encoded images ~25 x at ~2 GB/s, lz4 ~18 x
+    #: at ~3 GB/s but leaves the cloud ~1.1 x
+    compression: Literal["lz4", "zstd", "none"] = "zstd"
+    #: compression of the chunks holding the LiDAR cloud: with zstd's window spanning a chunk's frames, points
+    #: repeated from an earlier frame (~96 % of a default frame's) cost next to nothing (~6 x at ~1.5 GB/s); lz4
+    #: gains ~10 %; none writes 0.6 MB a frame to the page cache, which costs about as much CPU time as zstd.
+    #: Chunks switch compression only when images and cloud differ
+    cloud_compression: Literal["lz4", "zstd", "none"] = "zstd"
     #: frame slots in flight to the recorder process (0: no process, write synchronously inside the sink; None:
     #: as many as fit in QUEUE_BYTES, within MIN_SLOTS..MAX_SLOTS: ~20 for a default frame, 256 for small ones)
     queue_frames: int | None = None
-    #: the recorder process closes a chunk and flushes at most this often, s (0: after every frame)
-    flush_s: float = 0.5
+    #: the recorder process closes a chunk and flushes at most this often, s (0: after every frame): 1 s (10
+    #: default frames, ~11 MB before compression) lets zstd find each frame's repeats of the one before (the
+    #: first frame of a chunk has none) and the second image pair's repeats of the first; ~30 % less CPU time
+    #: and file than 0.5 s
+    flush_s: float = 1.0
     #: niceness added to the recorder process: it yields the CPU to the ring (the credits still guarantee that
     #: it gets every frame: when all slots are full the ring waits for it)
     nice: int = 10
@@ -136,6 +151,16 @@ class Recorded:
         return self.structs + (("lidar_points",) if self.lidar else ()) + self.grids + images
 
 
+class FrameData(NamedTuple):
+    """One sink call's recorded blocks for :meth:`McapWriter.write`: ``structs`` {block: {field: value}},
+    ``arrays`` {block: array} (views, valid while the source is quiescent) and ``stamps`` {block: the frame its
+    contents belong to} for every block in either."""
+
+    structs: dict[str, dict]
+    arrays: dict[str, np.ndarray]
+    stamps: dict[str, int]
+
+
 @dataclass(frozen=True)
 class RunInfo:
     """What the writer needs from the scenario, as plain values (the recorder process then imports no config)."""
@@ -159,22 +184,9 @@ class RunInfo:
                    (float(cart.interior_length_m), float(cart.interior_width_m)))
 
 
-def _compression_type(name: str):
-    from mcap.writer import CompressionType
-
-    return {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[name]
-
-
-def _writer(stream, compression: str):
-    from mcap.writer import Writer
-
-    return Writer(stream, compression=_compression_type(compression))
-
-
-#: where mcap's Writer keeps the compression of the chunks it finalizes (private: mcap 1.x). The writer switches
-#: it between chunks so that images and the LiDAR cloud can be compressed differently; without it (another mcap
-#: version) every chunk gets ``compression``.
-_WRITER_COMPRESSION = "_Writer__compression"
+def _constant(schema: str, msg: dict) -> bytes:
+    """Wire bytes of the fields of ``msg`` other than its timestamp and data."""
+    return proto.encode(schema, {k: v for k, v in msg.items() if k not in ("timestamp", "data")})
 
 
 class McapWriter:
@@ -198,11 +210,13 @@ class McapWriter:
         self._run = run
         self._closed = False
         self._file = open(self.path, "wb")
-        self._w = _writer(self._file, options.compression)
-        self._chunk_compression = options.compression
-        self._switchable = hasattr(self._w, _WRITER_COMPRESSION)
+        self._w = McapFile(self._file, options.compression)
         self._w.start(PROFILE, "graincosim.cosim.recording")
         self._schemas: dict[str, int] = {}
+        #: per block, the last stamp written (a block is written again only with a newer one)
+        self._last: dict[str, int] = {}
+        #: the last time (frame) the constant transforms were written at
+        self._static_frame = -1
         self._plan(schema)
         self._w.add_metadata("run", {"run_id": run_id, "fingerprint": fingerprint, "scenario": run.scenario,
                                      "sensor_period_s": repr(self.period_s)})
@@ -247,6 +261,8 @@ class McapWriter:
                 fmt, schema_name = "raw", "foxglove.RawImage"
             self._images[name] = (fmt, cam or name, self._proto_channel(topic, schema_name))
         self._lidar = self._proto_channel("/lidar/points", "foxglove.PointCloud") if rec.lidar else None
+        # the cloud in the mount frame, rewritten every frame: one buffer for the whole run
+        self._cloud = np.empty((schema.block("lidar_points").shape[0], 4), "<f4") if rec.lidar else None
         self._grids: dict[str, tuple[tuple[float, float], int]] = {}
         length_m, width_m = self._run.cart_interior_m
         for name in rec.grids:
@@ -255,57 +271,103 @@ class McapWriter:
             cell = (length_m / shape[0], width_m / shape[1])
             self._grids[name] = (cell, self._proto_channel(f"/heightmap/{kind}", "foxglove.Grid"))
         self._marker = self._json_channel(FRAME_TOPIC, S.FRAME_MARKER)
+        # the fields that never change (frame, pose, layout, sizes) encoded once per channel; a message is then its
+        # timestamp and data followed by these (protobuf parsers take fields in any order)
+        self._const: dict[str, bytes] = {}
+        if rec.lidar:
+            self._const["lidar_points"] = _constant("foxglove.PointCloud",
+                                                    point_cloud_msg(0, np.zeros((0, 4), np.float32)))
+        for name, ((cx, cy), _) in self._grids.items():
+            self._const[name] = _constant("foxglove.Grid", grid_msg(0, np.zeros(schema.block(name).shape, "<f4"),
+                                                                    cx, cy))
+        for name, (fmt, cam, _) in self._images.items():
+            if fmt == "raw":
+                self._const[name] = _constant("foxglove.RawImage",
+                                              raw_image_msg(0, np.zeros(schema.block(name).shape, np.uint8), cam))
+
+    def _message(self, schema: str, name: str, msg: dict) -> list:
+        """Parts of ``msg`` (a message of channel block ``name``) with its constant fields pre-encoded."""
+        return proto.encode_parts(schema, {"timestamp": msg["timestamp"], "data": msg["data"]}) + [self._const[name]]
 
     # -- frames ------------------------------------------------------------------------------------------
-    def _put(self, channel: int, t_ns: int, data) -> None:
-        self._w.add_message(channel, log_time=t_ns, data=data, publish_time=t_ns)
+    def _put(self, channel: int, t_ns: int, parts) -> None:
+        self._w.add_message(channel, t_ns, parts)
 
     def _compress_next_with(self, compression: str) -> None:
-        """Finish the chunk in progress and compress the following chunks with ``compression``."""
-        if compression == self._chunk_compression or not self._switchable:
-            return
-        self._w.flush()
-        setattr(self._w, _WRITER_COMPRESSION, _compression_type(compression))
-        self._chunk_compression = compression
+        """Compress the chunks from here on with ``compression`` (finishing the chunk in progress if it changes)."""
+        self._w.set_compression(compression)
 
-    def write(self, frame: int, structs: dict[str, dict], arrays: dict[str, np.ndarray]) -> None:
-        """Encode and write frame ``frame``: ``structs`` {block: {field: value}}; ``arrays`` {block: array} of the
-        non-struct blocks this frame records (images only on their beat; blocks never written left out). The
-        arrays are only read during the call (they may be views of a frame slot)."""
-        t_ns = round(frame * self.period_s * 1e9)
-        ts = stamp(t_ns)
-        ts_field = proto.encode("foxglove.FrameTransform", {"timestamp": ts})
-        for rest in self._static:
-            self._put(self._tf, t_ns, ts_field + rest)
+    def _t_ns(self, frame: int) -> int:
+        return round(frame * self.period_s * 1e9)
+
+    def _new(self, name: str, stamps: dict[str, int], frame: int) -> int | None:
+        """The stamp to write block ``name`` at, or None when it is not newer than the last one written."""
+        s = stamps.get(name, frame)
+        if s <= self._last.get(name, -1):
+            return None
+        self._last[name] = s
+        return s
+
+    def write(self, frame: int, structs: dict[str, dict], arrays: dict[str, np.ndarray],
+              stamps: dict[str, int] | None = None) -> None:
+        """Encode and write sink call ``frame``: ``structs`` {block: {field: value}}; ``arrays`` {block: array} of
+        the non-struct blocks this call records (images only on their beat; blocks never written left out);
+        ``stamps`` {block: frame its contents belong to} (None or a block missing: ``frame``). A block is written
+        at its stamp's time, and only if that stamp is newer than the last it was written with; the frame
+        marker carries ``frame``. The arrays are only read during the call (they may be views of a frame slot).
+        """
+        stamps = stamps or {}
+        new = self._new
+        struct_stamps = [(name, channel, s) for name, channel in self._structs if name in structs
+                         and (s := new(name, stamps, frame)) is not None]
+        grid_stamps = [(name, cell, channel, s) for name, (cell, channel) in self._grids.items() if name in arrays
+                       and (s := new(name, stamps, frame)) is not None]
+        image_stamps = [(name, s) for name in self._images if name in arrays
+                        and (s := new(name, stamps, frame)) is not None]
+        lidar = arrays.get("lidar_points") if self._lidar is not None else None
+        lidar_stamp = new("lidar_points", stamps, frame) if lidar is not None else None
+        newest = max([s for *_, s in struct_stamps + grid_stamps + image_stamps] +
+                     ([lidar_stamp] if lidar_stamp is not None else []), default=-1)
+        if newest > self._static_frame:
+            self._static_frame = newest
+            t_ns = self._t_ns(newest)
+            ts_field = proto.encode("foxglove.FrameTransform", {"timestamp": stamp(t_ns)})
+            for rest in self._static:
+                self._put(self._tf, t_ns, (ts_field, rest))
+        vehicles = {}
         for v, block in self._vehicles:
-            s = structs.get(block)
-            if s is None:
-                continue
-            x, y, yaw = s[f"{v}_x_m"], s[f"{v}_y_m"], s[f"{v}_yaw_rad"]
-            if np.isfinite((x, y, yaw)).all():
-                self._put(self._tf, t_ns, proto.encode("foxglove.FrameTransform",
-                                                       planar_transform_msg(t_ns, "world", v, x, y, yaw)))
-        for name, channel in self._structs:
-            if name in structs:
-                self._put(channel, t_ns, to_json(scalars_msg(t_ns, frame, structs[name])))
-        for name, ((cx, cy), channel) in self._grids.items():
-            if name in arrays:
-                self._put(channel, t_ns, proto.encode("foxglove.Grid", grid_msg(t_ns, arrays[name], cx, cy)))
-        images = [(name, arrays[name]) for name in self._images if name in arrays]
-        if images:
+            vehicles.setdefault(block, []).append(v)
+        for name, channel, s in struct_stamps:
+            t_ns = self._t_ns(s)
+            values = structs[name]
+            for v in vehicles.get(name, ()):
+                x, y, yaw = values[f"{v}_x_m"], values[f"{v}_y_m"], values[f"{v}_yaw_rad"]
+                if math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw):
+                    self._put(self._tf, t_ns, proto.encode_parts("foxglove.FrameTransform",
+                                                                 planar_transform_msg(t_ns, "world", v, x, y, yaw)))
+            self._put(channel, t_ns, (scalars_json(t_ns, s, values),))
+        for name, (cx, cy), channel, s in grid_stamps:
+            t_ns = self._t_ns(s)
+            self._put(channel, t_ns, self._message("foxglove.Grid", name, grid_msg(t_ns, arrays[name], cx, cy)))
+        if image_stamps:
             self._compress_next_with(self.options.compression)
-        for name, img in images:
+        for name, s in image_stamps:
             fmt, cam, channel = self._images[name]
+            t_ns = self._t_ns(s)
+            img = arrays[name]
             if fmt == "raw":
-                self._put(channel, t_ns, proto.encode("foxglove.RawImage", raw_image_msg(t_ns, img, cam)))
+                self._put(channel, t_ns, self._message("foxglove.RawImage", name, raw_image_msg(t_ns, img, cam)))
             else:
                 msg = compressed_image_msg(t_ns, img, cam, fmt, self.options.jpeg_quality)
-                self._put(channel, t_ns, proto.encode("foxglove.CompressedImage", msg))
-        lidar = arrays.get("lidar_points")
-        if lidar is not None and self._lidar is not None:
+                self._put(channel, t_ns, proto.encode_parts("foxglove.CompressedImage", msg))
+        if lidar_stamp is not None:
             self._compress_next_with(self.options.cloud_compression)
-            self._put(self._lidar, t_ns, proto.encode("foxglove.PointCloud", point_cloud_msg(t_ns, lidar)))
-        self._put(self._marker, t_ns, to_json({"timestamp": ts, "frame": int(frame), "t_s": frame * self.period_s}))
+            t_ns = self._t_ns(lidar_stamp)
+            self._put(self._lidar, t_ns, self._message("foxglove.PointCloud", "lidar_points",
+                                                       point_cloud_msg(t_ns, lidar, out=self._cloud)))
+        t_ns = self._t_ns(frame)
+        self._put(self._marker, t_ns, (to_json({"timestamp": stamp(t_ns), "frame": int(frame),
+                                                "t_s": frame * self.period_s}),))
         self.frames_written += 1
         self._dirty = True
         if time.monotonic() - self._t_flush >= self.flush_s:
@@ -339,18 +401,21 @@ class McapWriter:
         log.info("recording %s: %d frames", self.path, self.frames_written)
 
 
-def frame_data(seg: Segment, names) -> tuple[dict[str, dict], dict[str, np.ndarray]]:
-    """(structs, arrays) of blocks ``names`` of ``seg`` for :meth:`McapWriter.write`: struct fields copied into
-    dicts, arrays as zero-copy views (valid while the blocks are quiescent: the supervisor holds the token, or
-    they are a frame slot the recorder owns). Blocks never written are left out."""
-    structs, arrays = {}, {}
+def frame_data(seg: Segment, names) -> FrameData:
+    """(structs, arrays, stamps) of blocks ``names`` of ``seg`` for :meth:`McapWriter.write`: struct fields copied
+    into dicts, arrays as zero-copy views (valid while the blocks are quiescent: the supervisor holds the token,
+    or they are a frame slot the recorder owns), and each block's stamp (``seg.frame_of``: the frame its
+    contents belong to, which may be earlier than the sink call's). Blocks never written are left out."""
+    structs, arrays, stamps = {}, {}, {}
     for n in names:
-        if seg.frame_of(n) < 0:
+        s = seg.frame_of(n)
+        if s < 0:
             continue
+        stamps[n] = s
         v = seg.view(n)
         if isinstance(seg.schema.block(n), StructBlock):
             arr = v.array
             structs[n] = dict(zip(arr.dtype.names, arr.item()))
         else:
             arrays[n] = v
-    return structs, arrays
+    return FrameData(structs, arrays, stamps)
