@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Sequence
 
 from .errors import ScenarioError
+from .threadpools import default_to_single_threaded_pools
 
 __all__ = ["main", "build_parser", "run_extras", "VERBS"]
 
@@ -131,6 +132,7 @@ def _print_summary(result, stream) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    default_to_single_threaded_pools()  # before numpy loads: in-process runs (study, compare) and children
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or (argv[0] not in VERBS and argv[0] not in ("-h", "--help")):
         argv.insert(0, "run")

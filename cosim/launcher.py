@@ -31,6 +31,7 @@ from .logs import configure_logging
 from .outputs import default_run_dir, write_outputs, write_scenario
 from .recorder import Recorder
 from .specs import SUPERVISOR, ParticipantSpec, build_schema, ring_specs
+from .threadpools import single_threaded_pools
 
 __all__ = ["RunResult", "ObserverSpec", "launch", "EXIT_OK", "EXIT_RUN_ERROR", "EXIT_INTERRUPTED", "JOIN_TIMEOUT_S"]
 
@@ -160,7 +161,8 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
         for obs in observers:
             w = ctx.Process(target=_observer_main, args=(obs, name, str(log_path)), name=f"cosim-{obs.name}",
                             daemon=True)
-            w.start()
+            with single_threaded_pools():
+                w.start()
             watchers[obs.name] = w
         for make_sink in sinks:
             frame_sinks.append(make_sink(scenario, run_dir, seg))
@@ -169,7 +171,8 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
             args = ChildArgs(spec, scenario_json, name, schema.fingerprint, plan, sems, str(log_path), os.getpid(),
                              scenario.timing.startup_timeout_s, scenario.timing.handoff_timeout_s + 5.0)
             p = ctx.Process(target=child_main, args=(args,), name=f"cosim-{spec.name}", daemon=True)
-            p.start()
+            with single_threaded_pools():
+                p.start()
             procs[spec.name] = p
         recorder = Recorder(seg, plan.members, deferred=bool(plan.deferred))
         finished: set[str] = set()

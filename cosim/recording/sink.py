@@ -26,6 +26,7 @@ from pathlib import Path
 
 from shm_schema import Schema, Segment
 
+from ..threadpools import single_threaded_pools
 from .slots import FrameSlots
 from .writer import (
     DEFAULT_NAME,
@@ -120,7 +121,8 @@ class McapRecorder:
                                        self._slots.name, n_slots, str(self.path), self.options, segment.run_id,
                                        segment.fingerprint))
         try:
-            self._proc.start()
+            with single_threaded_pools():
+                self._proc.start()
         except BaseException:
             self._release_slots()
             raise
