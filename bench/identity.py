@@ -4,6 +4,8 @@
 
 * ``gt/``: the run directory of ``python launch.py run default --feedback ground_truth --renderer none`` (1201
   frames over the launched process ring);
+* ``gt-<scenario>/``: the same for every other packaged scenario (curved path, stiff drivetrain, other strategies
+  and crops, ...) and for the default scenario with the RK4 integrator, without figures;
 * ``perception.npz``: an in-process run (:func:`cosim.inprocess.simulate`) of the default scenario with perception
   feedback (renderer ``--renderer``, default gl; ``--duration`` s, default the scenario's 120 s): every
   timeseries column and the final array blocks.
@@ -32,9 +34,26 @@ MAPS = ("heightmap_truth", "heightmap_perceived")
 WALL_SUFFIX = "_ms"
 
 
+#: extra ground-truth runs: directory name -> launch.py arguments after ``run``
+EXTRA_GT = {
+    **{f"gt-{n}": [n] for n in ("back_to_front", "curved_pass", "fast_harvest", "grazing_sensor", "heavy_noise",
+                                "high_flow", "lowest_first", "misaligned_start", "near_alpha", "soybeans",
+                                "stiff_drivetrain")},
+    "gt-default-rk4": ["default", "--set", "integrator.method=rk4"],
+}
+
+
+#: every ground-truth run directory
+GT_DIRS = ("gt", *sorted(EXTRA_GT))
+
+
 def _record_gt(tree: Path, out: Path) -> None:
     subprocess.run([sys.executable, "launch.py", "run", "default", "--feedback", "ground_truth", "--renderer",
                     "none", "--quiet", "--out", str(out / "gt")], cwd=tree, check=True, stdout=subprocess.DEVNULL)
+    for name, args in EXTRA_GT.items():
+        subprocess.run([sys.executable, "launch.py", "run", *args, "--feedback", "ground_truth", "--renderer", "none",
+                        "--set", "outputs.figures=false", "--quiet", "--out", str(out / name)], cwd=tree, check=True,
+                       stdout=subprocess.DEVNULL)
 
 
 def _record_perception(tree: Path, out: Path, renderer: str, duration: float | None) -> None:
@@ -68,19 +87,25 @@ def _same(a: np.ndarray, b: np.ndarray) -> bool:
 def compare(a: Path, b: Path) -> list[str]:
     """Differences between two recorded directories (empty when bit-identical)."""
     diffs: list[str] = []
-    ca, cb = _csv_columns(a / "gt" / "timeseries.csv"), _csv_columns(b / "gt" / "timeseries.csv")
-    if list(ca) != list(cb):
-        diffs.append(f"gt: columns differ: {sorted(set(ca) ^ set(cb))}")
-    for k in ca:
-        if k.endswith(WALL_SUFFIX) or k not in cb:
+    checked = 0
+    for run in GT_DIRS:
+        if not (a / run).exists() or not (b / run).exists():
+            diffs.append(f"{run}: missing in {a if not (a / run).exists() else b}")
             continue
-        if ca[k] != cb[k]:
-            i = next((i for i, (x, y) in enumerate(zip(ca[k], cb[k])) if x != y), min(len(ca[k]), len(cb[k])))
-            diffs.append(f"gt: {k} differs first at row {i}")
-    for m in MAPS:
-        pa, pb = a / "gt" / f"{m}.npy", b / "gt" / f"{m}.npy"
-        if pa.exists() != pb.exists() or (pa.exists() and not _same(np.load(pa), np.load(pb))):
-            diffs.append(f"gt: {m}.npy differs")
+        ca, cb = _csv_columns(a / run / "timeseries.csv"), _csv_columns(b / run / "timeseries.csv")
+        checked += len(ca)
+        if list(ca) != list(cb):
+            diffs.append(f"{run}: columns differ: {sorted(set(ca) ^ set(cb))}")
+        for k in ca:
+            if k.endswith(WALL_SUFFIX) or k not in cb:
+                continue
+            if ca[k] != cb[k]:
+                i = next((i for i, (x, y) in enumerate(zip(ca[k], cb[k])) if x != y), min(len(ca[k]), len(cb[k])))
+                diffs.append(f"{run}: {k} differs first at row {i}")
+        for m in MAPS:
+            pa, pb = a / run / f"{m}.npy", b / run / f"{m}.npy"
+            if pa.exists() != pb.exists() or (pa.exists() and not _same(np.load(pa), np.load(pb))):
+                diffs.append(f"{run}: {m}.npy differs")
     za, zb = np.load(a / "perception.npz"), np.load(b / "perception.npz")
     if set(za.files) != set(zb.files):
         diffs.append(f"perception: keys differ: {sorted(set(za.files) ^ set(zb.files))}")
@@ -89,8 +114,8 @@ def compare(a: Path, b: Path) -> list[str]:
             continue
         if not _same(za[k], zb[k]):
             diffs.append(f"perception: {k} differs")
-    checked = len(ca) + len(za.files)
-    print(f"compared {checked} columns and arrays; {len(diffs)} differ")
+    checked += len(za.files)
+    print(f"compared {checked} columns and arrays over {len(GT_DIRS) + 1} runs; {len(diffs)} differ")
     return diffs
 
 

@@ -52,37 +52,51 @@ def step_exponential(x: np.ndarray, u: tuple[float, float], p: VehicleParams, dt
     return np.array(step_exponential_values(x.tolist(), u, p, dt))
 
 
-def _rates(cyaw: float, tyaw: float, pyaw: float, v: float, delta: float,
-           p: VehicleParams) -> tuple[float, float, float, float, float, float]:
-    """The kinematic derivatives that vary, (d cx, d cy, d tx, d ty, d tyaw, d pyaw) in m/s and rad/s: the
-    arithmetic of :func:`~dynamics_proc.vehicles.kinematic_derivative`, without the constant combine yaw rate
-    and without the positions, which no derivative depends on."""
-    vc = p.combine_speed_mps
-    r = v * math.tan(delta) / p.wheelbase_m
-    rel = tyaw - pyaw
-    dp = (v * math.sin(rel) - p.hitch_offset_m * r * math.cos(rel)) / p.tow_length_m
-    return vc * math.cos(cyaw), vc * math.sin(cyaw), v * math.cos(tyaw), v * math.sin(tyaw), r, dp
-
-
 def step_exponential_values(xs: list[float], u: tuple[float, float], p: VehicleParams, dt: float) -> list[float]:
     """:func:`step_exponential` on the state as a list of 9 Python floats (same order, same arithmetic, so the
-    same bits): the frame loop keeps the state as floats between its held-input steps."""
+    same bits): the frame loop keeps the state as floats between its held-input steps.
+
+    The RK4 stages evaluate :func:`~dynamics_proc.vehicles.kinematic_derivative` inline; only the headings feed
+    back into the derivatives, so the stage positions are not formed, and stages 2 and 3 share the combine
+    heading (its yaw rate is constant)."""
     v0, vm, v1, v_end = _stage_lag(xs[V], u[0], p.drivetrain_tau_s, p.accel_max_mps2, p.brake_max_mps2, dt)
     r = p.steer_rate_max_radps
     d0, dm, d1, d_end = _stage_lag(xs[DELTA], u[1], p.steer_tau_s, r, r, dt)
     cx, cy, cyaw, tx, ty, tyaw, pyaw = xs[0], xs[1], xs[2], xs[3], xs[4], xs[5], xs[8]
-    wc = p.combine_yaw_rate_radps
+    vc, wc, wb, hitch, tow = (p.combine_speed_mps, p.combine_yaw_rate_radps, p.wheelbase_m, p.hitch_offset_m,
+                              p.tow_length_m)
+    cos, sin, tan = math.cos, math.sin, math.tan
     half = 0.5 * dt
-    # RK4 stages; only the headings feed back into the derivatives (k = d cx, cy, tx, ty, tyaw, pyaw)
-    k1 = _rates(cyaw, tyaw, pyaw, v0, d0, p)
-    k2 = _rates(cyaw + half * wc, tyaw + half * k1[4], pyaw + half * k1[5], vm, dm, p)
-    k3 = _rates(cyaw + half * wc, tyaw + half * k2[4], pyaw + half * k2[5], vm, dm, p)
-    k4 = _rates(cyaw + dt * wc, tyaw + dt * k3[4], pyaw + dt * k3[5], v1, d1, p)
+    # combine velocity at the stage headings cyaw, cyaw + dt/2 wc (stages 2 and 3), cyaw + dt wc
+    c_mid, c_end = cyaw + half * wc, cyaw + dt * wc
+    cx1, cy1 = vc * cos(cyaw), vc * sin(cyaw)
+    cx2, cy2 = vc * cos(c_mid), vc * sin(c_mid)
+    cx4, cy4 = vc * cos(c_end), vc * sin(c_end)
+    # tractor and cart: speed v, yaw rate r = v tan(delta) / wheelbase, trailer rate dp, stage by stage
+    r1 = v0 * tan(d0) / wb
+    rel = tyaw - pyaw
+    p1 = (v0 * sin(rel) - hitch * r1 * cos(rel)) / tow
+    tx1, ty1 = v0 * cos(tyaw), v0 * sin(tyaw)
+    t2, q2 = tyaw + half * r1, pyaw + half * p1
+    r2 = vm * tan(dm) / wb
+    rel = t2 - q2
+    p2 = (vm * sin(rel) - hitch * r2 * cos(rel)) / tow
+    tx2, ty2 = vm * cos(t2), vm * sin(t2)
+    t3, q3 = tyaw + half * r2, pyaw + half * p2
+    r3 = r2                                        # same speed and steering as stage 2
+    rel = t3 - q3
+    p3 = (vm * sin(rel) - hitch * r3 * cos(rel)) / tow
+    tx3, ty3 = vm * cos(t3), vm * sin(t3)
+    t4, q4 = tyaw + dt * r3, pyaw + dt * p3
+    r4 = v1 * tan(d1) / wb
+    rel = t4 - q4
+    p4 = (v1 * sin(rel) - hitch * r4 * cos(rel)) / tow
+    tx4, ty4 = v1 * cos(t4), v1 * sin(t4)
     w = dt / 6.0
-    return [cx + w * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]), cy + w * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]),
-            cyaw + w * (wc + 2.0 * wc + 2.0 * wc + wc), tx + w * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2]),
-            ty + w * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3]), tyaw + w * (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4]),
-            v_end, d_end, pyaw + w * (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5])]
+    return [cx + w * (cx1 + 2.0 * cx2 + 2.0 * cx2 + cx4), cy + w * (cy1 + 2.0 * cy2 + 2.0 * cy2 + cy4),
+            cyaw + w * (wc + 2.0 * wc + 2.0 * wc + wc), tx + w * (tx1 + 2.0 * tx2 + 2.0 * tx3 + tx4),
+            ty + w * (ty1 + 2.0 * ty2 + 2.0 * ty3 + ty4), tyaw + w * (r1 + 2.0 * r2 + 2.0 * r3 + r4), v_end, d_end,
+            pyaw + w * (p1 + 2.0 * p2 + 2.0 * p3 + p4)]
 
 
 def step_ivp(x: np.ndarray, u: tuple[float, float], p: VehicleParams, dt: float,

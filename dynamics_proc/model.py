@@ -131,10 +131,10 @@ def _predicted_impacts(spg: np.ndarray, vg: np.ndarray,
                        p: ModelParams) -> tuple[float, tuple[float, float], tuple[float, float]]:
     """From the known geometry, the spout ``spg`` (3,) m and exit velocity ``vg`` (3,) m/s in the cart grid frame:
     (drift along grid x m, landing grid xy at the target height, on the floor)."""
-    top = ag.landing_point(spg, vg, p.control.target_m)
-    floor = ag.landing_point(spg, vg, 0.0)
+    top = ag.landing_xy(spg, vg, p.control.target_m)
+    floor = ag.landing_xy(spg, vg, 0.0)
     drift = 0.5 * (top[0] + floor[0]) - float(spg[0])
-    return drift, (float(top[0]), float(top[1])), (float(floor[0]), float(floor[1]))
+    return drift, top, floor
 
 
 def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
