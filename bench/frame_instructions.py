@@ -7,7 +7,9 @@ Two fixed workloads of the default scenario, each a loop over frames:
   publishing the three blocks, the truth measurement;
 * ``supervisor``: the supervisor's per-frame work on the default scenario's whole schema (GL rig, perception
   blocks): ``Recorder.record`` (every struct row and every small array block copied) and the progress callback,
-  the blocks stamped by their writers every frame as in a run.
+  the blocks stamped by their writers every frame as in a run;
+* ``stamps``: those writers' stamps alone (``Segment.write`` of every non-image block): subtract it from
+  ``supervisor`` for the supervisor's own work.
 
 ``python bench/frame_instructions.py WORKLOAD --frames N`` runs a workload natively and prints its median wall
 time per frame. ``--callgrind`` runs it twice under ``valgrind --tool=callgrind`` (``--frames`` F1 and F2, default
@@ -30,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 #: frame counts of the two callgrind runs: their difference is measured
 DEFAULT_SPAN = (150, 450)
-WORKLOADS = ("dynamics", "supervisor")
+WORKLOADS = ("dynamics", "supervisor", "stamps")
 
 
 def _scenario(feedback: str, renderer: str):
@@ -58,8 +60,9 @@ def run_dynamics(frames: int) -> list[float]:
     return out
 
 
-def run_supervisor(frames: int) -> list[float]:
-    """The supervisor's per-frame work on the default scenario's schema; wall ns per frame."""
+def run_supervisor(frames: int, record: bool = True) -> list[float]:
+    """The supervisor's per-frame work on the default scenario's schema (only the writers' stamps without
+    ``record``); wall ns per frame."""
     from cosim.progress import ProgressPrinter
     from cosim.recorder import Recorder
     from cosim.specs import build_schema, ring_specs
@@ -78,17 +81,21 @@ def run_supervisor(frames: int) -> list[float]:
             with seg.write(name, frame):
                 pass
         t0 = clock()
-        rec.record(frame, 1_000_000 if frame else None)
-        progress(frame, frames, frame * 0.1, 1.0)
+        if record:
+            rec.record(frame, 1_000_000 if frame else None)
+            progress(frame, frames, frame * 0.1, 1.0)
         out.append(clock() - t0)
     return out
 
 
 def _callgrind(workload: str, frames: int) -> int:
-    """Total instructions of one run of ``workload`` under callgrind."""
+    """Total instructions of one run of ``workload`` under callgrind (after a native run that leaves every
+    module's bytecode cached, so that both runs of a difference import the same way)."""
+    env = dict(os.environ, PYTHONHASHSEED="0")
+    subprocess.run([sys.executable, __file__, workload, "--frames", "1"], check=True, env=env,
+                   stdout=subprocess.DEVNULL)
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "callgrind.out"
-        env = dict(os.environ, PYTHONHASHSEED="0")
         subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", sys.executable, __file__,
                         workload, "--frames", str(frames)], check=True, env=env, stdout=subprocess.DEVNULL,
                        stderr=subprocess.DEVNULL)
@@ -109,7 +116,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{args.workload}: {(i2 - i1) / (f2 - f1):,.0f} instructions per frame (frames {f1}..{f2}; "
               f"totals {i1:,} / {i2:,})")
         return 0
-    times = run_dynamics(args.frames) if args.workload == "dynamics" else run_supervisor(args.frames)
+    if args.workload == "dynamics":
+        times = run_dynamics(args.frames)
+    else:
+        times = run_supervisor(args.frames, record=args.workload == "supervisor")
     times.sort()
     print(f"{args.workload}: median {times[len(times) // 2] / 1e6:.3f} ms per frame over {len(times)} frames")
     return 0

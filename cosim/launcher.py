@@ -210,14 +210,15 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
             recorder.record(frame, turn if frame > 0 else None)
             for sink in frame_sinks:
                 sink(seg, frame)
-            _warn_dead_observers(watchers, warned)
             check_stop()
             sw[heartbeat] = time.monotonic_ns()
-            if progress is not None:
-                progress(frame, plan.frames, frame * scenario.timing.sensor_period_s, time.perf_counter() - t_start)
             if frame < plan.frames:
                 t_turn = time.monotonic_ns()
                 token.give(first, frame + 1)
+            # what does not read the blocks runs while the next frame does
+            _warn_dead_observers(watchers, warned)
+            if progress is not None:
+                progress(frame, plan.frames, frame * scenario.timing.sensor_period_s, time.perf_counter() - t_start)
         if plan.flush_frame is not None:
             # the deferred members publish their last frame's outputs
             sw[phase] = Phase.WAITING
@@ -245,6 +246,8 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
                     log.exception("closing a frame sink failed")
         _stop_children(procs, graceful=error is None)
         _stop_children(watchers, graceful=False)
+        if recorder is not None:
+            recorder.finish()
         for s, h in old_handlers.items():
             signal.signal(s, h)
     if error is not None:

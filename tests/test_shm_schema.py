@@ -149,3 +149,15 @@ def test_error_slot_round_trip_truncates_long_tracebacks():
     err = seg.read_error("writer_b")
     assert err["frame"] == 12 and err["type"] == "ValueError" and err["traceback"].startswith("...")
     assert seg.read_error("writer_a") is None
+
+
+def test_a_failed_write_keeps_the_stamp_and_releases_the_seqlock():
+    seg = Segment.local(make_schema())
+    with seg.write("grid", 3) as g:
+        g[...] = 1.0
+    with pytest.raises(ZeroDivisionError):
+        with seg.write("grid", 4):
+            assert seg.seq_of("grid") == 3
+            1 / 0
+    assert seg.frame_of("grid") == 3 and seg.seq_of("grid") == 4
+    assert seg.snapshot("grid")[0] == 3
