@@ -12,10 +12,11 @@ Two fixed workloads of the default scenario, each a loop over frames:
   ``supervisor`` for the supervisor's own work.
 
 ``python bench/frame_instructions.py WORKLOAD --frames N`` runs a workload natively and prints its median wall
-time per frame. ``--callgrind`` runs it twice under ``valgrind --tool=callgrind`` (``--frames`` F1 and F2, default
-150 and 450) and prints (instructions(F2) - instructions(F1)) / (F2 - F1): the per-frame count over frames
-F1..F2, start-up and imports cancelled out. Counts repeat to a few instructions per frame between runs
-(PYTHONHASHSEED is fixed); compare them, not the wall times, between versions of the code.
+time per frame. ``--callgrind`` runs it twice under ``valgrind --tool=callgrind`` (F1 and F2 frames, ``SPANS``)
+and prints (instructions(F2) - instructions(F1)) / (F2 - F1): the per-frame count over frames F1..F2, start-up
+and imports cancelled out. PYTHONHASHSEED is fixed; start-up still varies by up to ~6 M instructions between
+runs, i.e. ~20 k per frame on the dynamics span and ~7 k on the supervisor's. Compare these counts, not the wall
+times, between versions of the code. (A large memcpy counts about one instruction per byte under callgrind.)
 """
 from __future__ import annotations
 
@@ -30,8 +31,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-#: frame counts of the two callgrind runs: their difference is measured
-DEFAULT_SPAN = (150, 450)
+#: frame counts of the two callgrind runs per workload: their difference is measured (the supervisor's span is
+#: longer: its per-frame count is small beside the few million instructions that start-up varies by)
+SPANS = {"dynamics": (150, 450), "supervisor": (150, 1050), "stamps": (150, 1050)}
 WORKLOADS = ("dynamics", "supervisor", "stamps")
 
 
@@ -106,12 +108,12 @@ def _callgrind(workload: str, frames: int) -> int:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("workload", choices=WORKLOADS)
-    p.add_argument("--frames", type=int, default=DEFAULT_SPAN[1])
+    p.add_argument("--frames", type=int, default=450)
     p.add_argument("--callgrind", action="store_true", help="instructions per frame over frames F1..F2")
-    p.add_argument("--span", type=int, nargs=2, default=DEFAULT_SPAN, metavar=("F1", "F2"))
+    p.add_argument("--span", type=int, nargs=2, metavar=("F1", "F2"), help="default: SPANS of the workload")
     args = p.parse_args(argv)
     if args.callgrind:
-        f1, f2 = args.span
+        f1, f2 = args.span or SPANS[args.workload]
         i1, i2 = _callgrind(args.workload, f1), _callgrind(args.workload, f2)
         print(f"{args.workload}: {(i2 - i1) / (f2 - f1):,.0f} instructions per frame (frames {f1}..{f2}; "
               f"totals {i1:,} / {i2:,})")

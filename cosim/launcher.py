@@ -28,7 +28,7 @@ from .config import Scenario
 from .errors import ParticipantCrashed, ParticipantDied, RunError, RunInterrupted
 from .lockstep import RingPlan, Token
 from .logs import configure_logging
-from .outputs import default_run_dir, write_outputs, write_scenario
+from .outputs import default_run_dir, run_data, write_outputs, write_scenario
 from .recorder import Recorder
 from .specs import SUPERVISOR, ParticipantSpec, build_schema, ring_specs
 from .threadpools import single_threaded_pools
@@ -264,9 +264,9 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
         (run_dir / "run.json").write_text(json.dumps(info, indent=2) + "\n")
     if scenario.outputs.figures and "dyn_state" in schema and recorder is not None and recorder.frames:
         try:
-            from .report import load_run, write_run_figures
+            from .report import write_run_figures
 
-            write_run_figures(load_run(run_dir))
+            write_run_figures(run_data(run_dir, scenario, summary, recorder))
         except Exception:  # noqa: BLE001 - figures are a convenience; the run's data is already written
             log.exception("writing the run's figures failed")
     code = EXIT_OK if error is None else EXIT_INTERRUPTED if isinstance(error, RunInterrupted) else EXIT_RUN_ERROR

@@ -15,6 +15,7 @@ from cosim.config import Scenario
 from cosim.geometry import cart_grid_from_body, invert, vehicle_pose
 
 from . import auger as ag
+from .blocks import SECTION_FIELD
 from .controller import (ControllerOutput, ControllerParams, ControllerState, Delivery, controller_step,
                          initial_controller)
 from .grainfill import GrainGrid, deposit, initial_heights, resample, volume
@@ -25,8 +26,6 @@ from .vehicles import CX, CY, CYAW, DELTA, V, VehicleParams, cart_pose, initial_
 __all__ = ["ModelParams", "World", "SpoutGeometry", "initial_world", "step_frame", "truth_measurement", "signals",
            "spout_grid", "SECTION_FIELD"]
 
-#: dyn_state field name of section k's fullness (k = 1..N)
-SECTION_FIELD = "section{k}_fullness"
 
 
 #: (spout world (3,) m, exit velocity world (3,) m/s, spout grid (3,) m, grid_from_world (4, 4)), see spout_grid
