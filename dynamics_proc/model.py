@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -216,6 +217,11 @@ def signals(w: World, p: ModelParams) -> dict[str, float]:
         "spilled_outside_m3": w.spilled_outside_m3, "cart_grain_m3": w.initial_m3 + in_cart,
         "peak_height_m": float(w.heights.max()),
     }
-    for k in range(p.control.sections):
-        d[SECTION_FIELD.format(k=k + 1)] = float(w.out.fullness[k])
+    d.update(zip(_section_names(p.control.sections), w.out.fullness.tolist()))
     return d
+
+
+@lru_cache(maxsize=4)
+def _section_names(sections: int) -> tuple[str, ...]:
+    """The dyn_state names of the section fullness fields, 1..N."""
+    return tuple(SECTION_FIELD.format(k=k + 1) for k in range(sections))

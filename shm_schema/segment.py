@@ -7,6 +7,7 @@ process's resource tracker, which then deletes it when that process exits; attac
 """
 from __future__ import annotations
 
+import struct
 import sys
 import threading
 import time
@@ -59,14 +60,31 @@ def _attach_untracked(name: str) -> shared_memory.SharedMemory:
             resource_tracker.register = original
 
 
+#: struct-module codes of the field types that :meth:`StructView.assign` packs in one call (little-endian)
+_PACK_CODES = {"<f8": "d", "<i8": "q"}
+
+
 class StructView:
     """Attribute access to a struct block's fields, zero copy: ``v.t_s``, ``v.t_s = 1.0``."""
 
-    __slots__ = ("_arr", "_names")
+    __slots__ = ("_arr", "_names", "_packer", "_raw")
 
     def __init__(self, arr: np.ndarray):
         object.__setattr__(self, "_arr", arr)
         object.__setattr__(self, "_names", frozenset(arr.dtype.names))
+        codes = [_PACK_CODES.get(arr.dtype.fields[n][0].str) for n in arr.dtype.names]
+        packed = all(codes) and struct.calcsize("<" + "".join(codes)) == arr.dtype.itemsize
+        object.__setattr__(self, "_packer", struct.Struct("<" + "".join(codes)) if packed else None)
+        object.__setattr__(self, "_raw", arr.reshape(1).view(np.uint8))
+
+    def assign(self, values) -> None:
+        """Write every field at once, in declaration order (a sequence of as many values). A record of float64
+        and int64 fields is packed in one call (integer fields then need ints, not floats); ~1 us against ~15 us
+        for assigning a tuple to the structured array."""
+        if self._packer is not None:
+            self._packer.pack_into(self._raw, 0, *values)
+        else:
+            self._arr[()] = tuple(values)
 
     def __getattr__(self, name: str):
         if name not in self._names:
