@@ -103,8 +103,9 @@ class Impact:
     surface: int
 
 
-def _surface(pts: np.ndarray, h: np.ndarray, cell: float, a: AugerParams) -> tuple[np.ndarray, np.ndarray]:
-    """Surface height (n,) m (grid frame) under grid points (n, 3) and its code (n,) int."""
+def _surface(pts: np.ndarray, h: np.ndarray, cell: float, a: AugerParams) -> np.ndarray:
+    """Surface height (n,) m (grid frame) under grid points (n, 3): the grain inside the interior, the rim band
+    around it, the ground beyond (:func:`_surface_at` for one point, with its surface code)."""
     hl, hw = 0.5 * a.length_m, 0.5 * a.width_m
     ax, ay = np.abs(pts[:, 0] - hl), np.abs(pts[:, 1] - hw)
     inside = (ax < hl) & (ay < hw)
@@ -112,10 +113,7 @@ def _surface(pts: np.ndarray, h: np.ndarray, cell: float, a: AugerParams) -> tup
     ij = (pts[:, :2] * (1.0 / cell)).astype(np.int64)
     np.maximum(ij, 0, out=ij)
     np.minimum(ij, (h.shape[0] - 1, h.shape[1] - 1), out=ij)
-    z = np.where(band, a.rim_top_m, -a.floor_height_m)
-    z[inside] = h[ij[inside, 0], ij[inside, 1]]
-    code = SURFACE_GROUND - band - inside        # 3 ground, 2 band, 1 inside (inside implies band)
-    return z, code
+    return np.where(inside, h[ij[:, 0], ij[:, 1]], np.where(band, a.rim_top_m, -a.floor_height_m))
 
 
 def _surface_at(x: float, y: float, h: np.ndarray, cell: float, a: AugerParams) -> tuple[float, int]:
@@ -156,7 +154,7 @@ def first_surface(spout: np.ndarray, vel: np.ndarray, grid_from_world: np.ndarra
     for n in (_COARSE, _FINE):
         s = np.linspace(lo, hi, n)
         g = _points(sg, vg, s)
-        z, _ = _surface(g, h, cell, a)
+        z = _surface(g, h, cell, a)
         d = g[:, 2] - z                               # height above the surface below, m
         below = np.flatnonzero(d <= 0.0)
         k = int(below[0]) if below.size else n - 1   # none: only through round-off at the ground

@@ -24,7 +24,7 @@ travels farther with the auger off), the predicted impact is safely inside the c
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -288,8 +288,7 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
     auger = bool(seen and target >= 0 and safe and near)
     with np.errstate(invalid="ignore"):
         fullness = heights / p.target_m
-    new_state = replace(st, heights=heights, last_valid_t=last_valid, forced_full=forced, full=full, estimate=est,
-                        delivered_m3=delivered,
-                        target=target, last_nudge_t=last_nudge, bias_m=bias, auger_cmd=auger, seen=seen,
-                        all_full=all_full, nudges=count)
+    new_state = ControllerState(heights=heights, last_valid_t=last_valid, forced_full=forced, full=full, estimate=est,
+                                delivered_m3=delivered, target=target, last_nudge_t=last_nudge, bias_m=bias,
+                                auger_cmd=auger, seen=seen, all_full=all_full, nudges=count)
     return new_state, ControllerOutput(nudge, auger, desired, effort, fullness)
