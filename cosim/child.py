@@ -13,6 +13,7 @@ import logging
 import os
 import signal
 import sys
+import time
 import traceback
 from dataclasses import dataclass
 from typing import Mapping
@@ -44,6 +45,8 @@ class ChildArgs:
     parent_pid: int
     startup_timeout_s: float
     handoff_timeout_s: float
+    #: wall-clock time (time.time(), s) at which the launcher started this process, for the start-up log line
+    spawned_at_s: float
 
 
 def _die_with_parent() -> None:
@@ -60,6 +63,7 @@ def _on_sigterm(signum, frame) -> None:
 
 def child_main(args: ChildArgs) -> None:
     """Run one participant in this process until the last frame, a failure or a stop."""
+    t_main = time.time()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _on_sigterm)
     _die_with_parent()
@@ -84,12 +88,17 @@ def child_main(args: ChildArgs) -> None:
 
     try:
         scenario = Scenario.model_validate_json(args.scenario_json)
+        t_create = time.time()
         participant = args.spec.create(scenario)
+        t_start = time.time()
         participant.start(seg)
-        log.info("started (pid %d)", os.getpid())
+        t_ready = time.time()
+        log.info("started (pid %d) %.2f s after its spawn: interpreter and imports %.2f s, create %.2f s, start %.2f s",
+                 os.getpid(), t_ready - args.spawned_at_s, t_main - args.spawned_at_s, t_start - t_create,
+                 t_ready - t_start)
         member_loop(name, participant, seg, Token(seg, args.semaphores), args.plan,
                     startup_timeout_s=args.startup_timeout_s, handoff_timeout_s=args.handoff_timeout_s, check=check)
-        log.info("finished %d frames", args.plan.frames + 1)
+        log.info("finished %d frames (cpu %.2f s)", args.plan.frames + 1, time.process_time())
     except BaseException as exc:  # noqa: BLE001 - every failure must reach the launcher with its traceback
         code = 143 if isinstance(exc, SystemExit) else 1
         slot["phase"] = Phase.FAILED
