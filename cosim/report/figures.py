@@ -101,8 +101,7 @@ def fig_heightmaps(run: RunData):
     maps = [m for m in maps if m[1] is not None]
     fig = Figure(figsize=(5 * max(len(maps), 1), 3.2))
     axes = fig.subplots(1, max(len(maps), 1), squeeze=False)
-    cmap = matplotlib.colormaps["gray"].copy()
-    cmap.set_bad("black")
+    cmap = matplotlib.colormaps["gray"].with_extremes(bad="black")
     depth = run.scenario.cart.interior_depth_m
     for ax, (title, hm, cell) in zip(axes[0], maps):
         ext = (0, hm.shape[0] * cell, hm.shape[1] * cell, 0)
