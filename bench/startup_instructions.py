@@ -2,17 +2,18 @@
 
 Each step is a ``python -c`` snippet run from a source tree (default this checkout, ``--src`` another one, e.g.
 an export of main) under ``valgrind --tool=callgrind``, after a native run that leaves every module's bytecode
-cached. The launcher's steps are cumulative (each adds to the previous), the others stand alone:
+cached. A step that adds to another is printed with the increment:
 
 * the bare interpreter;
 * launcher: command line, scenario loading and validation, the launcher's modules, the resolved scenario and
   the schema (every ring member's blocks): everything before it spawns the children;
 * child: what a spawned participant process imports before ``child_main`` runs, then each participant's
-  module and ``create`` (the renderer's GL context and the perception tables come in ``start``, not counted);
-* end of run: the plotting modules, and the four figures of the default ground-truth run from memory.
+  module and ``create`` (what ``start`` does, e.g. the renderer's GL context and shaders, is not counted);
+* end of run: the plotting modules, and the four figures of a 300-frame ground-truth run (from memory; a tree
+  without ``cosim.outputs.run_data`` writes the run directory's data and reads it back, as its launcher did).
 
 Usage: ``python bench/startup_instructions.py [--src TREE] [--only NAME ...]``; several minutes (matplotlib under
-valgrind). Prints one Markdown row per step: instructions (M) and, for cumulative steps, the increment.
+valgrind). Prints one Markdown row per step: instructions (M) and the increment over the step it adds to.
 """
 from __future__ import annotations
 
@@ -26,9 +27,10 @@ from pathlib import Path
 
 _LOAD = ("from cosim.loader import load_scenario, resolve_scenario_arg; "
          "s = load_scenario(resolve_scenario_arg('default'))")
-#: a spawned child runs the launcher's main file as __mp_main__, then unpickles its arguments (cosim.child)
+#: a spawned child runs the launcher's main file as __mp_main__, unpickles its arguments (cosim.child) and validates
+#: the scenario's JSON ({json}: a file holding the default scenario's)
 _CHILD = ("import runpy; runpy.run_path('launch.py', run_name='__mp_main__'); import multiprocessing.spawn, "
-          "cosim.child; " + _LOAD)
+          "cosim.child; from cosim.config import Scenario; s = Scenario.model_validate_json(open('{json}').read())")
 _GT = ("from cosim.loader import load_scenario, resolve_scenario_arg; "
        "s = load_scenario(resolve_scenario_arg('default'), extra={'feedback': 'ground_truth', 'renderer': 'none'})")
 _FIG_DATA = (_GT + "; from cosim.inprocess import simulate; r = simulate(s, frames=300); "
@@ -49,23 +51,33 @@ except ImportError:
 cosim.report.write_run_figures(rd)
 """
 
-#: (name, snippet, cumulative on the previous step)
-STEPS: tuple[tuple[str, str, bool], ...] = (
-    ("interpreter", "pass", False),
-    ("launcher: command line", "import cosim.cli", False),
-    ("launcher: + scenario loaded", "import cosim.cli; " + _LOAD, True),
-    ("launcher: + launcher modules", "import cosim.cli; " + _LOAD + "; import cosim.launcher", True),
+#: (name, snippet, name of the step it adds to, or None)
+STEPS: tuple[tuple[str, str, str | None], ...] = (
+    ("interpreter", "pass", None),
+    ("launcher: command line", "import cosim.cli", "interpreter"),
+    ("launcher: + scenario loaded", "import cosim.cli; " + _LOAD, "launcher: command line"),
+    ("launcher: + launcher modules", "import cosim.cli; " + _LOAD + "; import cosim.launcher",
+     "launcher: + scenario loaded"),
     ("launcher: + resolved scenario and schema",
      "import cosim.cli; " + _LOAD + "; import cosim.launcher; from cosim.loader import dump_resolved; "
-     "dump_resolved(s); from cosim.specs import build_schema, ring_specs; build_schema(s, ring_specs(s))", True),
-    ("child: before child_main", _CHILD, False),
-    ("child: + dynamics create", _CHILD + "; from dynamics_proc.participant import create; create(s)", True),
-    ("child: + renderer create", _CHILD + "; from renderer_proc.participant import create; create(s)", False),
-    ("child: + perception create", _CHILD + "; from perception_proc.participant import create; create(s)", False),
-    ("end: run data (300 frames, not counted below)", _FIG_DATA, False),
-    ("end: + plotting modules", _FIG_DATA + "; import cosim.report", True),
-    ("end: + four figures", _FIG_DATA + "; import cosim.report\n" + _FIGURES, True),
+     "dump_resolved(s); from cosim.specs import build_schema, ring_specs; build_schema(s, ring_specs(s))",
+     "launcher: + launcher modules"),
+    ("child: before child_main", _CHILD, "interpreter"),
+    ("child: + dynamics create", _CHILD + "; from dynamics_proc.participant import create; create(s)",
+     "child: before child_main"),
+    ("child: + renderer create", _CHILD + "; from renderer_proc.participant import create; create(s)",
+     "child: before child_main"),
+    ("child: + perception create", _CHILD + "; from perception_proc.participant import create; create(s)",
+     "child: before child_main"),
+    ("end: run data (300 frames)", _FIG_DATA, None),
+    ("end: + plotting modules", _FIG_DATA + "; import cosim.report", "end: run data (300 frames)"),
+    ("end: + four figures", _FIG_DATA + "; import cosim.report\n" + _FIGURES, "end: + plotting modules"),
 )
+
+
+def _scenario_json(src: Path, path: Path) -> None:
+    code = (_LOAD + f"; open('{path}', 'w').write(s.model_dump_json())")
+    subprocess.run([sys.executable, "-c", code], cwd=src, check=True)
 
 
 def instructions(src: Path, code: str) -> int:
@@ -84,17 +96,18 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--src", type=Path, default=Path(__file__).resolve().parents[1])
     p.add_argument("--only", nargs="*", help="names (prefixes) of the steps to run")
     args = p.parse_args(argv)
+    src = args.src.resolve()
+    json_path = Path(tempfile.mkdtemp()) / "scenario.json"
+    _scenario_json(src, json_path)
     print("| step | instructions (M) | increment (M) |")
     print("|---|---:|---:|")
-    prev = None
-    for name, code, cumulative in STEPS:
+    done: dict[str, int] = {}
+    for name, code, adds_to in STEPS:
         if args.only and not any(name.startswith(o) for o in args.only):
-            prev = None
             continue
-        n = instructions(args.src.resolve(), code)
-        inc = f"{(n - prev) / 1e6:,.0f}" if cumulative and prev is not None else ""
+        n = done[name] = instructions(src, code.replace("{json}", str(json_path)))
+        inc = f"{(n - done[adds_to]) / 1e6:,.0f}" if adds_to in done else ""
         print(f"| {name} | {n / 1e6:,.0f} | {inc} |", flush=True)
-        prev = n
     return 0
 
 
