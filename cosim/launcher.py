@@ -78,7 +78,8 @@ class RunResult:
     segment_name: str = ""
     exit_code: int = EXIT_OK
     children: dict[str, int | None] = field(default_factory=dict)
-    #: last completed frame's copy of every recorded (non-image) array block
+    #: last completed frame's copy of every recorded (non-image) array block (a block larger than
+    #: cosim.recorder.FRAME_COPY_LIMIT that a writer touched after that frame is left out: zeros)
     arrays: dict = field(default_factory=dict)
 
     @property
