@@ -20,7 +20,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from cosim.config import Scenario  # noqa: E402
 from dynamics_proc import auger as ag  # noqa: E402
 from dynamics_proc.closed_loop import simulate  # noqa: E402
-from dynamics_proc.controller import controller_step  # noqa: E402
+from dynamics_proc.controller import Delivery, controller_step  # noqa: E402
 from dynamics_proc.grainfill import deposit  # noqa: E402
 from dynamics_proc.integrators import integrate  # noqa: E402
 from dynamics_proc.machine_sync import sync_command  # noqa: E402
@@ -57,7 +57,9 @@ def frame_costs(s: Scenario) -> dict[str, np.ndarray]:
         if imp.surface == ag.SURFACE_GRAIN:
             deposit(w.heights, float(imp.grid[0]), float(imp.grid[1]), 0.0125, p.grid, p.cap)
         t3 = time.perf_counter()
-        controller_step(w.ctrl, p.control, w.t_s, meas, float(spg[0]), ((1.0, 1.0), (1.0, 1.0)), 0.0, 0.35)
+        delivery = Delivery(w.delivered_m3, spg, g[:3, :3] @ vel) if p.control.fusion is not None else None
+        controller_step(w.ctrl, p.control, w.t_s, meas, float(spg[0]), ((1.0, 1.0), (1.0, 1.0)), 0.0, 0.35,
+                        delivery)
         t4 = time.perf_counter()
         # the real frame
         w = step_frame(w, meas, p)

@@ -47,6 +47,7 @@ def simulate(scenario: Scenario, specs: Mapping[str, ParticipantSpec] | None = N
             participants.append(p)
             p.start(seg)
         run_inprocess(seg, participants, n, recorder.record, deferred=deferred, on_flush=recorder.record_flush)
+        recorder.finish()
     finally:
         for p in participants:
             p.close()

@@ -28,7 +28,7 @@ from .config import Scenario
 from .errors import ParticipantCrashed, ParticipantDied, RunError, RunInterrupted
 from .lockstep import RingPlan, Token
 from .logs import configure_logging
-from .outputs import default_run_dir, write_outputs, write_scenario
+from .outputs import default_run_dir, run_data, write_outputs, write_scenario
 from .recorder import Recorder
 from .specs import SUPERVISOR, ParticipantSpec, build_schema, ring_specs
 from .threadpools import single_threaded_pools
@@ -78,7 +78,8 @@ class RunResult:
     segment_name: str = ""
     exit_code: int = EXIT_OK
     children: dict[str, int | None] = field(default_factory=dict)
-    #: last completed frame's copy of every recorded (non-image) array block
+    #: last completed frame's copy of every recorded (non-image) array block (a block larger than
+    #: cosim.recorder.FRAME_COPY_LIMIT that a writer touched after that frame is left out: zeros)
     arrays: dict = field(default_factory=dict)
 
     @property
@@ -127,6 +128,7 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
     completed frame (see :data:`SinkFactory`). The run directory's ``run.json`` names the segment while the run
     lives, so that ``python -m cosim.viewer --attach RUN_DIR`` can find it.
     """
+    t_enter = time.perf_counter()
     run_dir = Path(out_dir) if out_dir is not None else default_run_dir(scenario)
     run_dir.mkdir(parents=True, exist_ok=True)
     log_path = run_dir / "log.txt"
@@ -145,7 +147,7 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
     procs: dict[str, mp.process.BaseProcess] = {}
     recorder: Recorder | None = None
     error: RunError | None = None
-    t_start = time.perf_counter()
+    t_start = t_first = time.perf_counter()
     log.info("run %s: segment %s (%d bytes, fingerprint %s), ring %s, %d frames", run_dir.name, name,
              schema.total_nbytes, schema.fingerprint[:12], " -> ".join(plan.members), scenario.frames + 1)
     (run_dir / "run.json").write_text(json.dumps({"segment": name, "launcher_pid": os.getpid(),
@@ -169,7 +171,7 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
         scenario_json = scenario.model_dump_json()
         for spec in ring:
             args = ChildArgs(spec, scenario_json, name, schema.fingerprint, plan, sems, str(log_path), os.getpid(),
-                             scenario.timing.startup_timeout_s, scenario.timing.handoff_timeout_s + 5.0)
+                             scenario.timing.startup_timeout_s, scenario.timing.handoff_timeout_s + 5.0, time.time())
             p = ctx.Process(target=child_main, args=(args,), name=f"cosim-{spec.name}", daemon=True)
             with single_threaded_pools():
                 p.start()
@@ -205,19 +207,22 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
                 timeout += scenario.timing.startup_timeout_s
             token.take(SUPERVISOR, frame, timeout, check)
             turn = time.monotonic_ns() - t_turn
+            if frame == 0:
+                t_first = time.perf_counter()
             sw[frame_word] = frame
             sw[phase] = Phase.STEPPING
             recorder.record(frame, turn if frame > 0 else None)
             for sink in frame_sinks:
                 sink(seg, frame)
-            _warn_dead_observers(watchers, warned)
             check_stop()
             sw[heartbeat] = time.monotonic_ns()
-            if progress is not None:
-                progress(frame, plan.frames, frame * scenario.timing.sensor_period_s, time.perf_counter() - t_start)
             if frame < plan.frames:
                 t_turn = time.monotonic_ns()
                 token.give(first, frame + 1)
+            # what does not read the blocks runs while the next frame does
+            _warn_dead_observers(watchers, warned)
+            if progress is not None:
+                progress(frame, plan.frames, frame * scenario.timing.sensor_period_s, time.perf_counter() - t_start)
         if plan.flush_frame is not None:
             # the deferred members publish their last frame's outputs
             sw[phase] = Phase.WAITING
@@ -245,8 +250,11 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
                     log.exception("closing a frame sink failed")
         _stop_children(procs, graceful=error is None)
         _stop_children(watchers, graceful=False)
+        if recorder is not None:
+            recorder.finish()
         for s, h in old_handlers.items():
             signal.signal(s, h)
+        t_stopped = time.perf_counter()
     if error is not None:
         log.error("run failed: %s", error)
         if error.detail:
@@ -259,15 +267,21 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
         info = json.loads((run_dir / "run.json").read_text())
         info["ended"] = True
         (run_dir / "run.json").write_text(json.dumps(info, indent=2) + "\n")
+    t_outputs = time.perf_counter()
     if scenario.outputs.figures and "dyn_state" in schema and recorder is not None and recorder.frames:
         try:
-            from .report import load_run, write_run_figures
+            from .report import write_run_figures
 
-            write_run_figures(load_run(run_dir))
+            write_run_figures(run_data(run_dir, scenario, summary, recorder))
         except Exception:  # noqa: BLE001 - figures are a convenience; the run's data is already written
             log.exception("writing the run's figures failed")
     code = EXIT_OK if error is None else EXIT_INTERRUPTED if isinstance(error, RunInterrupted) else EXIT_RUN_ERROR
-    log.info("run %s %s in %.2f s (exit %d)", run_dir.name, "completed" if error is None else "stopped", wall, code)
+    t_end = time.perf_counter()
+    log.info("run %s %s in %.2f s (exit %d); start-up %.2f s to the first frame (set-up before spawning %.2f s), "
+             "shut-down %.2f s (children %.2f s, outputs %.2f s, figures %.2f s); launcher cpu %.2f s", run_dir.name,
+             "completed" if error is None else "stopped", wall, code, t_first - t_enter, t_start - t_enter,
+             t_end - t_start - wall, t_stopped - t_start - wall, t_outputs - t_stopped, t_end - t_outputs,
+             time.process_time())
     return RunResult(run_dir, summary, error, name, code, {n: p.exitcode for n, p in procs.items()},
                      dict(recorder.arrays) if recorder is not None else {})
 

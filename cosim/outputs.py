@@ -20,12 +20,15 @@ from .errors import RunError
 from .recorder import Recorder
 from .specs import ParticipantSpec, load_callable
 
-__all__ = ["default_run_dir", "write_scenario", "compose_summary", "write_outputs", "clean_json", "STAGE_KEYS"]
+__all__ = ["default_run_dir", "write_scenario", "compose_summary", "write_outputs", "saved_maps", "run_data",
+           "clean_json", "STAGE_KEYS", "SAVED_MAPS"]
 
 log = logging.getLogger("cosim.outputs")
 
 #: participant name -> timing_ms key in summary.json
 STAGE_KEYS = {"dynamics": "dynamics", "renderer": "render", "perception": "perception"}
+#: final array blocks written to the run directory as ``<name>.npy``
+SAVED_MAPS = ("heightmap_truth", "heightmap_perceived")
 
 
 def default_run_dir(scenario: Scenario, root: Path = Path("runs")) -> Path:
@@ -117,14 +120,28 @@ def compose_summary(scenario: Scenario, recorder: Recorder | None, ring: Sequenc
     return summary
 
 
+def saved_maps(recorder: Recorder) -> dict[str, np.ndarray]:
+    """The final height maps a run directory keeps (``<name>.npy``): those of SAVED_MAPS the run wrote."""
+    return {n: recorder.arrays[n] for n in SAVED_MAPS if n in recorder.arrays and recorder.array_frames.get(n, -1) >= 0}
+
+
+def run_data(run_dir: Path, scenario: Scenario, summary: dict, recorder: Recorder):
+    """The :class:`~cosim.report.RunData` that ``load_run(run_dir)`` reads back after :func:`write_outputs`, taken
+    from memory (no re-reading of timeseries.csv, scenario.yaml and the maps before the figures)."""
+    from .report.rundata import RunData
+
+    maps = saved_maps(recorder)
+    return RunData(Path(run_dir), scenario, clean_json(summary), recorder.series(), maps.get("heightmap_truth"),
+                   maps.get("heightmap_perceived"))
+
+
 def write_outputs(run_dir: Path, scenario: Scenario, recorder: Recorder | None, ring: Sequence[ParticipantSpec],
                   *, wall_time_s: float, error: RunError | None) -> dict:
     """Write timeseries.csv, the final arrays and summary.json; return the summary."""
     if recorder is not None:
         recorder.write_csv(run_dir / "timeseries.csv")
-        for name in ("heightmap_truth", "heightmap_perceived"):
-            if name in recorder.arrays and recorder.array_frames.get(name, -1) >= 0:
-                np.save(run_dir / f"{name}.npy", recorder.arrays[name])
+        for name, a in saved_maps(recorder).items():
+            np.save(run_dir / f"{name}.npy", a)
     summary = compose_summary(scenario, recorder, ring, wall_time_s=wall_time_s, error=error)
     (run_dir / "summary.json").write_text(json.dumps(clean_json(summary), indent=2) + "\n")
     return summary

@@ -21,7 +21,7 @@ from cosim.config import Scenario
 
 __all__ = ["GRAVITY_MPS2", "STREAM_ROWS", "SURFACE_NONE", "SURFACE_GRAIN", "SURFACE_WALL", "SURFACE_GROUND",
            "AugerParams", "spout_world", "exit_velocity_world", "flow_advance", "Impact", "first_surface",
-           "stream_rows", "landing_point"]
+           "stream_rows", "landing_point", "landing_xy"]
 
 GRAVITY_MPS2 = 9.80665
 #: rows of the ``stream`` block (CONTRACTS.md)
@@ -103,8 +103,9 @@ class Impact:
     surface: int
 
 
-def _surface(pts: np.ndarray, h: np.ndarray, cell: float, a: AugerParams) -> tuple[np.ndarray, np.ndarray]:
-    """Surface height (n,) m (grid frame) under grid points (n, 3) and its code (n,) int."""
+def _surface(pts: np.ndarray, h: np.ndarray, cell: float, a: AugerParams) -> np.ndarray:
+    """Surface height (n,) m (grid frame) under grid points (n, 3): the grain inside the interior, the rim band
+    around it, the ground beyond (:func:`_surface_at` for one point, with its surface code)."""
     hl, hw = 0.5 * a.length_m, 0.5 * a.width_m
     ax, ay = np.abs(pts[:, 0] - hl), np.abs(pts[:, 1] - hw)
     inside = (ax < hl) & (ay < hw)
@@ -112,10 +113,20 @@ def _surface(pts: np.ndarray, h: np.ndarray, cell: float, a: AugerParams) -> tup
     ij = (pts[:, :2] * (1.0 / cell)).astype(np.int64)
     np.maximum(ij, 0, out=ij)
     np.minimum(ij, (h.shape[0] - 1, h.shape[1] - 1), out=ij)
-    z = np.where(band, a.rim_top_m, -a.floor_height_m)
-    z[inside] = h[ij[inside, 0], ij[inside, 1]]
-    code = SURFACE_GROUND - band - inside        # 3 ground, 2 band, 1 inside (inside implies band)
-    return z, code
+    return np.where(inside, h[ij[:, 0], ij[:, 1]], np.where(band, a.rim_top_m, -a.floor_height_m))
+
+
+def _surface_at(x: float, y: float, h: np.ndarray, cell: float, a: AugerParams) -> tuple[float, int]:
+    """:func:`_surface` of one grid point (x, y) m, on Python floats (same arithmetic): (height m, code)."""
+    hl, hw = 0.5 * a.length_m, 0.5 * a.width_m
+    ax, ay = abs(x - hl), abs(y - hw)
+    if ax < hl and ay < hw:
+        i = min(max(int(x * (1.0 / cell)), 0), h.shape[0] - 1)
+        j = min(max(int(y * (1.0 / cell)), 0), h.shape[1] - 1)
+        return float(h[i, j]), SURFACE_GRAIN
+    if ax < hl + a.band_m and ay < hw + a.band_m:
+        return a.rim_top_m, SURFACE_WALL
+    return -a.floor_height_m, SURFACE_GROUND
 
 
 def _points(spout: np.ndarray, vel: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -143,7 +154,7 @@ def first_surface(spout: np.ndarray, vel: np.ndarray, grid_from_world: np.ndarra
     for n in (_COARSE, _FINE):
         s = np.linspace(lo, hi, n)
         g = _points(sg, vg, s)
-        z, _ = _surface(g, h, cell, a)
+        z = _surface(g, h, cell, a)
         d = g[:, 2] - z                               # height above the surface below, m
         below = np.flatnonzero(d <= 0.0)
         k = int(below[0]) if below.size else n - 1   # none: only through round-off at the ground
@@ -155,11 +166,13 @@ def first_surface(spout: np.ndarray, vel: np.ndarray, grid_from_world: np.ndarra
         d_lo, d_hi = float(d[k - 1]), float(d[k])
     # the crossing inside the last bracket, the surface taken as level there (linear in time)
     s_hit = lo + (hi - lo) * (d_lo / (d_lo - d_hi)) if d_lo > d_hi else hi
-    g = _points(sg, vg, np.array([s_hit]))
-    z, code = _surface(g, h, cell, a)
-    g[0, 2] = z[0]                                   # on the surface it crossed (sub-millimetre correction)
-    w = (g[0] - t) @ r
-    return Impact(world=w, grid=g[0], time_s=s_hit, surface=int(code[0]))
+    sx, sy, _ = sg.tolist()
+    vx, vy, _ = vg.tolist()
+    gx, gy = sx + vx * s_hit, sy + vy * s_hit         # _points' arithmetic for one point
+    z, code = _surface_at(gx, gy, h, cell, a)
+    g = np.array([gx, gy, z])                          # on the surface it crossed (sub-millimetre correction)
+    w = (g - t) @ r
+    return Impact(world=w, grid=g, time_s=s_hit, surface=code)
 
 
 def _fall_time(z0: float, vz: float, z: float) -> float:
@@ -176,6 +189,17 @@ def stream_rows(spout: np.ndarray, vel: np.ndarray, t_impact: float, radius_m: f
     out[:, :3] = _points(spout, vel, s)
     out[:, 3] = radius_m
     return out
+
+
+def landing_xy(spout: np.ndarray, vel: np.ndarray, z_plane: float) -> tuple[float, float]:
+    """x and y of :func:`landing_point` (same arithmetic on Python floats, so the same bits), m."""
+    sx, sy, sz = spout.tolist()
+    dz = sz - z_plane
+    if dz <= 0.0:
+        return sx, sy
+    vx, vy, vz = vel.tolist()
+    s = (vz + math.sqrt(vz * vz + 2.0 * GRAVITY_MPS2 * dz)) / GRAVITY_MPS2
+    return sx + vx * s, sy + vy * s
 
 
 def landing_point(spout: np.ndarray, vel: np.ndarray, z_plane: float) -> np.ndarray:

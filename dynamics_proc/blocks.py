@@ -12,11 +12,12 @@ from shm_schema import ArrayBlock, Block, Field, StructBlock
 
 from .auger import STREAM_ROWS
 from .grainfill import GrainGrid
-from .model import SECTION_FIELD
 
-__all__ = ["WRITER", "STATE_FIELDS", "state_fields", "declare_blocks"]
+__all__ = ["WRITER", "STATE_FIELDS", "SECTION_FIELD", "state_fields", "declare_blocks"]
 
 WRITER = "dynamics"
+#: dyn_state field name of section k's fullness (k = 1..N)
+SECTION_FIELD = "section{k}_fullness"
 
 #: (name, unit, dtype, doc) of every dyn_state field except the per-section ones
 STATE_FIELDS: tuple[tuple[str, str, str, str], ...] = (

@@ -24,7 +24,8 @@ travels farther with the auger off), the predicted impact is safely inside the c
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -159,8 +160,8 @@ def min2x2(m: np.ndarray, next_row: np.ndarray | None = None) -> np.ndarray:
     if next_row is None:
         next_row = np.minimum(np.arange(nx) + 1, nx - 1)
     col = np.minimum(np.arange(ny) + 1, ny - 1)
-    down = m[next_row]
-    return np.fmin(np.fmin(m, down), np.fmin(m[:, col], down[:, col]))
+    pair = np.fmin(m, m[next_row])                 # each cell with its row pair
+    return np.fmin(pair, pair[:, col])             # = fmin(fmin(m, down), fmin(m[:, col], down[:, col]))
 
 
 def _inner(m: np.ndarray, p: ControllerParams) -> np.ndarray:
@@ -178,7 +179,20 @@ def section_valid(m: np.ndarray, p: ControllerParams) -> np.ndarray:
     """Whether each section of ``m`` (nx, ny) m has at least ``min_section_cells`` valid cells inside the edge
     margin, (N,) bool."""
     valid = np.count_nonzero(~np.isnan(_inner(m, p)), axis=1)
-    return np.add.reduceat(valid, np.asarray(p.section_start_rows)) >= p.min_section_cells
+    return np.add.reduceat(valid, _section_pairing(p.nx, p.section_start_rows)[0]) >= p.min_section_cells
+
+
+@lru_cache(maxsize=8)
+def _section_pairing(nx: int, section_start_rows: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """(first row of each section (N,), row paired with each row (nx,)): the next one, the last row of a section
+    with itself, so that 2 x 2 blocks stay inside their section. Read-only, computed once per grid."""
+    starts = np.asarray(section_start_rows)
+    nxt = np.minimum(np.arange(nx) + 1, nx - 1)
+    last = np.append(starts[1:], nx) - 1
+    nxt[last] = last
+    starts.setflags(write=False)
+    nxt.setflags(write=False)
+    return starts, nxt
 
 
 def section_heights(m: np.ndarray, p: ControllerParams) -> np.ndarray:
@@ -186,10 +200,7 @@ def section_heights(m: np.ndarray, p: ControllerParams) -> np.ndarray:
     the edge margin left out), (N,) float64 m; NaN where a section has fewer than ``min_section_cells`` valid
     cells. Exact for a heap whose flat top spans 2 x 2 cells."""
     m = _inner(m, p)
-    starts = np.asarray(p.section_start_rows)
-    nxt = np.minimum(np.arange(p.nx) + 1, p.nx - 1)
-    last = np.append(starts[1:], p.nx) - 1                   # last row of each section pairs with itself
-    nxt[last] = last
+    starts, nxt = _section_pairing(p.nx, p.section_start_rows)
     rowmax = np.fmax.reduce(min2x2(m, nxt), axis=1)          # NaN only for all-NaN rows
     peak = np.fmax.reduceat(rowmax, starts)
     valid = np.add.reduceat(np.count_nonzero(~np.isnan(m), axis=1), starts)
@@ -277,8 +288,7 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
     auger = bool(seen and target >= 0 and safe and near)
     with np.errstate(invalid="ignore"):
         fullness = heights / p.target_m
-    new_state = replace(st, heights=heights, last_valid_t=last_valid, forced_full=forced, full=full, estimate=est,
-                        delivered_m3=delivered,
-                        target=target, last_nudge_t=last_nudge, bias_m=bias, auger_cmd=auger, seen=seen,
-                        all_full=all_full, nudges=count)
+    new_state = ControllerState(heights=heights, last_valid_t=last_valid, forced_full=forced, full=full, estimate=est,
+                                delivered_m3=delivered, target=target, last_nudge_t=last_nudge, bias_m=bias,
+                                auger_cmd=auger, seen=seen, all_full=all_full, nudges=count)
     return new_state, ControllerOutput(nudge, auger, desired, effort, fullness)

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .auger import landing_point
+from .auger import landing_xy
 from .grainfill import GrainGrid, deposit
 
 __all__ = ["FusionParams", "FillEstimate", "initial_estimate", "landing_on", "predict", "update",
@@ -87,7 +87,7 @@ def landing_on(h: np.ndarray, spout: np.ndarray, vel: np.ndarray, grid: GrainGri
     z = float(np.max(h))
     x = y = 0.0
     for _ in range(LANDING_ITERATIONS):
-        x, y = (float(v) for v in landing_point(spout, vel, z)[:2])
+        x, y = landing_xy(spout, vel, z)
         i, j = int(x // grid.cell_m), int(y // grid.cell_m)
         if not (0 <= i < grid.nx and 0 <= j < grid.ny):
             break

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -32,6 +33,8 @@ __all__ = ["GRID_TOLERANCE", "GrainGrid", "initial_heights", "deposit", "relax",
 GRID_TOLERANCE = 1e-9
 #: pairwise exchange factor per neighbour pair (<= 1/4 keeps heights non-negative with 4 neighbours)
 EXCHANGE_FACTOR = 0.25
+#: grids whose cell centres and caps are kept (a run has two: the grain grid and the controller's)
+GRID_CACHE = 8
 
 
 def _cells(extent_m: float, cell_m: float, what: str) -> int:
@@ -103,8 +106,8 @@ def deposit(h: np.ndarray, gx: float, gy: float, vol_m3: float, grid: GrainGrid,
     """
     if vol_m3 <= 0.0:
         return h, 0.0
-    cap = grid.cap() if cap is None else cap
-    x, y = grid.centres()
+    cap = _cap(grid) if cap is None else cap
+    x, y = _centres(grid)
     r = np.hypot(x[:, None] - gx, y[None, :] - gy)
     base = -grid.tan_repose * np.maximum(r - grid.flat_radius_m, 0.0)   # heap shape, apex 0
     gap = h - base                                                        # heap height H at which a cell joins
@@ -115,10 +118,29 @@ def deposit(h: np.ndarray, gx: float, gy: float, vol_m3: float, grid: GrainGrid,
     return new, spilled
 
 
+@lru_cache(maxsize=GRID_CACHE)
+def _centres(grid: GrainGrid) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`GrainGrid.centres`, computed once per grid (read-only)."""
+    return tuple(_read_only(a) for a in grid.centres())
+
+
+@lru_cache(maxsize=GRID_CACHE)
+def _cap(grid: GrainGrid) -> np.ndarray:
+    """:meth:`GrainGrid.cap`, computed once per grid (read-only)."""
+    return _read_only(grid.cap())
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
 def _heap_height(gap: np.ndarray, target: float) -> float:
     """H with sum(max(H - gap, 0)) == target (> 0): exact, by sorting the candidate cells. gap (n,) m."""
     g0 = float(gap.min())
-    cand = np.sort(gap[gap < g0 + target])          # H <= g0 + target, so no other cell can join
+    # H <= g0 + target, so no other cell can join. The candidates hold neither NaN nor -0.0 (gap = h - base with
+    # base <= -0.0), so every sort orders them alike: the stable one is twice as fast here as the default
+    cand = np.sort(gap[gap < g0 + target], kind="stable")
     k = np.arange(1, cand.size + 1)
     csum = np.cumsum(cand)
     # V at H = cand[k-1] with the first k-1 cells active; find the last breakpoint with V <= target

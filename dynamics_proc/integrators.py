@@ -12,17 +12,16 @@ Every function maps state (9,) float64 -> new state (9,) float64 over ``dt`` sec
 """
 from __future__ import annotations
 
+import math
 from typing import Literal
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
-from .vehicles import DELTA, V, VehicleParams, derivative, kinematic_derivative, lag_exact, lag_integral
+from .vehicles import DELTA, V, VehicleParams, derivative, lag_exact, lag_exact_pair, lag_integral
 
-__all__ = ["METHODS", "step_rk4", "step_exponential", "step_ivp", "integrate"]
+__all__ = ["METHODS", "step_rk4", "step_exponential", "step_exponential_values", "step_ivp", "integrate"]
 
 METHODS = ("rk4", "exponential", "radau", "bdf")
-_KIN = (0, 1, 2, 3, 4, 5, 8)     # kinematic states, in kinematic_derivative's order
 
 
 def step_rk4(x: np.ndarray, u: tuple[float, float], p: VehicleParams, dt: float) -> np.ndarray:
@@ -39,9 +38,10 @@ def _stage_lag(x0: float, target: float, tau: float, up: float, down: float, dt:
     these are the exact point values. When it does not (stiff), the transient falls between the stage times,
     so the stages take the exact means over [0, dt/2], [0, dt] and [dt/2, dt] instead: with Simpson's
     weights that reproduces the exact integral of the lag state (the distance travelled) over the step."""
-    end = lag_exact(x0, target, tau, up, down, dt)
     if dt <= tau:
-        return x0, lag_exact(x0, target, tau, up, down, 0.5 * dt), end, end
+        mid, end = lag_exact_pair(x0, target, tau, up, down, 0.5 * dt, dt)
+        return x0, mid, end, end
+    end = lag_exact(x0, target, tau, up, down, dt)
     i_half = lag_integral(x0, target, tau, up, down, 0.5 * dt)
     i_full = lag_integral(x0, target, tau, up, down, dt)
     return 2.0 * i_half / dt, i_full / dt, 2.0 * (i_full - i_half) / dt, end
@@ -49,22 +49,61 @@ def _stage_lag(x0: float, target: float, tau: float, up: float, down: float, dt:
 
 def step_exponential(x: np.ndarray, u: tuple[float, float], p: VehicleParams, dt: float) -> np.ndarray:
     """Exact lags, RK4 kinematics driven by them; one step of ``dt`` s."""
-    xs = x.tolist()
+    return np.array(step_exponential_values(x.tolist(), u, p, dt))
+
+
+def step_exponential_values(xs: list[float], u: tuple[float, float], p: VehicleParams, dt: float) -> list[float]:
+    """:func:`step_exponential` on the state as a list of 9 Python floats (same order, same arithmetic, so the
+    same bits): the frame loop keeps the state as floats between its held-input steps.
+
+    The RK4 stages evaluate :func:`~dynamics_proc.vehicles.kinematic_derivative` inline; only the headings feed
+    back into the derivatives, so the stage positions are not formed, and stages 2 and 3 share the combine
+    heading (its yaw rate is constant)."""
     v0, vm, v1, v_end = _stage_lag(xs[V], u[0], p.drivetrain_tau_s, p.accel_max_mps2, p.brake_max_mps2, dt)
     r = p.steer_rate_max_radps
     d0, dm, d1, d_end = _stage_lag(xs[DELTA], u[1], p.steer_tau_s, r, r, dt)
-    y0 = [xs[i] for i in _KIN]
-    k1 = kinematic_derivative(y0, v0, d0, p)
-    k2 = kinematic_derivative([a + 0.5 * dt * b for a, b in zip(y0, k1)], vm, dm, p)
-    k3 = kinematic_derivative([a + 0.5 * dt * b for a, b in zip(y0, k2)], vm, dm, p)
-    k4 = kinematic_derivative([a + dt * b for a, b in zip(y0, k3)], v1, d1, p)
-    y1 = [a + (dt / 6.0) * (b + 2.0 * c + 2.0 * d + e) for a, b, c, d, e in zip(y0, k1, k2, k3, k4)]
-    return np.array([y1[0], y1[1], y1[2], y1[3], y1[4], y1[5], v_end, d_end, y1[6]])
+    cx, cy, cyaw, tx, ty, tyaw, pyaw = xs[0], xs[1], xs[2], xs[3], xs[4], xs[5], xs[8]
+    vc, wc, wb, hitch, tow = (p.combine_speed_mps, p.combine_yaw_rate_radps, p.wheelbase_m, p.hitch_offset_m,
+                              p.tow_length_m)
+    cos, sin, tan = math.cos, math.sin, math.tan
+    half = 0.5 * dt
+    # combine velocity at the stage headings cyaw, cyaw + dt/2 wc (stages 2 and 3), cyaw + dt wc
+    c_mid, c_end = cyaw + half * wc, cyaw + dt * wc
+    cx1, cy1 = vc * cos(cyaw), vc * sin(cyaw)
+    cx2, cy2 = vc * cos(c_mid), vc * sin(c_mid)
+    cx4, cy4 = vc * cos(c_end), vc * sin(c_end)
+    # tractor and cart: speed v, yaw rate r = v tan(delta) / wheelbase, trailer rate dp, stage by stage
+    r1 = v0 * tan(d0) / wb
+    rel = tyaw - pyaw
+    p1 = (v0 * sin(rel) - hitch * r1 * cos(rel)) / tow
+    tx1, ty1 = v0 * cos(tyaw), v0 * sin(tyaw)
+    t2, q2 = tyaw + half * r1, pyaw + half * p1
+    r2 = vm * tan(dm) / wb
+    rel = t2 - q2
+    p2 = (vm * sin(rel) - hitch * r2 * cos(rel)) / tow
+    tx2, ty2 = vm * cos(t2), vm * sin(t2)
+    t3, q3 = tyaw + half * r2, pyaw + half * p2
+    r3 = r2                                        # same speed and steering as stage 2
+    rel = t3 - q3
+    p3 = (vm * sin(rel) - hitch * r3 * cos(rel)) / tow
+    tx3, ty3 = vm * cos(t3), vm * sin(t3)
+    t4, q4 = tyaw + dt * r3, pyaw + dt * p3
+    r4 = v1 * tan(d1) / wb
+    rel = t4 - q4
+    p4 = (v1 * sin(rel) - hitch * r4 * cos(rel)) / tow
+    tx4, ty4 = v1 * cos(t4), v1 * sin(t4)
+    w = dt / 6.0
+    return [cx + w * (cx1 + 2.0 * cx2 + 2.0 * cx2 + cx4), cy + w * (cy1 + 2.0 * cy2 + 2.0 * cy2 + cy4),
+            cyaw + w * (wc + 2.0 * wc + 2.0 * wc + wc), tx + w * (tx1 + 2.0 * tx2 + 2.0 * tx3 + tx4),
+            ty + w * (ty1 + 2.0 * ty2 + 2.0 * ty3 + ty4), tyaw + w * (r1 + 2.0 * r2 + 2.0 * r3 + r4), v_end, d_end,
+            pyaw + w * (p1 + 2.0 * p2 + 2.0 * p3 + p4)]
 
 
 def step_ivp(x: np.ndarray, u: tuple[float, float], p: VehicleParams, dt: float,
              method: Literal["radau", "bdf"] = "radau", rtol: float = 1e-8, atol: float = 1e-10) -> np.ndarray:
     """One step of ``dt`` s with scipy ``solve_ivp`` (``Radau`` or ``BDF``). Raises RuntimeError on failure."""
+    from scipy.integrate import solve_ivp   # only the reference methods need scipy (~0.3 s to import)
+
     sol = solve_ivp(lambda _t, y: derivative(y, u, p), (0.0, dt), x, method="Radau" if method == "radau" else "BDF",
                     rtol=rtol, atol=atol)
     if not sol.success:

@@ -57,10 +57,11 @@ def tractor_offset(setpoint: tuple[float, float], p: VehicleParams) -> tuple[flo
     return setpoint[0] + p.tow_length_m + p.hitch_offset_m, setpoint[1]
 
 
-def sync_command(x: np.ndarray, setpoint: tuple[float, float], p: VehicleParams,
+def sync_command(x: np.ndarray | list[float], setpoint: tuple[float, float], p: VehicleParams,
                  g: SyncGains) -> tuple[float, float]:
-    """Held input (v_cmd m/s, delta_cmd rad) for state ``x`` (9,) and cart offset ``setpoint`` (m, m)."""
-    xs = x.tolist()
+    """Held input (v_cmd m/s, delta_cmd rad) for state ``x`` ((9,) array, or a list of its 9 floats) and cart
+    offset ``setpoint`` (m, m)."""
+    xs = x.tolist() if isinstance(x, np.ndarray) else x
     cyaw = xs[CYAW]
     c, s = math.cos(cyaw), math.sin(cyaw)
     ax, ay = tractor_offset(setpoint, p)

@@ -7,7 +7,8 @@ world over one sensor period (``steps_per_frame`` held-input steps of ``dynamics
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -15,18 +16,21 @@ from cosim.config import Scenario
 from cosim.geometry import cart_grid_from_body, invert, vehicle_pose
 
 from . import auger as ag
+from .blocks import SECTION_FIELD
 from .controller import (ControllerOutput, ControllerParams, ControllerState, Delivery, controller_step,
                          initial_controller)
 from .grainfill import GrainGrid, deposit, initial_heights, resample, volume
-from .integrators import integrate
+from .integrators import integrate, step_exponential_values
 from .machine_sync import SyncGains, cart_offset, sync_command
 from .vehicles import CX, CY, CYAW, DELTA, V, VehicleParams, cart_pose, initial_state, tractor_pose
 
-__all__ = ["ModelParams", "World", "initial_world", "step_frame", "truth_measurement", "signals",
+__all__ = ["ModelParams", "World", "SpoutGeometry", "initial_world", "step_frame", "truth_measurement", "signals",
            "spout_grid", "SECTION_FIELD"]
 
-#: dyn_state field name of section k's fullness (k = 1..N)
-SECTION_FIELD = "section{k}_fullness"
+
+
+#: (spout world (3,) m, exit velocity world (3,) m/s, spout grid (3,) m, grid_from_world (4, 4)), see spout_grid
+SpoutGeometry = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -81,13 +85,14 @@ class World:
     impact: ag.Impact
     stream: np.ndarray               # (64, 4) float32 world rows [x, y, z, radius]
     stream_points: int
+    spout: SpoutGeometry             # spout_grid(x), derived from x once per frame (the next frame starts from it)
 
 
 def _grid_from_world(x: np.ndarray, p: ModelParams) -> np.ndarray:
     return p.grid_from_cart_body @ invert(vehicle_pose(*cart_pose(x, p.vehicles)))
 
 
-def spout_grid(x: np.ndarray, p: ModelParams) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def spout_grid(x: np.ndarray, p: ModelParams) -> SpoutGeometry:
     """(spout world (3,), exit velocity world (3,), spout grid (3,), grid_from_world (4, 4)) for state x."""
     sp = ag.spout_world(float(x[CX]), float(x[CY]), float(x[CYAW]), p.auger)
     vel = ag.exit_velocity_world(float(x[CYAW]), p.auger)
@@ -95,9 +100,9 @@ def spout_grid(x: np.ndarray, p: ModelParams) -> tuple[np.ndarray, np.ndarray, n
     return sp, vel, g[:3, :3] @ sp + g[:3, 3], g
 
 
-def _stream(x: np.ndarray, h: np.ndarray, level: float, active: bool,
+def _stream(spout: SpoutGeometry, h: np.ndarray, level: float, active: bool,
             p: ModelParams) -> tuple[ag.Impact, np.ndarray, int]:
-    sp, vel, _, g = spout_grid(x, p)
+    sp, vel, _, g = spout
     imp = ag.first_surface(sp, vel, g, h, p.grid.cell_m, p.auger)
     rows = ag.stream_rows(sp, vel, imp.time_s, p.auger.stream_radius_m * math.sqrt(max(level, 0.0)))
     return imp, rows, (ag.STREAM_ROWS if active else 0)
@@ -109,11 +114,12 @@ def initial_world(s: Scenario, p: ModelParams | None = None) -> World:
     x = initial_state(s, p.vehicles)
     h = initial_heights(p.grid, s.grain.initial_fill_m)
     setpoint = (s.machine_sync.longitudinal_offset_m, s.machine_sync.lateral_offset_m)
-    imp, rows, n = _stream(x, h, 0.0, False, p)
-    _, _, spg, _ = spout_grid(x, p)
+    spout = spout_grid(x, p)
+    imp, rows, n = _stream(spout, h, 0.0, False, p)
+    spg = spout[2]
     out = ControllerOutput(0, False, float(spg[0]), float(spg[0]), np.full(p.control.sections, np.nan))
     return World(0, 0.0, x, 0.0, h, volume(h, p.grid), 0.0, 0.0, 0.0, setpoint, initial_controller(p.control), out,
-                 imp, rows, n)
+                 imp, rows, n, spout)
 
 
 def truth_measurement(h: np.ndarray, p: ModelParams) -> np.ndarray:
@@ -121,46 +127,60 @@ def truth_measurement(h: np.ndarray, p: ModelParams) -> np.ndarray:
     return resample(h, p.grid.cell_m, p.control.grid_cell_m, p.grid.length_m, p.grid.width_m)
 
 
-def _predicted_impacts(x: np.ndarray, p: ModelParams) -> tuple[float, tuple[float, float], tuple[float, float]]:
-    """From the known geometry: (drift along grid x m, landing grid xy at the target height, on the floor)."""
-    sp, vel, spg, g = spout_grid(x, p)
-    vg = g[:3, :3] @ vel
-    top = ag.landing_point(spg, vg, p.control.target_m)
-    floor = ag.landing_point(spg, vg, 0.0)
+def _predicted_impacts(spg: np.ndarray, vg: np.ndarray,
+                       p: ModelParams) -> tuple[float, tuple[float, float], tuple[float, float]]:
+    """From the known geometry, the spout ``spg`` (3,) m and exit velocity ``vg`` (3,) m/s in the cart grid frame:
+    (drift along grid x m, landing grid xy at the target height, on the floor)."""
+    top = ag.landing_xy(spg, vg, p.control.target_m)
+    floor = ag.landing_xy(spg, vg, 0.0)
     drift = 0.5 * (top[0] + floor[0]) - float(spg[0])
-    return drift, (float(top[0]), float(top[1])), (float(floor[0]), float(floor[1]))
+    return drift, top, floor
 
 
 def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
     """Advance the world by one sensor frame acting on ``meas`` (controller grid heights m, NaN holes) or None."""
     x = w.x
-    _, vel, spg, g = spout_grid(x, p)
-    drift, top, floor = _predicted_impacts(x, p)
+    _, vel, spg, g = w.spout
+    vg = g[:3, :3] @ vel
+    drift, top, floor = _predicted_impacts(spg, vg, p)
     signal = w.setpoint[0] + p.signal_offset_m
     delivery = None
     if p.control.fusion is not None:
-        delivery = Delivery(w.delivered_m3 * (1.0 + p.flow_meter_bias), spg, g[:3, :3] @ vel)
+        delivery = Delivery(w.delivered_m3 * (1.0 + p.flow_meter_bias), spg, vg)
     # the stream lands between these two points: both must be safely inside
     ctrl, out = controller_step(w.ctrl, p.control, w.t_s, meas, float(spg[0]), (top, floor), drift, signal,
                                 delivery)
     setpoint = (w.setpoint[0] + out.nudge * p.control.nudge_m, w.setpoint[1])
+    x = _advance_vehicles(x, setpoint, p)
     level, vol = w.flow_level, 0.0
     for _ in range(p.steps):
-        u = sync_command(x, setpoint, p.vehicles, p.gains)
-        x = integrate(p.method, x, u, p.vehicles, p.dt_s, 1, p.rtol, p.atol)
         level, dv = ag.flow_advance(level, out.auger_cmd, p.dt_s, p.auger)
         vol += dv
-    imp, rows, n = _stream(x, w.heights, level, vol > 0.0 or level > 0.0, p)
+    spout = spout_grid(x, p)
+    imp, rows, n = _stream(spout, w.heights, level, vol > 0.0 or level > 0.0, p)
     h, spill, spill_outside = w.heights, 0.0, 0.0
     if vol > 0.0:
         if imp.surface == ag.SURFACE_GRAIN:
             h, spill = deposit(h, float(imp.grid[0]), float(imp.grid[1]), vol, p.grid, p.cap)
         else:
             spill_outside = vol
-    return replace(w, frame=w.frame + 1, t_s=(w.frame + 1) * p.frame_dt_s, x=x, flow_level=level, heights=h,
-                   delivered_m3=w.delivered_m3 + vol, spilled_m3=w.spilled_m3 + spill + spill_outside,
-                   spilled_outside_m3=w.spilled_outside_m3 + spill_outside, setpoint=setpoint, ctrl=ctrl, out=out,
-                   impact=imp, stream=rows, stream_points=n)
+    return World(w.frame + 1, (w.frame + 1) * p.frame_dt_s, x, level, h, w.initial_m3, w.delivered_m3 + vol,
+                 w.spilled_m3 + spill + spill_outside, w.spilled_outside_m3 + spill_outside, setpoint, ctrl, out, imp,
+                 rows, n, spout)
+
+
+def _advance_vehicles(x: np.ndarray, setpoint: tuple[float, float], p: ModelParams) -> np.ndarray:
+    """The vehicle state (9,) after one frame: ``p.steps`` steps of ``p.dt_s``, each with the Machine Sync input
+    held. The exponential method keeps the state as Python floats between the steps (same bits)."""
+    if p.method == "exponential":
+        xs = x.tolist()
+        for _ in range(p.steps):
+            xs = step_exponential_values(xs, sync_command(xs, setpoint, p.vehicles, p.gains), p.vehicles, p.dt_s)
+        return np.array(xs)
+    for _ in range(p.steps):
+        x = integrate(p.method, x, sync_command(x, setpoint, p.vehicles, p.gains), p.vehicles, p.dt_s, 1, p.rtol,
+                      p.atol)
+    return x
 
 
 def signals(w: World, p: ModelParams) -> dict[str, float]:
@@ -168,7 +188,7 @@ def signals(w: World, p: ModelParams) -> dict[str, float]:
     x, vp = w.x, p.vehicles
     tx, ty, tyaw = tractor_pose(x, vp)
     px, py, pyaw = cart_pose(x, vp)
-    sp, _, spg, _ = spout_grid(x, p)
+    sp, _, spg, _ = w.spout
     long_m, lat_m = cart_offset(x, vp)
     in_cart = volume(w.heights, p.grid) - w.initial_m3
     d = {
@@ -197,6 +217,11 @@ def signals(w: World, p: ModelParams) -> dict[str, float]:
         "spilled_outside_m3": w.spilled_outside_m3, "cart_grain_m3": w.initial_m3 + in_cart,
         "peak_height_m": float(w.heights.max()),
     }
-    for k in range(p.control.sections):
-        d[SECTION_FIELD.format(k=k + 1)] = float(w.out.fullness[k])
+    d.update(zip(_section_names(p.control.sections), w.out.fullness.tolist()))
     return d
+
+
+@lru_cache(maxsize=4)
+def _section_names(sections: int) -> tuple[str, ...]:
+    """The dyn_state names of the section fullness fields, 1..N."""
+    return tuple(SECTION_FIELD.format(k=k + 1) for k in range(sections))

@@ -124,7 +124,7 @@ class DynamicsParticipant:
         sig = signals(w, self.params)
         self.rows.append(sig)
         with seg.write("dyn_state", frame) as v:
-            v.array[()] = tuple(sig[n] for n in self._names)
+            v.assign([sig[n] for n in self._names])
         with seg.write("stream", frame) as s:
             s[...] = w.stream
         with seg.write("heightmap_truth", frame) as h:

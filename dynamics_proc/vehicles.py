@@ -34,8 +34,8 @@ from cosim.config import Scenario
 
 __all__ = [
     "N_STATES", "CX", "CY", "CYAW", "TX", "TY", "TYAW", "V", "DELTA", "PYAW", "VehicleParams",
-    "derivative", "kinematic_derivative", "lag_exact", "lag_integral", "cart_pose", "tractor_pose", "hitch_point",
-    "initial_state",
+    "derivative", "kinematic_derivative", "lag_exact", "lag_exact_pair", "lag_integral", "cart_pose", "tractor_pose",
+    "hitch_point", "initial_state",
 ]
 
 N_STATES = 9
@@ -116,7 +116,19 @@ def lag_exact(x0: float, target: float, tau: float, rate_up: float, rate_down: f
     While |target - x| > tau * rate the state ramps at the limiting rate; from then on it decays as
     exp(-t / tau). Same units as x; ``tau`` s, rates in units of x per s.
     """
-    e0, sign, rate, band, t1 = _lag_phases(x0, target, tau, rate_up, rate_down)
+    return _lag_at(_lag_phases(x0, target, tau, rate_up, rate_down), x0, target, tau, t)
+
+
+def lag_exact_pair(x0: float, target: float, tau: float, rate_up: float, rate_down: float, t_a: float,
+                   t_b: float) -> tuple[float, float]:
+    """:func:`lag_exact` at two times ``t_a``, ``t_b`` (s) of one lag, its phases computed once."""
+    ph = _lag_phases(x0, target, tau, rate_up, rate_down)
+    return _lag_at(ph, x0, target, tau, t_a), _lag_at(ph, x0, target, tau, t_b)
+
+
+def _lag_at(phases: tuple, x0: float, target: float, tau: float, t: float) -> float:
+    """The lag's value at time ``t`` s from its :func:`_lag_phases`."""
+    e0, sign, rate, band, t1 = phases
     if t1 is not None:
         if t <= t1:
             return x0 + sign * rate * t

@@ -21,7 +21,7 @@ from .spec import ArrayBlock, Block, Field, SchemaError, StructBlock, check_name
 
 __all__ = [
     "ALIGN", "MAGIC", "LAYOUT_VERSION", "MAX_PROCS", "ERROR_BYTES", "PROC_DTYPE", "HEADER_DTYPE",
-    "BLOCK_HEADER_DTYPE", "SLOT_WORD", "BlockLayout", "Schema", "align_up",
+    "BLOCK_HEADER_DTYPE", "BLOCK_WORD", "SLOT_WORD", "BlockLayout", "Schema", "align_up",
 ]
 
 ALIGN = 64
@@ -70,6 +70,9 @@ HEADER_DTYPE = np.dtype(
 
 BLOCK_HEADER_DTYPE = np.dtype({"names": ["seq", "frame", "t_ns"], "formats": ["<u8", "<i8", "<i8"],
                                "itemsize": ALIGN})
+#: index of each field of a block header read as int64 words (derived from BLOCK_HEADER_DTYPE; seq is unsigned
+#: in the layout and stays far below 2**63, so both readings agree)
+BLOCK_WORD = {name: BLOCK_HEADER_DTYPE.fields[name][1] // 8 for name in BLOCK_HEADER_DTYPE.names}
 
 
 def align_up(n: int, a: int = ALIGN) -> int:

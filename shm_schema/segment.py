@@ -7,20 +7,22 @@ process's resource tracker, which then deletes it when that process exits; attac
 """
 from __future__ import annotations
 
-import contextlib
+import struct
 import sys
 import threading
 import time
 from multiprocessing import resource_tracker, shared_memory
-from typing import Iterator
 
 import msgpack
 import numpy as np
 
-from .layout import (BLOCK_HEADER_DTYPE, ERROR_BYTES, HEADER_DTYPE, LAYOUT_VERSION, MAGIC, PROC_DTYPE, Schema)
+from .layout import (BLOCK_HEADER_DTYPE, BLOCK_WORD, ERROR_BYTES, HEADER_DTYPE, LAYOUT_VERSION, MAGIC, PROC_DTYPE,
+                     Schema)
 from .spec import StructBlock
 
-__all__ = ["Segment", "StructView", "SchemaMismatch", "SegmentNotFound", "Phase", "SnapshotTimeout"]
+__all__ = ["Segment", "StructView", "BlockWrite", "SchemaMismatch", "SegmentNotFound", "Phase", "SnapshotTimeout"]
+
+_SEQ, _FRAME, _T_NS = BLOCK_WORD["seq"], BLOCK_WORD["frame"], BLOCK_WORD["t_ns"]
 
 
 class SchemaMismatch(RuntimeError):
@@ -58,14 +60,31 @@ def _attach_untracked(name: str) -> shared_memory.SharedMemory:
             resource_tracker.register = original
 
 
+#: struct-module codes of the field types that :meth:`StructView.assign` packs in one call (little-endian)
+_PACK_CODES = {"<f8": "d", "<i8": "q"}
+
+
 class StructView:
     """Attribute access to a struct block's fields, zero copy: ``v.t_s``, ``v.t_s = 1.0``."""
 
-    __slots__ = ("_arr", "_names")
+    __slots__ = ("_arr", "_names", "_packer", "_raw")
 
     def __init__(self, arr: np.ndarray):
         object.__setattr__(self, "_arr", arr)
         object.__setattr__(self, "_names", frozenset(arr.dtype.names))
+        codes = [_PACK_CODES.get(arr.dtype.fields[n][0].str) for n in arr.dtype.names]
+        packed = all(codes) and struct.calcsize("<" + "".join(codes)) == arr.dtype.itemsize
+        object.__setattr__(self, "_packer", struct.Struct("<" + "".join(codes)) if packed else None)
+        object.__setattr__(self, "_raw", arr.reshape(1).view(np.uint8))
+
+    def assign(self, values) -> None:
+        """Write every field at once, in declaration order (a sequence of as many values). A record of float64
+        and int64 fields is packed in one call (integer fields then need ints, not floats); ~1 us against ~15 us
+        for assigning a tuple to the structured array."""
+        if self._packer is not None:
+            self._packer.pack_into(self._raw, 0, *values)
+        else:
+            self._arr[()] = tuple(values)
 
     def __getattr__(self, name: str):
         if name not in self._names:
@@ -92,6 +111,29 @@ class StructView:
             setattr(self, k, v)
 
 
+class BlockWrite:
+    """Context manager of one write of a block (:meth:`Segment.write`): seq odd on entry; on a clean exit the
+    frame and time stamps, then seq even again. A plain class: a generator-based context manager costs ~2 us
+    more per write, paid by every writer for every block of every frame."""
+
+    __slots__ = ("_words", "_view", "_frame")
+
+    def __init__(self, words: memoryview, view, frame: int):
+        self._words, self._view, self._frame = words, view, frame
+
+    def __enter__(self):
+        self._words[_SEQ] += 1
+        return self._view
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        w = self._words
+        if exc_type is None:
+            w[_FRAME] = self._frame
+            w[_T_NS] = time.monotonic_ns()
+        w[_SEQ] += 1
+        return False
+
+
 class Segment:
     """Named zero-copy views over one run's blocks, plus the header's process slots."""
 
@@ -103,9 +145,15 @@ class Segment:
         self.header = np.ndarray((), HEADER_DTYPE, buffer=buf, offset=0)
         self._views: dict[str, object] = {}
         self._words: list[memoryview] = []
-        self._bheaders: dict[str, np.ndarray] = {}
+        #: each block header as int64 words [seq, frame, t_ns] (BLOCK_WORD): a word store is ~10x cheaper than a
+        #: structured field's, and every writer touches three per block per frame
+        self._bwords: dict[str, memoryview] = {}
+        raw = memoryview(buf).cast("B")
+        self._words.append(raw)
         for name, lay in schema.layout.items():
-            self._bheaders[name] = np.ndarray((), BLOCK_HEADER_DTYPE, buffer=buf, offset=lay.offset)
+            words = raw[lay.offset:lay.offset + BLOCK_HEADER_DTYPE.itemsize].cast("q")
+            self._words.append(words)
+            self._bwords[name] = words
             b = lay.block
             if isinstance(b, StructBlock):
                 self._views[name] = StructView(np.ndarray((), b.dtype, buffer=buf, offset=lay.data_offset))
@@ -201,38 +249,32 @@ class Segment:
         except KeyError:
             raise KeyError(f"no block {name!r} in this run; blocks: {sorted(self._views)}") from None
 
-    @contextlib.contextmanager
-    def write(self, name: str, frame: int) -> Iterator[object]:
-        """Write block ``name`` for ``frame`` under its seqlock (odd while writing), then stamp the frame."""
-        bh = self._bheaders[name]
-        bh["seq"] += 1
-        try:
-            yield self._views[name]
-            bh["frame"] = frame
-            bh["t_ns"] = time.monotonic_ns()
-        finally:
-            bh["seq"] += 1
+    def write(self, name: str, frame: int) -> "BlockWrite":
+        """``with seg.write(name, frame) as view:`` writes block ``name`` for ``frame`` under its seqlock (odd
+        while writing), then stamps the frame; a write that raises leaves the stamp as it was."""
+        return BlockWrite(self._bwords[name], self._views[name], frame)
 
     def frame_of(self, name: str) -> int:
         """Frame stamp of the last completed write of ``name`` (-1 before any)."""
-        return int(self._bheaders[name]["frame"])
+        return self._bwords[name][_FRAME]
 
     def seq_of(self, name: str) -> int:
-        return int(self._bheaders[name]["seq"])
+        """Seqlock counter of ``name``: odd while a write is in progress, +2 per completed write."""
+        return self._bwords[name][_SEQ]
 
     def snapshot(self, name: str, tries: int = 1000):
         """(frame, copy) of block ``name``, consistent under its seqlock; never blocks the writer.
 
         For struct blocks the copy is a dict. Raises :class:`SnapshotTimeout` after ``tries`` failed attempts.
         """
-        bh = self._bheaders[name]
+        bw = self._bwords[name]
         v = self._views[name]
         for attempt in range(tries):
-            s1 = int(bh["seq"])
+            s1 = bw[_SEQ]
             if s1 % 2 == 0:
                 data = v.as_dict() if isinstance(v, StructView) else np.array(v, copy=True)
-                frame = int(bh["frame"])
-                if int(bh["seq"]) == s1:
+                frame = bw[_FRAME]
+                if bw[_SEQ] == s1:
                     return frame, data
             if attempt > 8:
                 time.sleep(50e-6)
@@ -294,8 +336,8 @@ class Segment:
     def close(self) -> None:
         """Drop every view and unmap (attachers and owner alike). Idempotent."""
         self._views.clear()
-        self._bheaders.clear()
-        for w in self._words:
+        self._bwords.clear()
+        for w in reversed(self._words):
             w.release()
         self._words.clear()
         self.header = None

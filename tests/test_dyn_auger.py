@@ -109,3 +109,11 @@ def test_stream_rows_shape_and_ends():
     np.testing.assert_allclose(rows[0, :3], sp, atol=1e-5)
     np.testing.assert_allclose(rows[-1, :3], imp.world, atol=2e-3)
     assert np.all(np.diff(rows[:, 2]) < 0)                 # falling all the way
+
+
+@settings(max_examples=100, deadline=None)
+@given(spout=st.lists(st.floats(-10.0, 10.0), min_size=3, max_size=3),
+       vel=st.lists(st.floats(-8.0, 8.0), min_size=3, max_size=3), z=st.floats(-2.0, 12.0))
+def test_landing_xy_is_landing_point_to_the_bit(spout, vel, z):
+    s, v = np.array(spout), np.array(vel)
+    assert list(ag.landing_xy(s, v, z)) == ag.landing_point(s, v, z)[:2].tolist()

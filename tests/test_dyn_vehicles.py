@@ -11,10 +11,10 @@ from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
 from cosim.config import Scenario
-from dynamics_proc.integrators import integrate, step_ivp
+from dynamics_proc.integrators import integrate, step_exponential, step_exponential_values, step_ivp
 from dynamics_proc.machine_sync import cart_offset, sync_command, tractor_offset
 from dynamics_proc.vehicles import (CX, CY, DELTA, PYAW, TX, TY, TYAW, V, VehicleParams, cart_pose, initial_state,
-                                    lag_exact, lag_integral)
+                                    kinematic_derivative, lag_exact, lag_integral)
 
 
 def scen(**kw) -> Scenario:
@@ -89,6 +89,34 @@ def test_exponential_keeps_the_stiff_distance_exact():
     assert got == pytest.approx(exact, abs=1e-12)
     rk = integrate("rk4", x, u, p, 0.1)[TX] - x[TX]
     assert abs(rk - exact) > 1e-3
+
+
+def _exponential_step_reference(x, u, p, dt):
+    """The exponential step written plainly from kinematic_derivative (the frame loop's inlined arithmetic must
+    give these bits)."""
+    from dynamics_proc.integrators import _stage_lag
+    v0, vm, v1, v_end = _stage_lag(x[V], u[0], p.drivetrain_tau_s, p.accel_max_mps2, p.brake_max_mps2, dt)
+    r = p.steer_rate_max_radps
+    d0, dm, d1, d_end = _stage_lag(x[DELTA], u[1], p.steer_tau_s, r, r, dt)
+    y0 = [x[i] for i in (0, 1, 2, 3, 4, 5, 8)]
+    k1 = kinematic_derivative(y0, v0, d0, p)
+    k2 = kinematic_derivative([a + 0.5 * dt * b for a, b in zip(y0, k1)], vm, dm, p)
+    k3 = kinematic_derivative([a + 0.5 * dt * b for a, b in zip(y0, k2)], vm, dm, p)
+    k4 = kinematic_derivative([a + dt * b for a, b in zip(y0, k3)], v1, d1, p)
+    y1 = [a + (dt / 6.0) * (b + 2.0 * c + 2.0 * d + e) for a, b, c, d, e in zip(y0, k1, k2, k3, k4)]
+    return [y1[0], y1[1], y1[2], y1[3], y1[4], y1[5], v_end, d_end, y1[6]]
+
+
+@settings(max_examples=200, deadline=None)
+@given(state=st.lists(st.floats(-3.0, 3.0), min_size=9, max_size=9), v_cmd=st.floats(0.0, 6.0),
+       d_cmd=st.floats(-0.6, 0.6), dt=st.sampled_from([0.002, 0.01, 0.1]), tau=st.sampled_from([0.001, 0.5]),
+       radius=st.sampled_from([None, 60.0]))
+def test_exponential_step_is_bit_identical_to_its_plain_form(state, v_cmd, d_cmd, dt, tau, radius):
+    combine = {"path": "arc", "path_radius_m": radius} if radius else {}
+    p = VehicleParams.from_scenario(scen(tractor={"drivetrain_tau_s": tau}, combine=combine))
+    got = step_exponential_values(list(state), (v_cmd, d_cmd), p, dt)
+    assert got == _exponential_step_reference(state, (v_cmd, d_cmd), p, dt)
+    assert step_exponential(np.array(state), (v_cmd, d_cmd), p, dt).tolist() == got
 
 
 @pytest.mark.parametrize("method,tol", [("rk4", 1e-9), ("exponential", 1e-14), ("radau", 1e-7), ("bdf", 1e-6)])

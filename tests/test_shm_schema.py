@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import multiprocessing as mp
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -149,3 +150,27 @@ def test_error_slot_round_trip_truncates_long_tracebacks():
     err = seg.read_error("writer_b")
     assert err["frame"] == 12 and err["type"] == "ValueError" and err["traceback"].startswith("...")
     assert seg.read_error("writer_a") is None
+
+
+def test_a_failed_write_keeps_the_stamp_and_releases_the_seqlock():
+    seg = Segment.local(make_schema())
+    with seg.write("grid", 3) as g:
+        g[...] = 1.0
+    with pytest.raises(ZeroDivisionError):
+        with seg.write("grid", 4):
+            assert seg.seq_of("grid") == 3
+            1 / 0
+    assert seg.frame_of("grid") == 3 and seg.seq_of("grid") == 4
+    assert seg.snapshot("grid")[0] == 3
+
+
+def test_assign_writes_every_field_in_order_like_a_tuple():
+    seg = Segment.local(make_schema())
+    v = seg.view("state")
+    v.assign([0.25, -3.5, 2**40 + 3])
+    assert v.as_dict() == {"t_s": 0.25, "x_m": -3.5, "count": 2**40 + 3}
+    ref = np.zeros((), v.array.dtype)
+    ref[()] = (0.25, -3.5, 2**40 + 3)
+    assert v.array.tobytes() == ref.tobytes()
+    with pytest.raises(struct.error, match="integer"):
+        v.assign([0.0, 0.0, 1.5])                          # no silent truncation of an integer field

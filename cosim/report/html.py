@@ -5,8 +5,6 @@ import html
 from pathlib import Path
 from typing import Sequence
 
-import matplotlib.pyplot as plt
-
 from .figures import DPI, fig_auger, fig_fullness, fig_heightmaps, fig_profile
 from .rundata import RunData
 
@@ -69,7 +67,6 @@ def write_comparison_report(runs: Sequence[RunData], out: Path, notes: str = "")
                          f"Fig 8: ground-truth against perceived height map ({r.path.name})", fig_heightmaps(r)))
     for name, _, fig in figs:
         fig.savefig(out / name, dpi=DPI)
-        plt.close(fig)
     head = "".join(f"<th>{html.escape(r.path.name)}</th>" for r in runs)
     body = []
     rows = [metrics_row(r.summary) for r in runs]

@@ -1,0 +1,28 @@
+"""The run directory's outputs and the in-memory view of them that the end-of-run figures are drawn from."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from cosim.config import Scenario
+from cosim.inprocess import simulate
+from cosim.outputs import run_data, write_outputs, write_scenario
+from cosim.report import load_run
+
+
+def test_figures_see_what_the_run_directory_holds(tmp_path):
+    sc = Scenario.model_validate({"format_version": 1, "feedback": "ground_truth", "renderer": "none",
+                                  "duration_s": 3.0})
+    run = simulate(sc)
+    write_scenario(tmp_path, sc)
+    summary = write_outputs(tmp_path, sc, run.recorder, run.ring, wall_time_s=run.wall_time_s, error=None)
+    mem, disk = run_data(tmp_path, sc, summary, run.recorder), load_run(tmp_path)
+    assert mem.scenario == disk.scenario
+    assert json.dumps(mem.summary, sort_keys=True) == json.dumps(disk.summary, sort_keys=True)
+    assert list(mem.series) == list(disk.series)
+    for k, v in disk.series.items():
+        assert mem.series[k].dtype == v.dtype and np.array_equal(mem.series[k], v, equal_nan=True), k
+    assert disk.heightmap_perceived is None and mem.heightmap_perceived is None
+    assert mem.heightmap_truth.dtype == disk.heightmap_truth.dtype
+    assert np.array_equal(mem.heightmap_truth, disk.heightmap_truth)
