@@ -1,0 +1,415 @@
+"""Replay recorded perception inputs: per-stage cost (wall or callgrind instructions) and a bit-identity check.
+
+A fixed workload for the perception process, independent of the machine's load and of the other processes:
+
+* ``record``: runs a scenario in-process (default: ``default`` with its GL renderer; ``--renderer mock`` with
+  ``render.mock_scale`` 1.0 writes the same bytes) and keeps, for every ``--every``-th frame (plus the
+  ``--offsets`` after it), exactly what the perception participant reads: the rig's depth images, ``dyn_state``,
+  ``heightmap_truth`` and ``stream``. Written to one ``.npz`` (with the resolved scenario).
+* ``replay``: writes each recorded frame into a local segment and runs ``PerceptionParticipant`` step + rest +
+  flush (the overlapped participant, as in a run), keeping ``perc_state`` (every field but the ``*_ms``
+  timings), ``heightmap_perceived`` and ``lidar_points``. ``--save`` writes them; ``--check`` compares them
+  bit for bit with a saved reference (exit status 1 on any difference). Then the stages one by one over all
+  frames (``--stages``): lidar (resample + noise), points (the lidar_points record), level (level points and
+  border flags), cart, heightmap, impact, accuracy, and the whole participant step.
+* ``--callgrind``: under ``valgrind --tool=callgrind --collect-atstart=no`` each stage's loop is collected alone
+  and dumped under its name (a small client-request library is compiled on first use into ``bench/out``);
+  ``python bench/perception_replay.py totals callgrind.out.PID`` then prints instructions per stage and frame.
+
+Run from the repository root (``OPENBLAS_NUM_THREADS=1`` is set here, as in a run's processes), e.g.::
+
+    python bench/perception_replay.py record --out bench/out/replay/default.npz
+    python bench/perception_replay.py replay bench/out/replay/default.npz --check bench/out/replay/ref.npz --stages
+    LP_NUM_THREADS=0 valgrind --tool=callgrind --collect-atstart=no --callgrind-out-file=bench/out/cg.%p \\
+        python bench/perception_replay.py replay bench/out/replay/default.npz --stages --callgrind --limit 30
+    python bench/perception_replay.py totals bench/out/cg.*
+"""
+from __future__ import annotations
+
+import argparse
+import ctypes
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")   # as in a run's processes (cosim/threadpools.py)
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from cosim.config import Scenario  # noqa: E402
+from cosim.loader import load_scenario, resolve_scenario_arg  # noqa: E402
+
+#: stages timed or counted one by one, in pipeline order
+STAGES = ("lidar", "points", "level", "cart", "heightmap", "impact", "accuracy", "step")
+#: truth blocks the accuracy evaluation reads
+TRUTH_BLOCKS = ("heightmap_truth", "stream")
+_CG_SOURCE = """#include <valgrind/callgrind.h>
+void cg_toggle(void) { CALLGRIND_TOGGLE_COLLECT; }
+void cg_dump(const char *name) { CALLGRIND_DUMP_STATS_AT(name); }
+void cg_zero(void) { CALLGRIND_ZERO_STATS; }
+"""
+
+
+# -- recording ---------------------------------------------------------------------------------------------------
+def record(scenario: Scenario, path: Path, every: int, offsets: tuple[int, ...], frames: int | None) -> int:
+    """Run ``scenario`` in-process and save the perception inputs of the kept frames to ``path``; returns how many
+    frames were kept."""
+    from cosim.inprocess import simulate
+    from perception_proc import participant as perc_mod
+
+    kept: dict[str, list] = {"frame": [], "state": [], **{b: [] for b in TRUTH_BLOCKS}}
+    images: dict[str, list] = {}
+    base_create = perc_mod.create
+
+    def create(sc):
+        p = base_create(sc)
+        step = p.step
+
+        def recording_step(frame: int):
+            if frame % every in offsets:
+                seg = p.segment
+                kept["frame"].append(frame)
+                kept["state"].append(seg.view("dyn_state").as_dict())
+                for b in TRUTH_BLOCKS:
+                    kept[b].append(np.array(seg.view(b), copy=True))
+                for name, img in p._images:
+                    images.setdefault(name, []).append(np.array(img, copy=True))
+            return step(frame)
+
+        p.step = recording_step
+        return p
+
+    perc_mod.create = create                    # the ring resolves "perception_proc.participant:create" lazily
+    try:
+        simulate(scenario, frames=frames)
+    finally:
+        perc_mod.create = base_create
+    names = list(kept["state"][0])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(
+        path, scenario=np.array(scenario.model_dump_json()), frames=np.array(kept["frame"], np.int64),
+        state_names=np.array(names), state=np.array([[s[n] for n in names] for s in kept["state"]], np.float64),
+        **{b: np.stack(kept[b]) for b in TRUTH_BLOCKS}, **{f"img_{k}": np.stack(v) for k, v in images.items()})
+    return len(kept["frame"])
+
+
+class Recording:
+    """A recorded workload: ``scenario``, ``frames`` (F,) int64, per frame the ``dyn_state`` dict, the truth blocks
+    and the depth images by block name."""
+
+    def __init__(self, path: Path, limit: int | None = None):
+        z = np.load(path)
+        self.scenario = Scenario.model_validate_json(str(z["scenario"]))
+        n = len(z["frames"]) if limit is None else min(limit, len(z["frames"]))
+        self.frames = z["frames"][:n]
+        names = [str(s) for s in z["state_names"]]
+        self.states = [dict(zip(names, row)) for row in z["state"][:n]]
+        self.truth = {b: z[b][:n] for b in TRUTH_BLOCKS}
+        self.images = {k[4:]: z[k][:n] for k in z.files if k.startswith("img_")}
+
+
+# -- replay ------------------------------------------------------------------------------------------------------
+def _segment(scenario: Scenario):
+    from cosim.specs import build_schema, ring_specs
+    from shm_schema import Segment
+
+    return Segment.local(build_schema(scenario, ring_specs(scenario)))
+
+
+def _load_inputs(seg, rec: Recording, i: int) -> int:
+    """Write recorded frame ``i`` into the segment's input blocks; returns its frame id."""
+    frame = int(rec.frames[i])
+    with seg.write("dyn_state", frame) as v:
+        v.update(rec.states[i])
+    for b in TRUTH_BLOCKS:
+        with seg.write(b, frame) as v:
+            v[...] = rec.truth[b][i]
+    for name, imgs in rec.images.items():
+        with seg.write(name, frame) as v:
+            v[...] = imgs[i]
+    return frame
+
+
+def _is_timing(name: str) -> bool:
+    return name.endswith("_ms")
+
+
+def replay_outputs(rec: Recording) -> dict[str, np.ndarray]:
+    """Every recorded frame through a fresh participant (step, rest, flush): ``state_names`` (S,), ``state``
+    (F, S) float64 (every ``perc_state`` field but the timings), ``heights`` (F, nx, ny) float32, ``points``
+    (F, N, 4) float32."""
+    from perception_proc.participant import PerceptionParticipant
+
+    seg = _segment(rec.scenario)
+    part = PerceptionParticipant(rec.scenario)
+    part.start(seg)
+    names = [n for n in seg.view("perc_state").array.dtype.names if not _is_timing(n)]
+    state, heights, points = [], [], []
+    for i in range(len(rec.frames)):
+        frame = _load_inputs(seg, rec, i)
+        rest = part.step(frame)
+        if rest is not None:
+            rest()
+        part.flush()
+        st = seg.view("perc_state").as_dict()
+        state.append([st[n] for n in names])
+        heights.append(np.array(seg.view("heightmap_perceived"), copy=True))
+        points.append(np.array(seg.view("lidar_points"), copy=True))
+    part.close()
+    return {"state_names": np.array(names), "state": np.array(state, np.float64), "heights": np.stack(heights),
+            "points": np.stack(points)}
+
+
+def compare(out: dict[str, np.ndarray], ref: dict[str, np.ndarray]) -> list[str]:
+    """Differences between two :func:`replay_outputs` results, bit for bit (NaN equals NaN of the same bits);
+    empty when identical."""
+    problems = []
+    names, ref_names = [str(s) for s in out["state_names"]], [str(s) for s in ref["state_names"]]
+    if names != ref_names:
+        problems.append(f"perc_state fields differ: {sorted(set(names) ^ set(ref_names))}")
+        return problems
+    for key in ("state", "heights", "points"):
+        a, b = out[key], ref[key]
+        if a.shape != b.shape:
+            problems.append(f"{key}: shape {a.shape} vs {b.shape}")
+            continue
+        diff = a.view(np.uint8).reshape(a.shape[0], -1) != b.view(np.uint8).reshape(b.shape[0], -1)
+        bad = np.flatnonzero(diff.any(axis=1))
+        if bad.size == 0:
+            continue
+        if key == "state":
+            cols = np.flatnonzero((a != b) & ~(np.isnan(a) & np.isnan(b)))
+            fields = sorted({names[c % len(names)] for c in cols})
+            problems.append(f"state: {bad.size} frames differ, fields {fields}")
+        else:
+            with np.errstate(invalid="ignore"):
+                worst = float(np.nanmax(np.abs(a.astype(np.float64) - b)))
+            problems.append(f"{key}: {bad.size} frames differ (largest difference {worst:.3g} m)")
+    return problems
+
+
+# -- stages ------------------------------------------------------------------------------------------------------
+class _Callgrind:
+    """Callgrind client requests through a tiny compiled library (``bench/out/cgreq.so``)."""
+
+    def __init__(self):
+        lib = ROOT / "bench" / "out" / "cgreq.so"
+        if not lib.exists():
+            src = lib.with_suffix(".c")
+            lib.parent.mkdir(parents=True, exist_ok=True)
+            src.write_text(_CG_SOURCE)
+            subprocess.run(["cc", "-O1", "-shared", "-fPIC", "-o", str(lib), str(src)], check=True)
+        self.lib = ctypes.CDLL(str(lib))
+
+    @contextmanager
+    def collect(self, name: str) -> Iterator[None]:
+        self.lib.cg_zero()
+        self.lib.cg_toggle()
+        try:
+            yield
+        finally:
+            self.lib.cg_toggle()
+            self.lib.cg_dump(name.encode())
+
+
+class _Clock:
+    """Wall time per stage (``time.perf_counter``) and process CPU time."""
+
+    def __init__(self):
+        self.rows: dict[str, tuple[float, float]] = {}
+
+    @contextmanager
+    def collect(self, name: str) -> Iterator[None]:
+        w, c = time.perf_counter(), time.process_time()
+        try:
+            yield
+        finally:
+            self.rows[name] = (time.perf_counter() - w, time.process_time() - c)
+
+
+def run_stages(rec: Recording, meter, repeat: int = 1) -> dict[str, int]:
+    """Each stage over every recorded frame (``repeat`` times), inputs of later stages computed beforehand
+    outside the meter; returns the number of calls per stage."""
+    from perception_proc.participant import PerceptionParticipant
+
+    seg = _segment(rec.scenario)
+    part = PerceptionParticipant(rec.scenario)
+    part.start(seg)
+    pipe = part.pipeline
+    imgs = [[rec.images[name][i] for name, _ in part._images] for i in range(len(rec.frames))]
+    frames = [int(f) for f in rec.frames]
+    gathered = [pipe.gather(im) for im in imgs]
+    calls: dict[str, int] = {}
+    with meter.collect("lidar"):
+        for _ in range(repeat):
+            ranges = [pipe.noisy(pipe.resample_gathered(g), f) for g, f in zip(gathered, frames)]
+    calls["lidar"] = repeat * len(frames)
+    with meter.collect("points"):
+        for _ in range(repeat):
+            for r in ranges:
+                pipe.points(r)
+    calls["points"] = repeat * len(frames)
+    from perception_proc.rim import border_beams, find_cart
+
+    with meter.collect("level"):
+        for _ in range(repeat):
+            lvl = [(pipe.level_points(r), border_beams(r, pipe.shape)) for r in ranges]
+    calls["level"] = repeat * len(frames)
+    sc = rec.scenario
+    sigma = sc.sensor.noise.range_sigma_m
+    headings = []
+    for i, st in enumerate(rec.states):
+        from perception_proc import accuracy as acc
+
+        headings.append(part._heading(st, acc.world_from_parent(sc, st)))
+    with meter.collect("cart"):
+        for _ in range(repeat):
+            carts = [find_cart(p, b, sc.cart, h, sigma) for (p, b), h in zip(lvl, headings)]
+    calls["cart"] = repeat * len(frames)
+    from perception_proc.heightmap import height_map
+
+    valid = [i for i, c in enumerate(carts) if c.valid]
+    with meter.collect("heightmap"):
+        for _ in range(repeat):
+            hms = {i: height_map(lvl[i][0], carts[i].level_from_grid, sc.cart, sc.controller.grid_cell_m,
+                                 sc.perception.min_points_per_cell, sigma) for i in valid}
+    calls["heightmap"] = repeat * len(valid)
+    from perception_proc.impact import blank_under_stream, find_impact
+
+    def impact(i):
+        lfg, hm = carts[i].level_from_grid, hms[i]
+        sg = (pipe.level_from_sensor[:3, 3] - lfg[:3, 3]) @ lfg[:3, :3]
+        heights = hm.heights.copy()
+        imp = find_impact(hm.grid_points, hm.stream, heights, pipe.cell_xy, sc.perception.impact_search_radius_m,
+                          (float(sg[0]), float(sg[1])))
+        blank_under_stream(heights, imp, pipe.cell_xy)
+        return imp
+
+    with meter.collect("impact"):
+        for _ in range(repeat):
+            for i in valid:
+                impact(i)
+    calls["impact"] = repeat * len(valid)
+    # the accuracy evaluation of the frames the participant evaluates (the frame's seeded beam sample)
+    evaluated = [i for i, f in enumerate(frames) if part._accuracy_beams(f) is not None]
+    results = {}
+    for i in evaluated:
+        results[i] = pipe.perceive(ranges[i], headings[i], with_points=False)
+    clean = [pipe.resample_gathered(g) for g in gathered]
+    with meter.collect("accuracy"):
+        for _ in range(repeat):
+            for i in evaluated:
+                st = rec.states[i]
+                beams = part._accuracy_beams(frames[i])
+                wfp = acc.world_from_parent(sc, st)
+                part._accuracy(st, beams, clean[i][beams], results[i], wfp, rec.truth["heightmap_truth"][i],
+                               rec.truth["stream"][i])
+    calls["accuracy"] = repeat * len(evaluated)
+    # the whole participant: step, rest, flush (accuracy included on the evaluated frames)
+    for i in range(len(frames)):
+        _load_inputs(seg, rec, i)        # warm the segment views
+    with meter.collect("step"):
+        for _ in range(repeat):
+            for i in range(len(frames)):
+                _load_inputs(seg, rec, i)
+                rest = part.step(frames[i])
+                if rest is not None:
+                    rest()
+                part.flush()
+    calls["step"] = repeat * len(frames)
+    calls["_evaluated"] = repeat * len(evaluated)
+    part.close()
+    return calls
+
+
+# -- callgrind dumps ---------------------------------------------------------------------------------------------
+def dump_totals(paths: list[Path]) -> dict[str, int]:
+    """Instructions (Ir) per dump name, summed over the callgrind output files ``paths``."""
+    out: dict[str, int] = {}
+    for p in paths:
+        text = p.read_text(errors="replace")
+        name = re.search(r"^desc: Trigger: Client Request: (.*)$", text, re.M)
+        total = re.search(r"^(?:summary|totals): (\d+)", text, re.M)
+        if name and total:
+            out[name.group(1).strip()] = out.get(name.group(1).strip(), 0) + int(total.group(1))
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("record", help="record a scenario's perception inputs")
+    r.add_argument("--out", type=Path, required=True)
+    r.add_argument("--scenario", default="default")
+    r.add_argument("--renderer", choices=("gl", "mock"), default=None)
+    r.add_argument("--frames", type=int, default=None, help="frames to simulate (default: the whole scenario)")
+    r.add_argument("--every", type=int, default=20)
+    r.add_argument("--offsets", default="0,7", help="kept frames: frame %% every in these")
+    p = sub.add_parser("replay", help="replay a recording")
+    p.add_argument("recording", type=Path)
+    p.add_argument("--limit", type=int, default=None, help="first LIMIT recorded frames only")
+    p.add_argument("--save", type=Path, help="write the outputs (reference for --check)")
+    p.add_argument("--check", type=Path, help="compare the outputs bit for bit with a saved reference")
+    p.add_argument("--stages", action="store_true", help="measure the stages one by one")
+    p.add_argument("--repeat", type=int, default=1)
+    p.add_argument("--callgrind", action="store_true", help="collect stages under callgrind instead of timing")
+    t = sub.add_parser("totals", help="instructions per stage from callgrind output files")
+    t.add_argument("files", type=Path, nargs="+")
+    t.add_argument("--calls", type=Path, help="the calls JSON a --callgrind replay printed (per-call figures)")
+    a = ap.parse_args()
+    if a.cmd == "record":
+        extra = {"renderer": a.renderer} if a.renderer else {}
+        if a.renderer == "mock":
+            extra["render"] = {"mock_scale": 1.0}
+        sc = load_scenario(resolve_scenario_arg(a.scenario), extra=extra or None)
+        n = record(sc, a.out, a.every, tuple(int(x) for x in a.offsets.split(",")), a.frames)
+        print(f"kept {n} frames in {a.out}")
+    elif a.cmd == "replay":
+        rec = Recording(a.recording, a.limit)
+        if a.save or a.check:
+            out = replay_outputs(rec)
+            if a.save:
+                np.savez_compressed(a.save, **out)
+                print(f"saved outputs of {len(rec.frames)} frames to {a.save}")
+            if a.check:
+                ref = dict(np.load(a.check))
+                if a.limit is not None:
+                    ref = {k: (v if k == "state_names" else v[:a.limit]) for k, v in ref.items()}
+                problems = compare(out, ref)
+                print("bit-identical" if not problems else "DIFFERENT:\n  " + "\n  ".join(problems))
+                if problems:
+                    sys.exit(1)
+        if a.stages:
+            meter = _Callgrind() if a.callgrind else _Clock()
+            calls = run_stages(rec, meter, a.repeat)
+            print(json.dumps(calls))
+            if isinstance(meter, _Clock):
+                print("| stage | calls | wall ms per call | CPU ms per call |")
+                print("|---|---:|---:|---:|")
+                for s in STAGES:
+                    w, c = meter.rows[s]
+                    n = max(calls[s], 1)
+                    print(f"| {s} | {calls[s]} | {1e3 * w / n:.3f} | {1e3 * c / n:.3f} |")
+    else:
+        totals = dump_totals(a.files)
+        calls = json.loads(a.calls.read_text()) if a.calls else {}
+        print("| stage | instructions (M) | calls | M per call |")
+        print("|---|---:|---:|---:|")
+        for s in STAGES:
+            if s in totals:
+                n = calls.get(s, 0)
+                per = f"{totals[s] / n / 1e6:.2f}" if n else ""
+                print(f"| {s} | {totals[s] / 1e6:.1f} | {n or ''} | {per} |")
+
+
+if __name__ == "__main__":
+    main()
