@@ -14,7 +14,8 @@ A fixed workload for the perception process, independent of the machine's load a
   border flags), cart, heightmap, impact, accuracy, and the whole participant step.
 * ``--callgrind``: under ``valgrind --tool=callgrind --collect-atstart=no`` each stage's loop is collected alone
   and dumped under its name (a small client-request library is compiled on first use into ``bench/out``);
-  ``python bench/perception_replay.py totals callgrind.out.PID`` then prints instructions per stage and frame.
+  ``python bench/perception_replay.py totals callgrind.out.PID.*`` then prints instructions per stage and call;
+  ``--focus STAGE:MODULE:FUNCTION`` adds the inclusive count of one function within a stage.
 
 Run from the repository root (``OPENBLAS_NUM_THREADS=1`` is set here, as in a run's processes), e.g.::
 
@@ -221,6 +222,52 @@ class _Callgrind:
             self.lib.cg_dump(name.encode())
 
 
+class _Focus:
+    """Callgrind collection only inside ``module:function`` while stage ``stage`` runs (inclusive instructions
+    of that function, dumped as ``stage/module:function``); other stages are not collected."""
+
+    def __init__(self, cg: _Callgrind, spec: str):
+        self.cg = cg
+        self.stage, _, self.target = spec.partition(":")
+        self.module, _, self.function = self.target.partition(":")
+
+    @contextmanager
+    def collect(self, name: str) -> Iterator[None]:
+        if name != self.stage:
+            yield
+            return
+        import functools
+        import importlib
+
+        mod = importlib.import_module(self.module)
+        *owners, attr = self.function.split(".")          # a function, or a class's method: "Class.method"
+        for o in owners:
+            mod = getattr(mod, o)
+        fn = getattr(mod, attr)
+        depth = [0]
+        lib = self.cg.lib
+
+        @functools.wraps(fn)
+        def wrapped(*args, **kwargs):
+            depth[0] += 1
+            if depth[0] == 1:
+                lib.cg_toggle()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                if depth[0] == 1:
+                    lib.cg_toggle()
+                depth[0] -= 1
+
+        setattr(mod, attr, wrapped)
+        lib.cg_zero()
+        try:
+            yield
+        finally:
+            setattr(mod, attr, fn)
+            lib.cg_dump(f"{self.stage}/{self.target}".encode())
+
+
 class _Clock:
     """Wall time per stage (``time.perf_counter``) and process CPU time."""
 
@@ -236,57 +283,43 @@ class _Clock:
             self.rows[name] = (time.perf_counter() - w, time.process_time() - c)
 
 
-def run_stages(rec: Recording, meter, repeat: int = 1) -> dict[str, int]:
-    """Each stage over every recorded frame (``repeat`` times), inputs of later stages computed beforehand
-    outside the meter; returns the number of calls per stage."""
+def run_stages(rec: Recording, meter, repeat: int = 1, upto: str | None = None) -> dict[str, int]:
+    """Each stage over every recorded frame (``repeat`` times), in frame order, after one call outside the
+    meter (first-call costs: lazy imports, caches); the inputs of later stages are computed outside the meter
+    as well. Stages after ``upto`` are left out. Returns the number of metered calls per stage."""
+    from perception_proc import accuracy as acc
+    from perception_proc.heightmap import height_map
+    from perception_proc.impact import blank_under_stream, find_impact
     from perception_proc.participant import PerceptionParticipant
+    from perception_proc.rim import border_beams, find_cart
 
     seg = _segment(rec.scenario)
     part = PerceptionParticipant(rec.scenario)
     part.start(seg)
-    pipe = part.pipeline
-    imgs = [[rec.images[name][i] for name, _ in part._images] for i in range(len(rec.frames))]
-    frames = [int(f) for f in rec.frames]
-    gathered = [pipe.gather(im) for im in imgs]
-    calls: dict[str, int] = {}
-    with meter.collect("lidar"):
-        for _ in range(repeat):
-            ranges = [pipe.noisy(pipe.resample_gathered(g), f) for g, f in zip(gathered, frames)]
-    calls["lidar"] = repeat * len(frames)
-    with meter.collect("points"):
-        for _ in range(repeat):
-            for r in ranges:
-                pipe.points(r)
-    calls["points"] = repeat * len(frames)
-    from perception_proc.rim import border_beams, find_cart
-
-    with meter.collect("level"):
-        for _ in range(repeat):
-            lvl = [(pipe.level_points(r), border_beams(r, pipe.shape)) for r in ranges]
-    calls["level"] = repeat * len(frames)
-    sc = rec.scenario
+    pipe, sc = part.pipeline, rec.scenario
     sigma = sc.sensor.noise.range_sigma_m
-    headings = []
-    for i, st in enumerate(rec.states):
-        from perception_proc import accuracy as acc
+    frames = [int(f) for f in rec.frames]
+    gathered = [pipe.gather([rec.images[name][i] for name, _ in part._images]) for i in range(len(frames))]
+    headings = [part._heading(st, acc.world_from_parent(sc, st)) for st in rec.states]
+    out: dict[str, dict] = {}
 
-        headings.append(part._heading(st, acc.world_from_parent(sc, st)))
-    with meter.collect("cart"):
-        for _ in range(repeat):
-            carts = [find_cart(p, b, sc.cart, h, sigma) for (p, b), h in zip(lvl, headings)]
-    calls["cart"] = repeat * len(frames)
-    from perception_proc.heightmap import height_map
+    def lidar(i):
+        return pipe.noisy(pipe.resample_gathered(gathered[i]), frames[i])
 
-    valid = [i for i, c in enumerate(carts) if c.valid]
-    with meter.collect("heightmap"):
-        for _ in range(repeat):
-            hms = {i: height_map(lvl[i][0], carts[i].level_from_grid, sc.cart, sc.controller.grid_cell_m,
-                                 sc.perception.min_points_per_cell, sigma) for i in valid}
-    calls["heightmap"] = repeat * len(valid)
-    from perception_proc.impact import blank_under_stream, find_impact
+    def level(i):
+        r = out["lidar"][i]
+        return pipe.level_points(r), border_beams(r, pipe.shape)
+
+    def cart(i):
+        p, b = out["level"][i]
+        return find_cart(p, b, sc.cart, headings[i], sigma)
+
+    def heightmap(i):
+        return height_map(out["level"][i][0], out["cart"][i].level_from_grid, sc.cart, sc.controller.grid_cell_m,
+                          sc.perception.min_points_per_cell, sigma)
 
     def impact(i):
-        lfg, hm = carts[i].level_from_grid, hms[i]
+        lfg, hm = out["cart"][i].level_from_grid, out["heightmap"][i]
         sg = (pipe.level_from_sensor[:3, 3] - lfg[:3, 3]) @ lfg[:3, :3]
         heights = hm.heights.copy()
         imp = find_impact(hm.grid_points, hm.stream, heights, pipe.cell_xy, sc.perception.impact_search_radius_m,
@@ -294,39 +327,50 @@ def run_stages(rec: Recording, meter, repeat: int = 1) -> dict[str, int]:
         blank_under_stream(heights, imp, pipe.cell_xy)
         return imp
 
-    with meter.collect("impact"):
-        for _ in range(repeat):
-            for i in valid:
-                impact(i)
-    calls["impact"] = repeat * len(valid)
-    # the accuracy evaluation of the frames the participant evaluates (the frame's seeded beam sample)
-    evaluated = [i for i, f in enumerate(frames) if part._accuracy_beams(f) is not None]
-    results = {}
-    for i in evaluated:
-        results[i] = pipe.perceive(ranges[i], headings[i], with_points=False)
-    clean = [pipe.resample_gathered(g) for g in gathered]
-    with meter.collect("accuracy"):
-        for _ in range(repeat):
-            for i in evaluated:
-                st = rec.states[i]
-                beams = part._accuracy_beams(frames[i])
-                wfp = acc.world_from_parent(sc, st)
-                part._accuracy(st, beams, clean[i][beams], results[i], wfp, rec.truth["heightmap_truth"][i],
-                               rec.truth["stream"][i])
-    calls["accuracy"] = repeat * len(evaluated)
-    # the whole participant: step, rest, flush (accuracy included on the evaluated frames)
-    for i in range(len(frames)):
-        _load_inputs(seg, rec, i)        # warm the segment views
-    with meter.collect("step"):
-        for _ in range(repeat):
-            for i in range(len(frames)):
-                _load_inputs(seg, rec, i)
-                rest = part.step(frames[i])
-                if rest is not None:
-                    rest()
-                part.flush()
-    calls["step"] = repeat * len(frames)
-    calls["_evaluated"] = repeat * len(evaluated)
+    clean = {}
+
+    def accuracy(i):
+        # the participant's evaluation of the frame (its seeded beam sample), on the frame's perception
+        st, beams = rec.states[i], part._accuracy_beams(frames[i])
+        res = out["perceived"][i]
+        return part._accuracy(st, beams, clean[i][beams], res, acc.world_from_parent(sc, st),
+                              rec.truth["heightmap_truth"][i], rec.truth["stream"][i])
+
+    def step(i):
+        # the whole participant: step, rest, flush (accuracy included on the evaluated frames)
+        _load_inputs(seg, rec, i)
+        rest = part.step(frames[i])
+        if rest is not None:
+            rest()
+        part.flush()
+
+    everything = list(range(len(frames)))
+    stages = {"lidar": (lidar, everything), "points": (lambda i: pipe.points(out["lidar"][i]), everything),
+              "level": (level, everything), "cart": (cart, everything)}
+    calls: dict[str, int] = {}
+    for name in STAGES:
+        if name == "heightmap":
+            with_cart = [i for i in everything if out["cart"][i].valid]
+            stages["heightmap"] = (heightmap, with_cart)
+            stages["impact"] = (impact, with_cart)
+        elif name == "accuracy":
+            evaluated = [i for i in everything if part._accuracy_beams(frames[i]) is not None]
+            out["perceived"] = {i: pipe.perceive(out["lidar"][i], headings[i], with_points=False) for i in evaluated}
+            clean.update({i: pipe.resample_gathered(gathered[i]) for i in evaluated})
+            stages["accuracy"] = (accuracy, evaluated)
+            calls["_evaluated"] = repeat * len(evaluated)
+        elif name == "step":
+            stages["step"] = (step, everything)
+        fn, which = stages[name]
+        if which:
+            fn(which[0])                                    # warm-up, outside the meter
+        with meter.collect(name):
+            for _ in range(repeat):
+                res = {i: fn(i) for i in which}
+        out[name] = res
+        calls[name] = repeat * len(which)
+        if name == upto:
+            break
     part.close()
     return calls
 
@@ -362,6 +406,8 @@ def main() -> None:
     p.add_argument("--stages", action="store_true", help="measure the stages one by one")
     p.add_argument("--repeat", type=int, default=1)
     p.add_argument("--callgrind", action="store_true", help="collect stages under callgrind instead of timing")
+    p.add_argument("--focus", action="append", default=[], metavar="STAGE:MODULE:FUNCTION",
+                   help="with --callgrind, also collect inside one function during one stage (repeatable)")
     t = sub.add_parser("totals", help="instructions per stage from callgrind output files")
     t.add_argument("files", type=Path, nargs="+")
     t.add_argument("--calls", type=Path, help="the calls JSON a --callgrind replay printed (per-call figures)")
@@ -391,6 +437,8 @@ def main() -> None:
         if a.stages:
             meter = _Callgrind() if a.callgrind else _Clock()
             calls = run_stages(rec, meter, a.repeat)
+            for spec in a.focus if a.callgrind else ():
+                run_stages(rec, _Focus(meter, spec), a.repeat, upto=spec.partition(":")[0])
             print(json.dumps(calls))
             if isinstance(meter, _Clock):
                 print("| stage | calls | wall ms per call | CPU ms per call |")
@@ -404,11 +452,11 @@ def main() -> None:
         calls = json.loads(a.calls.read_text()) if a.calls else {}
         print("| stage | instructions (M) | calls | M per call |")
         print("|---|---:|---:|---:|")
-        for s in STAGES:
-            if s in totals:
-                n = calls.get(s, 0)
-                per = f"{totals[s] / n / 1e6:.2f}" if n else ""
-                print(f"| {s} | {totals[s] / 1e6:.1f} | {n or ''} | {per} |")
+        for s in sorted(totals, key=lambda k: (STAGES.index(k.split("/")[0]) if k.split("/")[0] in STAGES
+                                               else len(STAGES), k)):
+            n = calls.get(s.split("/")[0], 0)
+            per = f"{totals[s] / n / 1e6:.2f}" if n else ""
+            print(f"| {s} | {totals[s] / 1e6:.1f} | {n or ''} | {per} |")
 
 
 if __name__ == "__main__":

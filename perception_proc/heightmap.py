@@ -79,14 +79,22 @@ def _grid_rows(p: np.ndarray, level_from_grid: np.ndarray, z_lo: float, z_hi: fl
     """Level-frame points (N, 3) into the grid frame, R^T (p - t), keeping those with grid z in (z_lo, z_hi).
 
     Written out per component on contiguous coordinate rows (a 3 x 3 BLAS product on tall arrays is slower
-    than nine multiply-adds), z first so that x and y are only computed for the points in the slab. Returns
-    (x, y, z) (K,) float64 and the kept indices (K,) int64 into ``p`` (ascending); NaN rows never pass."""
+    than nine multiply-adds), z first so that x and y are only computed for the points in the slab. When the
+    grid's z axis is the level frame's (a cart pose is a yaw: the third row and column of R are exactly
+    (0, 0, 1)), grid z is level z - t_z: the other two terms are exact zeros, so the sum is the same number.
+    Returns (x, y, z) (K,) float64 and the kept indices (K,) int64 into ``p`` (ascending); NaN rows never
+    pass."""
     r, t = level_from_grid[:3, :3], level_from_grid[:3, 3]
-    x, y, z = (p[:, k] - t[k] for k in range(3))
+    upright = bool(r[0, 2] == 0.0 and r[1, 2] == 0.0 and r[2, 2] == 1.0 and r[2, 0] == 0.0 and r[2, 1] == 0.0)
     with np.errstate(invalid="ignore"):
-        gz = r[0, 2] * x + r[1, 2] * y + r[2, 2] * z
+        if upright:
+            gz = p[:, 2] - t[2]
+        else:
+            gz = r[0, 2] * (p[:, 0] - t[0]) + r[1, 2] * (p[:, 1] - t[1]) + r[2, 2] * (p[:, 2] - t[2])
         sel = np.flatnonzero((gz > z_lo) & (gz < z_hi))
-    x, y, z = x[sel], y[sel], z[sel]
+    x, y, z = (p[:, k][sel] - t[k] for k in range(3))
+    if upright:                                                  # r[2, 0] = r[2, 1] = 0: the z terms vanish
+        return r[0, 0] * x + r[1, 0] * y, r[0, 1] * x + r[1, 1] * y, gz[sel], sel
     return r[0, 0] * x + r[1, 0] * y + r[2, 0] * z, r[0, 1] * x + r[1, 1] * y + r[2, 1] * z, gz[sel], sel
 
 
@@ -141,39 +149,40 @@ def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart
     g = np.empty((3, np.count_nonzero(inside)))                 # column-major (M, 3): coordinates contiguous
     for k, c in enumerate((gx, gy, gz)):
         np.compress(inside, c, out=g[k])
+    gx, gy, gz = g                                              # contiguous rows of the interior points
     g = g.T
-    high = g[:, 2] > top + HEAP_MAX_M                           # above any heap: stream (or spill) only
+    high = gz > top + HEAP_MAX_M                                # above any heap: stream (or spill) only
     heights = np.full((nx, ny), np.nan, np.float32) if out is None else out
     heights.fill(np.nan)
     counts = np.zeros((nx, ny), np.int32)
     if g.shape[0] == 0:
         return HeightMap(heights, counts, g, np.zeros(0, bool), 0.0)
-    i = np.minimum((g[:, 0] * (nx / L)).astype(np.int64), nx - 1)
-    j = np.minimum((g[:, 1] * (ny / W)).astype(np.int64), ny - 1)
+    i = np.minimum((gx * (nx / L)).astype(np.int64), nx - 1)
+    j = np.minimum((gy * (ny / W)).astype(np.int64), ny - 1)
     cell = i * ny + j
     low = np.flatnonzero(~high)
     # one sort by (cell, z): z lies in (-1, top + HEAP_MAX) < Z_SPAN_M, so cell * Z_SPAN_M + z + 1 orders both
-    order = low[np.argsort(cell[low] * Z_SPAN_M + (g[low, 2] + 1.0))]
-    cs, zs = cell[order], g[order, 2]
+    order = low[np.argsort(cell[low] * Z_SPAN_M + (gz[low] + 1.0))]
+    cs, zs = cell[order], gz[order]
     if cs.size == 0:
         return HeightMap(heights, counts, g, high.copy(), 0.0)
-    start = np.flatnonzero(np.r_[True, cs[1:] != cs[:-1]])
-    cnt = np.diff(np.r_[start, cs.size])
+    start = np.flatnonzero(np.concatenate(([True], cs[1:] != cs[:-1])))
+    cnt = np.diff(np.append(start, cs.size))                    # returns below any heap per occupied cell
     uniq = cs[start]
     zmin = zs[start]
     lower = zs <= np.repeat(zmin, cnt) + (CLUSTER_GAP_M + CLUSTER_NOISE_SIGMAS * noise_sigma_m)
-    k = np.add.reduceat(lower.astype(np.int64), start)          # lower cluster is a prefix of each cell
+    k = np.add.reduceat(lower, start, dtype=np.int64)           # lower cluster is a prefix of each cell
     med = 0.5 * (zs[start + (k - 1) // 2] + zs[start + k // 2])
     enough = k >= min_points
     flat = heights.reshape(-1)
     flat[uniq[enough]] = med[enough]
-    counts.reshape(-1)[:] = np.bincount(cell[low], minlength=nx * ny)
+    counts.reshape(-1)[uniq] = cnt
     # cells holding only stream returns stand far above their neighbourhood
     stream_cell = _stream_cells(heights)
     heights[stream_cell] = np.nan
     surface = heights.reshape(-1)[cell]
     with np.errstate(invalid="ignore"):
         stream = high | stream_cell.reshape(-1)[cell] | (
-            g[:, 2] > surface + (STREAM_MIN_HEIGHT_M + CLUSTER_NOISE_SIGMAS * noise_sigma_m))
+            gz > surface + (STREAM_MIN_HEIGHT_M + CLUSTER_NOISE_SIGMAS * noise_sigma_m))
     coverage = float(np.count_nonzero(np.isfinite(heights)) / heights.size)
     return HeightMap(heights, counts, g, stream, coverage)

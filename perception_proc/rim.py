@@ -96,6 +96,7 @@ MAX_MERGE_TURN_DEG = 10.0
 MIN_RIM_POINTS = 30
 #: a neighbouring beam nearer by this fraction of the range marks an occluder, dimensionless
 OCCLUDER_REL = 0.10
+_KERNEL_3X3 = np.ones((3, 3), np.uint8)
 
 
 @dataclass(frozen=True)
@@ -132,14 +133,26 @@ def border_beams(ranges: np.ndarray, shape: tuple[int, int] | None) -> np.ndarra
         return np.full(ranges.shape[0], FOV_EDGE, np.uint8)
     rows, cols = shape
     r = np.asarray(ranges, np.float32).reshape(rows, cols)
-    out = np.zeros((rows, cols), np.uint8)
-    out[0, :] = out[-1, :] = out[:, 0] = out[:, -1] = FOV_EDGE
-    # nearest neighbour (3 x 3 minimum, OpenCV erosion) with invalid beams counting as infinitely far
-    nearest = cv2.erode(np.where(np.isfinite(r), r, np.float32(np.inf)), np.ones((3, 3), np.uint8),
-                        borderType=cv2.BORDER_REPLICATE)
+    # nearest neighbour (3 x 3 minimum, OpenCV erosion) with invalid beams counting as infinitely far (fmin
+    # drops the NaN of an invalid beam, ranges are never above +inf)
+    nearest = cv2.erode(np.fmin(r, np.float32(np.inf)), _KERNEL_3X3, borderType=cv2.BORDER_REPLICATE)
     with np.errstate(invalid="ignore"):
-        out[nearest < r * np.float32(1.0 - OCCLUDER_REL)] |= OCCLUDED
+        occluded = np.less(nearest, r * np.float32(1.0 - OCCLUDER_REL))
+    out = occluded.view(np.uint8)                                # True is 1: scaled to the OCCLUDED bit
+    out *= np.uint8(OCCLUDED)
+    out[0, :] |= FOV_EDGE
+    out[-1, :] |= FOV_EDGE
+    out[:, 0] |= FOV_EDGE
+    out[:, -1] |= FOV_EDGE
     return out.ravel()
+
+
+def _xy(x: np.ndarray, y: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """(K, 2) float64 C-contiguous rows (x, y) of the points ``idx`` (K,) from coordinate rows ``x``, ``y`` (N,)."""
+    out = np.empty((idx.size, 2))
+    out[:, 0] = x[idx]
+    out[:, 1] = y[idx]
+    return out
 
 
 def _has_neighbour(xy: np.ndarray, others: np.ndarray, radius: float) -> np.ndarray:
@@ -192,7 +205,7 @@ def _outer(cart: Cart) -> tuple[float, float, float]:
 
 def _components(xy: np.ndarray) -> list[np.ndarray]:
     """Index arrays of the connected groups of top-down points (OpenCV connected components on a raster)."""
-    lo = xy.min(axis=0) - 2 * CLOSE_M
+    lo = np.array([xy[:, 0].min(), xy[:, 1].min()]) - 2 * CLOSE_M
     ij = np.floor((xy - lo) / RASTER_M).astype(np.int64)
     h, w = int(ij[:, 1].max()) + int(3 * CLOSE_M / RASTER_M), int(ij[:, 0].max()) + int(3 * CLOSE_M / RASTER_M)
     img = np.zeros((h, w), np.uint8)
@@ -204,8 +217,8 @@ def _components(xy: np.ndarray) -> list[np.ndarray]:
     n, labels = cv2.connectedComponents(img, connectivity=8)
     lab = labels[ij[:, 1], ij[:, 0]]
     order = np.argsort(lab, kind="stable")
-    bounds = np.searchsorted(lab[order], np.arange(1, n + 1))
-    return [g for g in np.split(order, bounds[:-1])[1:] if g.size]
+    bounds = np.searchsorted(lab[order], np.arange(1, n + 1)).tolist()
+    return [g for a, b in zip(bounds[:-1], bounds[1:]) if (g := order[a:b]).size]
 
 
 def _roofed(above: np.ndarray, centre: np.ndarray, u_long: np.ndarray, long_side: float, short_side: float) -> bool:
@@ -237,9 +250,10 @@ def _best_group(xy: np.ndarray, above: np.ndarray, lo_len: float, lo_wid: float)
 
     The rim ring breaks into pieces (sparse rows, occlusion by the auger or the stream): each piece, largest
     first, is grown by every other piece that keeps the union cart-sized and unroofed; the largest union
-    that spans enough of the cart's length and width wins. ``above`` (K, 2): points well above the rim.
+    that spans enough of the cart's length and width wins. ``above`` (2, K): x and y rows of the points well
+    above the rim, m.
     Rectangles are fitted to the union of the pieces' convex hulls (the same rectangle as of their points)."""
-    above_rows = np.ascontiguousarray(np.asarray(above, np.float64).reshape(-1, 2).T)
+    above_rows = np.ascontiguousarray(np.asarray(above, np.float64).reshape(2, -1))
 
     def fits(hull: np.ndarray):
         """(long side direction, long side m, short side m) if cart-sized and not roofed, else None."""
@@ -312,24 +326,27 @@ def find_cart(points: np.ndarray, border: np.ndarray, cart: Cart, heading_xy=(1.
     frame); returns a :class:`CartEstimate`.
     """
     p = np.asarray(points, dtype=np.float64)
-    z = np.ascontiguousarray(p[:, 2])                           # invalid beams are whole NaN rows
+    # coordinate rows (contiguous, no copy, for the column-major points of Perception.level_points)
+    x, y, z = (np.ascontiguousarray(p[:, k]) for k in range(3))   # invalid beams are whole NaN rows
     band = RIM_BAND_M + BAND_NOISE_SIGMAS * noise_sigma_m
     top = cart.rim_top_m
     with np.errstate(invalid="ignore"):                         # NaN compares False: invalid rows drop out
         cand = np.flatnonzero(np.abs(z - top) <= band)
         if cand.size < MIN_RIM_POINTS:
             return _none(f"{cand.size} points at rim height, need {MIN_RIM_POINTS}", int(cand.size))
-        above = p[z > top + band + ABOVE_RIM_M, :2]
-        slab = p[(z > top + band) & (z <= top + band + UNDER_SLAB_M), :2]
+        over = np.flatnonzero(z > top + band)                   # above the band: the slab and higher
+        z_over = z[over]
+        above = over[z_over > top + band + ABOVE_RIM_M]
+        slab = over[z_over <= top + band + UNDER_SLAB_M]
     lo_len, lo_wid, _ = _outer(cart)
-    if slab.shape[0]:
+    if slab.size:
         # a rim point has nothing right above it; a falling stream or a cab wall rising from the rim band does
         # (the auger tube passes higher over the rim, above the slab, and does not count)
-        cand = cand[~_has_neighbour(p[cand, :2], slab, UNDER_RADIUS_M)]
+        cand = cand[~_has_neighbour(_xy(x, y, cand), _xy(x, y, slab), UNDER_RADIUS_M)]
         if cand.size < MIN_RIM_POINTS:
             return _none(f"{cand.size} open points at rim height, need {MIN_RIM_POINTS}", int(cand.size))
-    xy = p[cand, :2]
-    best = _best_group(xy, above, lo_len, lo_wid)
+    xy = _xy(x, y, cand)
+    best = _best_group(xy, np.stack((x[above], y[above])), lo_len, lo_wid)
     if best is None:
         return _none("no rim-sized group of points at rim height", int(cand.size))
     g, ux = best
