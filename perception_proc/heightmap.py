@@ -135,7 +135,8 @@ def _stream_cells(heights: np.ndarray) -> np.ndarray:
     h = np.where(finite, heights, np.float32(np.inf)).astype(np.float32)
     low = cv2.erode(h, np.ones((NEIGHBOURHOOD, NEIGHBOURHOOD), np.uint8))   # border ignored (+inf)
     out = np.zeros(heights.shape, bool)
-    cand = np.nonzero(finite & (heights > low + np.float32(STREAM_STEP_M)))
+    # (rows, columns) from flat indices: np.nonzero on a 2-D mask costs several times more
+    cand = np.divmod(np.flatnonzero(finite & (heights > low + np.float32(STREAM_STEP_M))), heights.shape[1])
     if cand[0].size:
         out[cand] = heights[cand] > _lower_quartile(heights, cand) + STREAM_STEP_M
     return out
