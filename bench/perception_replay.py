@@ -211,18 +211,40 @@ class _Callgrind:
             subprocess.run(["cc", "-O1", "-shared", "-fPIC", "-o", str(lib), str(src)], check=True)
         self.lib = ctypes.CDLL(str(lib))
 
+    active = False
+
     @contextmanager
     def collect(self, name: str) -> Iterator[None]:
         self.lib.cg_zero()
+        self.lib.cg_toggle()
+        self.active = True
+        try:
+            yield
+        finally:
+            self.active = False
+            self.lib.cg_toggle()
+            self.lib.cg_dump(name.encode())
+
+    @contextmanager
+    def exclude(self) -> Iterator[None]:
+        """Not collected (inside :meth:`collect`; a no-op outside)."""
+        if not self.active:
+            yield
+            return
         self.lib.cg_toggle()
         try:
             yield
         finally:
             self.lib.cg_toggle()
-            self.lib.cg_dump(name.encode())
 
 
-class _Focus:
+class _NoExclude:
+    @contextmanager
+    def exclude(self) -> Iterator[None]:
+        yield
+
+
+class _Focus(_NoExclude):
     """Callgrind collection only inside ``module:function`` while stage ``stage`` runs (inclusive instructions
     of that function, dumped as ``stage/module:function``); other stages are not collected."""
 
@@ -273,14 +295,27 @@ class _Clock:
 
     def __init__(self):
         self.rows: dict[str, tuple[float, float]] = {}
+        self._excluded = [0.0, 0.0]
 
     @contextmanager
     def collect(self, name: str) -> Iterator[None]:
+        self._excluded = [0.0, 0.0]
         w, c = time.perf_counter(), time.process_time()
         try:
             yield
         finally:
-            self.rows[name] = (time.perf_counter() - w, time.process_time() - c)
+            self.rows[name] = (time.perf_counter() - w - self._excluded[0],
+                               time.process_time() - c - self._excluded[1])
+
+    @contextmanager
+    def exclude(self) -> Iterator[None]:
+        """Not counted (inside :meth:`collect`)."""
+        w, c = time.perf_counter(), time.process_time()
+        try:
+            yield
+        finally:
+            self._excluded[0] += time.perf_counter() - w
+            self._excluded[1] += time.process_time() - c
 
 
 def run_stages(rec: Recording, meter, repeat: int = 1, upto: str | None = None) -> dict[str, int]:
@@ -337,8 +372,10 @@ def run_stages(rec: Recording, meter, repeat: int = 1, upto: str | None = None) 
                               rec.truth["heightmap_truth"][i], rec.truth["stream"][i])
 
     def step(i):
-        # the whole participant: step, rest, flush (accuracy included on the evaluated frames)
-        _load_inputs(seg, rec, i)
+        # the whole participant: step, rest, flush (accuracy included on the evaluated frames); writing the
+        # recorded inputs into the segment is not counted
+        with meter.exclude():
+            _load_inputs(seg, rec, i)
         rest = part.step(frames[i])
         if rest is not None:
             rest()
