@@ -61,9 +61,10 @@ void cg_zero(void) { CALLGRIND_ZERO_STATS; }
 
 
 # -- recording ---------------------------------------------------------------------------------------------------
-def record(scenario: Scenario, path: Path, every: int, offsets: tuple[int, ...], frames: int | None) -> int:
-    """Run ``scenario`` in-process and save the perception inputs of the kept frames to ``path``; returns how many
-    frames were kept."""
+def record(scenario: Scenario, path: Path, every: int, offsets: tuple[int, ...], frames: int | None,
+           start: int = 0) -> int:
+    """Run ``scenario`` in-process and save the perception inputs of the kept frames (from frame ``start``) to
+    ``path``; returns how many frames were kept."""
     from cosim.inprocess import simulate
     from perception_proc import participant as perc_mod
 
@@ -76,7 +77,7 @@ def record(scenario: Scenario, path: Path, every: int, offsets: tuple[int, ...],
         step = p.step
 
         def recording_step(frame: int):
-            if frame % every in offsets:
+            if frame >= start and frame % every in offsets:
                 seg = p.segment
                 kept["frame"].append(frame)
                 kept["state"].append(seg.view("dyn_state").as_dict())
@@ -435,6 +436,7 @@ def main() -> None:
     r.add_argument("--frames", type=int, default=None, help="frames to simulate (default: the whole scenario)")
     r.add_argument("--every", type=int, default=20)
     r.add_argument("--offsets", default="0,7", help="kept frames: frame %% every in these")
+    r.add_argument("--start", type=int, default=0, help="keep no frame before this one")
     p = sub.add_parser("replay", help="replay a recording")
     p.add_argument("recording", type=Path)
     p.add_argument("--limit", type=int, default=None, help="first LIMIT recorded frames only")
@@ -454,7 +456,7 @@ def main() -> None:
         if a.renderer == "mock":
             extra["render"] = {"mock_scale": 1.0}
         sc = load_scenario(resolve_scenario_arg(a.scenario), extra=extra or None)
-        n = record(sc, a.out, a.every, tuple(int(x) for x in a.offsets.split(",")), a.frames)
+        n = record(sc, a.out, a.every, tuple(int(x) for x in a.offsets.split(",")), a.frames, a.start)
         print(f"kept {n} frames in {a.out}")
     elif a.cmd == "replay":
         rec = Recording(a.recording, a.limit)

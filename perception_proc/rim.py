@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -94,9 +95,14 @@ MAX_REFINE_DEG = 5.0
 MAX_MERGE_TURN_DEG = 10.0
 #: fewest rim points for an answer
 MIN_RIM_POINTS = 30
+#: line fits remembered (_fit_line): the two edges of the last few frames
+LINE_FIT_MEMO = 8
 #: a neighbouring beam nearer by this fraction of the range marks an occluder, dimensionless
 OCCLUDER_REL = 0.10
 _KERNEL_3X3 = np.ones((3, 3), np.uint8)
+#: slack of find_cart's first selection under the band's computed lower edge, far above the rounding of
+#: |z - top| <= band (so the selection holds every candidate), m
+_PREFILTER_MARGIN_M = 0.01
 
 
 @dataclass(frozen=True)
@@ -205,17 +211,20 @@ def _outer(cart: Cart) -> tuple[float, float, float]:
 
 def _components(xy: np.ndarray) -> list[np.ndarray]:
     """Index arrays of the connected groups of top-down points (OpenCV connected components on a raster)."""
-    lo = np.array([xy[:, 0].min(), xy[:, 1].min()]) - 2 * CLOSE_M
-    ij = np.floor((xy - lo) / RASTER_M).astype(np.int64)
-    h, w = int(ij[:, 1].max()) + int(3 * CLOSE_M / RASTER_M), int(ij[:, 0].max()) + int(3 * CLOSE_M / RASTER_M)
+    # raster cells per coordinate (column by column: the same numbers as on the (K, 2) array, without
+    # broadcasting a (2,) offset over short rows)
+    col, row = (np.floor((xy[:, a] - (xy[:, a].min() - 2 * CLOSE_M)) / RASTER_M).astype(np.int64) for a in (0, 1))
+    pad = int(3 * CLOSE_M / RASTER_M)
+    h, w = int(row.max()) + pad, int(col.max()) + pad
+    cell = row * w + col                                        # flat raster index of each point
     img = np.zeros((h, w), np.uint8)
-    img[ij[:, 1], ij[:, 0]] = 255
+    np.put(img, cell, 255)
     # dilation (not closing: a disc's rim slips into one-pixel gaps of a dotted line) joins points closer
     # than CLOSE_M; labels are read back at the points themselves
     k = max(3, int(round(CLOSE_M / RASTER_M)) | 1)
     img = cv2.dilate(img, np.ones((k, k), np.uint8))
     n, labels = cv2.connectedComponents(img, connectivity=8)
-    lab = labels[ij[:, 1], ij[:, 0]]
+    lab = np.take(labels, cell)
     order = np.argsort(lab, kind="stable")
     bounds = np.searchsorted(lab[order], np.arange(1, n + 1)).tolist()
     return [g for a, b in zip(bounds[:-1], bounds[1:]) if (g := order[a:b]).size]
@@ -278,15 +287,15 @@ def _best_group(xy: np.ndarray, above: np.ndarray, lo_len: float, lo_wid: float)
             break
         if (first := fits(hulls[i])) is None:
             continue
-        group, hull, u_seed = [seed], hulls[i], first[0]
+        group, hull, u_seed, group_fit = [seed], hulls[i], first[0], first
         for j, other in enumerate(comps):
             # a union whose rectangle axes turn (modulo 90 deg: a square seed may swap its long side) is a
             # diagonal join of unrelated pieces, not more of the rim
             if j != i and (res := fits(merged := _hull(np.concatenate([hull, hulls[j]])))) is not None \
                     and max(abs(res[0] @ u_seed), abs(res[0][0] * u_seed[1] - res[0][1] * u_seed[0])) >= turn:
                 group.append(other)
-                hull = merged
-        res = fits(hull) if len(group) > 1 else first
+                hull, group_fit = merged, res              # the union's rectangle: no second fit needed
+        res = group_fit
         n = sum(g.size for g in group)
         if res is None or n < MIN_RIM_POINTS or res[1] < MIN_SPAN_FRACTION * lo_len \
                 or res[2] < MIN_WIDTH_FRACTION * lo_wid:
@@ -294,6 +303,17 @@ def _best_group(xy: np.ndarray, above: np.ndarray, lo_len: float, lo_wid: float)
         if n > best_n:
             best, best_n = (np.concatenate(group), res[0]), n
     return best
+
+
+@lru_cache(maxsize=LINE_FIT_MEMO)
+def _fit_line(points_f32: bytes) -> tuple[float, float]:
+    """Direction (vx, vy) of ``cv2.fitLine`` (Huber, the settings of :func:`_refine_direction`) through the
+    (K, 2) float32 points whose bytes are given. Memoised on those bytes: the fit is deterministic (a fixed
+    seed for its restarts) and costs more than the rest of the cart search together, and an edge strip often
+    returns bit for bit from one frame to the next (the codec quantises small relative motion away)."""
+    pts = np.frombuffer(points_f32, np.float32).reshape(-1, 2)
+    vx, vy, _, _ = cv2.fitLine(pts, cv2.DIST_HUBER, 0, 0.01, 0.01).ravel()
+    return float(vx), float(vy)
 
 
 def _refine_direction(xy: np.ndarray, u_long: np.ndarray) -> np.ndarray:
@@ -306,8 +326,7 @@ def _refine_direction(xy: np.ndarray, u_long: np.ndarray) -> np.ndarray:
     for sel in (across <= lo + EDGE_STRIP_M, across >= hi - EDGE_STRIP_M):
         if np.count_nonzero(sel) < MIN_EDGE_POINTS:
             continue
-        vx, vy, _, _ = cv2.fitLine(xy[sel].astype(np.float32), cv2.DIST_HUBER, 0, 0.01, 0.01).ravel()
-        d = np.array([vx, vy], dtype=np.float64)
+        d = np.array(_fit_line(xy[sel].astype(np.float32).tobytes()), dtype=np.float64)
         dirs.append(d if d @ u_long >= 0 else -d)
         weights.append(np.count_nonzero(sel))
     if not dirs:
@@ -331,13 +350,16 @@ def find_cart(points: np.ndarray, border: np.ndarray, cart: Cart, heading_xy=(1.
     band = RIM_BAND_M + BAND_NOISE_SIGMAS * noise_sigma_m
     top = cart.rim_top_m
     with np.errstate(invalid="ignore"):                         # NaN compares False: invalid rows drop out
-        cand = np.flatnonzero(np.abs(z - top) <= band)
+        # one pass over every beam keeps the points from just under the band up (a small share); the exact
+        # tests below then run on those alone
+        high = np.flatnonzero(z >= top - band - _PREFILTER_MARGIN_M)
+        z_high = z[high]
+        cand = high[np.abs(z_high - top) <= band]
         if cand.size < MIN_RIM_POINTS:
             return _none(f"{cand.size} points at rim height, need {MIN_RIM_POINTS}", int(cand.size))
-        over = np.flatnonzero(z > top + band)                   # above the band: the slab and higher
-        z_over = z[over]
-        above = over[z_over > top + band + ABOVE_RIM_M]
-        slab = over[z_over <= top + band + UNDER_SLAB_M]
+        over = z_high > top + band                              # above the band: the slab and higher
+        above = high[over & (z_high > top + band + ABOVE_RIM_M)]
+        slab = high[over & (z_high <= top + band + UNDER_SLAB_M)]
     lo_len, lo_wid, _ = _outer(cart)
     if slab.size:
         # a rim point has nothing right above it; a falling stream or a cab wall rising from the rim band does
