@@ -6,11 +6,14 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as hst
 
 from cosim.config import Scenario
 from cosim.errors import FrameMismatch
 from cosim.geometry import vehicle_pose
 from dynamics_proc.blocks import declare_blocks as dynamics_blocks
+from perception_proc.accuracy import _median_sorted, _percentile_sorted
 from perception_proc.accuracy_report import render_markdown, write_report
 from perception_proc.blocks import declare_blocks
 from perception_proc.participant import PerceptionParticipant, create
@@ -110,6 +113,18 @@ def test_accuracy_fields_against_the_exact_cast(stepped):
     assert st.heightmap_rmse_m < 0.03
     assert math.isnan(st.impact_error_m)                 # no stream in this scene: nothing to compare
     assert st.impact_valid == 0
+
+
+@settings(max_examples=200, deadline=None)
+@given(hst.lists(hst.floats(0.0, 50.0), min_size=1, max_size=400), hst.integers(0, 3))
+def test_order_statistics_are_numpys_bit_for_bit(values, decimals):
+    """The accuracy statistics take median and 99th percentile from one sorted array: the same bytes as
+    np.median and np.percentile (ties included: rounded values repeat)."""
+    e = np.round(np.asarray(values), decimals)
+    s = np.sort(e)
+    assert np.float64(_median_sorted(s)).tobytes() == np.float64(np.median(e)).tobytes()
+    assert np.float64(_percentile_sorted(s, 99.0)).tobytes() == np.float64(np.percentile(e, 99)).tobytes()
+    assert math.isnan(_median_sorted(s[:0])) and math.isnan(_percentile_sorted(s[:0], 99.0))
 
 
 def test_perceived_heights_match_truth(stepped):
