@@ -325,7 +325,7 @@ def run_stages(rec: Recording, meter, repeat: int = 1, upto: str | None = None) 
     as well. Stages after ``upto`` are left out. Returns the number of metered calls per stage."""
     from perception_proc import accuracy as acc
     from perception_proc.heightmap import height_map
-    from perception_proc.impact import blank_under_stream, find_impact
+    from perception_proc import impact as impact_module           # looked up per call: --focus can wrap them
     from perception_proc.participant import PerceptionParticipant
     from perception_proc.rim import border_beams, find_cart
 
@@ -358,9 +358,9 @@ def run_stages(rec: Recording, meter, repeat: int = 1, upto: str | None = None) 
         lfg, hm = out["cart"][i].level_from_grid, out["heightmap"][i]
         sg = (pipe.level_from_sensor[:3, 3] - lfg[:3, 3]) @ lfg[:3, :3]
         heights = hm.heights.copy()
-        imp = find_impact(hm.grid_points, hm.stream, heights, pipe.cell_xy, sc.perception.impact_search_radius_m,
-                          (float(sg[0]), float(sg[1])))
-        blank_under_stream(heights, imp, pipe.cell_xy)
+        imp = impact_module.find_impact(hm.grid_points, hm.stream, heights, pipe.cell_xy,
+                                        sc.perception.impact_search_radius_m, (float(sg[0]), float(sg[1])))
+        impact_module.blank_under_stream(heights, imp, pipe.cell_xy)
         return imp
 
     clean = {}
