@@ -24,6 +24,7 @@ from cosim.config import Cart, Scenario
 from cosim.geometry import apply, cart_body_from_grid, invert, vehicle_pose
 
 from .blocks import RANGE_BANDS_M, band_name
+from .orderstats import median_sorted, percentile_sorted
 
 __all__ = ["range_error_stats", "exact_ranges", "sample_beams", "ACCURACY_STREAM", "true_corners_sensor", "corner_error", "truth_on_grid",
            "heightmap_error", "impact_error", "world_from_parent", "ABOVE_M", "WORKING_RANGE_M"]
@@ -76,8 +77,8 @@ def range_error_stats(ranges: np.ndarray, exact: np.ndarray, range_min_m: float,
     # order statistics from one sort each (the values numpy's median, percentile and max give)
     s = np.sort(err)
     out["range_err_mean_m"], out["frac_above_5cm"] = mean_above(err)
-    out["range_err_median_m"] = _median_sorted(s)
-    out["range_err_p99_m"] = _percentile_sorted(s, P99)
+    out["range_err_median_m"] = median_sorted(s)
+    out["range_err_p99_m"] = percentile_sorted(s, P99)
     out["range_err_max_m"] = float(s[-1]) if s.size else nan
     lo, hi = WORKING_RANGE_M
     out["range_err_mean_2_15_m"], out["frac_above_5cm_2_15"] = mean_above(err[(dist >= lo) & (dist < hi)])
@@ -86,33 +87,8 @@ def range_error_stats(ranges: np.ndarray, exact: np.ndarray, range_min_m: float,
         b = band_name(lo, hi)
         out[f"rerr_{b}_n"] = float(e.size)
         out[f"rerr_{b}_mean_m"], out[f"rerr_{b}_above5_frac"] = mean_above(e)
-        out[f"rerr_{b}_p99_m"] = _percentile_sorted(np.sort(e), P99)
+        out[f"rerr_{b}_p99_m"] = percentile_sorted(np.sort(e), P99)
     return out
-
-
-def _median_sorted(s: np.ndarray) -> float:
-    """``np.median`` of the values of ascending ``s`` (1-D float64, no NaN): the middle value, or the mean of
-    the middle two ((a + b) / 2, as numpy's mean of them); NaN when empty."""
-    n = s.size
-    if n == 0:
-        return math.nan
-    h = n // 2
-    return float(s[h]) if n % 2 else float((s[h - 1] + s[h]) / 2.0)
-
-
-def _percentile_sorted(s: np.ndarray, q: float) -> float:
-    """``np.percentile(s, q)`` (default linear method, numpy's formulas: virtual index (n - 1) q / 100, lerp
-    from the nearer end) of ascending ``s`` (1-D float64, no NaN); NaN when empty."""
-    n = s.size
-    if n == 0:
-        return math.nan
-    v = (n - 1) * (q / 100.0)
-    lo = math.floor(v)
-    hi = min(lo + 1, n - 1)
-    a, b = s[lo], s[hi]
-    g = v - lo
-    diff = b - a
-    return float(b - diff * (1 - g) if g >= 0.5 else a + diff * g)
 
 
 def world_from_parent(scenario: Scenario, state: Mapping[str, float]) -> np.ndarray:

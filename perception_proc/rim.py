@@ -38,6 +38,8 @@ from scipy.spatial import cKDTree
 from cosim.config import Cart
 from cosim.geometry import cart_body_from_grid, make_transform, rot_z
 
+from .orderstats import percentiles
+
 __all__ = ["CartEstimate", "find_cart", "border_beams", "RIM_BAND_M", "RASTER_M", "SIZE_TOL_M", "NO_CART",
            "FOV_EDGE", "OCCLUDED", "BAND_NOISE_SIGMAS"]
 
@@ -188,20 +190,6 @@ def _end_is_cut(flags: np.ndarray, other: np.ndarray, other_lo: float, other_hi:
     nbins = max(1, int(math.ceil((other_hi - other_lo) / END_BIN_M)))
     b = np.clip(((other - other_lo) / END_BIN_M).astype(np.int64), 0, nbins - 1)
     return np.unique(b).size < MIN_END_COVER * nbins
-
-
-def _percentiles(x: np.ndarray, q: tuple[float, ...]) -> np.ndarray:
-    """``np.percentile(x, q)`` (default linear method, same formulas, same values) for a 1-D float64 ``x``
-    without NaN, by one partition: numpy's general routine costs more than the selection itself here."""
-    n = x.size
-    v = (n - 1) * (np.asarray(q, np.float64) / 100.0)
-    lo = np.floor(v).astype(np.intp)
-    hi = np.minimum(lo + 1, n - 1)
-    part = np.partition(x, np.unique(np.concatenate([lo, hi])))
-    a, b = part[lo], part[hi]
-    g = v - lo
-    diff = b - a
-    return np.where(g >= 0.5, b - diff * (1 - g), a + diff * g)
 
 
 def _outer(cart: Cart) -> tuple[float, float, float]:
@@ -383,13 +371,13 @@ def find_cart(points: np.ndarray, border: np.ndarray, cart: Cart, heading_xy=(1.
     centre = []
     partial = False
     for coord, known in ((s, lo_len), (t, lo_wid)):
-        lo, hi = _percentiles(coord, (0.5, 99.5))
+        lo, hi = percentiles(coord, (0.5, 99.5))
         if hi - lo >= known - FULL_SPAN_TOL_M:
             centre.append(0.5 * (lo + hi))
             continue
         partial = True
         other = t if coord is s else s
-        o_lo, o_hi = _percentiles(other, (0.5, 99.5))
+        o_lo, o_hi = percentiles(other, (0.5, 99.5))
         at_lo, at_hi = coord <= lo + END_STRIP_M, coord >= hi - END_STRIP_M
         cut_lo = _end_is_cut(bd[at_lo], other[at_lo], o_lo, o_hi)
         cut_hi = _end_is_cut(bd[at_hi], other[at_hi], o_lo, o_hi)
