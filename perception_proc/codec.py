@@ -16,19 +16,13 @@ import numpy as np
 
 from cosim.config import Codec
 
-__all__ = ["decode_depth", "decode_bytes", "decode_lut", "decode_words", "decode_words_linear", "lut_key", "CM_PER_M",
-           "R_SATURATED"]
+__all__ = ["decode_depth", "decode_bytes", "decode_lut", "decode_words", "lut_key", "CM_PER_M", "R_SATURATED"]
 
 #: centimetres per metre (the codec works in cm, everything else in m)
 CM_PER_M = 100.0
 #: red byte value that marks a saturated (out-of-range) depth
 R_SATURATED = 255
 _INV255 = np.float32(1.0 / 255.0)
-#: the low bit of A in a little-endian RGBA word
-_VALID_BIT = 1 << 24
-#: 2^23 as float32 and its bit pattern (decode_words_linear)
-_TWO23 = np.float32(1 << 23)
-_TWO23_BITS = np.uint32(0x4B000000)
 
 
 def _linear(byte: np.ndarray, codec: Codec) -> np.ndarray:
@@ -85,47 +79,10 @@ def lut_key(words: np.ndarray) -> np.ndarray:
 
 
 def decode_words(words: np.ndarray, lut: np.ndarray) -> np.ndarray:
-    """Decode gathered RGBA words (any shape, uint32) with a :func:`decode_lut` table: depth m float32, NaN."""
-    return np.take(lut, lut_key(words))
+    """Decode gathered RGBA words (any shape, uint32) with a :func:`decode_lut` table: depth m float32, NaN.
 
-
-def decode_words_linear(words: np.ndarray, codec: Codec) -> np.ndarray:
-    """Eq 3 computed on RGBA words (any shape, uint32, little-endian R G B A) of a ``linear`` codec: depth m
-    float32, NaN where invalid (A's low bit clear, or R saturated), the same bytes as the
-    :func:`decode_lut` entry.
-
-    The same float32 operations as :func:`decode_bytes` in the same order (byte / 255 as ``byte *
-    float32(1/255)``, rint, no fused multiply-add), so the same numbers as the table, which is built by
-    them; but as a dozen vectorised passes instead of one gather per word, several times fewer instructions
-    for the thousands of words a frame decodes."""
-    if codec.gamma_mode != "linear":
-        raise ValueError(f"decode_words_linear needs a linear codec, got gamma_mode={codec.gamma_mode!r}")
-    w = np.asarray(words, dtype=np.uint32)
-    # a byte k as float32 without a conversion loop: the float32 with bits 0x4B000000 | k is 2^23 + k
-    # exactly, so subtracting 2^23 leaves k exactly (bit operations and one subtraction, all vectorised)
-    r = w & np.uint32(0xFF)
-    r |= _TWO23_BITS
-    xr = r.view(np.float32)
-    xr -= _TWO23
-    xr *= _INV255
-    b = np.right_shift(w, np.uint32(16))
-    b &= np.uint32(0xFF)
-    b |= _TWO23_BITS
-    xb = b.view(np.float32)
-    xb -= _TWO23
-    xb *= _INV255
-    depth = xr
-    depth *= np.float32(codec.alpha_cm / codec.beta_cm)
-    depth -= xb
-    np.rint(depth, out=depth)
-    depth += xb
-    depth *= np.float32(codec.beta_cm / CM_PER_M)
-    # A's low bit (valid) and R: invalid below the bit, or with the bit and R = 255
-    key = np.bitwise_and(w, np.uint32(_VALID_BIT | R_SATURATED), out=b)   # xb's storage: xb is done
-    invalid = key < np.uint32(_VALID_BIT)
-    invalid |= key == np.uint32(_VALID_BIT | R_SATURATED)
-    np.copyto(depth, np.float32(np.nan), where=invalid)
-    return depth
+    The key has 17 bits, so it always lies in the table: the gather skips numpy's per-index range check."""
+    return np.take(lut, lut_key(words), mode="wrap")
 
 
 def decode_depth(rgba: np.ndarray, codec: Codec) -> np.ndarray:

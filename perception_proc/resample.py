@@ -9,7 +9,7 @@ point is, with s_c the unit beam direction in that camera's frame,
 
 and a hit at planar depth Z lies at range Z r / f = Z / s_c.z (Eq 6). The tables (which camera, which pixels,
 which weights, the planar-to-range scale) are computed once per rig; per frame the work is a gather of 32-bit
-RGBA words, Eq 3 on the gathered words (computed, or looked up for the gamma study) and a multiply.
+RGBA words, Eq 3 on the gathered bytes and a multiply.
 
 Two samplers:
 
@@ -33,7 +33,7 @@ import numpy as np
 from cosim.camera import Rig
 from cosim.config import Codec
 
-from .codec import decode_lut, decode_words, decode_words_linear
+from .codec import decode_lut, decode_words
 
 __all__ = [
     "CameraTable", "ResampleTable", "build_table", "gather_depth", "resample", "beam_pixels",
@@ -220,7 +220,7 @@ def beam_words(rgba: np.ndarray, table: CameraTable, sampler: Sampler = "planar"
 
 def depth_from_words(words: np.ndarray, table: CameraTable, codec: Codec, sampler: Sampler = "planar") -> np.ndarray:
     """Planar depth Z (M,) float32, m, NaN where invalid, from :func:`beam_words`' words."""
-    z = _decode(words, codec)                                              # planar: (4, M), one decode
+    z = decode_words(words, decode_lut(codec))                             # planar: (4, M), one decode
     if sampler == "nearest":
         return z
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -235,13 +235,6 @@ def depth_from_words(words: np.ndarray, table: CameraTable, codec: Codec, sample
         z_lin = np.float32(1.0) / (table.weight_t / z).sum(axis=0)
     z_near = np.take(z, table.near_flat, mode="wrap")                      # nearest pixel is one of the four
     return np.where(smooth, z_lin, z_near)
-
-
-def _decode(words: np.ndarray, codec: Codec) -> np.ndarray:
-    """Eq 3 on gathered words: computed (linear codec) or looked up (the gamma study's table); same numbers."""
-    if codec.gamma_mode == "linear":
-        return decode_words_linear(words, codec)
-    return decode_words(words, decode_lut(codec))
 
 
 def gather_depth(rgba: np.ndarray, table: CameraTable, codec: Codec, sampler: Sampler = "planar") -> np.ndarray:

@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cosim.config import Codec
-from perception_proc.codec import decode_depth, decode_lut, decode_words, decode_words_linear
+from perception_proc.codec import decode_depth
 from perception_proc.synthetic import encode_linear
 
 
@@ -105,26 +105,3 @@ def test_synthetic_encoder_matches_reference():
 def test_decode_rejects_bad_shape():
     with pytest.raises(ValueError, match=r"\(H, W, 4\) uint8"):
         decode_depth(np.zeros((4, 4, 3), np.uint8), Codec())
-
-
-@settings(max_examples=25, deadline=None)
-@given(alpha=st.floats(200.0, 10_000.0), ratio=st.floats(1.5, 254.0), seed=st.integers(0, 2**32 - 1))
-def test_computed_word_decode_is_the_table_bit_for_bit(alpha, ratio, seed):
-    """decode_words_linear (arithmetic on the words) gives the decode table's bytes for every (R, B, A & 1),
-    whatever G and A's other bits hold: the same float32 operations in the same order."""
-    codec = Codec(alpha_cm=alpha, beta_cm=alpha / ratio)
-    key = np.arange(1 << 17, dtype=np.uint32)                        # R | B << 8 | (A & 1) << 16
-    rng = np.random.default_rng(seed)
-    g = rng.integers(0, 256, key.size, dtype=np.uint32)
-    a = (key >> np.uint32(16)) | (rng.integers(0, 128, key.size, dtype=np.uint32) << np.uint32(1))
-    words = (key & 0xFF) | (g << 8) | (((key >> 8) & 0xFF) << 16) | (a << 24)
-    table = decode_words(words.reshape(2, -1), decode_lut(codec))
-    computed = decode_words_linear(words.reshape(2, -1), codec)
-    assert computed.dtype == np.float32 and computed.shape == (2, key.size // 2)
-    np.testing.assert_array_equal(computed.view(np.uint32), table.view(np.uint32))
-    assert np.isnan(computed).sum() == 256 * 256 + 256               # A bit clear, or R = 255 with it set
-
-
-def test_computed_word_decode_refuses_the_gamma_study_codec():
-    with pytest.raises(ValueError, match="linear codec"):
-        decode_words_linear(np.zeros(4, np.uint32), Codec(gamma_mode="mishandled"))
