@@ -4,26 +4,42 @@ A fixed workload for the perception process, independent of the machine's load a
 
 * ``record``: runs a scenario in-process (default: ``default`` with its GL renderer; ``--renderer mock`` with
   ``render.mock_scale`` 1.0 writes the same bytes) and keeps, for every ``--every``-th frame (plus the
-  ``--offsets`` after it), exactly what the perception participant reads: the rig's depth images, ``dyn_state``,
-  ``heightmap_truth`` and ``stream``. Written to one ``.npz`` (with the resolved scenario).
+  ``--offsets`` after it, from ``--start``), exactly what the perception participant reads: the rig's depth
+  images, ``dyn_state``, ``heightmap_truth`` and ``stream``. Written to one ``.npz`` (with the resolved
+  scenario). Frame ids are kept, so noise and the accuracy sample are those of the run.
 * ``replay``: writes each recorded frame into a local segment and runs ``PerceptionParticipant`` step + rest +
   flush (the overlapped participant, as in a run), keeping ``perc_state`` (every field but the ``*_ms``
   timings), ``heightmap_perceived`` and ``lidar_points``. ``--save`` writes them; ``--check`` compares them
   bit for bit with a saved reference (exit status 1 on any difference). Then the stages one by one over all
-  frames (``--stages``): lidar (resample + noise), points (the lidar_points record), level (level points and
-  border flags), cart, heightmap, impact, accuracy, and the whole participant step.
+  frames (``--stages``), each after one unmetered warm-up call: lidar (resample + noise), points (the
+  lidar_points record), level (level points and border flags), cart, heightmap, impact, accuracy (the
+  evaluated frames), and the whole participant step (the harness's copying of the inputs into the segment
+  left out). A frame is evaluated when the scenario's ``accuracy_every_frames`` divides its id: the default
+  recording (frames 20 k and 20 k + 7) evaluates half its frames, a run of consecutive frames one in ten.
 * ``--callgrind``: under ``valgrind --tool=callgrind --collect-atstart=no`` each stage's loop is collected alone
   and dumped under its name (a small client-request library is compiled on first use into ``bench/out``);
   ``python bench/perception_replay.py totals callgrind.out.PID.*`` then prints instructions per stage and call;
-  ``--focus STAGE:MODULE:FUNCTION`` adds the inclusive count of one function within a stage.
+  ``--focus STAGE:MODULE:FUNCTION`` (or ``MODULE:Class.method``) adds the inclusive count of one function
+  within a stage (the function is wrapped where the stage looks it up: a module attribute).
+
+Workloads used for the figures in the issue notes (bench/out is not tracked; re-record them):
+
+    python bench/perception_replay.py record --out bench/out/replay/default.npz          # 121 frames, whole run
+    python bench/perception_replay.py record --out bench/out/replay/consecutive800.npz --frames 860 \
+        --start 800 --every 1 --offsets 0                                                # 61 consecutive frames
 
 Run from the repository root (``OPENBLAS_NUM_THREADS=1`` is set here, as in a run's processes), e.g.::
 
-    python bench/perception_replay.py record --out bench/out/replay/default.npz
+    python bench/perception_replay.py replay bench/out/replay/default.npz --save bench/out/replay/ref.npz
     python bench/perception_replay.py replay bench/out/replay/default.npz --check bench/out/replay/ref.npz --stages
-    LP_NUM_THREADS=0 valgrind --tool=callgrind --collect-atstart=no --callgrind-out-file=bench/out/cg.%p \\
+    PYTHONHASHSEED=0 valgrind --tool=callgrind --collect-atstart=no --callgrind-out-file=bench/out/cg.%p \
         python bench/perception_replay.py replay bench/out/replay/default.npz --stages --callgrind --limit 30
-    python bench/perception_replay.py totals bench/out/cg.*
+    python bench/perception_replay.py totals bench/out/cg.*.* --calls CALLS.json   # the JSON line printed above
+
+Under valgrind run the interpreter itself (``python -c "import sys; print(sys.executable)"``), not a shell
+shim: valgrind does not follow children. Callgrind counts each iteration of ``rep movsb``/``rep stosb`` as an
+instruction, so large ``memcpy``/``memset`` (BLAS zeroing its output, copies of whole blocks) weigh far more
+in its counts than in time.
 """
 from __future__ import annotations
 
