@@ -79,8 +79,10 @@ def lut_key(words: np.ndarray) -> np.ndarray:
 
 
 def decode_words(words: np.ndarray, lut: np.ndarray) -> np.ndarray:
-    """Decode gathered RGBA words (any shape, uint32) with a :func:`decode_lut` table: depth m float32, NaN."""
-    return np.take(lut, lut_key(words))
+    """Decode gathered RGBA words (any shape, uint32) with a :func:`decode_lut` table: depth m float32, NaN.
+
+    The key has 17 bits, so it always lies in the table: the gather skips numpy's per-index range check."""
+    return np.take(lut, lut_key(words), mode="wrap")
 
 
 def decode_depth(rgba: np.ndarray, codec: Codec) -> np.ndarray:

@@ -75,19 +75,40 @@ class HeightMap:
     coverage: float
 
 
-def _grid_rows(p: np.ndarray, level_from_grid: np.ndarray, z_lo: float, z_hi: float):
-    """Level-frame points (N, 3) into the grid frame, R^T (p - t), keeping those with grid z in (z_lo, z_hi).
+def _interior_points(p: np.ndarray, level_from_grid: np.ndarray, z_lo: float, z_hi: float,
+                     xy_box: tuple[float, float, float, float]) -> np.ndarray:
+    """Level-frame points (N, 3) into the grid frame, R^T (p - t), keeping those with grid z in (z_lo, z_hi)
+    and grid x, y strictly inside ``xy_box`` (x_lo, x_hi, y_lo, y_hi), m. Returns (3, M) float64 C-contiguous
+    coordinate rows in the order of ``p``; NaN rows never pass.
 
     Written out per component on contiguous coordinate rows (a 3 x 3 BLAS product on tall arrays is slower
-    than nine multiply-adds), z first so that x and y are only computed for the points in the slab. Returns
-    (x, y, z) (K,) float64 and the kept indices (K,) int64 into ``p`` (ascending); NaN rows never pass."""
+    than nine multiply-adds). When the grid's z axis is the level frame's (a cart pose is a yaw: the third row
+    and column of R are exactly (0, 0, 1)), grid z is level z - t_z and x, y have no z term (the dropped
+    terms are exact zeros: the same numbers), and every coordinate is computed for every point, then one
+    selection: full-length arithmetic costs far less per point than gathering subsets. Otherwise z first, and
+    x and y for the points in the slab only."""
     r, t = level_from_grid[:3, :3], level_from_grid[:3, 3]
-    x, y, z = (p[:, k] - t[k] for k in range(3))
+    x_lo, x_hi, y_lo, y_hi = xy_box
+    upright = bool(r[0, 2] == 0.0 and r[1, 2] == 0.0 and r[2, 2] == 1.0 and r[2, 0] == 0.0 and r[2, 1] == 0.0)
     with np.errstate(invalid="ignore"):
-        gz = r[0, 2] * x + r[1, 2] * y + r[2, 2] * z
+        if upright:
+            dx, dy = p[:, 0] - t[0], p[:, 1] - t[1]
+            rows = np.empty((3, p.shape[0]))
+            gx, gy, gz = rows
+            np.multiply(dx, r[0, 0], out=gx)
+            gx += r[1, 0] * dy
+            np.multiply(dx, r[0, 1], out=gy)
+            gy += r[1, 1] * dy
+            np.subtract(p[:, 2], t[2], out=gz)
+            keep = (gz > z_lo) & (gz < z_hi) & (gx > x_lo) & (gx < x_hi) & (gy > y_lo) & (gy < y_hi)
+            return np.take(rows, np.flatnonzero(keep), axis=1)
+        gz = r[0, 2] * (p[:, 0] - t[0]) + r[1, 2] * (p[:, 1] - t[1]) + r[2, 2] * (p[:, 2] - t[2])
         sel = np.flatnonzero((gz > z_lo) & (gz < z_hi))
-    x, y, z = x[sel], y[sel], z[sel]
-    return r[0, 0] * x + r[1, 0] * y + r[2, 0] * z, r[0, 1] * x + r[1, 1] * y + r[2, 1] * z, gz[sel], sel
+        x, y, z = (p[:, k][sel] - t[k] for k in range(3))
+        gx = r[0, 0] * x + r[1, 0] * y + r[2, 0] * z
+        gy = r[0, 1] * x + r[1, 1] * y + r[2, 1] * z
+        inside = (gx > x_lo) & (gx < x_hi) & (gy > y_lo) & (gy < y_hi)
+        return np.stack([gx[inside], gy[inside], gz[sel][inside]])
 
 
 def _lower_quartile(heights: np.ndarray, cells: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
@@ -114,7 +135,8 @@ def _stream_cells(heights: np.ndarray) -> np.ndarray:
     h = np.where(finite, heights, np.float32(np.inf)).astype(np.float32)
     low = cv2.erode(h, np.ones((NEIGHBOURHOOD, NEIGHBOURHOOD), np.uint8))   # border ignored (+inf)
     out = np.zeros(heights.shape, bool)
-    cand = np.nonzero(finite & (heights > low + np.float32(STREAM_STEP_M)))
+    # (rows, columns) from flat indices: np.nonzero on a 2-D mask costs several times more
+    cand = np.divmod(np.flatnonzero(finite & (heights > low + np.float32(STREAM_STEP_M))), heights.shape[1])
     if cand[0].size:
         out[cand] = heights[cand] > _lower_quartile(heights, cand) + STREAM_STEP_M
     return out
@@ -136,44 +158,44 @@ def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart
     p = np.asarray(points_level, dtype=np.float64)              # invalid beams are whole NaN rows
     clear = WALL_CLEAR_M + 3.0 * noise_sigma_m
     top = cart.interior_depth_m + cart.rim_height_m
-    gx, gy, gz, _ = _grid_rows(p, level_from_grid, -clear, top + STREAM_TOP_M)
-    inside = (gx > clear) & (gx < L - clear) & (gy > clear) & (gy < W - clear)
-    g = np.empty((3, np.count_nonzero(inside)))                 # column-major (M, 3): coordinates contiguous
-    for k, c in enumerate((gx, gy, gz)):
-        np.compress(inside, c, out=g[k])
-    g = g.T
-    high = g[:, 2] > top + HEAP_MAX_M                           # above any heap: stream (or spill) only
+    g = _interior_points(p, level_from_grid, -clear, top + STREAM_TOP_M, (clear, L - clear, clear, W - clear))
+    gx, gy, gz = g                                              # contiguous rows of the interior points
+    g = g.T                                                     # column-major (M, 3): coordinates contiguous
+    high = gz > top + HEAP_MAX_M                                # above any heap: stream (or spill) only
     heights = np.full((nx, ny), np.nan, np.float32) if out is None else out
     heights.fill(np.nan)
     counts = np.zeros((nx, ny), np.int32)
     if g.shape[0] == 0:
         return HeightMap(heights, counts, g, np.zeros(0, bool), 0.0)
-    i = np.minimum((g[:, 0] * (nx / L)).astype(np.int64), nx - 1)
-    j = np.minimum((g[:, 1] * (ny / W)).astype(np.int64), ny - 1)
+    i = np.minimum((gx * (nx / L)).astype(np.int64), nx - 1)
+    j = np.minimum((gy * (ny / W)).astype(np.int64), ny - 1)
     cell = i * ny + j
     low = np.flatnonzero(~high)
     # one sort by (cell, z): z lies in (-1, top + HEAP_MAX) < Z_SPAN_M, so cell * Z_SPAN_M + z + 1 orders both
-    order = low[np.argsort(cell[low] * Z_SPAN_M + (g[low, 2] + 1.0))]
-    cs, zs = cell[order], g[order, 2]
+    key = cell * Z_SPAN_M + (gz + 1.0)
+    order = low[np.argsort(key[low])]
+    cs, zs = cell[order], gz[order]
     if cs.size == 0:
         return HeightMap(heights, counts, g, high.copy(), 0.0)
-    start = np.flatnonzero(np.r_[True, cs[1:] != cs[:-1]])
-    cnt = np.diff(np.r_[start, cs.size])
+    start = np.flatnonzero(np.concatenate(([True], cs[1:] != cs[:-1])))
+    cnt = np.diff(np.append(start, cs.size))                    # returns below any heap per occupied cell
     uniq = cs[start]
     zmin = zs[start]
     lower = zs <= np.repeat(zmin, cnt) + (CLUSTER_GAP_M + CLUSTER_NOISE_SIGMAS * noise_sigma_m)
-    k = np.add.reduceat(lower.astype(np.int64), start)          # lower cluster is a prefix of each cell
+    k = np.add.reduceat(lower, start, dtype=np.int64)           # lower cluster is a prefix of each cell
     med = 0.5 * (zs[start + (k - 1) // 2] + zs[start + k // 2])
     enough = k >= min_points
     flat = heights.reshape(-1)
     flat[uniq[enough]] = med[enough]
-    counts.reshape(-1)[:] = np.bincount(cell[low], minlength=nx * ny)
+    counts.reshape(-1)[uniq] = cnt
     # cells holding only stream returns stand far above their neighbourhood
     stream_cell = _stream_cells(heights)
     heights[stream_cell] = np.nan
-    surface = heights.reshape(-1)[cell]
+    # per cell, the height above which a return is the stream's (float32, as the heights): -inf in a stream
+    # cell (all its returns are), NaN in an empty one (none is); one lookup per return
+    above = heights + np.float32(STREAM_MIN_HEIGHT_M + CLUSTER_NOISE_SIGMAS * noise_sigma_m)
+    above[stream_cell] = -np.inf
     with np.errstate(invalid="ignore"):
-        stream = high | stream_cell.reshape(-1)[cell] | (
-            g[:, 2] > surface + (STREAM_MIN_HEIGHT_M + CLUSTER_NOISE_SIGMAS * noise_sigma_m))
+        stream = high | (gz > np.take(above.reshape(-1), cell))
     coverage = float(np.count_nonzero(np.isfinite(heights)) / heights.size)
     return HeightMap(heights, counts, g, stream, coverage)

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .orderstats import median_sorted, percentile_sorted
+
 __all__ = ["Impact", "find_impact", "blank_under_stream", "MIN_STREAM_POINTS", "FIT_SPAN_M", "CLUSTER_RADIUS_M"]
 
 #: fewest stream returns for an answer
@@ -28,6 +30,8 @@ CLUSTER_RADIUS_M = 1.0
 FACE_TO_AXIS = math.pi / 4.0
 #: below this vertical spread the stream is taken as vertical through its mean, m
 MIN_FIT_SPREAD_M = 0.2
+#: percentile of the low returns' distances from the fitted axis taken as the stream's visible half-width
+RADIUS_PERCENTILE = 90.0
 
 
 @dataclass(frozen=True)
@@ -64,16 +68,25 @@ def blank_under_stream(heights: np.ndarray, impact: Impact, cell_m: tuple[float,
     return int(np.count_nonzero(hide))
 
 
+def _polyval(coef: tuple, x):
+    """``np.polyval(coef, x)`` of a line (a, b), the same operations (Horner from zero: (0 x + a) x + b), on a
+    float or an array, without its argument handling."""
+    a, b = coef
+    return (0.0 * x + a) * x + b
+
+
 def find_impact(grid_points: np.ndarray, stream: np.ndarray, heights: np.ndarray, cell_m: tuple[float, float],
                 search_radius_m: float, sensor_xy: tuple[float, float] | None = None) -> Impact:
     """Impact point from ``grid_points`` (M, 3) grid frame, their ``stream`` flags (M,) bool, the height map
     ``heights`` (nx, ny) m (NaN holes) with cell sizes ``cell_m`` (dx, dy) m. ``sensor_xy``: the LiDAR origin
     in the grid frame (m); the stream's returns lie on its near face, so the fitted line is moved away from
     the sensor by :data:`FACE_TO_AXIS` stream radii (None: no correction)."""
-    s = np.asarray(grid_points, dtype=np.float64)[np.asarray(stream, bool)]
+    # the stream returns (K, 3), gathered from the coordinate rows of the column-major points (np.take on
+    # the column-major array itself would first copy all of it to row-major)
+    s = np.take(np.asarray(grid_points, dtype=np.float64).T, np.flatnonzero(stream), axis=1).T
     if s.shape[0] < MIN_STREAM_POINTS:
         return _none(f"{s.shape[0]} stream returns, need {MIN_STREAM_POINTS}", s.shape[0])
-    med = np.median(s[:, :2], axis=0)
+    med = np.array([median_sorted(np.sort(s[:, k])) for k in (0, 1)])
     s = s[np.hypot(*(s[:, :2] - med).T) <= CLUSTER_RADIUS_M]
     if s.shape[0] < MIN_STREAM_POINTS:
         return _none("stream returns too scattered", s.shape[0])
@@ -85,7 +98,7 @@ def find_impact(grid_points: np.ndarray, stream: np.ndarray, heights: np.ndarray
     else:
         coef_x = tuple(np.polyfit(z, low[:, 0], 1))
         coef_y = tuple(np.polyfit(z, low[:, 1], 1))
-    foot = np.array([np.polyval(coef_x, z_low), np.polyval(coef_y, z_low)])
+    foot = np.array([_polyval(coef_x, z_low), _polyval(coef_y, z_low)])
     nx, ny = heights.shape
     dx, dy = cell_m
     cx = (np.arange(nx) + 0.5) * dx
@@ -95,11 +108,11 @@ def find_impact(grid_points: np.ndarray, stream: np.ndarray, heights: np.ndarray
     if vals.size == 0:
         return _none("no grain height near the stream foot", s.shape[0])
     z_imp = min(float(vals.max()), z_low)
-    xyz = np.array([np.polyval(coef_x, z_imp), np.polyval(coef_y, z_imp), z_imp])
+    xyz = np.array([_polyval(coef_x, z_imp), _polyval(coef_y, z_imp), z_imp])
     if not np.all(np.isfinite(xyz)) or math.isnan(z_imp):
         return _none("fit failed", s.shape[0])
-    axis = np.stack([np.polyval(coef_x, z), np.polyval(coef_y, z)], axis=1)
-    radius = float(np.percentile(np.hypot(*(low[:, :2] - axis).T), 90))
+    off = np.hypot(low[:, 0] - _polyval(coef_x, z), low[:, 1] - _polyval(coef_y, z))    # from the fitted axis
+    radius = percentile_sorted(np.sort(off), RADIUS_PERCENTILE)
     if sensor_xy is not None:
         away = xyz[:2] - np.asarray(sensor_xy, dtype=np.float64)
         norm = float(np.hypot(*away))

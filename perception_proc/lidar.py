@@ -42,7 +42,7 @@ def apply_noise_and_limits(ranges: np.ndarray, sensor: Sensor, gen: np.random.Ge
 
 def point_basis(directions: np.ndarray) -> np.ndarray:
     """(N, 4) float32 C-contiguous rows (s_x, s_y, s_z, 1) of unit beams ``directions`` (N, 3), sensor frame:
-    the ``lidar_points`` record is then this times the range, one float32 multiply (see :func:`to_points`)."""
+    the ``lidar_points`` record is then this times the range, in float32 (see :func:`to_points`)."""
     d = np.asarray(directions, np.float32)
     return np.ascontiguousarray(np.concatenate([d, np.ones((d.shape[0], 1), np.float32)], axis=1))
 
@@ -50,11 +50,15 @@ def point_basis(directions: np.ndarray) -> np.ndarray:
 def to_points(directions: np.ndarray, ranges: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """The ``lidar_points`` record: (N, 4) float32 rows x, y, z (sensor frame, m), range (m); NaN rows where
     the range is NaN. ``directions`` (N, 3) unit beams, sensor frame, or their :func:`point_basis` (N, 4)
-    (faster: one multiply writes whole rows; the product is then taken in float32); ``out`` optional (N, 4) float32 (e.g. the shared block)."""
+    (faster: the range column comes out of the same multiply; the product is then taken in float32); ``out``
+    optional (N, 4) float32 (e.g. the shared block)."""
     n = ranges.shape[0]
     res = np.empty((n, 4), np.float32) if out is None else out
     if directions.shape[1] == 4:
-        np.multiply(directions, ranges[:, None], out=res, casting="same_kind")
+        # column by column: one (N,) multiply each (a broadcast (N, 1) operand makes numpy buffer the whole
+        # product in chunks of four, about ten times the work); the same float32 products
+        for k in range(4):
+            np.multiply(directions[:, k], ranges, out=res[:, k], casting="same_kind")
         return res
     np.multiply(directions, ranges[:, None], out=res[:, :3], casting="unsafe")
     res[:, 3] = ranges

@@ -33,6 +33,9 @@ __all__ = ["Perception", "FrameResult", "own_vehicle_box", "OWN_BOX_MARGIN_M"]
 
 #: margin around the sensor's own vehicle box inside which returns are the vehicle itself, m
 OWN_BOX_MARGIN_M = 0.3
+#: reach along each beam, and samples, used to order the own-box test's axes (_own_box_axes), m
+OWN_AXIS_PROBE_M = 20.0
+OWN_AXIS_PROBE_STEPS = 41
 
 
 def own_vehicle_box(scenario: Scenario) -> tuple[np.ndarray, np.ndarray] | None:
@@ -50,6 +53,23 @@ def own_vehicle_box(scenario: Scenario) -> tuple[np.ndarray, np.ndarray] | None:
     else:
         return None
     return lo - OWN_BOX_MARGIN_M, hi + OWN_BOX_MARGIN_M
+
+
+def _own_box_axes(box: tuple[np.ndarray, np.ndarray] | None, origin: np.ndarray,
+                  directions: np.ndarray) -> tuple[int, int, int]:
+    """Level-frame axes (0 x, 1 y, 2 z) in the order the own-vehicle box test should take them: fewest beams
+    first whose ray from ``origin`` (3,) m along ``directions`` (N, 3) (level frame) crosses the box's slab on
+    that axis within :data:`OWN_AXIS_PROBE_M` (a proxy for the returns the axis keeps; any order gives the
+    same set)."""
+    if box is None:
+        return (0, 1, 2)
+    lo, hi = box
+    t = np.linspace(0.0, OWN_AXIS_PROBE_M, OWN_AXIS_PROBE_STEPS)
+    kept = []
+    for a in range(3):
+        c = origin[a] + directions[:, a, None] * t                       # (N, steps): the axis along each ray
+        kept.append(int(np.count_nonzero(((c >= lo[a]) & (c <= hi[a])).any(axis=1))))
+    return tuple(int(a) for a in np.argsort(kept, kind="stable"))
 
 
 @dataclass
@@ -87,6 +107,7 @@ class Perception:
         #: (N, 4) float64 rows (s, 1): the lidar_points record is this times the range (lidar.point_basis)
         self.point_basis = point_basis(self.directions)
         self.own_box = own_vehicle_box(scenario)
+        self._own_axes = _own_box_axes(self.own_box, self.level_from_sensor[:3, 3], self.level_directions)
         self.grid = grid_shape(scenario.cart, scenario.controller.grid_cell_m)
         self.cell_xy = (scenario.cart.interior_length_m / self.grid[0],
                         scenario.cart.interior_width_m / self.grid[1])
@@ -147,11 +168,15 @@ class Perception:
         rows += self.level_from_sensor[:3, 3:4]
         if self.own_box is not None:
             lo, hi = self.own_box
-            x, y, z = rows
             with np.errstate(invalid="ignore"):
-                own = np.flatnonzero((z >= lo[2]) & (z <= hi[2]))            # the box test, axis by axis
-                own = own[(x[own] >= lo[0]) & (x[own] <= hi[0])]
-                own = own[(y[own] >= lo[1]) & (y[own] <= hi[1])]
+                # the box test axis by axis, the most selective axis first (the one that keeps the fewest
+                # returns of the beams' level-frame directions; the same set in any order)
+                a0, a1, a2 = self._own_axes
+                c = rows[a0]
+                own = np.flatnonzero((c >= lo[a0]) & (c <= hi[a0]))
+                for a in (a1, a2):
+                    c = rows[a][own]
+                    own = own[(c >= lo[a]) & (c <= hi[a])]
             rows[:, own] = np.nan
         return rows.T
 

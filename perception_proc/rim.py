@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -36,6 +37,8 @@ from scipy.spatial import cKDTree
 
 from cosim.config import Cart
 from cosim.geometry import cart_body_from_grid, make_transform, rot_z
+
+from .orderstats import percentiles
 
 __all__ = ["CartEstimate", "find_cart", "border_beams", "RIM_BAND_M", "RASTER_M", "SIZE_TOL_M", "NO_CART",
            "FOV_EDGE", "OCCLUDED", "BAND_NOISE_SIGMAS"]
@@ -94,8 +97,14 @@ MAX_REFINE_DEG = 5.0
 MAX_MERGE_TURN_DEG = 10.0
 #: fewest rim points for an answer
 MIN_RIM_POINTS = 30
+#: line fits remembered (_fit_line): the two edges of the last few frames
+LINE_FIT_MEMO = 8
 #: a neighbouring beam nearer by this fraction of the range marks an occluder, dimensionless
 OCCLUDER_REL = 0.10
+_KERNEL_3X3 = np.ones((3, 3), np.uint8)
+#: slack of find_cart's first selection under the band's computed lower edge, far above the rounding of
+#: |z - top| <= band (so the selection holds every candidate), m
+_PREFILTER_MARGIN_M = 0.01
 
 
 @dataclass(frozen=True)
@@ -132,14 +141,26 @@ def border_beams(ranges: np.ndarray, shape: tuple[int, int] | None) -> np.ndarra
         return np.full(ranges.shape[0], FOV_EDGE, np.uint8)
     rows, cols = shape
     r = np.asarray(ranges, np.float32).reshape(rows, cols)
-    out = np.zeros((rows, cols), np.uint8)
-    out[0, :] = out[-1, :] = out[:, 0] = out[:, -1] = FOV_EDGE
-    # nearest neighbour (3 x 3 minimum, OpenCV erosion) with invalid beams counting as infinitely far
-    nearest = cv2.erode(np.where(np.isfinite(r), r, np.float32(np.inf)), np.ones((3, 3), np.uint8),
-                        borderType=cv2.BORDER_REPLICATE)
+    # nearest neighbour (3 x 3 minimum, OpenCV erosion) with invalid beams counting as infinitely far (fmin
+    # drops the NaN of an invalid beam, ranges are never above +inf)
+    nearest = cv2.erode(np.fmin(r, np.float32(np.inf)), _KERNEL_3X3, borderType=cv2.BORDER_REPLICATE)
     with np.errstate(invalid="ignore"):
-        out[nearest < r * np.float32(1.0 - OCCLUDER_REL)] |= OCCLUDED
+        occluded = np.less(nearest, r * np.float32(1.0 - OCCLUDER_REL))
+    out = occluded.view(np.uint8)                                # True is 1: scaled to the OCCLUDED bit
+    out *= np.uint8(OCCLUDED)
+    out[0, :] |= FOV_EDGE
+    out[-1, :] |= FOV_EDGE
+    out[:, 0] |= FOV_EDGE
+    out[:, -1] |= FOV_EDGE
     return out.ravel()
+
+
+def _xy(x: np.ndarray, y: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """(K, 2) float64 C-contiguous rows (x, y) of the points ``idx`` (K,) from coordinate rows ``x``, ``y`` (N,)."""
+    out = np.empty((idx.size, 2))
+    out[:, 0] = x[idx]
+    out[:, 1] = y[idx]
+    return out
 
 
 def _has_neighbour(xy: np.ndarray, others: np.ndarray, radius: float) -> np.ndarray:
@@ -171,20 +192,6 @@ def _end_is_cut(flags: np.ndarray, other: np.ndarray, other_lo: float, other_hi:
     return np.unique(b).size < MIN_END_COVER * nbins
 
 
-def _percentiles(x: np.ndarray, q: tuple[float, ...]) -> np.ndarray:
-    """``np.percentile(x, q)`` (default linear method, same formulas, same values) for a 1-D float64 ``x``
-    without NaN, by one partition: numpy's general routine costs more than the selection itself here."""
-    n = x.size
-    v = (n - 1) * (np.asarray(q, np.float64) / 100.0)
-    lo = np.floor(v).astype(np.intp)
-    hi = np.minimum(lo + 1, n - 1)
-    part = np.partition(x, np.unique(np.concatenate([lo, hi])))
-    a, b = part[lo], part[hi]
-    g = v - lo
-    diff = b - a
-    return np.where(g >= 0.5, b - diff * (1 - g), a + diff * g)
-
-
 def _outer(cart: Cart) -> tuple[float, float, float]:
     rw = cart.rim_width_m
     return cart.interior_length_m + 2 * rw, cart.interior_width_m + 2 * rw, rw
@@ -192,20 +199,23 @@ def _outer(cart: Cart) -> tuple[float, float, float]:
 
 def _components(xy: np.ndarray) -> list[np.ndarray]:
     """Index arrays of the connected groups of top-down points (OpenCV connected components on a raster)."""
-    lo = xy.min(axis=0) - 2 * CLOSE_M
-    ij = np.floor((xy - lo) / RASTER_M).astype(np.int64)
-    h, w = int(ij[:, 1].max()) + int(3 * CLOSE_M / RASTER_M), int(ij[:, 0].max()) + int(3 * CLOSE_M / RASTER_M)
+    # raster cells per coordinate (column by column: the same numbers as on the (K, 2) array, without
+    # broadcasting a (2,) offset over short rows)
+    col, row = (np.floor((xy[:, a] - (xy[:, a].min() - 2 * CLOSE_M)) / RASTER_M).astype(np.int64) for a in (0, 1))
+    pad = int(3 * CLOSE_M / RASTER_M)
+    h, w = int(row.max()) + pad, int(col.max()) + pad
+    cell = row * w + col                                        # flat raster index of each point
     img = np.zeros((h, w), np.uint8)
-    img[ij[:, 1], ij[:, 0]] = 255
+    np.put(img, cell, 255)
     # dilation (not closing: a disc's rim slips into one-pixel gaps of a dotted line) joins points closer
     # than CLOSE_M; labels are read back at the points themselves
     k = max(3, int(round(CLOSE_M / RASTER_M)) | 1)
     img = cv2.dilate(img, np.ones((k, k), np.uint8))
     n, labels = cv2.connectedComponents(img, connectivity=8)
-    lab = labels[ij[:, 1], ij[:, 0]]
+    lab = np.take(labels, cell)
     order = np.argsort(lab, kind="stable")
-    bounds = np.searchsorted(lab[order], np.arange(1, n + 1))
-    return [g for g in np.split(order, bounds[:-1])[1:] if g.size]
+    bounds = np.searchsorted(lab[order], np.arange(1, n + 1)).tolist()
+    return [g for a, b in zip(bounds[:-1], bounds[1:]) if (g := order[a:b]).size]
 
 
 def _roofed(above: np.ndarray, centre: np.ndarray, u_long: np.ndarray, long_side: float, short_side: float) -> bool:
@@ -237,9 +247,10 @@ def _best_group(xy: np.ndarray, above: np.ndarray, lo_len: float, lo_wid: float)
 
     The rim ring breaks into pieces (sparse rows, occlusion by the auger or the stream): each piece, largest
     first, is grown by every other piece that keeps the union cart-sized and unroofed; the largest union
-    that spans enough of the cart's length and width wins. ``above`` (K, 2): points well above the rim.
+    that spans enough of the cart's length and width wins. ``above`` (2, K): x and y rows of the points well
+    above the rim, m.
     Rectangles are fitted to the union of the pieces' convex hulls (the same rectangle as of their points)."""
-    above_rows = np.ascontiguousarray(np.asarray(above, np.float64).reshape(-1, 2).T)
+    above_rows = np.ascontiguousarray(np.asarray(above, np.float64).reshape(2, -1))
 
     def fits(hull: np.ndarray):
         """(long side direction, long side m, short side m) if cart-sized and not roofed, else None."""
@@ -264,15 +275,15 @@ def _best_group(xy: np.ndarray, above: np.ndarray, lo_len: float, lo_wid: float)
             break
         if (first := fits(hulls[i])) is None:
             continue
-        group, hull, u_seed = [seed], hulls[i], first[0]
+        group, hull, u_seed, group_fit = [seed], hulls[i], first[0], first
         for j, other in enumerate(comps):
             # a union whose rectangle axes turn (modulo 90 deg: a square seed may swap its long side) is a
             # diagonal join of unrelated pieces, not more of the rim
             if j != i and (res := fits(merged := _hull(np.concatenate([hull, hulls[j]])))) is not None \
                     and max(abs(res[0] @ u_seed), abs(res[0][0] * u_seed[1] - res[0][1] * u_seed[0])) >= turn:
                 group.append(other)
-                hull = merged
-        res = fits(hull) if len(group) > 1 else first
+                hull, group_fit = merged, res              # the union's rectangle: no second fit needed
+        res = group_fit
         n = sum(g.size for g in group)
         if res is None or n < MIN_RIM_POINTS or res[1] < MIN_SPAN_FRACTION * lo_len \
                 or res[2] < MIN_WIDTH_FRACTION * lo_wid:
@@ -280,6 +291,17 @@ def _best_group(xy: np.ndarray, above: np.ndarray, lo_len: float, lo_wid: float)
         if n > best_n:
             best, best_n = (np.concatenate(group), res[0]), n
     return best
+
+
+@lru_cache(maxsize=LINE_FIT_MEMO)
+def _fit_line(points_f32: bytes) -> tuple[float, float]:
+    """Direction (vx, vy) of ``cv2.fitLine`` (Huber, the settings of :func:`_refine_direction`) through the
+    (K, 2) float32 points whose bytes are given. Memoised on those bytes: the fit is deterministic (a fixed
+    seed for its restarts) and costs more than the rest of the cart search together, and an edge strip often
+    returns bit for bit from one frame to the next (the codec quantises small relative motion away)."""
+    pts = np.frombuffer(points_f32, np.float32).reshape(-1, 2)
+    vx, vy, _, _ = cv2.fitLine(pts, cv2.DIST_HUBER, 0, 0.01, 0.01).ravel()
+    return float(vx), float(vy)
 
 
 def _refine_direction(xy: np.ndarray, u_long: np.ndarray) -> np.ndarray:
@@ -292,8 +314,7 @@ def _refine_direction(xy: np.ndarray, u_long: np.ndarray) -> np.ndarray:
     for sel in (across <= lo + EDGE_STRIP_M, across >= hi - EDGE_STRIP_M):
         if np.count_nonzero(sel) < MIN_EDGE_POINTS:
             continue
-        vx, vy, _, _ = cv2.fitLine(xy[sel].astype(np.float32), cv2.DIST_HUBER, 0, 0.01, 0.01).ravel()
-        d = np.array([vx, vy], dtype=np.float64)
+        d = np.array(_fit_line(xy[sel].astype(np.float32).tobytes()), dtype=np.float64)
         dirs.append(d if d @ u_long >= 0 else -d)
         weights.append(np.count_nonzero(sel))
     if not dirs:
@@ -312,24 +333,30 @@ def find_cart(points: np.ndarray, border: np.ndarray, cart: Cart, heading_xy=(1.
     frame); returns a :class:`CartEstimate`.
     """
     p = np.asarray(points, dtype=np.float64)
-    z = np.ascontiguousarray(p[:, 2])                           # invalid beams are whole NaN rows
+    # coordinate rows (contiguous, no copy, for the column-major points of Perception.level_points)
+    x, y, z = (np.ascontiguousarray(p[:, k]) for k in range(3))   # invalid beams are whole NaN rows
     band = RIM_BAND_M + BAND_NOISE_SIGMAS * noise_sigma_m
     top = cart.rim_top_m
     with np.errstate(invalid="ignore"):                         # NaN compares False: invalid rows drop out
-        cand = np.flatnonzero(np.abs(z - top) <= band)
+        # one pass over every beam keeps the points from just under the band up (a small share); the exact
+        # tests below then run on those alone
+        high = np.flatnonzero(z >= top - band - _PREFILTER_MARGIN_M)
+        z_high = z[high]
+        cand = high[np.abs(z_high - top) <= band]
         if cand.size < MIN_RIM_POINTS:
             return _none(f"{cand.size} points at rim height, need {MIN_RIM_POINTS}", int(cand.size))
-        above = p[z > top + band + ABOVE_RIM_M, :2]
-        slab = p[(z > top + band) & (z <= top + band + UNDER_SLAB_M), :2]
+        over = z_high > top + band                              # above the band: the slab and higher
+        above = high[over & (z_high > top + band + ABOVE_RIM_M)]
+        slab = high[over & (z_high <= top + band + UNDER_SLAB_M)]
     lo_len, lo_wid, _ = _outer(cart)
-    if slab.shape[0]:
+    if slab.size:
         # a rim point has nothing right above it; a falling stream or a cab wall rising from the rim band does
         # (the auger tube passes higher over the rim, above the slab, and does not count)
-        cand = cand[~_has_neighbour(p[cand, :2], slab, UNDER_RADIUS_M)]
+        cand = cand[~_has_neighbour(_xy(x, y, cand), _xy(x, y, slab), UNDER_RADIUS_M)]
         if cand.size < MIN_RIM_POINTS:
             return _none(f"{cand.size} open points at rim height, need {MIN_RIM_POINTS}", int(cand.size))
-    xy = p[cand, :2]
-    best = _best_group(xy, above, lo_len, lo_wid)
+    xy = _xy(x, y, cand)
+    best = _best_group(xy, np.stack((x[above], y[above])), lo_len, lo_wid)
     if best is None:
         return _none("no rim-sized group of points at rim height", int(cand.size))
     g, ux = best
@@ -344,13 +371,13 @@ def find_cart(points: np.ndarray, border: np.ndarray, cart: Cart, heading_xy=(1.
     centre = []
     partial = False
     for coord, known in ((s, lo_len), (t, lo_wid)):
-        lo, hi = _percentiles(coord, (0.5, 99.5))
+        lo, hi = percentiles(coord, (0.5, 99.5))
         if hi - lo >= known - FULL_SPAN_TOL_M:
             centre.append(0.5 * (lo + hi))
             continue
         partial = True
         other = t if coord is s else s
-        o_lo, o_hi = _percentiles(other, (0.5, 99.5))
+        o_lo, o_hi = percentiles(other, (0.5, 99.5))
         at_lo, at_hi = coord <= lo + END_STRIP_M, coord >= hi - END_STRIP_M
         cut_lo = _end_is_cut(bd[at_lo], other[at_lo], o_lo, o_hi)
         cut_hi = _end_is_cut(bd[at_hi], other[at_hi], o_lo, o_hi)

@@ -43,11 +43,15 @@ def surface_height(padded: np.ndarray, cell_m: float, x: np.ndarray, y: np.ndarr
     na, nb = hp.shape
     gx = np.clip(np.asarray(x, dtype=np.float64) / cell_m + 0.5, 0.0, na - 1.0)
     gy = np.clip(np.asarray(y, dtype=np.float64) / cell_m + 0.5, 0.0, nb - 1.0)
-    a = np.minimum(np.floor(gx).astype(np.intp), na - 2)
-    b = np.minimum(np.floor(gy).astype(np.intp), nb - 2)
-    fx, fy = gx - a, gy - b
-    h00, h10 = hp[a, b], hp[a + 1, b]
-    h01, h11 = hp[a, b + 1], hp[a + 1, b + 1]
+    # the cell corner as float (exact small integers) for the fractions, as int for the gathers
+    af, bf = np.minimum(np.floor(gx), na - 2.0), np.minimum(np.floor(gy), nb - 2.0)
+    fx, fy = gx - af, gy - bf
+    a, b = af.astype(np.intp), bf.astype(np.intp)
+    # the four corners by flat index (a, b in range by the clip: one cheap gather each, not a 2-D fancy index)
+    flat = hp.ravel()
+    k = a * nb + b
+    h00, h10 = np.take(flat, k, mode="wrap"), np.take(flat, k + nb, mode="wrap")
+    h01, h11 = np.take(flat, k + 1, mode="wrap"), np.take(flat, k + nb + 1, mode="wrap")
     lower = h00 + fx * (h10 - h00) + fy * (h11 - h10)
     upper = h00 + fy * (h01 - h00) + fx * (h11 - h01)
     return np.where(fx >= fy, lower, upper)

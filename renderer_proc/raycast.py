@@ -85,8 +85,10 @@ def _cone_pairs(origin, d, centres, radii, best) -> tuple[np.ndarray, np.ndarray
     step = max(1, _PAIR_WORK // max(len(centres), 1))
     for s0 in range(0, len(d), step):
         dots = u @ d[s0:s0 + step].T                                   # (K, B): cosines to each centre
-        k, r = np.nonzero(dots >= cos_half[:, None])
-        near = dots[k, r] * dist[k] - rad[k]                           # entry bound along the ray
+        # flat indices, then (primitive, ray): np.nonzero on a 2-D mask costs several times more
+        f = np.flatnonzero(dots >= cos_half[:, None])
+        k, r = np.divmod(f, dots.shape[1])
+        near = np.take(dots, f) * dist[k] - rad[k]                     # entry bound along the ray
         r += s0
         keep = near < best[r]
         ks.append(k[keep])
@@ -127,8 +129,12 @@ def ray_boxes(o: np.ndarray, d: np.ndarray, boxes: Boxes, t_max: np.ndarray | No
             rays = _sphere_rays(o, d, c, float(np.linalg.norm(h)), best)
         if len(rays) == 0:
             continue
-        ol = (o[rays] - c) @ rot
-        dl = d[rays] @ rot
+        if origin is not None:
+            # every row is origin - c (the same subtraction), without gathering the broadcast origins
+            ol = np.ascontiguousarray(np.broadcast_to(origin - c, (len(rays), 3))) @ rot
+        else:
+            ol = (np.take(o, rays, axis=0) - c) @ rot
+        dl = np.take(d, rays, axis=0) @ rot
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             inv = 1.0 / dl
             t1, t2 = (-h - ol) * inv, (h - ol) * inv
@@ -209,33 +215,42 @@ def _hf_chunk(og, dg, a, b, hp: np.ndarray, cell: float) -> np.ndarray:
 
     The height along a ray is linear between the crossings of the lines x / c + 1/2 = integer,
     y / c + 1/2 = integer and (x - y) / c = integer (``renderer_proc.heightfield``), so the ray's height above
-    the surface is evaluated at those crossings only, and the first sign change is solved linearly (exact)."""
-    fams = [(og[:, 0] / cell + 0.5, dg[:, 0] / cell), (og[:, 1] / cell + 0.5, dg[:, 1] / cell),
-            ((og[:, 0] - og[:, 1]) / cell, (dg[:, 0] - dg[:, 1]) / cell)]
-    cols = [a[:, None], b[:, None]]
+    the surface is evaluated at those crossings only, and the first sign change is solved linearly (exact).
+
+    ``og``, ``dg`` (3, K) coordinate rows (grid frame). The work arrays are (crossings, K): each ray's values
+    run down a column, so the per-ray terms broadcast along contiguous rows (no buffered broadcasting)."""
+    k_rays = og.shape[1]
+    fams = [(og[0] / cell + 0.5, dg[0] / cell), (og[1] / cell + 0.5, dg[1] / cell),
+            ((og[0] - og[1]) / cell, (dg[0] - dg[1]) / cell)]
+    cols = [a[None], b[None]]
     for q0, dq in fams:
         first, count = _line_crossings(q0, dq, a, b)
         m = int(count.max()) if len(count) else 0
         if m == 0:
             continue
-        j = np.arange(m)[None]
+        j = np.arange(m)[:, None]
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            t = (first[:, None] + j - q0[:, None]) / dq[:, None]
-        use = (j < count[:, None]) & np.isfinite(t)       # a ray along a line (dq = 0) crosses none of it
-        cols.append(np.where(use, np.clip(t, a[:, None], b[:, None]), b[:, None]))
-    ts = np.sort(np.concatenate(cols, axis=1), axis=1)
-    px = og[:, 0:1] + ts * dg[:, 0:1]
-    py = og[:, 1:2] + ts * dg[:, 1:2]
-    g = og[:, 2:3] + ts * dg[:, 2:3] - surface_height(hp, cell, px, py)
+            t = (first + j.astype(np.float64) - q0) / dq  # float j: an int operand would be cast in buffers
+        use = (j < count) & np.isfinite(t)                # a ray along a line (dq = 0) crosses none of it
+        cols.append(np.where(use, np.clip(t, a, b), b))
+    # each ray's crossings in order, down its column: sorted as contiguous rows of a transposed copy (numpy
+    # sorts a strided axis element by element through a buffer)
+    ts = np.ascontiguousarray(np.concatenate(cols, axis=0).T)
+    ts.sort(axis=1)
+    ts = np.ascontiguousarray(ts.T)
+    px = og[0] + ts * dg[0]
+    py = og[1] + ts * dg[1]
+    g = og[2] + ts * dg[2] - surface_height(hp, cell, px, py)
     below = g <= 0.0
-    k = np.argmax(below, axis=1)
-    rows = np.arange(len(og))
-    km = np.maximum(k - 1, 0)
-    g0, g1 = g[rows, km], g[rows, k]
-    t0, t1 = ts[rows, km], ts[rows, k]
+    k = np.argmax(below, axis=0)
+    col = np.arange(k_rays)
+    at = k * k_rays + col                                 # flat indices of (k, ray) and (k - 1, ray)
+    before = np.maximum(k - 1, 0) * k_rays + col
+    g0, g1 = np.take(g, before), np.take(g, at)
+    t0, t1 = np.take(ts, before), np.take(ts, at)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         t = np.where(k == 0, t0, t0 + g0 * (t1 - t0) / (g0 - g1))
-    return np.where(below.any(axis=1) & (t > T_MIN_M), t, np.inf)
+    return np.where(below.any(axis=0) & (t > T_MIN_M), t, np.inf)
 
 
 def ray_heightfield(o: np.ndarray, d: np.ndarray, hf: HeightField) -> np.ndarray:
@@ -248,26 +263,30 @@ def ray_heightfield(o: np.ndarray, d: np.ndarray, hf: HeightField) -> np.ndarray
     g_from_w = np.linalg.inv(hf.world_from_grid)
     og = o @ g_from_w[:3, :3].T + g_from_w[:3, 3]
     dg = d @ g_from_w[:3, :3].T
+    og, dg = np.ascontiguousarray(og.T), np.ascontiguousarray(dg.T)     # (3, N) coordinate rows
     h = np.asarray(hf.heights, dtype=np.float64)
     # the z slab is padded so that a ray leaving through its bottom is strictly below the surface there: on a
     # flat fill (min h = surface) round-off would otherwise let about half of the rays slip through
-    lo = np.array([0.0, 0.0, float(h.min()) - _HF_Z_PAD_M])
-    hi = np.array([hf.length_m, hf.width_m, float(h.max()) + _HF_Z_PAD_M])
+    lo = (0.0, 0.0, float(h.min()) - _HF_Z_PAD_M)
+    hi = (hf.length_m, hf.width_m, float(h.max()) + _HF_Z_PAD_M)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        t1, t2 = (lo - og) / dg, (hi - og) / dg
-    t_lo = np.maximum(np.fmax.reduce(np.minimum(t1, t2), axis=1), 0.0)
-    t_hi = np.fmin.reduce(np.maximum(t1, t2), axis=1)
+        t1 = [(lo[i] - og[i]) / dg[i] for i in range(3)]
+        t2 = [(hi[i] - og[i]) / dg[i] for i in range(3)]
+    near = [np.minimum(t1[i], t2[i]) for i in range(3)]
+    far = [np.maximum(t1[i], t2[i]) for i in range(3)]
+    t_lo = np.maximum(np.fmax(np.fmax(near[0], near[1]), near[2]), 0.0)     # the slab test, axis by axis in order
+    t_hi = np.fmin(np.fmin(far[0], far[1]), far[2])
     cand = np.nonzero(t_hi >= t_lo)[0]
     if len(cand) == 0:
         return best
-    oc, dc, a, b = og[cand], dg[cand], t_lo[cand], t_hi[cand]
+    oc, dc, a, b = np.take(og, cand, axis=1), np.take(dg, cand, axis=1), t_lo[cand], t_hi[cand]
     c = hf.cell_m
-    span = np.abs(dc[:, 0]) + np.abs(dc[:, 1])            # line crossings grow with the xy path length
+    span = np.abs(dc[0]) + np.abs(dc[1])                  # line crossings grow with the xy path length
     order = np.argsort(span * (b - a))
     hp = padded_heights(h)
     for s0 in range(0, len(order), _HF_CHUNK):
         sel = order[s0:s0 + _HF_CHUNK]
-        best[cand[sel]] = _hf_chunk(oc[sel], dc[sel], a[sel], b[sel], hp, c)
+        best[cand[sel]] = _hf_chunk(np.take(oc, sel, axis=1), np.take(dc, sel, axis=1), a[sel], b[sel], hp, c)
     return best
 
 

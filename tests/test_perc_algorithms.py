@@ -186,6 +186,111 @@ def test_returns_on_the_sensors_own_vehicle_are_masked():
     assert np.isnan(lvl[inside]).all() and np.isfinite(lvl[~inside]).all()
 
 
+OWN_BOX_MOUNTS = [((0.0, -1.0, 5.0), (0.0, 45.0, 90.0)), ((3.0, 0.0, 4.0), (0.0, 30.0, 0.0)),
+                  ((-1.0, 1.5, 4.5), (0.0, 60.0, -90.0))]
+
+
+def _own_mask_case(xyz, rpy) -> tuple[int, int, int]:
+    """Check level_points' own-vehicle mask against the box test of every point; returns the axis order."""
+    from cosim.config import Scenario
+    from perception_proc.pipeline import Perception, own_vehicle_box
+    from perception_proc.synthetic import stitched_rig
+
+    sc = Scenario(format_version=1, sensor=Sensor(mount=Mount(parent="combine", xyz_m=xyz, rpy_deg=rpy)))
+    p = Perception(sc, stitched_rig(1, 48, 48, 90.0))
+    r = np.random.default_rng(1).uniform(0.2, 15.0, p.n_beams).astype(np.float32)
+    r[::17] = np.nan
+    raw = p.level_directions * r[:, None].astype(np.float64) + p.level_from_sensor[:3, 3]
+    lo, hi = own_vehicle_box(sc)
+    with np.errstate(invalid="ignore"):
+        inside = np.all((raw >= lo) & (raw <= hi), axis=1)
+    lvl = p.level_points(r)
+    assert 0 < inside.sum() < np.isfinite(r).sum()
+    np.testing.assert_array_equal(np.isnan(lvl[:, 0]), inside | np.isnan(r))
+    np.testing.assert_array_equal(lvl[~inside], raw[~inside])
+    return p._own_axes
+
+
+@pytest.mark.parametrize("xyz, rpy", OWN_BOX_MOUNTS)
+def test_own_vehicle_mask_is_the_box_whatever_axis_goes_first(xyz, rpy):
+    """The own-box test runs axis by axis, the most selective axis first (it depends on where the sensor
+    looks): the mask is the box test of every point."""
+    _own_mask_case(xyz, rpy)
+
+
+def test_own_box_axis_order_follows_the_view():
+    firsts = {_own_mask_case(*m)[0] for m in OWN_BOX_MOUNTS}
+    assert len(firsts) >= 2                          # looking sideways and looking ahead start elsewhere
+
+
+def test_border_flags_match_their_definition():
+    """FOV_EDGE on the pattern's outer rows and columns; OCCLUDED where a 3 x 3 neighbour (edge-replicated) is
+    nearer by more than OCCLUDER_REL of the range, invalid neighbours never nearer."""
+    from perception_proc.rim import FOV_EDGE, OCCLUDED, OCCLUDER_REL
+
+    rng = np.random.default_rng(3)
+    r = rng.uniform(2.0, 20.0, (30, 40)).astype(np.float32)
+    r[rng.random(r.shape) < 0.1] = np.nan
+    got = border_beams(r.ravel(), r.shape).reshape(r.shape)
+    pad = np.pad(np.where(np.isnan(r), np.inf, r), 1, mode="edge")
+    nearest = np.min([pad[i:i + 30, j:j + 40] for i in range(3) for j in range(3)], axis=0)
+    with np.errstate(invalid="ignore"):
+        want = np.where(nearest < r * np.float32(1.0 - OCCLUDER_REL), OCCLUDED, 0).astype(np.uint8)
+    want[[0, -1], :] |= FOV_EDGE
+    want[:, [0, -1]] |= FOV_EDGE
+    np.testing.assert_array_equal(got, want)
+    assert (got & OCCLUDED).any() and not (got[np.isnan(r)] & OCCLUDED).any()
+
+
+def test_upright_grid_transform_gives_the_full_products():
+    """For a yaw-only cart pose the height map's grid coordinates skip the terms that are exact zeros: the
+    same numbers as the full R^T (p - t), the same selection."""
+    from perception_proc.heightmap import _interior_points
+
+    rng = np.random.default_rng(4)
+    lfg = vehicle_pose(1.3, 6.2, 0.37) @ cart_body_from_grid(CART)
+    g0 = rng.uniform((-1.0, -1.0, -1.0), (L + 1.0, W + 1.0, 4.0), (5000, 3))     # around the cart, grid frame
+    p = apply(lfg, g0)
+    p[::50] = np.nan
+    box = (0.1, L - 0.1, 0.1, W - 0.1)
+    g = _interior_points(p, lfg, -0.5, 3.0, box)
+    r, t = lfg[:3, :3], lfg[:3, 3]
+    with np.errstate(invalid="ignore"):
+        full = (p - t) @ r                                   # row k: R^T (p_k - t), by BLAS
+        keep = ((full[:, 2] > -0.5) & (full[:, 2] < 3.0) & (full[:, 0] > box[0]) & (full[:, 0] < box[1])
+                & (full[:, 1] > box[2]) & (full[:, 1] < box[3]))
+    assert g.shape == (3, keep.sum()) and keep.sum() > 100
+    np.testing.assert_allclose(g.T, full[keep], rtol=0, atol=1e-12)
+    tilted = lfg @ mount_transform(Mount(parent="world", xyz_m=(0.0, 0.0, 0.0), rpy_deg=(2.0, 0.0, 0.0)))
+    gt = _interior_points(p, tilted, -0.5, 3.0, box)          # the general path still selects and transforms
+    with np.errstate(invalid="ignore"):
+        ft = (p - tilted[:3, 3]) @ tilted[:3, :3]
+        kt = ((ft[:, 2] > -0.5) & (ft[:, 2] < 3.0) & (ft[:, 0] > box[0]) & (ft[:, 0] < box[1]) & (ft[:, 1] > box[2])
+              & (ft[:, 1] < box[3]))
+    np.testing.assert_allclose(gt.T, ft[kt], rtol=0, atol=1e-12)
+
+
+def test_edge_line_fit_memo_returns_the_fit():
+    """The rim edge fits are memoised on their exact input bytes: the same answer as cv2.fitLine, computed once
+    for repeated input, and a changed point is a new fit."""
+    import cv2
+
+    from perception_proc.rim import _fit_line
+
+    rng = np.random.default_rng(5)
+    pts = np.stack([np.linspace(0, 6, 300), 0.1 * np.linspace(0, 6, 300) + rng.normal(0, 0.01, 300)], 1)
+    pts = pts.astype(np.float32)
+    vx, vy, _, _ = cv2.fitLine(pts, cv2.DIST_HUBER, 0, 0.01, 0.01).ravel()
+    _fit_line.cache_clear()
+    assert _fit_line(pts.tobytes()) == (float(vx), float(vy))
+    assert _fit_line(pts.copy().tobytes()) == (float(vx), float(vy))
+    assert _fit_line.cache_info().hits == 1
+    moved = pts.copy()
+    moved[7, 1] += 0.5
+    _fit_line(moved.tobytes())
+    assert _fit_line.cache_info().misses == 2
+
+
 @pytest.mark.parametrize("x0", [1.6, 2.6])
 def test_tube_hiding_part_of_the_rim_never_gives_a_wrong_cart(x0):
     # an auger-like bar between the sensor and the cart's front part: answer right, or no answer

@@ -6,11 +6,14 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as hst
 
 from cosim.config import Scenario
 from cosim.errors import FrameMismatch
 from cosim.geometry import vehicle_pose
 from dynamics_proc.blocks import declare_blocks as dynamics_blocks
+from perception_proc.orderstats import median_sorted, percentile_sorted, percentiles
 from perception_proc.accuracy_report import render_markdown, write_report
 from perception_proc.blocks import declare_blocks
 from perception_proc.participant import PerceptionParticipant, create
@@ -110,6 +113,20 @@ def test_accuracy_fields_against_the_exact_cast(stepped):
     assert st.heightmap_rmse_m < 0.03
     assert math.isnan(st.impact_error_m)                 # no stream in this scene: nothing to compare
     assert st.impact_valid == 0
+
+
+@settings(max_examples=200, deadline=None)
+@given(hst.lists(hst.floats(0.0, 50.0), min_size=1, max_size=400), hst.integers(0, 3))
+def test_order_statistics_are_numpys_bit_for_bit(values, decimals):
+    """perception_proc.orderstats gives the same bytes as np.median and np.percentile (ties included: rounded
+    values repeat)."""
+    e = np.round(np.asarray(values), decimals)
+    s = np.sort(e)
+    for q in (0.5, 90.0, 99.0, 99.5):
+        assert np.float64(percentile_sorted(s, q)).tobytes() == np.float64(np.percentile(e, q)).tobytes()
+    assert np.float64(median_sorted(s)).tobytes() == np.float64(np.median(e)).tobytes()
+    assert percentiles(e, (0.5, 99.5)).tobytes() == np.percentile(e, (0.5, 99.5)).tobytes()
+    assert math.isnan(median_sorted(s[:0])) and math.isnan(percentile_sorted(s[:0], 99.0))
 
 
 def test_perceived_heights_match_truth(stepped):

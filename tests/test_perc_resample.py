@@ -147,6 +147,22 @@ def test_stitched_rig_has_no_seam_artefacts():
     assert np.max(err[near_seam]) <= max(4 * BOUND, 2 * np.percentile(err[away], 99.9))
 
 
+def test_uncovered_beams_are_nan_and_a_small_image_is_refused():
+    """Beams outside every camera read the NaN slot of the end-to-end gather; an image smaller than the
+    table expects is refused (the gather skips per-index range checks, so the table checks once)."""
+    rig = stitched_rig(1, 320, 240, 60.0)
+    _, e, a = _grid(el=(-15, 15), az=(-70, 70), ne=11, na=71)            # wider than the one camera
+    table = build_table(rig, beam_directions(e, a))
+    assert 0 < table.covered.sum() < table.n_beams
+    shapes = [Plane((0.0, 0.0, 1.0), 12.0)]
+    rng = resample(_images(shapes, rig), table, CODEC, "planar", out=np.zeros(table.n_beams, np.float32))
+    assert np.isnan(rng[~table.covered]).all() and np.isfinite(rng[table.covered]).all()
+    assert np.array_equal(np.sort(table.source[table.covered]), np.arange(table.covered.sum()))
+    small = np.zeros((120, 320, 4), np.uint8)
+    with pytest.raises(ValueError, match="image of 38400 pixels"):
+        resample([small], table, CODEC, "planar")
+
+
 def test_offset_lidar_matches_exact_cast_and_is_flagged():
     rig0 = stitched_rig(2, 320, 240, 60.0, pitch_deg=-10.0)
     rig = stitched_rig(2, 320, 240, 60.0, pitch_deg=-10.0, offset_m=(0.15, 0.1, -0.1))
