@@ -1,18 +1,21 @@
-"""End to end: real-time factor, per-stage medians and where the CPU goes, process by process (issue 6).
+"""End to end (issue 6): launched runs as a user makes them; real-time factor, start-up and shut-down, per-stage
+medians, and the CPU per frame of every process, for one source tree or several interleaved (A/B).
 
-Runs ``python launch.py run SCENARIO --duration D --out DIR --quiet`` as a user would, ``--rounds`` times,
-each round alternating a whole run with a short one (``--short`` simulated seconds: start-up and shut-down,
-i.e. imports, GL context and shaders, beam tables, the run directory and figures). While a run lives the bench
-samples the CPU time (user + system, from /proc, every :data:`POLL_S`) of the launcher and of every process
-it starts, and names the ring members by the pids they log at start (``cosim.<name>: started (pid N)``).
+Run from the repository root::
 
-Per process it reports the fixed cost (CPU of the short run) and the CPU per frame in steady state,
-``(cpu_long - cpu_short) / (frames_long - frames_short)``; their sum over processes divided by the core count is
-the lower bound that the machine puts on the frame time however well the stages overlap. The wall time splits
-the same way into start-up (launch to the last "started" line), frames and shut-down (last frame to exit).
-Medians over the rounds; the host is noisy, so compare rounds run interleaved, not runs from different hours.
+    python bench/e2e.py --rounds 3 --duration 120                    # this tree: where the time goes
+    python bench/e2e.py --tree main=/work/main --tree new=. --rounds 6 --duration 30    # A/B, interleaved
 
-Usage: ``python bench/e2e.py [--scenario default] [--duration 120] [--short 1] [--rounds 3] [--set PATH=VALUE]``.
+Each round launches ``python launch.py run SCENARIO --duration D --out TMP --quiet`` once per tree, the order
+alternating every round (A B, B A, ...) so that a noisy host's load falls on both alike. While a run goes, its
+segment is attached read-only (the name is in the run directory's ``run.json``) for the ring members' pids
+(the supervisor is the launcher) and the supervisor's frame counter, and ``/proc/<pid>/stat`` is sampled every
+:data:`POLL_S`. A process's CPU per frame is the CPU (user + system) it used between the first sample at or
+after frame :data:`SKIP_FRAMES` and the last sample, over the frames completed in between: steady state, with
+start-up and teardown left out. Their sum divided by the core count is the shortest frame the machine allows
+however well the stages overlap. Start-up (launch to the first frame) and shut-down (children, outputs,
+figures) come from the launcher's last log line. Prints one Markdown table per tree: medians over the rounds
+(min-max).
 """
 from __future__ import annotations
 
@@ -29,138 +32,135 @@ from datetime import datetime
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-#: sampling period of the /proc CPU counters, s (a process's last POLL_S of CPU before it exits is missed)
-POLL_S = 0.02
+sys.path.insert(0, str(ROOT))
+
+from shm_schema import Segment  # noqa: E402
+
+#: sampling period of /proc and of the frame counter, s
+POLL_S = 0.05
+#: frames left out at the start of the CPU window (start-up transients)
+SKIP_FRAMES = 20
+#: processes whose CPU is reported: the ring members and the supervisor (the launcher process)
+MEMBERS = ("dynamics", "renderer", "perception", "supervisor")
 _TICK_S = 1.0 / os.sysconf("SC_CLK_TCK")
-_STARTED = re.compile(r"^(\d\d):(\d\d):(\d\d\.\d+) \S+\s+INFO\s+cosim\.(\w+): started \(pid (\d+)\)")
-_FINISHED = re.compile(r"^(\d\d):(\d\d):(\d\d\.\d+) \S+\s+INFO\s+cosim\.(\w+): finished")
-_LAUNCHED = re.compile(r"^(\d\d):(\d\d):(\d\d\.\d+) \S+\s+INFO\s+cosim\.launcher: run ")
+_PHASES = re.compile(r"start-up ([\d.]+) s to the first frame .* shut-down ([\d.]+) s \(children ([\d.]+) s, "
+                     r"outputs ([\d.]+) s, figures ([\d.]+) s\)")
 
 
 def _cpu_s(pid: int) -> float | None:
-    """User + system CPU time of ``pid`` so far, s (None once it is gone)."""
+    """User + system CPU of ``pid`` so far, s (None once it has gone)."""
     try:
-        with open(f"/proc/{pid}/stat") as f:
-            s = f.read()
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            fields = f.read().rsplit(b")", 1)[1].split()
     except OSError:
         return None
-    rest = s[s.rindex(")") + 2:].split()
-    return (int(rest[11]) + int(rest[12])) * _TICK_S
+    return (int(fields[11]) + int(fields[12])) * _TICK_S             # utime, stime (fields 14, 15)
 
 
-def _children(pid: int) -> list[int]:
-    out: list[int] = []
-    try:
-        for task in os.listdir(f"/proc/{pid}/task"):
-            with open(f"/proc/{pid}/task/{task}/children") as f:
-                out += [int(x) for x in f.read().split()]
-    except OSError:
-        pass
-    return out
+def one_run(tree: Path, scenario: str, duration: float, extra: list[str]) -> dict:
+    """Launch one run from ``tree``; returns its figures (see the module docstring)."""
+    with tempfile.TemporaryDirectory(prefix="e2e-") as tmp:
+        out = Path(tmp) / "run"
+        cmd = [sys.executable, "launch.py", "run", scenario, "--duration", str(duration), "--out", str(out),
+               "--quiet", *extra]
+        env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(cmd, cwd=tree, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        seg, pids, first, last, seen = None, {}, {}, {}, -1
+        while proc.poll() is None:
+            time.sleep(POLL_S)
+            if seg is None:
+                try:
+                    seg = Segment.attach(json.loads((out / "run.json").read_text())["segment"])
+                except (OSError, ValueError, KeyError):
+                    continue
+            if len(pids) < len(MEMBERS):                           # children fill their slots as they start
+                pids = {m: int(seg.slot(m)["pid"]) for m in MEMBERS if m in seg.schema.participants}
+                pids = {m: p for m, p in pids.items() if p > 0}
+                continue
+            frame = int(seg.slot("supervisor")["frame"])
+            if frame < SKIP_FRAMES or frame <= seen:               # before the window, or the ring is done
+                continue
+            seen = frame
+            for m, pid in pids.items():
+                cpu = _cpu_s(pid)
+                if cpu is not None:
+                    first.setdefault(m, (frame, cpu))
+                    last[m] = (frame, cpu)
+        wall = time.perf_counter() - t0
+        if seg is not None:
+            seg.close()
+        err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
+        summary = json.loads((out / "summary.json").read_text()) if (out / "summary.json").exists() else {}
+        log = (out / "log.txt").read_text() if (out / "log.txt").exists() else ""
+    if proc.returncode != 0 or not summary.get("completed"):
+        raise RuntimeError(f"run from {tree} failed ({proc.returncode}): {err[-2000:]}")
+    res = {"wall_s": wall, "rtf_process": summary["sim_time_s"] / wall, "rtf": summary["real_time_factor"],
+           "frames": summary["frames"], "period_s": summary["sim_time_s"] / max(summary["frames"] - 1, 1),
+           "timing_ms": summary.get("timing_ms", {}),
+           "cpu_ms": {m: 1e3 * (last[m][1] - first[m][1]) / max(last[m][0] - first[m][0], 1) for m in last}}
+    m = _PHASES.search(log)
+    if m:
+        res.update(zip(("startup_s", "shutdown_s", "join_s", "outputs_s", "figures_s"), map(float, m.groups())))
+    return res
 
 
-def _cmdline(pid: int) -> str:
-    try:
-        with open(f"/proc/{pid}/cmdline", "rb") as f:
-            return f.read().replace(b"\0", b" ").decode(errors="replace")
-    except OSError:
-        return ""
+def _cell(values: list[float]) -> str:
+    return f"{statistics.median(values):.2f} ({min(values):.2f}-{max(values):.2f})" if values else ""
 
 
-def _clock_s(m: re.Match) -> float:
-    return int(m.group(1)) * 3600 + int(m.group(2)) * 60 + float(m.group(3))
-
-
-def run_once(scenario: str, duration: float, sets: list[str], out: Path) -> dict:
-    """One launched run: summary figures, CPU s per named process, wall split (s)."""
-    cmd = [sys.executable, "launch.py", "run", scenario, "--duration", str(duration), "--out", str(out), "--quiet"]
-    for s in sets:
-        cmd += ["--set", s]
-    t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL)
-    cpu: dict[int, float] = {}
-    cmds: dict[int, str] = {}
-    while proc.poll() is None:
-        stack = [proc.pid]
-        while stack:
-            pid = stack.pop()
-            c = _cpu_s(pid)
-            if c is not None:
-                cpu[pid] = c
-                if pid not in cmds:
-                    cmds[pid] = _cmdline(pid)
-            stack += _children(pid)
-        time.sleep(POLL_S)
-    wall = time.perf_counter() - t0
-    if proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} exited with {proc.returncode}; see {out / 'log.txt'}")
-    names = {proc.pid: "launcher"}
-    started, finished, launched = [], [], None
-    for line in (out / "log.txt").read_text().splitlines():
-        if (m := _STARTED.match(line)):
-            names[int(m.group(5))] = m.group(4)
-            started.append(_clock_s(m))
-        elif (m := _FINISHED.match(line)):
-            finished.append(_clock_s(m))
-        elif launched is None and (m := _LAUNCHED.match(line)):
-            launched = _clock_s(m)
-    by_name: dict[str, float] = {}
-    for pid, c in cpu.items():
-        name = names.get(pid) or ("resource tracker" if "resource_tracker" in cmds.get(pid, "") else "other")
-        by_name[name] = by_name.get(name, 0.0) + c
-    s = json.loads((out / "summary.json").read_text())
-    split = {}
-    if launched is not None and started and finished:
-        split = {"start_s": max(started) - launched, "frames_s": max(finished) - max(started),
-                 "end_s": (launched + wall) - max(finished)}     # launcher's first log line ~ process start
-    return {"frames": s["frames"], "period_s": s["sim_time_s"] / max(s["frames"] - 1, 1), "rtf": s["real_time_factor"], "wall": wall, "timing": s["timing_ms"],
-            "cpu": by_name, "split": split}
+def report(label: str, runs: list[dict]) -> None:
+    """Print one tree's Markdown tables (medians over its runs, min-max)."""
+    cols = [("real-time factor, whole process", lambda r: r["rtf_process"]),
+            ("real-time factor, ring (summary)", lambda r: r["rtf"]), ("wall s", lambda r: r["wall_s"]),
+            ("start-up s", lambda r: r.get("startup_s")), ("shut-down s", lambda r: r.get("shutdown_s")),
+            ("of which figures s", lambda r: r.get("figures_s"))]
+    stages = list(runs[0]["timing_ms"])
+    cols += [(f"{k} ms (median)", lambda r, k=k: r["timing_ms"].get(k)) for k in stages]
+    print(f"**{label}**\n")
+    print("| " + " | ".join(c for c, _ in cols) + " |")
+    print("|" + "---:|" * len(cols))
+    print("| " + " | ".join(_cell([v for r in runs if (v := get(r)) is not None]) for _, get in cols) + " |")
+    print("\n| process | CPU ms per frame (steady state) |")
+    print("|---|---:|")
+    total = []
+    for m in MEMBERS:
+        v = [r["cpu_ms"][m] for r in runs if m in r["cpu_ms"]]
+        if v:
+            print(f"| {m} | {_cell(v)} |")
+    for r in runs:
+        total.append(sum(r["cpu_ms"].values()))
+    cores = os.cpu_count() or 1
+    bound = statistics.median(total) / cores
+    print(f"| all | {_cell(total)} |\n")
+    print(f"{statistics.median(total):.2f} ms of CPU per frame on {cores} cores: no frame shorter than {bound:.2f} ms "
+          f"({1e3 * runs[0]['period_s'] / bound:.1f}x real time at {runs[0]['period_s']:g} s frames) however the "
+          "stages overlap.\n")
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--tree", action="append", metavar="LABEL=PATH",
+                    help="a source tree to launch from (repeatable; default: this repository)")
     ap.add_argument("--scenario", default="default")
-    ap.add_argument("--duration", type=float, default=120.0, help="simulated seconds of the whole run")
-    ap.add_argument("--short", type=float, default=1.0, help="simulated seconds of the start-up run")
+    ap.add_argument("--duration", type=float, default=120.0, help="simulated seconds per run")
     ap.add_argument("--rounds", type=int, default=3)
-    ap.add_argument("--set", dest="sets", action="append", default=[], metavar="PATH=VALUE")
-    args = ap.parse_args(argv)
-    longs, shorts = [], []
-    with tempfile.TemporaryDirectory() as tmp:
-        for r in range(args.rounds):
-            shorts.append(run_once(args.scenario, args.short, args.sets, Path(tmp) / f"short{r}"))
-            longs.append(run_once(args.scenario, args.duration, args.sets, Path(tmp) / f"long{r}"))
-            print(f"round {r + 1}: {longs[-1]['rtf']:.2f}x real time, wall {longs[-1]['wall']:.1f} s, "
-                  f"load {os.getloadavg()[0]:.2f}", file=sys.stderr, flush=True)
-    med = statistics.median
-    print(f"Scenario `{args.scenario}` {' '.join('--set ' + s for s in args.sets)}, {args.duration:g} s simulated "
-          f"({longs[0]['frames']} frames), {args.rounds} rounds, {os.cpu_count()} cores, "
-          f"{datetime.now():%Y-%m-%d %H:%M}\n")
-    print("| real-time factor | wall s | start-up s | frames s | shut-down s | ms per frame | "
-          + " | ".join(f"{k} ms (median)" for k in longs[0]["timing"]) + " |")
-    print("|" + "---:|" * (6 + len(longs[0]["timing"])))
-    sp = {k: med([r["split"].get(k, float("nan")) for r in longs]) for k in ("start_s", "frames_s", "end_s")}
-    frame_ms = 1e3 * sp["frames_s"] / longs[0]["frames"]
-    print(f"| {med([r['rtf'] for r in longs]):.2f} | {med([r['wall'] for r in longs]):.1f} | {sp['start_s']:.2f} | "
-          f"{sp['frames_s']:.1f} | {sp['end_s']:.2f} | {frame_ms:.2f} | "
-          + " | ".join(f"{med([r['timing'][k] for r in longs]):.2f}" for k in longs[0]["timing"]) + " |")
-    names = sorted({n for r in longs + shorts for n, c in r["cpu"].items() if c > 0.0},
-                   key=lambda n: -med([r["cpu"].get(n, 0.0) for r in longs]))
-    dn = longs[0]["frames"] - shorts[0]["frames"]
-    print("\n| process | CPU s, short run (fixed cost) | CPU s, whole run | CPU ms per frame (steady state) |")
-    print("|---|---:|---:|---:|")
-    total = 0.0
-    for n in names:
-        lo, hi = med([r["cpu"].get(n, 0.0) for r in shorts]), med([r["cpu"].get(n, 0.0) for r in longs])
-        per = 1e3 * (hi - lo) / dn
-        total += per
-        print(f"| {n} | {lo:.2f} | {hi:.2f} | {per:.2f} |")
-    cores = os.cpu_count() or 1
-    print(f"| all | | | {total:.2f} |")
-    print(f"\nCPU per frame {total:.2f} ms on {cores} cores: the frames cannot run faster than {total / cores:.2f} ms "
-          f"each ({1e3 * longs[0]['period_s'] / (total / cores) if total else float('nan'):.1f}x real time at "
-          f"{longs[0]['period_s']:g} s frames); measured "
-          f"{frame_ms:.2f} ms per frame between the last start-up and the last finish.")
+    ap.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", help="passed to launch.py")
+    a = ap.parse_args(argv)
+    trees = [(lab, Path(p).resolve()) for lab, _, p in (t.partition("=") for t in (a.tree or [f"this={ROOT}"]))]
+    extra = [x for s in a.set for x in ("--set", s)]
+    runs: dict[str, list[dict]] = {lab: [] for lab, _ in trees}
+    for r in range(a.rounds):
+        for lab, path in (trees if r % 2 == 0 else trees[::-1]):
+            res = one_run(path, a.scenario, a.duration, extra)
+            runs[lab].append(res)
+            print(f"round {r + 1} {lab}: {res['rtf_process']:.2f}x real time (whole process), load "
+                  f"{os.getloadavg()[0]:.2f}", file=sys.stderr, flush=True)
+    print(f"Scenario `{a.scenario}` {' '.join('--set ' + s for s in a.set)}, {a.duration:g} s simulated, "
+          f"{a.rounds} interleaved rounds, {os.cpu_count()} cores, {datetime.now():%Y-%m-%d %H:%M}: median "
+          "(min-max)\n")
+    for lab, _ in trees:
+        report(lab, runs[lab])
 
 
 if __name__ == "__main__":
