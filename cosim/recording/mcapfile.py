@@ -157,9 +157,7 @@ class McapFile:
         """Add a message whose data is the concatenation of ``parts`` (bytes or any C-contiguous buffers; copied
         here, not kept)."""
         views = [p if type(p) is bytes else memoryview(p).cast("B") for p in parts]
-        size = 0
-        for v in views:
-            size += len(v)
+        size = sum(map(len, views))
         need = _MESSAGE.size + size
         if self._n + need > len(self._buf):
             self._finish_chunk()
@@ -169,26 +167,30 @@ class McapFile:
                 self._mv = memoryview(self._buf)
         if not self._index:
             self._c_start = self._c_end = log_time
-        elif log_time < self._c_start:
-            self._c_start = log_time
         elif log_time > self._c_end:
             self._c_end = log_time
+        elif log_time < self._c_start:
+            self._c_start = log_time
         n = self._n
-        self._index.setdefault(channel_id, []).append((log_time, n))
+        index = self._index.get(channel_id)
+        if index is None:
+            index = self._index[channel_id] = []
+        index.append((log_time, n))
         _MESSAGE.pack_into(self._buf, n, Opcode.MESSAGE, _MESSAGE_FIXED + size, channel_id, 0, log_time,
                            log_time if publish_time is None else publish_time)
         n += _MESSAGE.size
         mv = self._mv
         for v in views:
-            k = len(v)
-            mv[n:n + k] = v
-            n += k
+            k = n + len(v)
+            mv[n:k] = v
+            n = k
         self._n = n
         if self._messages == 0:
             self._t_start = self._t_end = log_time
-        else:
-            self._t_start = min(self._t_start, log_time)
-            self._t_end = max(self._t_end, log_time)
+        elif log_time > self._t_end:
+            self._t_end = log_time
+        elif log_time < self._t_start:
+            self._t_start = log_time
         self._messages += 1
         self._counts[channel_id] += 1
 
