@@ -165,8 +165,9 @@ class Timing:
         return (len(s) - 1) * period_s / (s[-1] - s[0])
 
 
+#: the polling client; a response cut off (the viewer stopped at the run's end) or refused is skipped, not fatal
 CLIENT = """
-import json, sys, time, urllib.request
+import http.client, json, sys, time, urllib.request
 url = sys.argv[1]
 shown, fetched = {}, {}
 while True:
@@ -178,7 +179,7 @@ while True:
                     and time.monotonic() - fetched.get(pid, 0) >= 0.5:
                 urllib.request.urlopen(f"{url}panel/{pid}.png?frame={info['frame']}", timeout=5).read()
                 shown[pid], fetched[pid] = info["frame"], time.monotonic()
-    except OSError:
+    except (OSError, http.client.HTTPException, ValueError):
         pass
     time.sleep(0.25)
 """
