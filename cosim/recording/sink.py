@@ -13,8 +13,8 @@ NOTIFY_FRAMES frames or NOTIFY_S seconds, whichever comes first, and always befo
 so wakes the recorder ~30 times a second instead of ~1000: each wake-up is scheduler work on both sides, and
 a woken recorder lands on whichever core is idle at that instant, which is the core the next ring member is
 about to be woken on (the sender still occupies the other), where the ring then waits for it. A 100 ms frame
-still wakes it every frame. The recorder runs at nice 10, like the viewer: it takes the CPU the ring leaves,
-and the slots absorb its delays.
+still wakes it every frame. The recorder runs at nice 10 (``RecordOptions.nice``), like the viewer: it takes the
+CPU the ring leaves, and the slots absorb its delays.
 
 ``queue_frames=0`` writes synchronously inside the sink, with no process.
 

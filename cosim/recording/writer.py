@@ -98,7 +98,10 @@ class RecordOptions:
     #: and file than 0.5 s
     flush_s: float = 1.0
     #: niceness added to the recorder process: it yields the CPU to the ring (the credits still guarantee that
-    #: it gets every frame: when all slots are full the ring waits for it)
+    #: it gets every frame: when all slots are full the ring waits for it). Not SCHED_IDLE: on a machine whose
+    #: other work keeps both cores busy an idle-class recorder gets next to no CPU, the slots fill and the ring
+    #: waits on it for as long as that work lasts (measured: 30-92x real time against 67-120x at nice 10 in the
+    #: same rounds), and an unprivileged process can never leave SCHED_IDLE again
     nice: int = 10
 
     def __post_init__(self) -> None:
