@@ -1,4 +1,5 @@
-"""Pre-encoded message templates give the same bytes as the generic encoders they stand in for."""
+"""Pre-encoded message templates (and the packed chunk message index) give the same bytes as the generic encoders
+they stand in for."""
 from __future__ import annotations
 
 import math
@@ -52,3 +53,17 @@ def test_marker_json_is_to_json(t_ns, frame, t_s):
 def test_non_finite_values_become_null():
     got = ScalarsTemplate(("a", "b", "c"), "fff").encode(0, 1, (math.nan, math.inf, -math.inf))
     assert got == b'{"timestamp":{"sec":0,"nsec":0},"frame":1,"a":null,"b":null,"c":null}'
+
+
+@given(st.integers(min_value=1, max_value=2**16 - 1),
+       st.lists(st.tuples(T_NS, st.integers(min_value=0, max_value=2**40)), max_size=50))
+def test_message_index_record_is_mcaps(channel_id, index):
+    """The chunk's MessageIndex records, packed in one call, are the bytes mcap's own record writer makes."""
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import MessageIndex
+
+    from cosim.recording.mcapfile import message_index_record
+
+    rb = RecordBuilder()
+    MessageIndex(channel_id=channel_id, records=index).write(rb)
+    assert message_index_record(channel_id, index) == rb.end()

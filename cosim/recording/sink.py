@@ -47,7 +47,7 @@ from .writer import (
 )
 
 __all__ = ["McapRecorder", "mcap_sink", "slot_count", "CREDIT_POLL_S", "CLOSE_TIMEOUT_S", "QUEUE_BYTES", "MIN_SLOTS",
-           "MAX_SLOTS", "NOTIFY_FRAMES", "NOTIFY_S"]
+           "MAX_SLOTS", "NOTIFY_FRAMES", "NOTIFY_S", "RELEASE_FRAMES"]
 
 log = logging.getLogger("cosim.recording")
 
@@ -65,6 +65,9 @@ NOTIFY_FRAMES = 32
 #: ...and at least this often, s, while frames keep coming: a frame reaches the recorder at most this late
 #: (plus one frame), and the file at most ``RecordOptions.flush_s`` after that
 NOTIFY_S = 0.03
+#: the recorder gives slots back (credits) in batches of this many frames (at most a quarter of the slots), and
+#: all it holds whenever it has caught up: a sink that had to wait then wakes once per batch, not once per frame
+RELEASE_FRAMES = 8
 #: a notification: the count of frames put so far (int64); the end mark is an empty message
 _COUNT = struct.Struct("<q")
 
@@ -88,7 +91,8 @@ def _recorder_main(conn, credits, run: RunInfo, schema_bytes: bytes, slots_name:
     writer = McapWriter(run, schema, Path(path), options, run_id, fingerprint, flush_s=options.flush_s)
     slots = FrameSlots.attach(slots_name, schema, Recorded.of(schema).names, n_slots)
     cpu0 = time.process_time()  # start-up (interpreter, imports, writer, slots) ends here
-    done = wakeups = 0
+    release_every = max(1, min(RELEASE_FRAMES, n_slots // 4))
+    done = wakeups = held = 0
     try:
         end = False
         while not end:
@@ -108,12 +112,22 @@ def _recorder_main(conn, credits, run: RunInfo, schema_bytes: bytes, slots_name:
                 frame, data = slots.frame(done % n_slots)
                 writer.write(frame, *data)
                 done += 1
-                credits.release()
+                held += 1
+                if held >= release_every:
+                    held = _give_back(credits, held)
+            held = _give_back(credits, held)  # caught up: every slot back before waiting for more
     finally:
         # what recording cost: this process's CPU time since it was ready (encode, compress, write), s
         writer.close({"process_cpu_s": repr(time.process_time() - cpu0), "startup_cpu_s": repr(cpu0),
                       "wakeups": str(wakeups)})
         slots.close()
+
+
+def _give_back(credits, n: int) -> int:
+    """Give ``n`` slots back to the sink; returns the number still held (0)."""
+    for _ in range(n):
+        credits.release()
+    return 0
 
 
 class McapRecorder:
