@@ -16,8 +16,10 @@ size per frame. Two workloads:
 
 The real-time factor is measured in steady state by a timing sink: frames completed more than ``SETTLE_S``
 after frame 0 (so the children's and the viewer's start-up, imports included, does not count), to the end.
-Usage: ``python bench/viewer_bench.py [--reps 3] [--frames 250] [--work-ms 10] [--skip-dynamics]
-[--configs plain,record]``; prints a Markdown table. Figures: bench/README.md.
+Usage: ``python bench/viewer_bench.py [--reps 3] [--frames 250] [--dynamics-frames 12000] [--work-ms 10]
+[--skip-dynamics] [--skip-payload] [--configs plain,record]``; prints a Markdown table (with the 1-minute load
+average before and after, and for recording runs how often the ring waited for a free frame slot). Figures:
+bench/README.md.
 """
 from __future__ import annotations
 
@@ -165,8 +167,9 @@ class Timing:
         return (len(s) - 1) * period_s / (s[-1] - s[0])
 
 
+#: the polling client; a response cut off (the viewer stopped at the run's end) or refused is skipped, not fatal
 CLIENT = """
-import json, sys, time, urllib.request
+import http.client, json, sys, time, urllib.request
 url = sys.argv[1]
 shown, fetched = {}, {}
 while True:
@@ -178,7 +181,7 @@ while True:
                     and time.monotonic() - fetched.get(pid, 0) >= 0.5:
                 urllib.request.urlopen(f"{url}panel/{pid}.png?frame={info['frame']}", timeout=5).read()
                 shown[pid], fetched[pid] = info["frame"], time.monotonic()
-    except OSError:
+    except (OSError, http.client.HTTPException, ValueError):
         pass
     time.sleep(0.25)
 """
@@ -188,10 +191,10 @@ class TimedSink:
     """Sink factory wrapper recording how long each call of the wrapped sink takes (supervisor time, s)."""
 
     def __init__(self, factory):
-        self.factory, self.calls = factory, []
+        self.factory, self.calls, self.inner = factory, [], None
 
     def __call__(self, scenario, run_dir, segment):
-        inner = self.factory(scenario, run_dir, segment)
+        inner = self.inner = self.factory(scenario, run_dir, segment)
         calls = self.calls
 
         class Sink:
@@ -250,6 +253,7 @@ def one_run(scenario: Scenario, specs, config: str, tmp: Path) -> float:
     one_run.sizes[config] = size / (len(timing.stamps) or 1)
     if record.calls:
         one_run.sink_ms.setdefault(config, []).append(1e3 * statistics.mean(record.calls))
+        one_run.waits.setdefault(config, []).append(1e3 * getattr(record.inner, "waits", 0) / len(record.calls))
         meta = recorder_metadata(out / "recording.mcap")
         if meta:
             one_run.cpu_ms.setdefault(config, []).append(1e3 * float(meta["process_cpu_s"]) / int(meta["frames"]))
@@ -259,28 +263,42 @@ def one_run(scenario: Scenario, specs, config: str, tmp: Path) -> float:
 one_run.sizes = {}
 one_run.sink_ms = {}
 one_run.cpu_ms = {}
+#: per recording config and run, the sink's waits for a free frame slot per 1000 frames
+one_run.waits = {}
 
 
-def bench(name: str, scenario: Scenario, specs, reps: int, configs=CONFIGS) -> list[str]:
+def bench(name: str, scenario: Scenario, specs, reps: int, configs=CONFIGS, warmup: bool = True,
+          rotate: int = 0) -> list[str]:
+    """Run every config ``reps`` times, interleaved, the order rotated each rep (no config always first: the
+    first run after start-up or after a recording's files were deleted is often the slowest), after one
+    discarded warm-up run of ``plain``. ``vs plain``: ratio of the medians; ``paired``: median (range) of each
+    rep's ratio to its own plain run, which a load that drifts between reps disturbs less."""
     results = {c: [] for c in configs}
     one_run.sink_ms.clear()
     one_run.cpu_ms.clear()
+    one_run.waits.clear()
     with tempfile.TemporaryDirectory() as tmp:
-        for _ in range(reps):
-            for c in configs:
+        if warmup:
+            one_run(scenario, specs, "plain", Path(tmp))
+        for r in range(reps):
+            k = (r + rotate) % len(configs)
+            for c in configs[k:] + configs[:k]:
                 results[c].append(one_run(scenario, specs, c, Path(tmp)))
     base = statistics.median(results["plain"])
     rows = []
     for c in configs:
         med = statistics.median(results[c])
         spread = f"{min(results[c]):.2f}-{max(results[c]):.2f}"
-        ratio = f"{100 * (med / base - 1):+.1f} %"
+        paired = [100 * (x / p - 1) for x, p in zip(results[c], results["plain"])]
+        ratio = (f"{100 * (med / base - 1):+.1f} % | {statistics.median(paired):+.1f} % "
+                 f"({min(paired):+.0f} to {max(paired):+.0f})") if c != "plain" else "- | -"
         if "record" in c:
             cpu = one_run.cpu_ms.get(c)
-            rec = (f"{statistics.median(one_run.sink_ms[c]):.2f} | "
-                   f"{f'{statistics.median(cpu):.1f}' if cpu else '?'} | {one_run.sizes.get(c, 0) / 1024:.0f}")
+            rec = (f"{statistics.median(one_run.sink_ms[c]):.3f} | "
+                   f"{f'{statistics.median(cpu):.2f}' if cpu else '?'} | {one_run.sizes.get(c, 0) / 1024:.0f} | "
+                   f"{statistics.median(one_run.waits[c]):.1f}")
         else:
-            rec = "- | - | -"
+            rec = "- | - | - | -"
         rows.append(f"| {name} | {c} | {med:.2f} | {spread} | {ratio} | {rec} |")
     return rows
 
@@ -288,9 +306,14 @@ def bench(name: str, scenario: Scenario, specs, reps: int, configs=CONFIGS) -> l
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--reps", type=int, default=3)
-    ap.add_argument("--frames", type=int, default=250, help="payload frames (dynamics runs 15x as many)")
+    ap.add_argument("--frames", type=int, default=250, help="payload frames")
+    ap.add_argument("--dynamics-frames", type=int, default=12000,
+                    help="dynamics frames (~1 ms each: enough for a steady window well past SETTLE_S)")
     ap.add_argument("--work-ms", type=float, default=10.0, help="CPU time per payload step, ms")
     ap.add_argument("--skip-dynamics", action="store_true")
+    ap.add_argument("--skip-payload", action="store_true")
+    ap.add_argument("--rotate", type=int, default=0,
+                    help="start the rotation of the config order here (to interleave separate invocations)")
     ap.add_argument("--configs", default=",".join(CONFIGS),
                     help="comma-separated subset of %(default)s (plain is always run: the reference)")
     args = ap.parse_args()
@@ -299,20 +322,24 @@ def main() -> None:
     if unknown:
         ap.error(f"unknown configs {sorted(unknown)}; choose from {CONFIGS}")
     period = 0.1
-    sc = Scenario(format_version=1, duration_s=args.frames * period, renderer="mock", viewer=True)
-    rows = bench("payload", sc, payload_specs(args.work_ms), args.reps, configs)
+    load0 = os.getloadavg()[0]
+    rows = []
+    if not args.skip_payload:
+        sc = Scenario(format_version=1, duration_s=args.frames * period, renderer="mock", viewer=True)
+        rows += bench("payload", sc, payload_specs(args.work_ms), args.reps, configs, rotate=args.rotate)
     if not args.skip_dynamics:
-        gt = Scenario(format_version=1, duration_s=15 * args.frames * period, feedback="ground_truth",
+        gt = Scenario(format_version=1, duration_s=args.dynamics_frames * period, feedback="ground_truth",
                       renderer="none")
         try:
-            rows += bench("dynamics", gt, None, args.reps, configs)
+            rows += bench("dynamics", gt, None, args.reps, configs, rotate=args.rotate)
         except Exception as exc:  # noqa: BLE001 - the real participant is someone else's work in progress
-            rows.append(f"| dynamics | (failed: {type(exc).__name__}: {exc}) | | | | | |")
-    print(f"machine: {os.cpu_count()} cores; {args.reps} runs each, interleaved; {args.frames} payload frames; "
-          f"steady state from {SETTLE_S:g} s after frame 0; payload work {args.work_ms:g} ms CPU per step")
-    print("| workload | config | real-time factor (median) | range | vs plain | sink ms/frame | recorder CPU ms/frame "
-          "| recording KiB/frame |")
-    print("|---|---|---|---|---|---|---|---|")
+            rows.append(f"| dynamics | (failed: {type(exc).__name__}: {exc}) | | | | | | | | |")
+    print(f"machine: {os.cpu_count()} cores, load average {load0:.1f} before, {os.getloadavg()[0]:.1f} after; "
+          f"{args.reps} runs each, interleaved; {args.frames} payload frames, {args.dynamics_frames} dynamics "
+          f"frames; steady state from {SETTLE_S:g} s after frame 0; payload work {args.work_ms:g} ms CPU per step")
+    print("| workload | config | real-time factor (median) | range | vs plain | paired vs plain | sink ms/frame "
+          "| recorder CPU ms/frame | recording KiB/frame | slot waits per 1000 frames |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     print("\n".join(rows))
 
 

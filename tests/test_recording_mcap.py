@@ -454,3 +454,76 @@ def test_frame_data_gives_each_blocks_stamp():
     assert stamps == {"dyn_state": 3, "perc_state": 2, "lidar_points": 2, "cam0_depth": 3}
     assert structs["perc_state"]["coverage"] == 2.0 and set(arrays) == {"lidar_points", "cam0_depth"}
     assert np.shares_memory(arrays["lidar_points"], seg.view("lidar_points"))
+
+
+def _lag_recorder(tmp_path, monkeypatch, queue_frames: int, notify_frames: int | None = None):
+    """A recorder process fed from a local segment of the lagging schema; ``notify_frames`` None: the sink's own
+    batching, else tell the recorder only every that many frames (and never on time)."""
+    from shm_schema import Segment
+
+    from cosim.recording import McapRecorder, sink
+
+    if notify_frames is not None:
+        monkeypatch.setattr(sink, "NOTIFY_S", 1e9)
+    seg = Segment.local(_lag_schema())
+    rec = McapRecorder(standins.scenario(1.0), tmp_path, seg, RecordOptions(queue_frames=queue_frames, flush_s=0.0))
+    if notify_frames is not None:
+        rec._notify_frames = notify_frames
+    return seg, rec
+
+
+def test_the_recorder_is_woken_once_per_batch_of_frames(tmp_path, shm_clean, monkeypatch):
+    """Fast frames: one message per NOTIFY_FRAMES frames (plus the end), every frame in the file."""
+    from cosim.recording.sink import NOTIFY_FRAMES
+
+    seg, rec = _lag_recorder(tmp_path, monkeypatch, queue_frames=256, notify_frames=NOTIFY_FRAMES)
+    n = 100
+    for m in range(n):
+        _write_lagging(seg, m)
+        rec(seg, m)
+    rec.close()
+    r = read_recording(tmp_path / "recording.mcap")
+    assert r.frames == list(range(n)) and rec.waits == 0
+    assert int(r.metadata["recorder"]["wakeups"]) <= n // NOTIFY_FRAMES + 2
+
+
+def test_frames_put_but_not_yet_told_are_recorded_when_the_launcher_is_gone(tmp_path, shm_clean, monkeypatch):
+    """The pipe closes without an end mark (what a killed launcher leaves): the recorder takes every frame counted
+    in the slots, told of or not, and finishes the file."""
+    seg, rec = _lag_recorder(tmp_path, monkeypatch, queue_frames=16, notify_frames=1000)
+    for m in range(6):
+        _write_lagging(seg, m)
+        rec(seg, m)
+    assert rec._told == 0 and rec._slots.count == 6, "nothing told yet: the frames are only in the slots"
+    rec._conn.close()  # the launcher is gone
+    rec._proc.join(60)
+    try:
+        assert rec._proc.exitcode == 0
+        r = read_recording(tmp_path / "recording.mcap")
+        assert r.truncated is False and r.frames == list(range(6))
+        assert [t for t, _ in r.topic("/dyn_state")] == [round(k * 0.1e9) for k in range(6)]
+    finally:
+        rec._closed = True
+        rec._release_slots()
+
+
+def test_a_full_set_of_slots_tells_the_recorder_before_the_ring_waits(tmp_path, shm_clean, monkeypatch):
+    """Two slots and no batch ever due: the sink must tell the recorder of the full slots before it waits for a
+    credit, or it would wait forever."""
+    import threading
+
+    seg, rec = _lag_recorder(tmp_path, monkeypatch, queue_frames=2, notify_frames=10**6)
+    n = 12
+
+    def feed():
+        for m in range(n):
+            _write_lagging(seg, m)
+            rec(seg, m)
+
+    t = threading.Thread(target=feed, daemon=True)
+    t.start()
+    t.join(60)
+    assert not t.is_alive(), "the sink waited for a credit the recorder could never give back"
+    rec.close()
+    r = read_recording(tmp_path / "recording.mcap")
+    assert r.frames == list(range(n)) and rec.waits >= 1 and not rec._failed

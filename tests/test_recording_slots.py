@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cosim.recording.slots import FrameSlots, slot_block
+from cosim.recording.slots import NOT_PUT, FrameSlots, block_bytes, slot_block
 from shm_schema import (
     ArrayBlock,
     Field,
@@ -44,14 +44,17 @@ def test_put_copies_each_block_into_its_slot_and_reads_back(shm_clean):
         fill(run, 4)
         assert slots.put(run, 1, 4, NAMES) == NAMES
         fill(run, 5)  # the run moves on: the slot keeps frame 4
-        structs, arrays, stamps = reader.frame(1, NAMES)
+        frame, (structs, arrays, stamps) = reader.frame(1)
+        assert frame == 4 and stamps == {"dyn": 4, "img": 4, "pts": 4}
         assert structs["dyn"] == {"t_s": 0.4, "frame": 4, "x_m": -10.0}
         np.testing.assert_array_equal(arrays["pts"], np.arange(28, dtype=np.float32).reshape(7, 4) * 4)
         assert arrays["img"].shape == (6, 5, 4) and arrays["img"][0, 0, 0] == 4
         assert np.shares_memory(arrays["img"], reader.view(1, "img")), "the recorder reads the slot in place"
-        assert reader.segment.frame_of(slot_block(1, "pts")) == 4
+        assert reader.stamp(1, "pts") == 4
         assert slots.put(run, 0, 5, ("dyn",)) == ("dyn",)
-        assert reader.frame(0, ("dyn",))[0]["dyn"]["frame"] == 5 and reader.frame(1, ("dyn",))[0]["dyn"]["frame"] == 4
+        frame0, (structs0, arrays0, stamps0) = reader.frame(0)
+        assert frame0 == 5 and structs0["dyn"]["frame"] == 5 and arrays0 == {} and stamps0 == {"dyn": 5}
+        assert reader.frame(1)[1].structs["dyn"]["frame"] == 4 and reader.stamp(0, "img") == NOT_PUT
         reader.close()
     finally:
         slots.close()
@@ -66,8 +69,8 @@ def test_put_keeps_each_blocks_own_stamp(shm_clean):
             fill(run, 6, ("dyn", "img"))
             fill(run, 5, ("pts",))
             assert slots.put(run, 0, 6, NAMES) == NAMES
-            _, arrays, stamps = slots.frame(0, NAMES)
-            assert stamps == {"dyn": 6, "img": 6, "pts": 5} and slots.stamp(0, "pts") == 5
+            frame, (_, arrays, stamps) = slots.frame(0)
+            assert frame == 6 and stamps == {"dyn": 6, "img": 6, "pts": 5} and slots.stamp(0, "pts") == 5
             np.testing.assert_array_equal(arrays["pts"], np.arange(28, dtype=np.float32).reshape(7, 4) * 5)
         finally:
             slots.unlink()
@@ -79,7 +82,7 @@ def test_blocks_never_written_are_not_copied(shm_clean):
         try:
             fill(run, 0, which=("dyn",))
             assert slots.put(run, 0, 0, NAMES) == ("dyn",)
-            structs, arrays, _ = slots.frame(0, ("dyn",))
+            _, (structs, arrays, _) = slots.frame(0)
             assert np.isnan(structs["dyn"]["x_m"]) and arrays == {}
         finally:
             slots.unlink()

@@ -28,6 +28,7 @@ import zlib
 from collections import defaultdict
 from typing import BinaryIO, Sequence
 
+import numpy as np
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
 from mcap.records import (
@@ -36,7 +37,6 @@ from mcap.records import (
     DataEnd,
     Footer,
     Header,
-    MessageIndex,
     Metadata,
     MetadataIndex,
     Schema,
@@ -44,7 +44,8 @@ from mcap.records import (
     SummaryOffset,
 )
 
-__all__ = ["McapFile", "MAGIC", "COMPRESSIONS", "CHUNK_BYTES", "ZSTD_LEVEL", "ZSTD_WINDOW_LOG", "ZSTD_HASH_LOG"]
+__all__ = ["McapFile", "MAGIC", "COMPRESSIONS", "CHUNK_BYTES", "ZSTD_LEVEL", "ZSTD_WINDOW_LOG", "ZSTD_HASH_LOG",
+           "message_index_record"]
 
 #: MCAP v0 magic (start and end of a file)
 MAGIC = b"\x89MCAP0\r\n"
@@ -65,6 +66,16 @@ _MESSAGE = struct.Struct("<BQHIQQ")
 _MESSAGE_FIXED = _MESSAGE.size - 9  # the record's own fields before its data
 #: Chunk record header up to the compression string: opcode, length, start, end, uncompressed size, crc
 _CHUNK_HEAD = struct.Struct("<BQQQQI")
+#: Message index record header: opcode, record length, channel id, byte length of the (log time, offset) pairs
+_INDEX_HEAD = struct.Struct("<BQHI")
+
+
+def message_index_record(channel_id: int, index: list[tuple[int, int]]) -> bytes:
+    """The MessageIndex record of a chunk's messages on ``channel_id``: (log time ns, offset in the chunk's
+    records) pairs, the bytes ``mcap.records.MessageIndex(...).write`` makes, packed in one call instead of two
+    ``struct.pack`` per message (a ground-truth run's chunks hold ~8000 messages a second)."""
+    pairs = np.array(index, dtype="<u8").reshape(-1, 2)
+    return _INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 2 + 4 + pairs.nbytes, channel_id, pairs.nbytes) + pairs.tobytes()
 
 
 class McapFile:
@@ -157,9 +168,7 @@ class McapFile:
         """Add a message whose data is the concatenation of ``parts`` (bytes or any C-contiguous buffers; copied
         here, not kept)."""
         views = [p if type(p) is bytes else memoryview(p).cast("B") for p in parts]
-        size = 0
-        for v in views:
-            size += len(v)
+        size = sum(map(len, views))
         need = _MESSAGE.size + size
         if self._n + need > len(self._buf):
             self._finish_chunk()
@@ -169,26 +178,30 @@ class McapFile:
                 self._mv = memoryview(self._buf)
         if not self._index:
             self._c_start = self._c_end = log_time
-        elif log_time < self._c_start:
-            self._c_start = log_time
         elif log_time > self._c_end:
             self._c_end = log_time
+        elif log_time < self._c_start:
+            self._c_start = log_time
         n = self._n
-        self._index.setdefault(channel_id, []).append((log_time, n))
+        index = self._index.get(channel_id)
+        if index is None:
+            index = self._index[channel_id] = []
+        index.append((log_time, n))
         _MESSAGE.pack_into(self._buf, n, Opcode.MESSAGE, _MESSAGE_FIXED + size, channel_id, 0, log_time,
                            log_time if publish_time is None else publish_time)
         n += _MESSAGE.size
         mv = self._mv
         for v in views:
-            k = len(v)
-            mv[n:n + k] = v
-            n += k
+            k = n + len(v)
+            mv[n:k] = v
+            n = k
         self._n = n
         if self._messages == 0:
             self._t_start = self._t_end = log_time
-        else:
-            self._t_start = min(self._t_start, log_time)
-            self._t_end = max(self._t_end, log_time)
+        elif log_time > self._t_end:
+            self._t_end = log_time
+        elif log_time < self._t_start:
+            self._t_start = log_time
         self._messages += 1
         self._counts[channel_id] += 1
 
@@ -211,12 +224,13 @@ class McapFile:
         self._write(head)
         self._write(data)
         chunk_length = self._pos - start
-        rb = RecordBuilder()
-        offsets = {}
+        parts, offsets, n = [], {}, 0
         for cid, index in self._index.items():
-            offsets[cid] = self._pos + rb.count
-            MessageIndex(channel_id=cid, records=index).write(rb)
-        index_bytes = rb.end()
+            offsets[cid] = self._pos + n
+            record = message_index_record(cid, index)
+            parts.append(record)
+            n += len(record)
+        index_bytes = b"".join(parts)
         self._write(index_bytes)
         self._chunk_indexes.append(ChunkIndex(
             message_start_time=self._c_start, message_end_time=self._c_end, chunk_start_offset=start,

@@ -2,25 +2,34 @@
 
 The supervisor calls the sink after each completed frame while it holds the token, so it sees every frame
 consistently without a seqlock retry. The sink only copies the frame's recorded blocks into a free frame slot
-(:mod:`cosim.recording.slots`, shared memory: one memcpy per block, nothing pickled) and sends the recorder
-process ``(frame, slot, blocks)``, a few bytes; the recorder (spawned, like the ring's children) encodes and
-writes straight from the slot, then gives the slot back. The ring is sequential, so on a 2-core machine the
-recorder uses the core the ring leaves idle, and it shares no GIL with the supervisor. At most ``queue_frames``
-frames are in flight (a semaphore of credits, one per slot; by default as many slots as fit in QUEUE_BYTES): when
-encoding cannot keep up, the sink waits, so a recording never loses a frame. The recorder runs at nice 10, like
-the viewer: it takes the CPU the ring leaves, and the slots absorb its delays. ``queue_frames=0`` writes
-synchronously inside the sink, with no process.
+(:mod:`cosim.recording.slots`, shared memory: one memcpy per block, nothing pickled) and counts it; the
+recorder (spawned, like the ring's children) encodes and writes straight from the slot, then gives the slot
+back. At most ``queue_frames`` frames are in flight (a semaphore of credits, one per slot; by default as many
+slots as fit in QUEUE_BYTES): when encoding cannot keep up, the sink waits, so a recording never loses a frame.
 
-Ends: ``close`` (end of run, failure, stop) sends the end mark and waits for the recorder to write every frame
-it was sent and finish the file. If the launcher itself is killed, the recorder sees the pipe close, writes
-what it has received (its mapping of the slots outlives their name) and finishes the file. A recording failure
-(disk full, a dead recorder) is logged once and recording stops; the run goes on.
+Wake-ups are batched. The sink tells the recorder the count of frames put (an 8-byte message) only every
+NOTIFY_FRAMES frames or NOTIFY_S seconds, whichever comes first, and always before it would wait for a credit
+(the recorder must know of every full slot before the ring waits for one). A ground-truth run of ~1 ms frames
+so wakes the recorder ~30 times a second instead of ~1000: each wake-up is scheduler work on both sides, and
+a woken recorder lands on whichever core is idle at that instant, which is the core the next ring member is
+about to be woken on (the sender still occupies the other), where the ring then waits for it. A 100 ms frame
+still wakes it every frame. The recorder runs at nice 10 (``RecordOptions.nice``), like the viewer: it takes the
+CPU the ring leaves, and the slots absorb its delays.
+
+``queue_frames=0`` writes synchronously inside the sink, with no process.
+
+Ends: ``close`` (end of run, failure, stop) sends the count and the end mark and waits for the recorder to write
+every frame put and finish the file. If the launcher itself is killed, the recorder sees the pipe close, takes
+every frame counted in the slots' shared count (told of or not: the batching loses nothing; its mapping of the
+slots outlives their name) and finishes the file. A recording failure (disk full, a dead recorder) is logged
+once and recording stops; the run goes on.
 """
 from __future__ import annotations
 
 import logging
 import multiprocessing as mp
 import os
+import struct
 import time
 from pathlib import Path
 
@@ -38,7 +47,7 @@ from .writer import (
 )
 
 __all__ = ["McapRecorder", "mcap_sink", "slot_count", "CREDIT_POLL_S", "CLOSE_TIMEOUT_S", "QUEUE_BYTES", "MIN_SLOTS",
-           "MAX_SLOTS"]
+           "MAX_SLOTS", "NOTIFY_FRAMES", "NOTIFY_S", "RELEASE_FRAMES"]
 
 log = logging.getLogger("cosim.recording")
 
@@ -51,6 +60,16 @@ CLOSE_TIMEOUT_S = 120.0
 QUEUE_BYTES = 64 * 2**20
 #: fewest and most frame slots when sized by QUEUE_BYTES
 MIN_SLOTS, MAX_SLOTS = 4, 256
+#: the sink tells the recorder of new frames at least every this many frames (at most half the slots)...
+NOTIFY_FRAMES = 32
+#: ...and at least this often, s, while frames keep coming: a frame reaches the recorder at most this late
+#: (plus one frame), and the file at most ``RecordOptions.flush_s`` after that
+NOTIFY_S = 0.03
+#: the recorder gives slots back (credits) in batches of this many frames (at most a quarter of the slots), and
+#: all it holds whenever it has caught up: a sink that had to wait then wakes once per batch, not once per frame
+RELEASE_FRAMES = 8
+#: a notification: the count of frames put so far (int64); the end mark is an empty message
+_COUNT = struct.Struct("<q")
 
 
 def slot_count(options: RecordOptions, frame_bytes: int) -> int:
@@ -62,8 +81,9 @@ def slot_count(options: RecordOptions, frame_bytes: int) -> int:
 
 def _recorder_main(conn, credits, run: RunInfo, schema_bytes: bytes, slots_name: str, n_slots: int, path: str,
                    options: RecordOptions, run_id: str, fingerprint: str) -> None:
-    """Recorder process: encode and write each frame from its slot, give the slot back; flush whenever
-    ``flush_s`` has passed since the last flush (busy or idle), so a frame is on disk at most that late."""
+    """Recorder process: encode and write each frame put, in order, from its slot, and give the slot back; flush
+    whenever ``flush_s`` has passed since the last flush (busy or idle), so a frame is on disk at most that late
+    after the recorder heard of it."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the launcher handles Ctrl-C and then closes us
@@ -71,25 +91,43 @@ def _recorder_main(conn, credits, run: RunInfo, schema_bytes: bytes, slots_name:
     writer = McapWriter(run, schema, Path(path), options, run_id, fingerprint, flush_s=options.flush_s)
     slots = FrameSlots.attach(slots_name, schema, Recorded.of(schema).names, n_slots)
     cpu0 = time.process_time()  # start-up (interpreter, imports, writer, slots) ends here
+    release_every = max(1, min(RELEASE_FRAMES, n_slots // 4))
+    done = wakeups = held = 0
     try:
-        while True:
-            # the pipe holds at most queue_frames small tuples (credits), so it never needs draining ahead
+        end = False
+        while not end:
+            # the pipe holds small messages, at most one per slot, so it never needs draining ahead
             if not conn.poll(writer.flush_due_in()):
                 writer.flush()
                 continue
+            wakeups += 1
             try:
-                item = conn.recv()
-            except (EOFError, OSError):  # the launcher is gone: finish what was sent
-                break
-            if item is None:
-                break
-            frame, slot, names = item
-            writer.write(frame, *slots.frame(slot, names))
-            credits.release()
+                msg = conn.recv_bytes()
+            except (EOFError, OSError):  # the launcher is gone: take every frame it finished putting
+                upto, end = slots.count, True
+            else:
+                end = not msg
+                upto = done if end else _COUNT.unpack(msg)[0]
+            while done < upto:
+                frame, data = slots.frame(done % n_slots)
+                writer.write(frame, *data)
+                done += 1
+                held += 1
+                if held >= release_every:
+                    held = _give_back(credits, held)
+            held = _give_back(credits, held)  # caught up: every slot back before waiting for more
     finally:
         # what recording cost: this process's CPU time since it was ready (encode, compress, write), s
-        writer.close({"process_cpu_s": repr(time.process_time() - cpu0), "startup_cpu_s": repr(cpu0)})
+        writer.close({"process_cpu_s": repr(time.process_time() - cpu0), "startup_cpu_s": repr(cpu0),
+                      "wakeups": str(wakeups)})
         slots.close()
+
+
+def _give_back(credits, n: int) -> int:
+    """Give ``n`` slots back to the sink; returns the number still held (0)."""
+    for _ in range(n):
+        credits.release()
+    return 0
 
 
 class McapRecorder:
@@ -104,9 +142,13 @@ class McapRecorder:
         self._writer: McapWriter | None = None
         self._proc = None
         self._slots: FrameSlots | None = None
-        self._sent = 0
+        #: frames put into slots, and the count last told to the recorder (when)
+        self._sent = self._told = 0
+        self._t_told = time.monotonic()
         #: per block, the newest stamp handed to the writer
         self._stamps: dict[str, int] = {}
+        #: times the sink found every slot full and the ring waited for the recorder, and how long in all, s
+        self.waits, self.wait_s = 0, 0.0
         n_slots = slot_count(self.options, sum(segment.schema.block(n).nbytes for n in self.recorded.names))
         if n_slots == 0:
             self._writer = McapWriter(scenario, segment.schema, self.path, self.options, segment.run_id,
@@ -114,6 +156,7 @@ class McapRecorder:
             return
         ctx = mp.get_context("spawn")
         self._slots = FrameSlots.create(segment.schema, self.recorded.names, n_slots)
+        self._notify_frames = max(1, min(NOTIFY_FRAMES, n_slots // 2))
         self._credits = ctx.Semaphore(n_slots)
         recv, self._conn = ctx.Pipe(duplex=False)
         self._proc = ctx.Process(target=_recorder_main, name="cosim-recorder", daemon=True,
@@ -142,22 +185,39 @@ class McapRecorder:
             return
         try:
             # only blocks with contents newer than those last recorded (a block that lags comes a call later)
-            names = tuple(n for n in self.recorded.due(frame, self.options.image_every)
-                          if seg.frame_of(n) > self._stamps.get(n, -1))
-            self._stamps.update((n, seg.frame_of(n)) for n in names)
+            names, last = [], self._stamps
+            for n in self.recorded.due(frame, self.options.image_every):
+                stamp = seg.frame_of(n)
+                if stamp > last.get(n, -1):
+                    last[n] = stamp
+                    names.append(n)
             if self._writer is not None:
                 self._writer.write(frame, *frame_data(seg, names))
                 return
-            while not self._credits.acquire(timeout=CREDIT_POLL_S):
-                if not self._proc.is_alive():
-                    raise RuntimeError(f"the recorder process died (exit {self._proc.exitcode})")
+            if not self._credits.acquire(False):
+                self._tell()  # every full slot must be known to the recorder before the ring waits for one
+                t0 = time.perf_counter()
+                self.waits += 1
+                while not self._credits.acquire(timeout=CREDIT_POLL_S):
+                    if not self._proc.is_alive():
+                        raise RuntimeError(f"the recorder process died (exit {self._proc.exitcode})")
+                self.wait_s += time.perf_counter() - t0
             slot = self._sent % self._slots.slots  # credits come back in order: this slot is free
-            copied = self._slots.put(seg, slot, frame, names)
-            self._conn.send((frame, slot, copied))
+            self._slots.put(seg, slot, frame, names)
             self._sent += 1
+            self._slots.count = self._sent
+            if self._sent - self._told >= self._notify_frames or time.monotonic() - self._t_told >= NOTIFY_S:
+                self._tell()
         except Exception:  # noqa: BLE001 - a recording failure must not end the run
             self._failed = True
             log.exception("recording to %s failed at frame %d; the run goes on without recording", self.path, frame)
+
+    def _tell(self) -> None:
+        """Tell the recorder how many frames have been put (one small message; a no-op when it knows)."""
+        if self._sent != self._told:
+            self._conn.send_bytes(_COUNT.pack(self._sent))
+            self._told = self._sent
+        self._t_told = time.monotonic()
 
     def _release_slots(self) -> None:
         if self._slots is not None:
@@ -174,7 +234,8 @@ class McapRecorder:
             self._writer.close()
             return
         try:
-            self._conn.send(None)
+            self._tell()
+            self._conn.send_bytes(b"")  # the end mark
         except OSError:
             pass
         self._conn.close()
@@ -185,6 +246,9 @@ class McapRecorder:
             self._proc.join(5)
         elif self._proc.exitcode != 0:
             log.error("the recorder of %s ended with exit %s", self.path, self._proc.exitcode)
+        if self.waits:
+            log.info("recording %s: the ring waited %d times (%.2f s in all) for a free frame slot", self.path,
+                     self.waits, self.wait_s)
         self._release_slots()
 
 

@@ -8,14 +8,23 @@ Routes: ``/`` the page, ``/api/state`` the numbers (JSON), ``/panel/<id>.png`` a
 :func:`observe` is what ``launch(..., observers=[ObserverSpec("viewer", "cosim.viewer.server:observe", {...})])``
 runs in its own process: it lowers its scheduling priority (the run's processes come first on a small machine),
 attaches and serves until the launcher terminates it.
+
+Stopping never cuts a response short. A response goes out as headers, then body; a process that simply died
+on SIGTERM between the two (the launcher terminates its observers when the run ends) left a client with the
+headers of a JSON document and none of its bytes (``http.client.IncompleteRead``). :func:`serve` turns SIGTERM
+(and Ctrl-C) into a graceful stop: stop accepting, let the requests being answered finish (at most
+DRAIN_S), then unmap and exit. A connection idle between requests is simply closed, which HTTP clients expect.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
 import os
+import signal
 import threading
+import time
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
@@ -25,7 +34,8 @@ from .page import page_html
 from .panels import IMAGE_PANELS, PanelRenderer, panel_info
 from .snapshot import fullness
 
-__all__ = ["DashboardServer", "state_json", "observe", "serve", "DEFAULT_PORT", "DEFAULT_HOST", "NICE"]
+__all__ = ["DashboardServer", "state_json", "observe", "serve", "ServerStop", "DEFAULT_PORT", "DEFAULT_HOST", "NICE",
+           "DRAIN_S"]
 
 log = logging.getLogger("cosim.viewer")
 
@@ -35,6 +45,15 @@ DEFAULT_HOST = "127.0.0.1"
 NICE = 10
 #: how often the server checks whether the run has ended (to unmap promptly), s
 HOUSEKEEPING_S = 1.0
+#: longest wait, when stopping, for the responses being sent to finish, s (the launcher allows its observers
+#: cosim.launcher.TERMINATE_GRACE_S = 0.5 s after SIGTERM before it kills them)
+DRAIN_S = 0.3
+
+
+class ServerStop(BaseException):
+    """Raised in the serving thread by SIGTERM: stop serving, finish the responses under way, exit. A
+    BaseException, like KeyboardInterrupt, so that socketserver's per-request ``except Exception`` does not
+    swallow it."""
 
 
 def _finite(x):
@@ -78,8 +97,14 @@ class _Handler(BaseHTTPRequestHandler):
             self.wfile.write(body)
 
     def do_GET(self) -> None:  # noqa: N802 - http.server's naming
+        with self.server.answering():
+            self._answer()
+
+    def _answer(self) -> None:
         path = urlsplit(self.path).path
         srv = self.server
+        if srv.stopping:
+            self.close_connection = True  # no next request on this connection: the server is going away
         try:
             if path in ("/", "/index.html"):
                 self._send(200, srv.page, "text/html; charset=utf-8")
@@ -126,6 +151,10 @@ class DashboardServer(ThreadingHTTPServer):
         self._dropped = 0
         self._last_frame = -1
         self._lock = threading.Lock()
+        #: requests being answered (read, computed, sent), guarded by _idle
+        self._answering = 0
+        self._idle = threading.Condition()
+        self.stopping = False
         self._stop = threading.Event()
         self._keeper = threading.Thread(target=self._housekeeping, name="viewer-housekeeping", daemon=True)
         self._keeper.start()
@@ -145,6 +174,36 @@ class DashboardServer(ThreadingHTTPServer):
             doc["dropped_total"] = self._dropped
         return doc
 
+    @contextlib.contextmanager
+    def answering(self):
+        """Count a request as being answered while its handler runs (see :meth:`drain`)."""
+        with self._idle:
+            self._answering += 1
+        try:
+            yield
+        finally:
+            with self._idle:
+                self._answering -= 1
+                self._idle.notify_all()
+
+    def drain(self, timeout_s: float = DRAIN_S) -> bool:
+        """Stop accepting and wait until no request is being answered (at most ``timeout_s``). Returns whether
+        every response was finished."""
+        self.stopping = True
+        try:
+            self.socket.close()
+        except OSError:
+            pass
+        deadline = time.monotonic() + timeout_s
+        with self._idle:
+            while self._answering:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    log.warning("viewer stopping with %d responses unfinished", self._answering)
+                    return False
+                self._idle.wait(left)
+        return True
+
     def _housekeeping(self) -> None:
         while not self._stop.wait(HOUSEKEEPING_S):
             try:
@@ -158,17 +217,30 @@ class DashboardServer(ThreadingHTTPServer):
         self.source.close()
 
 
+def _raise_stop(signum, frame) -> None:
+    raise ServerStop(signal.Signals(signum).name)
+
+
 def serve(source, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, announce: str | None = None) -> None:
-    """Serve ``source`` until interrupted. ``announce``: a file to write ``{"url": ...}`` to once listening."""
+    """Serve ``source`` until SIGTERM or Ctrl-C, then stop gracefully (module docstring). ``announce``: a file to
+    write ``{"url": ...}`` to once listening."""
     srv = DashboardServer(source, host, port)
     log.info("viewer of %s at %s", source.name, srv.url)
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _raise_stop)
     if announce:
         tmp = Path(announce).with_suffix(".tmp")
         tmp.write_text(json.dumps({"url": srv.url, "pid": os.getpid()}))
         os.replace(tmp, announce)
     try:
         srv.serve_forever(poll_interval=0.5)
+    except (ServerStop, KeyboardInterrupt) as exc:
+        log.info("viewer of %s stopping (%s)", source.name, type(exc).__name__)
     finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second SIGTERM must not cut the drain short
+        srv.drain()
         srv.server_close()
 
 
