@@ -1,8 +1,8 @@
 """Cost of the live viewer and of MCAP recording to a run's real-time factor (issue 7 benchmark).
 
-Five configurations, interleaved and repeated (``--configs`` picks some): plain, ``viewer`` (the observer
+Six configurations, interleaved and repeated (``--configs`` picks some): plain, ``viewer`` (the observer
 process attached, with a client polling the dashboard like the page does: state every 250 ms, each changed
-image panel at most every 500 ms), ``record`` (the MCAP sink, images every frame), ``record-img5`` (images
+image panel at most every 500 ms), ``viewer-idle`` (the observer attached, nobody polling it), ``record`` (the MCAP sink, images every frame), ``record-img5`` (images
 every 5th frame) and ``viewer+record``. Recording runs also report the supervisor's time in the recording sink
 per frame (mean, ms: the copy into a frame slot plus any wait for a free slot), the recorder's CPU time per
 frame (its process CPU time: encode, compress, write; from the file's ``recorder`` metadata; older recorders
@@ -47,7 +47,7 @@ from shm_schema import ArrayBlock, Field, StructBlock, image_block  # noqa: E402
 SETTLE_S = 4.0
 CAMS, H, W = 2, 480, 640
 BEAMS = 32768
-CONFIGS = ("plain", "viewer", "record", "record-img5", "viewer+record")
+CONFIGS = ("plain", "viewer", "viewer-idle", "record", "record-img5", "viewer+record")
 
 
 def depth_image() -> np.ndarray:
@@ -233,7 +233,7 @@ def one_run(scenario: Scenario, specs, config: str, tmp: Path) -> float:
         def start_client(sc, run_dir, seg):
             def sink(s, frame):
                 nonlocal client
-                if client is None and announce.exists():
+                if client is None and announce.exists() and not config.endswith("idle"):
                     url = json.loads(announce.read_text())["url"]
                     client = subprocess.Popen([sys.executable, "-c", CLIENT, url])
             return sink
@@ -247,7 +247,7 @@ def one_run(scenario: Scenario, specs, config: str, tmp: Path) -> float:
             client.wait(5)
     if not res.completed:
         raise RuntimeError(f"{config} run failed: {res.error}")
-    if "viewer" in config and client is None:
+    if "viewer" in config and not config.endswith("idle") and client is None:
         raise RuntimeError("the viewer never announced itself; no client polled it")
     size = (out / "recording.mcap").stat().st_size if "record" in config else 0
     one_run.sizes[config] = size / (len(timing.stamps) or 1)
