@@ -3,7 +3,10 @@
 Runs the renderer participant in-process over ``Segment.local`` (the same code path as a run: scene from the
 dynamics blocks, upload, draw, ``read_into`` the image blocks under their seqlocks) on the sample frame of
 the default scenario, for 640 x 480 and 1024 x 768, one and two cameras, plus the auto-planned rig and the
-mock renderer. Prints a Markdown table with the load average before and after (on a shared machine the
+mock renderer; and the auto-planned rig on the frames of a run ("run frames": the states, height maps and streams
+the dynamics participant produces from ``RUN_FIRST_FRAME`` on, ground-truth feedback). The sample frame's pile is
+a cone on a flat fill, so most of its grain surface merges into large triangles (``renderer_proc.hfmesh``); a
+run's fill model leaves no block flat, so its surface is the full grid and it costs more. Prints a Markdown table with the load average before and after (on a shared machine the
 "best" and CPU columns are the steadier figures). Usage: ``python bench/render_fps.py [--frames N]``.
 
 llvmpipe reads ``LP_NUM_THREADS`` (rasteriser threads, default: one per CPU) and ``LP_NATIVE_VECTOR_WIDTH``;
@@ -35,6 +38,30 @@ from shm_schema import ArrayBlock, Field, Schema, Segment, StructBlock  # noqa: 
 
 #: untimed frames before timing (shader compilation, first allocation)
 WARMUP_FRAMES = 5
+#: first dynamics frame of the "run frames" row (30 s into the default fill: a heaped, rough grain surface)
+RUN_FIRST_FRAME = 300
+
+
+def run_frames(s: Scenario, count: int) -> list[tuple[dict, "np.ndarray", "np.ndarray"]]:
+    """``count`` consecutive (dyn_state mapping, heightmap, stream) of the default scenario from frame
+    RUN_FIRST_FRAME, as the dynamics participant writes them (ground-truth feedback, no renderer)."""
+    from cosim.specs import build_schema, ring_specs
+    from dynamics_proc.participant import create as create_dynamics
+
+    g = s.model_copy(update={"feedback": "ground_truth", "renderer": "none"})
+    seg = Segment.local(build_schema(g, ring_specs(g)), frames=RUN_FIRST_FRAME + count)
+    p = create_dynamics(g)
+    p.start(seg)
+    out = []
+    try:
+        for k in range(RUN_FIRST_FRAME + count):
+            p.step(k)
+            if k >= RUN_FIRST_FRAME:
+                out.append((seg.view("dyn_state").as_dict(), seg.view("heightmap_truth").copy(),
+                            seg.view("stream").copy()))
+    finally:
+        p.close()
+    return out
 
 
 def triangles(s: Scenario) -> tuple[int, int]:
@@ -53,11 +80,14 @@ def triangles(s: Scenario) -> tuple[int, int]:
     return drawn, rest + boxes + 2 * (nx + 1) * (ny + 1)
 
 
-def measure(s: Scenario, frames: int) -> tuple[float, float, float, str]:
+def measure(s: Scenario, frames: int, source=None) -> tuple[float, float, float, str]:
     """(median wall ms per frame, best wall ms, median CPU ms per frame of the whole process, including
     llvmpipe's rasteriser threads, rig description) for scenario ``s``. On a shared machine the CPU time is
-    the steadier figure: wall time rises with other load, CPU time much less."""
-    state, heights, stream = sample_frame(s)
+    the steadier figure: wall time rises with other load, CPU time much less. ``source``: the frames'
+    (state, heights, stream), default the sample frame moving along at the harvest speed."""
+    if source is None:
+        source = [sample_frame(s, t_s=0.1 * k) for k in range(frames + WARMUP_FRAMES)]
+    state, heights, stream = source[0]
     dyn = [StructBlock("dyn_state", "dynamics", tuple(Field(k, "", "i8" if k == "stream_points" else "f8")
                                                       for k in state)),
            ArrayBlock("heightmap_truth", "dynamics", "f4", heights.shape),
@@ -68,11 +98,13 @@ def measure(s: Scenario, frames: int) -> tuple[float, float, float, str]:
     times, cpu = [], []
     try:
         for k in range(frames + WARMUP_FRAMES):
-            state, heights, stream = sample_frame(s, t_s=0.1 * k)
+            state, heights, stream = source[k]
             with seg.write("dyn_state", k) as v:
                 v.update({n: int(x) if n == "stream_points" else x for n, x in state.items()})
             with seg.write("heightmap_truth", k) as v:
                 v[...] = heights
+            with seg.write("stream", k) as v:
+                v[...] = stream
             t0, c0 = time.perf_counter(), time.process_time()
             p.step(k)
             if k >= WARMUP_FRAMES:
@@ -103,6 +135,10 @@ def main() -> None:
         med, best, cpu, desc = measure(s, frames)
         label = ", ".join(f"{k}={v}" for k, v in extra.items()) or "depth only"
         rows.append((backend, desc + (" (auto rig)" if n == 0 else ""), label, med, best, cpu))
+    s = Scenario.model_validate({"format_version": 1, "renderer": "gl", "render": {"rig": "auto"}})
+    med, best, cpu, desc = measure(s, args.frames, run_frames(s, args.frames + WARMUP_FRAMES))
+    rows.append(("gl", desc + " (auto rig)", f"run frames {RUN_FIRST_FRAME}-{RUN_FIRST_FRAME + args.frames + WARMUP_FRAMES - 1}",
+                 med, best, cpu))
     load1 = os.getloadavg()
     drawn, full = triangles(base)
     print(f"Renderer benchmark: default scene ({drawn} triangles drawn of {full}), render + read into shared "
