@@ -18,7 +18,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["Field", "MESSAGES", "ENUMS", "FILES", "descriptor_set", "encode", "encode_parts", "decode", "ProtoError"]
+__all__ = ["Field", "MESSAGES", "ENUMS", "FILES", "descriptor_set", "encode", "encode_parts", "decode", "varint",
+           "ProtoError"]
 
 
 class ProtoError(ValueError):
@@ -80,7 +81,8 @@ _TYPE_MESSAGE, _TYPE_ENUM, _LABEL_OPTIONAL, _LABEL_REPEATED = 11, 14, 1, 3
 _DOUBLE, _FIXED32 = struct.Struct("<d"), struct.Struct("<I")
 
 
-def _varint(n: int) -> bytes:
+def varint(n: int) -> bytes:
+    """Protobuf base-128 varint of ``n`` (a negative int32/int64 as its 64-bit two's complement)."""
     if 0 <= n < 128:
         return _SMALL[n]
     n &= (1 << 64) - 1  # negative int32/int64: two's complement, 10 bytes
@@ -96,7 +98,7 @@ _SMALL = [bytes((i,)) for i in range(128)]
 
 
 def _len_field(number: int, payload: bytes) -> list:
-    return [_varint(number << 3 | _LEN), _varint(len(payload)), payload]
+    return [varint(number << 3 | _LEN), varint(len(payload)), payload]
 
 
 def _flat(buf):
@@ -116,7 +118,7 @@ def _plan(name: str) -> tuple:
             kind, wire = "varint", _VARINT
         else:
             kind, wire = ("string" if f.type == "string" else "bytes" if f.type == "bytes" else "message"), _LEN
-        plan.append((f.name, kind, _varint(f.number << 3 | wire), f.type, f.repeated))
+        plan.append((f.name, kind, varint(f.number << 3 | wire), f.type, f.repeated))
     return tuple(plan)
 
 
@@ -131,7 +133,7 @@ def _encode_parts(name: str, msg: dict, out: list) -> None:
             elif kind == "fixed32":
                 out += (key, _FIXED32.pack(v))
             elif kind == "varint":
-                out += (key, _varint(int(v)))
+                out += (key, varint(int(v)))
             else:
                 if kind == "string":
                     v = v.encode()
@@ -139,7 +141,7 @@ def _encode_parts(name: str, msg: dict, out: list) -> None:
                     v = encode(ftype, v)
                 elif not isinstance(v, bytes):
                     v = _flat(v)
-                out += (key, _varint(len(v)), v)
+                out += (key, varint(len(v)), v)
 
 
 _PLANS = {name: _plan(name) for name in MESSAGES}
@@ -256,10 +258,10 @@ def _field_descriptor(f: Field) -> bytes:
         kind, type_name = _TYPE_ENUM, f.type[len("enum:"):]
     else:
         kind, type_name = _TYPE_MESSAGE, f.type
-    parts = _len_field(1, f.name.encode()) + [_varint(3 << 3), _varint(f.number),
-                                              _varint(4 << 3), _varint(_LABEL_REPEATED if f.repeated else
+    parts = _len_field(1, f.name.encode()) + [varint(3 << 3), varint(f.number),
+                                              varint(4 << 3), varint(_LABEL_REPEATED if f.repeated else
                                                                        _LABEL_OPTIONAL),
-                                              _varint(5 << 3), _varint(kind)]
+                                              varint(5 << 3), varint(kind)]
     if type_name is not None:
         parts += _len_field(6, f".{type_name}".encode())
     parts += _len_field(10, _json_name(f.name).encode())
@@ -274,7 +276,7 @@ def _json_name(name: str) -> str:
 def _enum_descriptor(full: str) -> bytes:
     parts = _len_field(1, full.rpartition(".")[2].encode())
     for value, number in ENUMS[full]:
-        parts += _len_field(2, b"".join(_len_field(1, value.encode()) + [_varint(2 << 3), _varint(number)]))
+        parts += _len_field(2, b"".join(_len_field(1, value.encode()) + [varint(2 << 3), varint(number)]))
     return b"".join(parts)
 
 

@@ -36,20 +36,11 @@ _POSE_KEYS = ((4 << 3 | _LEN), 27, 1 << 3 | _I64, 2 << 3 | _I64, 3 << 3 | _I64,
 _NON_FINITE = re.compile(r"(?<=:)(?:-?inf|nan)(?=[,}])")
 
 
-def _varint(n: int) -> bytes:
-    out = bytearray()
-    while n > 0x7F:
-        out.append((n & 0x7F) | 0x80)
-        n >>= 7
-    out.append(n)
-    return bytes(out)
-
-
 def timestamp_field(t_ns: int) -> bytes:
     """Field 1 of a Foxglove message: a ``google.protobuf.Timestamp`` {seconds, nanos} of ``t_ns`` >= 0 (ns),
     both written even when zero, as :func:`cosim.recording.proto.encode` writes ``{"timestamp": stamp(t_ns)}``."""
     sec, nsec = divmod(max(0, int(t_ns)), NS_PER_S)
-    ts = b"\x08" + _varint(sec) + b"\x10" + _varint(nsec)
+    ts = b"\x08" + proto.varint(sec) + b"\x10" + proto.varint(nsec)
     return bytes((1 << 3 | _LEN, len(ts))) + ts
 
 
