@@ -219,6 +219,15 @@ def recorder_metadata(path: Path) -> dict:
     return {}
 
 
+def process_cpu_s(pid: int) -> float:
+    """User + system CPU time of process ``pid`` so far, s (0 when it is gone)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def one_run(scenario: Scenario, specs, config: str, tmp: Path) -> float:
     timing = Timing()
     options = RecordOptions(image_every=5 if config.endswith("img5") else 1)
@@ -230,14 +239,29 @@ def one_run(scenario: Scenario, specs, config: str, tmp: Path) -> float:
     if "viewer" in config:
         observers = [ObserverSpec("viewer", "cosim.viewer.server:observe", {"port": 0, "announce": str(announce)})]
 
-        def start_client(sc, run_dir, seg):
-            def sink(s, frame):
+        class ViewerCpu:
+            """Sink: starts the polling client once the viewer is up; at the run's end (sinks close before the
+            launcher stops its observers) takes the viewer's and the client's CPU time since then."""
+
+            def __init__(self):
+                self.t0 = self.cpu0 = None
+
+            def __call__(self, s, frame):
                 nonlocal client
-                if client is None and announce.exists() and not config.endswith("idle"):
-                    url = json.loads(announce.read_text())["url"]
-                    client = subprocess.Popen([sys.executable, "-c", CLIENT, url])
-            return sink
-        sinks.append(start_client)
+                if self.t0 is None and announce.exists():
+                    info = json.loads(announce.read_text())
+                    self.pid, self.t0 = info["pid"], time.perf_counter()
+                    self.cpu0 = process_cpu_s(self.pid)
+                    if not config.endswith("idle"):
+                        client = subprocess.Popen([sys.executable, "-c", CLIENT, info["url"]])
+                        self.cpu0 += process_cpu_s(client.pid)
+
+            def close(self):
+                if self.t0 is None:
+                    return
+                cpu = process_cpu_s(self.pid) + (process_cpu_s(client.pid) if client is not None else 0.0)
+                one_run.viewer_cpu.setdefault(config, []).append(1e3 * (cpu - self.cpu0) / (time.perf_counter() - self.t0))
+        sinks.append(lambda sc, run_dir, seg: ViewerCpu())
     out = tmp / f"run-{config}"
     try:
         res = launch(scenario, out, specs=specs, console_log=False, observers=observers, sinks=sinks)
@@ -263,6 +287,8 @@ def one_run(scenario: Scenario, specs, config: str, tmp: Path) -> float:
 one_run.sizes = {}
 one_run.sink_ms = {}
 one_run.cpu_ms = {}
+#: per viewer config and run, the viewer's (and its polling client's) CPU time per second of run, ms
+one_run.viewer_cpu = {}
 #: per recording config and run, the sink's waits for a free frame slot per 1000 frames
 one_run.waits = {}
 
@@ -277,6 +303,7 @@ def bench(name: str, scenario: Scenario, specs, reps: int, configs=CONFIGS, warm
     one_run.sink_ms.clear()
     one_run.cpu_ms.clear()
     one_run.waits.clear()
+    one_run.viewer_cpu.clear()
     with tempfile.TemporaryDirectory() as tmp:
         if warmup:
             one_run(scenario, specs, "plain", Path(tmp))
@@ -299,7 +326,9 @@ def bench(name: str, scenario: Scenario, specs, reps: int, configs=CONFIGS, warm
                    f"{statistics.median(one_run.waits[c]):.1f}")
         else:
             rec = "- | - | - | -"
-        rows.append(f"| {name} | {c} | {med:.2f} | {spread} | {ratio} | {rec} |")
+        vcpu = one_run.viewer_cpu.get(c)
+        view = f"{statistics.median(vcpu):.1f}" if vcpu else "-"
+        rows.append(f"| {name} | {c} | {med:.2f} | {spread} | {ratio} | {view} | {rec} |")
     return rows
 
 
@@ -333,13 +362,13 @@ def main() -> None:
         try:
             rows += bench("dynamics", gt, None, args.reps, configs, rotate=args.rotate)
         except Exception as exc:  # noqa: BLE001 - the real participant is someone else's work in progress
-            rows.append(f"| dynamics | (failed: {type(exc).__name__}: {exc}) | | | | | | | | |")
+            rows.append(f"| dynamics | (failed: {type(exc).__name__}: {exc}) | | | | | | | | | |")
     print(f"machine: {os.cpu_count()} cores, load average {load0:.1f} before, {os.getloadavg()[0]:.1f} after; "
           f"{args.reps} runs each, interleaved; {args.frames} payload frames, {args.dynamics_frames} dynamics "
           f"frames; steady state from {SETTLE_S:g} s after frame 0; payload work {args.work_ms:g} ms CPU per step")
-    print("| workload | config | real-time factor (median) | range | vs plain | paired vs plain | sink ms/frame "
-          "| recorder CPU ms/frame | recording KiB/frame | slot waits per 1000 frames |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("| workload | config | real-time factor (median) | range | vs plain | paired vs plain | viewer (+ client) "
+          "CPU ms/s | sink ms/frame | recorder CPU ms/frame | recording KiB/frame | slot waits per 1000 frames |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     print("\n".join(rows))
 
 

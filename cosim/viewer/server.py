@@ -214,6 +214,7 @@ class DashboardServer(ThreadingHTTPServer):
     def server_close(self) -> None:
         self._stop.set()
         super().server_close()
+        self.renderer.close()
         self.source.close()
 
 
