@@ -45,15 +45,18 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from cosim.camera import Rig, beam_directions
 from cosim.config import Codec
 
 from .codec import decode_lut, decode_words, lut_key
 from .resample import DISCONTINUITY_REL, words_of
+
+if TYPE_CHECKING:
+    from scipy.spatial import cKDTree
 
 __all__ = ["OffsetCamera", "OffsetTable", "build_offset_table", "resample_offset", "NEAR_RANGE_M",
            "TOLERANCE_PIXELS", "is_offset"]
@@ -222,6 +225,8 @@ def build_offset_table(rig: Rig, elevation: np.ndarray, azimuth: np.ndarray,
     tol = TOLERANCE_PIXELS * pitch
     sep = _separable(e, a, shape)
     if sep is None:
+        from scipy.spatial import cKDTree  # only a pattern that is not a grid needs it (~0.2 s to import)
+
         rows, cols, er, az0, daz, tree = 0, 0, None, 0.0, 0.0, cKDTree(dirs)
     else:
         (rows, cols, er, az0, daz), tree = sep, None

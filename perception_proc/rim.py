@@ -33,7 +33,6 @@ from functools import lru_cache
 
 import cv2
 import numpy as np
-from scipy.spatial import cKDTree
 
 from cosim.config import Cart
 from cosim.geometry import cart_body_from_grid, make_transform, rot_z
@@ -165,14 +164,45 @@ def _xy(x: np.ndarray, y: np.ndarray, idx: np.ndarray) -> np.ndarray:
 
 def _has_neighbour(xy: np.ndarray, others: np.ndarray, radius: float) -> np.ndarray:
     """(K,) bool: whether any of ``others`` (M, 2) lies closer than ``radius`` (m, strictly) to each of ``xy``
-    (K, 2). Only points inside the others' bounding box grown by the radius are looked up (k-d tree)."""
+    (K, 2). Only points inside the others' bounding box grown by the radius are looked up, each against the
+    others in its own and the 8 surrounding cells of a grid of ``radius`` squares (any point closer than the
+    radius lies in one of them): the same squared-distance test a k-d tree makes, without importing one
+    (scipy.spatial costs a perception process ~0.2 s of start-up)."""
     lo, hi = others.min(axis=0) - radius, others.max(axis=0) + radius
     near = np.flatnonzero((xy[:, 0] >= lo[0]) & (xy[:, 0] <= hi[0]) & (xy[:, 1] >= lo[1]) & (xy[:, 1] <= hi[1]))
     out = np.zeros(xy.shape[0], bool)
     if near.size:
-        d, _ = cKDTree(others).query(xy[near], k=1, distance_upper_bound=radius)
-        out[near] = np.isfinite(d)
+        out[near] = _near_in_grid(xy[near], others, lo, radius)
     return out
+
+
+def _near_in_grid(q: np.ndarray, others: np.ndarray, origin: np.ndarray, radius: float) -> np.ndarray:
+    """(K,) bool for :func:`_has_neighbour`: queries ``q`` (K, 2) inside the box from ``origin`` (the others'
+    minimum less the radius, so every cell index below is >= 0 and the others' are >= 1)."""
+    oc = np.floor((others - origin) / radius).astype(np.int64)
+    qc = np.floor((q - origin) / radius).astype(np.int64)
+    # cells as keys a * ny + b; ny leaves two empty columns above the highest, so a neighbour key one column
+    # outside the grid (b - 1 = -1 or b + 1) never names an occupied cell
+    ny = int(max(oc[:, 1].max(), qc[:, 1].max())) + 3
+    okey = oc[:, 0] * ny + oc[:, 1]
+    order = np.argsort(okey, kind="stable")
+    keys, pts = okey[order], others[order]
+    r2 = radius * radius
+    hit = np.zeros(q.shape[0], bool)
+    rows = np.arange(q.shape[0])
+    for da in (-1, 0, 1):
+        for db in (-1, 0, 1):
+            key = (qc[:, 0] + da) * ny + (qc[:, 1] + db)
+            start = np.searchsorted(keys, key, "left")
+            count = np.searchsorted(keys, key, "right") - start
+            total = int(count.sum())
+            if total == 0:
+                continue
+            iq = np.repeat(rows, count)
+            io = np.repeat(start - (np.cumsum(count) - count), count) + np.arange(total)
+            d = q[iq] - pts[io]
+            hit[iq[d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] < r2]] = True
+    return hit
 
 
 def _end_is_cut(flags: np.ndarray, other: np.ndarray, other_lo: float, other_hi: float) -> bool:

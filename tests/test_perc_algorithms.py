@@ -314,3 +314,23 @@ def test_heavy_range_noise_leaves_the_height_map_unbiased():
     ok = np.isfinite(hm.heights) & (hm.counts >= 4)
     assert ok.sum() > 300
     assert abs(float(np.mean(hm.heights[ok])) - 1.5) < 0.004
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_neighbour_grid_matches_a_kd_tree(seed):
+    """The rim's "anything right above" test (a grid of radius-sized cells) against scipy's k-d tree on random
+    clouds, including points on the cell lines and pairs exactly one radius apart (strictly closer counts)."""
+    from scipy.spatial import cKDTree
+
+    from perception_proc.rim import _has_neighbour
+
+    rng = np.random.default_rng(seed)
+    for trial in range(200):
+        k, m = int(rng.integers(1, 400)), int(rng.integers(1, 200))
+        xy = rng.uniform(-3.0, 3.0, (k, 2))
+        others = rng.uniform(-1.0, 2.0, (m, 2)) * rng.uniform(0.1, 2.0)
+        radius = (0.25, 0.1, 0.5)[trial % 3]
+        if trial % 2:   # on the grid: cell lines and exact-radius pairs
+            xy, others = np.round(xy * 4) / 4, np.round(others * 4) / 4
+        d, _ = cKDTree(others).query(xy, k=1, distance_upper_bound=radius)
+        np.testing.assert_array_equal(_has_neighbour(xy, others, radius), np.isfinite(d))
