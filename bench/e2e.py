@@ -47,7 +47,7 @@ _PHASES = re.compile(r"start-up ([\d.]+) s to the first frame .* shut-down ([\d.
                      r"outputs ([\d.]+) s, figures ([\d.]+) s\)")
 
 
-def _cpu_s(pid: int) -> float | None:
+def process_cpu_s(pid: int) -> float | None:
     """User + system CPU of ``pid`` so far, s (None once it has gone)."""
     try:
         with open(f"/proc/{pid}/stat", "rb") as f:
@@ -83,7 +83,7 @@ def one_run(tree: Path, scenario: str, duration: float, extra: list[str]) -> dic
                 continue
             seen = frame
             for m, pid in pids.items():
-                cpu = _cpu_s(pid)
+                cpu = process_cpu_s(pid)
                 if cpu is not None:
                     first.setdefault(m, (frame, cpu))
                     last[m] = (frame, cpu)

@@ -2,16 +2,17 @@
 
 Six configurations, interleaved and repeated (``--configs`` picks some): plain, ``viewer`` (the observer
 process attached, with a client polling the dashboard like the page does: state every 250 ms, each changed
-image panel at most every 500 ms), ``viewer-idle`` (the observer attached, nobody polling it), ``record`` (the MCAP sink, images every frame), ``record-img5`` (images
-every 5th frame) and ``viewer+record``. Recording runs also report the supervisor's time in the recording sink
-per frame (mean, ms: the copy into a frame slot plus any wait for a free slot), the recorder's CPU time per
-frame (its process CPU time: encode, compress, write; from the file's ``recorder`` metadata; older recorders
-lack it) and the file
-size per frame. Two workloads:
+image panel at most every 500 ms), ``viewer-idle`` (the observer attached, nobody polling it), ``record`` (the
+MCAP sink, images every frame), ``record-img5`` (images every 5th frame) and ``viewer+record``. Viewer runs
+report the viewer's (and its client's) CPU time per second of run. Recording runs also report the supervisor's
+time in the recording sink per frame (mean, ms: the copy into a frame slot plus any wait for a free slot), the
+recorder's CPU time per frame (its process CPU time: encode, compress, write; from the file's ``recorder``
+metadata; older recorders lack it) and the file size per frame. Two workloads:
 
-* ``payload``: a CPU-bound stand-in ring with the real runs' payload sizes: 2 cameras of 640 x 480 depth-encoded
-  (the renderer's codec applied to a view of flat ground) and RGB images, 32768 LiDAR rows, 60 x 30 and 30 x 15 height maps, a 60-field dyn_state; each step burns
-  ``--work-ms`` of CPU time (thread time, so contention shows as lost real time).
+* ``payload``: a CPU-bound stand-in ring with the real runs' payload sizes: 2 cameras of 640 x 480
+  depth-encoded (the renderer's codec applied to a view of flat ground) and RGB images, 32768 LiDAR rows,
+  60 x 30 and 30 x 15 height maps, a 60-field dyn_state; each step burns ``--work-ms`` of CPU time (thread
+  time, so contention shows as lost real time).
 * ``dynamics``: the real dynamics participant alone (ground-truth feedback, no renderer), if it runs.
 
 The real-time factor is measured in steady state by a timing sink: frames completed more than ``SETTLE_S``
@@ -42,6 +43,8 @@ from cosim.launcher import ObserverSpec, launch  # noqa: E402
 from cosim.recording import RecordOptions, mcap_sink  # noqa: E402
 from cosim.specs import ParticipantSpec  # noqa: E402
 from shm_schema import ArrayBlock, Field, StructBlock, image_block  # noqa: E402
+
+from e2e import process_cpu_s  # noqa: E402  (bench/, this script's folder)
 
 #: wall time after frame 0 left out of the measurement (start-up of the viewer process and its client), s
 SETTLE_S = 4.0
@@ -219,15 +222,6 @@ def recorder_metadata(path: Path) -> dict:
     return {}
 
 
-def process_cpu_s(pid: int) -> float:
-    """User + system CPU time of process ``pid`` so far, s (0 when it is gone)."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return 0.0
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
 def one_run(scenario: Scenario, specs, config: str, tmp: Path) -> float:
     timing = Timing()
     options = RecordOptions(image_every=5 if config.endswith("img5") else 1)
@@ -251,16 +245,19 @@ def one_run(scenario: Scenario, specs, config: str, tmp: Path) -> float:
                 if self.t0 is None and announce.exists():
                     info = json.loads(announce.read_text())
                     self.pid, self.t0 = info["pid"], time.perf_counter()
-                    self.cpu0 = process_cpu_s(self.pid)
+                    self.cpu0 = process_cpu_s(self.pid) or 0.0
                     if not config.endswith("idle"):
                         client = subprocess.Popen([sys.executable, "-c", CLIENT, info["url"]])
-                        self.cpu0 += process_cpu_s(client.pid)
+                        self.cpu0 += process_cpu_s(client.pid) or 0.0
 
             def close(self):
                 if self.t0 is None:
                     return
-                cpu = process_cpu_s(self.pid) + (process_cpu_s(client.pid) if client is not None else 0.0)
-                one_run.viewer_cpu.setdefault(config, []).append(1e3 * (cpu - self.cpu0) / (time.perf_counter() - self.t0))
+                cpu = process_cpu_s(self.pid) or 0.0
+                if client is not None:
+                    cpu += process_cpu_s(client.pid) or 0.0
+                per_s = 1e3 * (cpu - self.cpu0) / (time.perf_counter() - self.t0)
+                one_run.viewer_cpu.setdefault(config, []).append(per_s)
         sinks.append(lambda sc, run_dir, seg: ViewerCpu())
     out = tmp / f"run-{config}"
     try:

@@ -3,8 +3,8 @@
 Every process of a run keeps numpy's BLAS (OpenBLAS), OpenMP and MKL single-threaded. The participants multiply
 (N, 3) by (3, 3) matrices, where a second BLAS thread buys nothing, while an idle pool thread spins for a while
 after each call and takes a core from llvmpipe's rasteriser or another participant. Measured on the 2-core
-machine (default scenario, 60 s simulated, bench/README.md): the perception process's CPU fell from 17 to
-8.5 ms per frame and the run went from 6.2x to 9.0x real time.
+machine (default scenario, 30 s runs interleaved, bench/README.md 2026-11-24): the perception process's CPU fell
+from 22 to 12 ms per frame and the run went from 4.5x to 6.5x real time.
 
 The libraries read these variables once, when they load, so they are set in the environment that children are
 spawned with (and, by the command line, before anything imports numpy). A variable the user has set is left

@@ -27,8 +27,6 @@ from .vehicles import CX, CY, CYAW, DELTA, V, VehicleParams, cart_pose, initial_
 __all__ = ["ModelParams", "World", "SpoutGeometry", "initial_world", "step_frame", "truth_measurement", "signals",
            "spout_grid", "SECTION_FIELD"]
 
-
-
 #: (spout world (3,) m, exit velocity world (3,) m/s, spout grid (3,) m, grid_from_world (4, 4)), see spout_grid
 SpoutGeometry = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
