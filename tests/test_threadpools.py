@@ -1,4 +1,4 @@
-"""Thread pools of the run's processes (cosim.threadpools): single-threaded BLAS/OpenMP unless the user says."""
+"""Thread pools of the run's processes (cosim.threadpools): single-threaded BLAS/OpenMP/OpenCV unless the user says."""
 from __future__ import annotations
 
 import multiprocessing as mp
@@ -13,11 +13,17 @@ def _report(q) -> None:
     q.put({v: os.environ.get(v) for v in POOL_VARIABLES})
 
 
-def _spawned_env() -> dict:
+def _report_opencv(q) -> None:
+    import cv2
+
+    q.put(cv2.getNumThreads())
+
+
+def _spawned_env(target=_report):
     ctx = mp.get_context("spawn")
     q = ctx.Queue()
     with single_threaded_pools():
-        p = ctx.Process(target=_report, args=(q,))
+        p = ctx.Process(target=target, args=(q,))
         p.start()
     got = q.get(timeout=30)
     p.join(timeout=30)
@@ -29,6 +35,13 @@ def test_children_get_one_thread_and_the_parent_is_restored(monkeypatch):
         monkeypatch.delenv(v, raising=False)
     assert _spawned_env() == {v: "1" for v in POOL_VARIABLES}
     assert not any(v in os.environ for v in POOL_VARIABLES)
+
+
+def test_opencv_in_a_child_runs_one_thread(monkeypatch):
+    # the variable is the one OpenCV itself reads at load: the child's pool really has one thread
+    for v in POOL_VARIABLES:
+        monkeypatch.delenv(v, raising=False)
+    assert _spawned_env(_report_opencv) == 1
 
 
 def test_a_users_setting_is_kept(monkeypatch):
