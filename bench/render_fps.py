@@ -6,8 +6,10 @@ the default scenario, for 640 x 480 and 1024 x 768, one and two cameras, plus th
 mock renderer; and the auto-planned rig on the frames of a run ("run frames": the states, height maps and streams
 the dynamics participant produces from ``RUN_FIRST_FRAME`` on, ground-truth feedback). The sample frame's pile is
 a cone on a flat fill, so most of its grain surface merges into large triangles (``renderer_proc.hfmesh``); a
-run's fill model leaves no block flat, so its surface is the full grid and it costs more. Prints a Markdown table with the load average before and after (on a shared machine the
-"best" and CPU columns are the steadier figures). Usage: ``python bench/render_fps.py [--frames N]``.
+run's fill model leaves few blocks flat, so its surface keeps most of the grid and it costs more; a diagnostic row
+renders the same run frames without the grain surface (wrong images), to put a number on the surface's share.
+Prints a Markdown table with the load average before and after (on a shared machine the "best" and CPU columns
+are the steadier figures). Usage: ``python bench/render_fps.py [--frames N]``.
 
 llvmpipe reads ``LP_NUM_THREADS`` (rasteriser threads, default: one per CPU) and ``LP_NATIVE_VECTOR_WIDTH``;
 the renderer sets neither (on 2 cores neither 0-4 threads nor 128-bit vectors beat the defaults measurably).
@@ -80,11 +82,28 @@ def triangles(s: Scenario) -> tuple[int, int]:
     return drawn, rest + boxes + 2 * (nx + 1) * (ny + 1)
 
 
-def measure(s: Scenario, frames: int, source=None) -> tuple[float, float, float, str]:
+def _without_grain(backend) -> None:
+    """Diagnostic: make ``backend`` (a GLRenderer) skip the grain surface's draw call (uploads unchanged), so
+    the difference to a normal row is what the surface costs. The images are then wrong (the cart floor shows)."""
+    draw = backend.draw
+
+    def draw_without_grain(k, world_from_camera):
+        surface = backend._hf
+        count, surface.count = surface.count, 0
+        try:
+            draw(k, world_from_camera)
+        finally:
+            surface.count = count
+
+    backend.draw = draw_without_grain
+
+
+def measure(s: Scenario, frames: int, source=None, grain: bool = True) -> tuple[float, float, float, str]:
     """(median wall ms per frame, best wall ms, median CPU ms per frame of the whole process, including
     llvmpipe's rasteriser threads, rig description) for scenario ``s``. On a shared machine the CPU time is
     the steadier figure: wall time rises with other load, CPU time much less. ``source``: the frames'
-    (state, heights, stream), default the sample frame moving along at the harvest speed."""
+    (state, heights, stream), default the sample frame moving along at the harvest speed. ``grain=False``:
+    the grain surface is not drawn (diagnostic, :func:`_without_grain`)."""
     if source is None:
         source = [sample_frame(s, t_s=0.1 * k) for k in range(frames + WARMUP_FRAMES)]
     state, heights, stream = source[0]
@@ -95,6 +114,8 @@ def measure(s: Scenario, frames: int, source=None) -> tuple[float, float, float,
     seg = Segment.local(Schema(dyn + declare_blocks(s), ["dynamics", "renderer"]))
     p = create(s)
     p.start(seg)
+    if not grain:
+        _without_grain(p.backend)
     times, cpu = [], []
     try:
         for k in range(frames + WARMUP_FRAMES):
@@ -136,9 +157,12 @@ def main() -> None:
         label = ", ".join(f"{k}={v}" for k, v in extra.items()) or "depth only"
         rows.append((backend, desc + (" (auto rig)" if n == 0 else ""), label, med, best, cpu))
     s = Scenario.model_validate({"format_version": 1, "renderer": "gl", "render": {"rig": "auto"}})
-    med, best, cpu, desc = measure(s, args.frames, run_frames(s, args.frames + WARMUP_FRAMES))
-    rows.append(("gl", desc + " (auto rig)", f"run frames {RUN_FIRST_FRAME}-{RUN_FIRST_FRAME + args.frames + WARMUP_FRAMES - 1}",
-                 med, best, cpu))
+    source = run_frames(s, args.frames + WARMUP_FRAMES)
+    label = f"run frames {RUN_FIRST_FRAME}-{RUN_FIRST_FRAME + args.frames + WARMUP_FRAMES - 1}"
+    for grain in (True, False):
+        med, best, cpu, desc = measure(s, args.frames, source, grain=grain)
+        rows.append(("gl", desc + " (auto rig)", label + ("" if grain else ", grain surface not drawn (diagnostic)"),
+                     med, best, cpu))
     load1 = os.getloadavg()
     drawn, full = triangles(base)
     print(f"Renderer benchmark: default scene ({drawn} triangles drawn of {full}), render + read into shared "
