@@ -15,13 +15,13 @@ import sys
 import time
 from pathlib import Path
 
-import os
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")   # the ring runs three processes on two cores
+from cosim.threadpools import default_to_single_threaded_pools  # noqa: E402
+
+default_to_single_threaded_pools()      # before numpy and cv2 load: one-thread pools, as in a run's processes
 
 import numpy as np  # noqa: E402
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from cosim.camera import beam_directions  # noqa: E402
 from cosim.config import Codec, Pattern, Scenario  # noqa: E402

@@ -28,7 +28,8 @@ Workloads used for the figures in the issue notes (bench/out is not tracked; re-
     python bench/perception_replay.py record --out bench/out/replay/consecutive800.npz --frames 860 \
         --start 800 --every 1 --offsets 0                                                # 61 consecutive frames
 
-Run from the repository root (``OPENBLAS_NUM_THREADS=1`` is set here, as in a run's processes), e.g.::
+Run from the repository root (the thread pools are single-threaded here, as in a run's processes:
+``cosim.threadpools``), e.g.::
 
     python bench/perception_replay.py replay bench/out/replay/default.npz --save bench/out/replay/ref.npz
     python bench/perception_replay.py replay bench/out/replay/default.npz --check bench/out/replay/ref.npz --stages
@@ -46,7 +47,6 @@ from __future__ import annotations
 import argparse
 import ctypes
 import json
-import os
 import re
 import subprocess
 import sys
@@ -55,12 +55,14 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")   # as in a run's processes (cosim/threadpools.py)
-
-import numpy as np  # noqa: E402
-
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from cosim.threadpools import default_to_single_threaded_pools  # noqa: E402
+
+default_to_single_threaded_pools()      # before numpy and cv2 load: one-thread pools, as in a run's processes
+
+import numpy as np  # noqa: E402
 
 from cosim.config import Scenario  # noqa: E402
 from cosim.loader import load_scenario, resolve_scenario_arg  # noqa: E402
