@@ -1,8 +1,8 @@
 """Thread pools of the numerical libraries in a run's processes.
 
-Every process of a run keeps numpy's BLAS (OpenBLAS), OpenMP, MKL and OpenCV single-threaded. The participants multiply
-(N, 3) by (3, 3) matrices, where a second BLAS thread buys nothing, while an idle pool thread spins for a while
-after each call and takes a core from llvmpipe's rasteriser or another participant. Measured on the 2-core
+Every process of a run keeps numpy's BLAS (OpenBLAS), OpenMP, MKL and OpenCV single-threaded. The participants
+multiply (N, 3) by (3, 3) matrices, where a second BLAS thread buys nothing, while an idle pool thread spins for a
+while after each call and takes a core from llvmpipe's rasteriser or another participant. Measured on the 2-core
 machine (default scenario, 30 s runs interleaved, bench/README.md 2026-11-24): the perception process's CPU fell
 from 22 to 12 ms per frame and the run went from 4.5x to 6.5x real time. OpenCV's own pool (``parallel_for_``,
 two threads on 2 cores) splits the rim search's small rasters (erode, connected components) and spent 0.5 ms of
@@ -10,7 +10,7 @@ CPU per frame to save no wall time (``bench/perception_replay.py --stages``: car
 same 1.24 ms wall, outputs bit-identical).
 
 The libraries read these variables once, when they load, so they are set in the environment that children are
-spawned with (and, by the command line, before anything imports numpy). A variable the user has set is left
+spawned with (and, by the command line, before anything imports numpy or cv2). A variable the user has set is left
 as it is: ``OPENBLAS_NUM_THREADS=2 python launch.py`` still gets two BLAS threads.
 """
 from __future__ import annotations
