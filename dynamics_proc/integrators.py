@@ -17,7 +17,7 @@ from typing import Literal
 
 import numpy as np
 
-from .vehicles import DELTA, V, VehicleParams, derivative, lag_exact, lag_exact_pair, lag_integral
+from .vehicles import DELTA, V, VehicleParams, derivative, lag_exact, lag_exact_pair, lag_integral, towing_rates
 
 __all__ = ["METHODS", "step_rk4", "step_exponential", "step_exponential_values", "step_ivp", "integrate"]
 
@@ -56,7 +56,8 @@ def step_exponential_values(xs: list[float], u: tuple[float, float], p: VehicleP
     """:func:`step_exponential` on the state as a list of 9 Python floats (same order, same arithmetic, so the
     same bits): the frame loop keeps the state as floats between its held-input steps.
 
-    The RK4 stages evaluate :func:`~dynamics_proc.vehicles.kinematic_derivative` inline; only the headings feed
+    The RK4 stages evaluate :func:`~dynamics_proc.vehicles.kinematic_derivative` inline (its combine rows here,
+    its tractor-and-cart rows through :func:`~dynamics_proc.vehicles.towing_rates`); only the headings feed
     back into the derivatives, so the stage positions are not formed, and stages 2 and 3 share the combine
     heading (its yaw rate is constant)."""
     v0, vm, v1, v_end = _stage_lag(xs[V], u[0], p.drivetrain_tau_s, p.accel_max_mps2, p.brake_max_mps2, dt)
@@ -74,24 +75,16 @@ def step_exponential_values(xs: list[float], u: tuple[float, float], p: VehicleP
     cx4, cy4 = vc * cos(c_end), vc * sin(c_end)
     # tractor and cart: speed v, yaw rate r = v tan(delta) / wheelbase, trailer rate dp, stage by stage
     r1 = v0 * tan(d0) / wb
-    rel = tyaw - pyaw
-    p1 = (v0 * sin(rel) - hitch * r1 * cos(rel)) / tow
-    tx1, ty1 = v0 * cos(tyaw), v0 * sin(tyaw)
+    p1, tx1, ty1 = towing_rates(v0, r1, tyaw, pyaw, hitch, tow)
     t2, q2 = tyaw + half * r1, pyaw + half * p1
     r2 = vm * tan(dm) / wb
-    rel = t2 - q2
-    p2 = (vm * sin(rel) - hitch * r2 * cos(rel)) / tow
-    tx2, ty2 = vm * cos(t2), vm * sin(t2)
+    p2, tx2, ty2 = towing_rates(vm, r2, t2, q2, hitch, tow)
     t3, q3 = tyaw + half * r2, pyaw + half * p2
     r3 = r2                                        # same speed and steering as stage 2
-    rel = t3 - q3
-    p3 = (vm * sin(rel) - hitch * r3 * cos(rel)) / tow
-    tx3, ty3 = vm * cos(t3), vm * sin(t3)
+    p3, tx3, ty3 = towing_rates(vm, r3, t3, q3, hitch, tow)
     t4, q4 = tyaw + dt * r3, pyaw + dt * p3
     r4 = v1 * tan(d1) / wb
-    rel = t4 - q4
-    p4 = (v1 * sin(rel) - hitch * r4 * cos(rel)) / tow
-    tx4, ty4 = v1 * cos(t4), v1 * sin(t4)
+    p4, tx4, ty4 = towing_rates(v1, r4, t4, q4, hitch, tow)
     w = dt / 6.0
     return [cx + w * (cx1 + 2.0 * cx2 + 2.0 * cx2 + cx4), cy + w * (cy1 + 2.0 * cy2 + 2.0 * cy2 + cy4),
             cyaw + w * (wc + 2.0 * wc + 2.0 * wc + wc), tx + w * (tx1 + 2.0 * tx2 + 2.0 * tx3 + tx4),

@@ -34,8 +34,8 @@ from cosim.config import Scenario
 
 __all__ = [
     "N_STATES", "CX", "CY", "CYAW", "TX", "TY", "TYAW", "V", "DELTA", "PYAW", "VehicleParams",
-    "derivative", "kinematic_derivative", "lag_exact", "lag_exact_pair", "lag_integral", "cart_pose", "tractor_pose",
-    "hitch_point", "initial_state",
+    "derivative", "kinematic_derivative", "towing_rates", "lag_exact", "lag_exact_pair", "lag_integral",
+    "cart_pose", "tractor_pose", "hitch_point", "initial_state",
 ]
 
 N_STATES = 9
@@ -79,16 +79,23 @@ def _clip(a: float, lo: float, hi: float) -> float:
     return lo if a < lo else hi if a > hi else a
 
 
+def towing_rates(v: float, r: float, tyaw: float, pyaw: float, hitch_m: float, tow_m: float) -> tuple[float, ...]:
+    """The tractor-and-cart rows of :func:`kinematic_derivative`: (cart yaw rate dp rad/s, tractor velocity
+    vx, vy m/s, world frame) at speed ``v`` m/s, tractor yaw rate ``r`` rad/s, headings ``tyaw`` and ``pyaw``
+    rad, hitch offset and tow length m (also called stage by stage by the inlined RK4 of
+    ``integrators.step_exponential_values``)."""
+    rel = tyaw - pyaw
+    return ((v * math.sin(rel) - hitch_m * r * math.cos(rel)) / tow_m, v * math.cos(tyaw), v * math.sin(tyaw))
+
+
 def kinematic_derivative(k: list[float], v: float, delta: float, p: VehicleParams) -> tuple[float, ...]:
     """Time derivative of the seven kinematic states ``k`` = (cx, cy, cyaw, tx, ty, tyaw, pyaw) at the given
     speed v (m/s) and steering angle delta (rad)."""
-    cyaw, tyaw, pyaw = k[2], k[5], k[6]
+    cyaw = k[2]
     vc = p.combine_speed_mps
     r = v * math.tan(delta) / p.wheelbase_m
-    rel = tyaw - pyaw
-    dp = (v * math.sin(rel) - p.hitch_offset_m * r * math.cos(rel)) / p.tow_length_m
-    return (vc * math.cos(cyaw), vc * math.sin(cyaw), p.combine_yaw_rate_radps,
-            v * math.cos(tyaw), v * math.sin(tyaw), r, dp)
+    dp, vx, vy = towing_rates(v, r, k[5], k[6], p.hitch_offset_m, p.tow_length_m)
+    return (vc * math.cos(cyaw), vc * math.sin(cyaw), p.combine_yaw_rate_radps, vx, vy, r, dp)
 
 
 def derivative(x: np.ndarray, u: tuple[float, float], p: VehicleParams) -> np.ndarray:
