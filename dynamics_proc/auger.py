@@ -194,20 +194,17 @@ def stream_rows(spout: np.ndarray, vel: np.ndarray, t_impact: float, radius_m: f
 def landing_xy(spout: np.ndarray, vel: np.ndarray, z_plane: float) -> tuple[float, float]:
     """x and y of :func:`landing_point` (same arithmetic on Python floats, so the same bits), m."""
     sx, sy, sz = spout.tolist()
-    dz = sz - z_plane
-    if dz <= 0.0:
+    if sz <= z_plane:
         return sx, sy
     vx, vy, vz = vel.tolist()
-    s = (vz + math.sqrt(vz * vz + 2.0 * GRAVITY_MPS2 * dz)) / GRAVITY_MPS2
+    s = _fall_time(sz, vz, z_plane)
     return sx + vx * s, sy + vy * s
 
 
 def landing_point(spout: np.ndarray, vel: np.ndarray, z_plane: float) -> np.ndarray:
     """Where the parabola descends through the horizontal plane z = ``z_plane`` (same frame as the inputs;
     gravity along -z), (3,) float64 m. Below the spout only; a plane above it gives the spout itself."""
-    dz = float(spout[2]) - z_plane
-    if dz <= 0.0:
+    z0 = float(spout[2])
+    if z0 <= z_plane:
         return spout.copy()
-    vz = float(vel[2])
-    s = (vz + math.sqrt(vz * vz + 2.0 * GRAVITY_MPS2 * dz)) / GRAVITY_MPS2
-    return _points(spout, vel, np.array([s]))[0]
+    return _points(spout, vel, np.array([_fall_time(z0, float(vel[2]), z_plane)]))[0]
