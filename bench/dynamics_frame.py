@@ -17,7 +17,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from cosim.config import Scenario  # noqa: E402
+from cosim.scenario.config import Scenario  # noqa: E402
 from dynamics_proc import auger as ag  # noqa: E402
 from dynamics_proc.closed_loop import simulate  # noqa: E402
 from dynamics_proc.controller import Delivery, controller_step  # noqa: E402

@@ -19,7 +19,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from cosim.config import Scenario  # noqa: E402
+from cosim.scenario.config import Scenario  # noqa: E402
 from dynamics_proc.integrators import integrate  # noqa: E402
 from dynamics_proc.machine_sync import SyncGains, sync_command  # noqa: E402
 from dynamics_proc.vehicles import VehicleParams, cart_pose, initial_state  # noqa: E402

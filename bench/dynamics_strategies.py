@@ -16,7 +16,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from cosim.config import Scenario  # noqa: E402
+from cosim.scenario.config import Scenario  # noqa: E402
 from dynamics_proc.closed_loop import noisy_measurement, simulate  # noqa: E402
 from dynamics_proc.summary import section_stats, summarize  # noqa: E402
 

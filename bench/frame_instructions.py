@@ -40,14 +40,14 @@ TOGGLE = "functools_reduce"
 
 
 def _scenario(feedback: str, renderer: str):
-    from cosim.loader import load_scenario, resolve_scenario_arg
+    from cosim.scenario.loader import load_scenario, resolve_scenario_arg
 
     return load_scenario(resolve_scenario_arg("default"), extra={"feedback": feedback, "renderer": renderer})
 
 
 def dynamics_step(frames: int):
     """step(frame) of the dynamics participant over an in-process segment."""
-    from cosim.specs import build_schema, ring_specs
+    from cosim.runtime.specs import build_schema, ring_specs
     from dynamics_proc.participant import create
     from shm_schema import Segment
 
@@ -60,9 +60,9 @@ def dynamics_step(frames: int):
 
 def supervisor_step(frames: int, record: bool = True):
     """step(frame): the writers' stamps of every non-image block, then (``record``) the supervisor's work."""
-    from cosim.progress import ProgressPrinter
-    from cosim.recorder import Recorder
-    from cosim.specs import build_schema, ring_specs
+    from cosim.runtime.progress import ProgressPrinter
+    from cosim.runtime.recorder import Recorder
+    from cosim.runtime.specs import build_schema, ring_specs
     from shm_schema import Segment, StructBlock
 
     s = _scenario("perception", "gl")

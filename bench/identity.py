@@ -6,7 +6,7 @@
   frames over the launched process ring);
 * ``gt-<scenario>/``: the same for every other packaged scenario (curved path, stiff drivetrain, other strategies
   and crops, ...) and for the default scenario with the RK4 integrator, without figures;
-* ``perception.npz``: an in-process run (:func:`cosim.inprocess.simulate`) of the default scenario with perception
+* ``perception.npz``: an in-process run (:func:`cosim.runtime.inprocess.simulate`) of the default scenario with perception
   feedback (renderer ``--renderer``, default gl; ``--duration`` s, default the scenario's 120 s): every
   timeseries column and the final array blocks.
 
@@ -59,8 +59,8 @@ def _record_gt(tree: Path, out: Path) -> None:
 def _record_perception(tree: Path, out: Path, renderer: str, duration: float | None) -> None:
     code = (
         "import sys, numpy as np\n"
-        "from cosim.loader import load_scenario, resolve_scenario_arg\n"
-        "from cosim.inprocess import simulate\n"
+        "from cosim.scenario.loader import load_scenario, resolve_scenario_arg\n"
+        "from cosim.runtime.inprocess import simulate\n"
         "extra = {'renderer': sys.argv[2]}\n"
         "if sys.argv[3] != 'None': extra['duration_s'] = float(sys.argv[3])\n"
         "s = load_scenario(resolve_scenario_arg('default'), extra=extra)\n"

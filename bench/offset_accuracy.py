@@ -28,10 +28,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cosim.camera import Rig, RigCamera, beam_directions  # noqa: E402
-from cosim.config import Codec, Pattern, Scenario  # noqa: E402
+from cosim.world.camera import Rig, RigCamera, beam_directions  # noqa: E402
+from cosim.scenario.config import Codec, Pattern, Scenario  # noqa: E402
 from perception_proc.accuracy import exact_ranges, range_error_stats  # noqa: E402
-from perception_proc.patterns import beam_table, pattern_shape  # noqa: E402
+from cosim.world.patterns import beam_table, pattern_shape  # noqa: E402
 from perception_proc.synthetic import Box, Plane, encode_linear, raycast, render_depth, stitched_rig  # noqa: E402
 
 #: LiDAR-to-camera offset of the study, sensor frame, m (as in bench/perception_bench.py)
@@ -58,9 +58,9 @@ def default_case():
     from perception_proc.pipeline import Perception
     from renderer_proc.mock_backend import MockRenderer
     from renderer_proc.projection import camera_poses
-    from renderer_proc.rig import plan_rig
+    from cosim.world.rig import plan_rig
     from renderer_proc.sample import sample_frame
-    from renderer_proc.scene import scene_from_state
+    from cosim.world.scene import scene_from_state
 
     sc = Scenario.model_validate_json(json.dumps(
         {"format_version": 1, "renderer": "mock", "render": {"mock_scale": 1.0}}))

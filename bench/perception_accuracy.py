@@ -18,8 +18,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cosim.config import Scenario  # noqa: E402
-from cosim.inprocess import simulate  # noqa: E402
+from cosim.scenario.config import Scenario  # noqa: E402
+from cosim.runtime.inprocess import simulate  # noqa: E402
 from perception_proc.accuracy_report import render_markdown, write_report  # noqa: E402
 from perception_proc.summary import summarize  # noqa: E402
 

@@ -17,17 +17,17 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from cosim.threadpools import default_to_single_threaded_pools  # noqa: E402
+from cosim.runtime.threadpools import default_to_single_threaded_pools  # noqa: E402
 
 default_to_single_threaded_pools()      # before numpy and cv2 load: one-thread pools, as in a run's processes
 
 import numpy as np  # noqa: E402
 
-from cosim.camera import beam_directions  # noqa: E402
-from cosim.config import Codec, Pattern, Scenario  # noqa: E402
-from cosim.geometry import vehicle_pose  # noqa: E402
+from cosim.world.camera import beam_directions  # noqa: E402
+from cosim.scenario.config import Codec, Pattern, Scenario  # noqa: E402
+from cosim.world.geometry import vehicle_pose  # noqa: E402
 from perception_proc.codec import decode_depth  # noqa: E402
-from perception_proc.patterns import beam_table, pattern_shape  # noqa: E402
+from cosim.world.patterns import beam_table, pattern_shape  # noqa: E402
 from perception_proc.pipeline import Perception  # noqa: E402
 from perception_proc.resample import build_table, resample  # noqa: E402
 from perception_proc.resample_offset import build_offset_table, resample_offset  # noqa: E402
@@ -152,7 +152,7 @@ def accuracy_cost_rows(repeats: int = 5) -> list[tuple]:
     """Cost of one accuracy evaluation's exact ray cast on the default scene (renderer_proc.sample frame):
     every beam vs the default stratified sample (``perception.accuracy_beams``), ms median and best."""
     from perception_proc.accuracy import exact_ranges, sample_beams, world_from_parent
-    from renderer_proc.rig import plan_rig
+    from cosim.world.rig import plan_rig
     from renderer_proc.sample import sample_frame
 
     sc = Scenario(format_version=1)

@@ -29,7 +29,7 @@ Workloads used for the figures in the issue notes (bench/out is not tracked; re-
         --start 800 --every 1 --offsets 0                                                # 61 consecutive frames
 
 Run from the repository root (the thread pools are single-threaded here, as in a run's processes:
-``cosim.threadpools``), e.g.::
+``cosim.runtime.threadpools``), e.g.::
 
     python bench/perception_replay.py replay bench/out/replay/default.npz --save bench/out/replay/ref.npz
     python bench/perception_replay.py replay bench/out/replay/default.npz --check bench/out/replay/ref.npz --stages
@@ -58,14 +58,14 @@ from typing import Iterator
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cosim.threadpools import default_to_single_threaded_pools  # noqa: E402
+from cosim.runtime.threadpools import default_to_single_threaded_pools  # noqa: E402
 
 default_to_single_threaded_pools()      # before numpy and cv2 load: one-thread pools, as in a run's processes
 
 import numpy as np  # noqa: E402
 
-from cosim.config import Scenario  # noqa: E402
-from cosim.loader import load_scenario, resolve_scenario_arg  # noqa: E402
+from cosim.scenario.config import Scenario  # noqa: E402
+from cosim.scenario.loader import load_scenario, resolve_scenario_arg  # noqa: E402
 
 #: stages timed or counted one by one, in pipeline order
 STAGES = ("lidar", "points", "level", "cart", "heightmap", "impact", "accuracy", "step")
@@ -83,7 +83,7 @@ def record(scenario: Scenario, path: Path, every: int, offsets: tuple[int, ...],
            start: int = 0) -> int:
     """Run ``scenario`` in-process and save the perception inputs of the kept frames (from frame ``start``) to
     ``path``; returns how many frames were kept."""
-    from cosim.inprocess import simulate
+    from cosim.runtime.inprocess import simulate
     from perception_proc import participant as perc_mod
 
     kept: dict[str, list] = {"frame": [], "state": [], **{b: [] for b in TRUTH_BLOCKS}}
@@ -139,7 +139,7 @@ class Recording:
 
 # -- replay ------------------------------------------------------------------------------------------------------
 def _segment(scenario: Scenario):
-    from cosim.specs import build_schema, ring_specs
+    from cosim.runtime.specs import build_schema, ring_specs
     from shm_schema import Segment
 
     return Segment.local(build_schema(scenario, ring_specs(scenario)))

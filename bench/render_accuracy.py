@@ -2,7 +2,7 @@
 
 Renders the default scene's sample frame with one 640 x 480 camera (hfov 60 deg) on the LiDAR mount, decodes
 the bytes with Eq 3, and compares with the planar depth of an exact ray cast of the same scene
-(``renderer_proc.raycast``) at every pixel centre. Depth edges (3 x 3 neighbourhood spanning more than
+(``cosim.world.raycast``) at every pixel centre. Depth edges (3 x 3 neighbourhood spanning more than
 EDGE_M in exact depth) are reported separately. Prints a Markdown table. Usage: ``python bench/render_accuracy.py``.
 """
 from __future__ import annotations
@@ -17,15 +17,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 from scipy.ndimage import maximum_filter, minimum_filter  # noqa: E402
 
-from cosim.camera import Pinhole, Rig, RigCamera  # noqa: E402
-from cosim.config import Scenario  # noqa: E402
-from cosim.config.sensing import Codec  # noqa: E402
+from cosim.world.camera import Pinhole, Rig, RigCamera  # noqa: E402
+from cosim.scenario.config import Scenario  # noqa: E402
+from cosim.scenario.config.sensing import Codec  # noqa: E402
 from renderer_proc.codec import decode_depth  # noqa: E402
 from renderer_proc.gl_backend import GLRenderer  # noqa: E402
 from renderer_proc.projection import camera_poses, pixel_rays  # noqa: E402
-from renderer_proc.raycast import raycast  # noqa: E402
+from cosim.world.raycast import raycast  # noqa: E402
 from renderer_proc.sample import sample_frame  # noqa: E402
-from renderer_proc.scene import scene_from_state  # noqa: E402
+from cosim.world.scene import scene_from_state  # noqa: E402
 
 #: neighbourhood depth span that marks a depth edge, m
 EDGE_M = 0.05

@@ -27,15 +27,15 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
-from cosim.config import Scenario  # noqa: E402
+from cosim.scenario.config import Scenario  # noqa: E402
 from renderer_proc.blocks import declare_blocks  # noqa: E402
-from renderer_proc.heightfield import padded_heights  # noqa: E402
+from cosim.world.heightfield import padded_heights  # noqa: E402
 from renderer_proc.hfmesh import SurfaceMesh  # noqa: E402
-from renderer_proc.meshes import unit_cube, unit_cylinder  # noqa: E402
+from cosim.world.meshes import unit_cube, unit_cylinder  # noqa: E402
 from renderer_proc.participant import create  # noqa: E402
-from renderer_proc.rig import plan_rig  # noqa: E402
+from cosim.world.rig import plan_rig  # noqa: E402
 from renderer_proc.sample import sample_frame  # noqa: E402
-from renderer_proc.scene import scene_from_state  # noqa: E402
+from cosim.world.scene import scene_from_state  # noqa: E402
 from shm_schema import ArrayBlock, Field, Schema, Segment, StructBlock  # noqa: E402
 
 #: untimed frames before timing (shader compilation, first allocation)
@@ -47,7 +47,7 @@ RUN_FIRST_FRAME = 300
 def run_frames(s: Scenario, count: int) -> list[tuple[dict, "np.ndarray", "np.ndarray"]]:
     """``count`` consecutive (dyn_state mapping, heightmap, stream) of the default scenario from frame
     RUN_FIRST_FRAME, as the dynamics participant writes them (ground-truth feedback, no renderer)."""
-    from cosim.specs import build_schema, ring_specs
+    from cosim.runtime.specs import build_schema, ring_specs
     from dynamics_proc.participant import create as create_dynamics
 
     g = s.model_copy(update={"feedback": "ground_truth", "renderer": "none"})

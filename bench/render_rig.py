@@ -13,8 +13,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from cosim.config import Scenario  # noqa: E402
-from renderer_proc.rig import beam_angles, beam_pixel_error, plan_rig  # noqa: E402
+from cosim.scenario.config import Scenario  # noqa: E402
+from cosim.world.rig import beam_angles, beam_pixel_error, plan_rig  # noqa: E402
 
 PATTERNS = {
     "default honeycomb 90 x 95 deg, 240 x 160": {},

@@ -1,7 +1,7 @@
 """Ring round-trip latency: three OS processes passing the token over semaphores (issue 2 benchmark).
 
 Two measurements:
-* ``bare``: three spawned processes running ``cosim.lockstep.member_loop`` with trivial steps; the first member
+* ``bare``: three spawned processes running ``cosim.runtime.lockstep.member_loop`` with trivial steps; the first member
   times each full turn (its step start to the next one). Payloads: none, or a 640 x 480 x 4 image written by
   member 2 and read (summed) by member 3.
 * ``launcher``: the real launcher with stand-in participants (adds the supervisor's hop and its per-frame
@@ -21,7 +21,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
 
-from cosim.lockstep import RingPlan, Token, member_loop  # noqa: E402
+from cosim.runtime.lockstep import RingPlan, Token, member_loop  # noqa: E402
 from shm_schema import ArrayBlock, Schema, Segment, image_block  # noqa: E402
 
 FRAME_BUDGET_MS = 10.0
@@ -84,8 +84,8 @@ def bare_ring(frames: int, payload: bool) -> np.ndarray:
 
 def launcher_ring(frames: int) -> dict:
     import fakes
-    from cosim.config import Scenario
-    from cosim.launcher import launch
+    from cosim.scenario.config import Scenario
+    from cosim.runtime.launcher import launch
 
     period = 0.01
     sc = Scenario(format_version=1, duration_s=frames * period, renderer="mock")

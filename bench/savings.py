@@ -11,7 +11,7 @@ Leave-outs (issue 6, point 6):
 * perception's accuracy evaluation against the exact ray cast, which the controller does not need
   (``perception.accuracy_every_frames`` 10 against 0);
 * not a leave-out but the same kind of saving: perception off the critical path, overlapping the next frame
-  (``timing.overlap_perception`` true against false; same numbers, cosim.participant).
+  (``timing.overlap_perception`` true against false; same numbers, cosim.runtime.participant).
 
 Each pair runs interleaved ``--reps`` times through the real launcher (OS processes, GL renderer) for
 ``--duration`` simulated seconds; prints a Markdown table of medians. Usage:
@@ -27,8 +27,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from cosim.launcher import launch  # noqa: E402
-from cosim.loader import load_scenario, packaged_scenarios  # noqa: E402
+from cosim.runtime.launcher import launch  # noqa: E402
+from cosim.scenario.loader import load_scenario, packaged_scenarios  # noqa: E402
 
 #: saving -> (config with the leave-out, config without it), each a scenario overlay on the default
 PAIRS = {

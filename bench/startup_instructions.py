@@ -10,7 +10,7 @@ cached. A step that adds to another is printed with the increment:
 * child: what a spawned participant process imports before ``child_main`` runs, then each participant's
   module and ``create`` (what ``start`` does, e.g. the renderer's GL context and shaders, is not counted);
 * end of run: the plotting modules, and the four figures of a 300-frame ground-truth run (from memory; a tree
-  without ``cosim.outputs.run_data`` writes the run directory's data and reads it back, as its launcher did).
+  without ``cosim.runtime.outputs.run_data`` writes the run directory's data and reads it back, as its launcher did).
 
 Usage: ``python bench/startup_instructions.py [--src TREE] [--only NAME ...]``; several minutes (matplotlib under
 valgrind). Prints one Markdown row per step: instructions (M) and the increment over the step it adds to.
@@ -25,26 +25,26 @@ import sys
 import tempfile
 from pathlib import Path
 
-_LOAD = ("from cosim.loader import load_scenario, resolve_scenario_arg; "
+_LOAD = ("from cosim.scenario.loader import load_scenario, resolve_scenario_arg; "
          "s = load_scenario(resolve_scenario_arg('default'))")
-#: a spawned child runs the launcher's main file as __mp_main__, unpickles its arguments (cosim.child) and validates
+#: a spawned child runs the launcher's main file as __mp_main__, unpickles its arguments (cosim.runtime.child) and validates
 #: the scenario's JSON ({json}: a file holding the default scenario's)
 _CHILD = ("import runpy; runpy.run_path('launch.py', run_name='__mp_main__'); import multiprocessing.spawn, "
-          "cosim.child; from cosim.config import Scenario; s = Scenario.model_validate_json(open('{json}').read())")
-_GT = ("from cosim.loader import load_scenario, resolve_scenario_arg; "
+          "cosim.runtime.child; from cosim.scenario.config import Scenario; s = Scenario.model_validate_json(open('{json}').read())")
+_GT = ("from cosim.scenario.loader import load_scenario, resolve_scenario_arg; "
        "s = load_scenario(resolve_scenario_arg('default'), extra={'feedback': 'ground_truth', 'renderer': 'none'})")
-_FIG_DATA = (_GT + "; from cosim.inprocess import simulate; r = simulate(s, frames=300); "
-             "from cosim.outputs import compose_summary; import tempfile, pathlib; "
+_FIG_DATA = (_GT + "; from cosim.runtime.inprocess import simulate; r = simulate(s, frames=300); "
+             "from cosim.runtime.outputs import compose_summary; import tempfile, pathlib; "
              "sm = compose_summary(s, r.recorder, r.ring, wall_time_s=1.0, error=None)")
 
 #: the launcher's figure step: from memory where the tree can (run_data), else as it did before (write the run
 #: directory's data, read it back with load_run)
 _FIGURES = """d = pathlib.Path(tempfile.mkdtemp())
 try:
-    from cosim.outputs import run_data
+    from cosim.runtime.outputs import run_data
     rd = run_data(d, s, sm, r.recorder)
 except ImportError:
-    from cosim.outputs import write_outputs, write_scenario
+    from cosim.runtime.outputs import write_outputs, write_scenario
     write_scenario(d, s)
     write_outputs(d, s, r.recorder, r.ring, wall_time_s=1.0, error=None)
     rd = cosim.report.load_run(d)
@@ -56,11 +56,11 @@ STEPS: tuple[tuple[str, str, str | None], ...] = (
     ("interpreter", "pass", None),
     ("launcher: command line", "import cosim.cli", "interpreter"),
     ("launcher: + scenario loaded", "import cosim.cli; " + _LOAD, "launcher: command line"),
-    ("launcher: + launcher modules", "import cosim.cli; " + _LOAD + "; import cosim.launcher",
+    ("launcher: + launcher modules", "import cosim.cli; " + _LOAD + "; import cosim.runtime.launcher",
      "launcher: + scenario loaded"),
     ("launcher: + resolved scenario and schema",
-     "import cosim.cli; " + _LOAD + "; import cosim.launcher; from cosim.loader import dump_resolved; "
-     "dump_resolved(s); from cosim.specs import build_schema, ring_specs; build_schema(s, ring_specs(s))",
+     "import cosim.cli; " + _LOAD + "; import cosim.runtime.launcher; from cosim.scenario.loader import dump_resolved; "
+     "dump_resolved(s); from cosim.runtime.specs import build_schema, ring_specs; build_schema(s, ring_specs(s))",
      "launcher: + launcher modules"),
     ("child: before child_main", _CHILD, "interpreter"),
     ("child: + dynamics create", _CHILD + "; from dynamics_proc.participant import create; create(s)",

@@ -38,10 +38,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from cosim.config import Scenario  # noqa: E402
-from cosim.launcher import ObserverSpec, launch  # noqa: E402
+from cosim.scenario.config import Scenario  # noqa: E402
+from cosim.runtime.launcher import ObserverSpec, launch  # noqa: E402
 from cosim.recording import RecordOptions, mcap_sink  # noqa: E402
-from cosim.specs import ParticipantSpec  # noqa: E402
+from cosim.runtime.specs import ParticipantSpec  # noqa: E402
 from shm_schema import ArrayBlock, Field, StructBlock, image_block  # noqa: E402
 
 from e2e import process_cpu_s  # noqa: E402  (bench/, this script's folder)
@@ -57,7 +57,7 @@ def depth_image() -> np.ndarray:
     """(H, W, 4) uint8 depth-encoded image (the renderer's codec, DESIGN.md 4) of what a camera 3 m above
     undulating ground (+-5 % in depth: a heap), pitched 20 degrees down, sees (60 degree field of view): rows
     near the horizon are out of the codec's range (invalid, A = 0), like a real frame."""
-    from cosim.config.sensing import Codec
+    from cosim.scenario.config.sensing import Codec
     from renderer_proc.codec import encode_depth
 
     f_px = (W / 2) / np.tan(np.radians(30.0))

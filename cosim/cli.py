@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Sequence
 
 from .errors import ScenarioError
-from .threadpools import default_to_single_threaded_pools
+from cosim.runtime.threadpools import default_to_single_threaded_pools
 
 __all__ = ["main", "build_parser", "run_extras", "VERBS"]
 
@@ -77,7 +77,7 @@ def run_extras(args: argparse.Namespace) -> tuple[list, list]:
     """(observers, sinks) that ``run``'s --viewer and --record ask for."""
     observers, sinks = [], []
     if getattr(args, "viewer", False):
-        from .launcher import ObserverSpec
+        from cosim.runtime.launcher import ObserverSpec
 
         observers.append(ObserverSpec("viewer", "cosim.viewer.server:observe", {"port": args.viewer_port}))
     if getattr(args, "record", None) is not None:
@@ -105,7 +105,7 @@ def _extra(args: argparse.Namespace) -> dict:
 
 
 def _load(args: argparse.Namespace):
-    from .loader import load_scenario, resolve_scenario_arg
+    from cosim.scenario.loader import load_scenario, resolve_scenario_arg
 
     path = resolve_scenario_arg(args.scenario)
     return load_scenario(path, args.overrides, extra=_extra(args))
@@ -145,7 +145,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return viewer_main(["--replay", str(args.file), "--port", str(args.port), "--speed", str(args.speed)]
                            + (["--loop"] if args.loop else []))
     if args.verb == "schema":
-        from .jsonschema import schema_text
+        from cosim.scenario.jsonschema import schema_text
 
         text = schema_text()
         if args.out:
@@ -163,18 +163,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_SCENARIO
     if args.verb == "validate":
         if args.print:
-            from .loader import dump_resolved
+            from cosim.scenario.loader import dump_resolved
 
             sys.stdout.write(dump_resolved(scenario))
         else:
             sys.stdout.write(f"{args.scenario}: valid ({scenario.frames + 1} frames, ring "
                              f"{' -> '.join(scenario.participants)})\n")
         return 0
-    from .progress import ProgressPrinter
+    from cosim.runtime.progress import ProgressPrinter
 
     if args.verb == "study":
-        from .outputs import default_run_dir
-        from .study import KNOBS, run_study
+        from cosim.runtime.outputs import default_run_dir
+        from cosim.studies.study import KNOBS, run_study
 
         knobs = [k.strip() for k in args.knobs.split(",") if k.strip()]
         unknown = [k for k in knobs if k not in KNOBS]
@@ -186,14 +186,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stdout.write(md.read_text() + f"\nstudy written to {out}\n")
         return 0
     if args.verb == "compare":
-        from .compare import compare
-        from .outputs import default_run_dir
+        from cosim.studies.compare import compare
+        from cosim.runtime.outputs import default_run_dir
 
         out = args.out or default_run_dir(scenario.model_copy(update={"name": f"compare-{scenario.name}"}))
         report = compare(scenario, out, None if args.quiet else ProgressPrinter())
         sys.stdout.write(f"report: {report}\n")
         return 0
-    from .launcher import launch
+    from cosim.runtime.launcher import launch
 
     progress = None if args.quiet else ProgressPrinter()
     try:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 
 __all__ = ["GRAVITY_MPS2", "STREAM_ROWS", "SURFACE_NONE", "SURFACE_GRAIN", "SURFACE_WALL", "SURFACE_GROUND",
            "AugerParams", "spout_world", "exit_velocity_world", "flow_advance", "Impact", "first_surface",

@@ -7,7 +7,7 @@
 """
 from __future__ import annotations
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 from shm_schema import ArrayBlock, Block, Field, StructBlock
 
 from .auger import STREAM_ROWS

@@ -13,7 +13,7 @@ from typing import Callable
 
 import numpy as np
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 
 from .model import ModelParams, World, initial_world, signals, step_frame, truth_measurement
 

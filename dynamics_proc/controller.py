@@ -29,7 +29,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 
 from .estimator import FillEstimate, FusionParams, initial_estimate, landing_on, predict, update
 from .grainfill import GrainGrid, section_rows

@@ -24,7 +24,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 
 __all__ = ["GRID_TOLERANCE", "GrainGrid", "initial_heights", "deposit", "relax", "max_slope", "volume",
            "section_rows", "resample"]

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 
 from .vehicles import CX, CY, CYAW, TX, TY, TYAW, V, VehicleParams, cart_pose
 

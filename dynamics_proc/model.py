@@ -12,8 +12,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from cosim.config import Scenario
-from cosim.geometry import cart_grid_from_body, invert, vehicle_pose
+from cosim.scenario.config import Scenario
+from cosim.world.geometry import cart_grid_from_body, invert, vehicle_pose
 
 from . import auger as ag
 from .blocks import SECTION_FIELD

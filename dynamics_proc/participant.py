@@ -15,9 +15,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 from cosim.errors import FrameMismatch
-from cosim.participant import perception_overlaps
+from cosim.runtime.participant import perception_overlaps
 
 from .blocks import WRITER, state_fields
 from .model import ModelParams, World, initial_world, signals, step_frame, truth_measurement
@@ -38,7 +38,7 @@ class DynamicsParticipant:
         self.params = ModelParams.from_scenario(scenario)
         self.latency = scenario.timing.latency_frames
         self.perception = scenario.feedback == "perception"
-        #: perception publishes one turn late (cosim.participant): the block holds P(m - 2) at frame m
+        #: perception publishes one turn late (cosim.runtime.participant): the block holds P(m - 2) at frame m
         self._lag = 1 if perception_overlaps(scenario) else 0
         self.world: World | None = None
         self.rows: list[dict[str, float]] = []

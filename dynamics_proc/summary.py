@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 
 from .grainfill import section_rows
 

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 
 __all__ = [
     "N_STATES", "CX", "CY", "CYAW", "TX", "TY", "TYAW", "V", "DELTA", "PYAW", "VehicleParams",

@@ -1,7 +1,7 @@
 """Accuracy of the perception stage against truth (DESIGN.md sections 4 and 6).
 
 Pure functions. Range errors compare each beam's noise-free range with the exact range of the same beam from
-the LiDAR origin (an exact ray cast of the same scene: ``renderer_proc.raycast``); a beam counts when both
+the LiDAR origin (an exact ray cast of the same scene: ``cosim.world.raycast``); a beam counts when both
 are valid and within the sensor's range limits. The other measures compare the perceived rim corners, height
 map and impact with the dynamics' ground truth. Truth never feeds the estimates: these functions are called
 after the frame's outputs are computed.
@@ -20,8 +20,8 @@ from typing import Mapping
 
 import numpy as np
 
-from cosim.config import Cart, Scenario
-from cosim.geometry import apply, cart_body_from_grid, invert, vehicle_pose
+from cosim.scenario.config import Cart, Scenario
+from cosim.world.geometry import apply, cart_body_from_grid, invert, vehicle_pose
 
 from .blocks import RANGE_BANDS_M, band_name
 from .orderstats import median_sorted, percentile_sorted
@@ -104,8 +104,8 @@ def exact_ranges(scenario: Scenario, state: Mapping[str, float], heightmap_truth
                  stream: np.ndarray, world_from_sensor: np.ndarray, directions: np.ndarray) -> np.ndarray:
     """Exact range (N,) float64 m (inf on a miss) of every beam, by the renderer's ray caster on the scene
     the renderer drew. ``directions`` (N, 3) unit beams in the sensor frame."""
-    from renderer_proc.raycast import raycast          # lazily: only accuracy frames need the scene
-    from renderer_proc.scene import scene_from_state
+    from cosim.world.raycast import raycast          # lazily: only accuracy frames need the scene
+    from cosim.world.scene import scene_from_state
 
     scene = scene_from_state(scenario, state, heightmap_truth, stream)
     d_w = directions @ world_from_sensor[:3, :3].T

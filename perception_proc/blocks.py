@@ -9,11 +9,11 @@
 """
 from __future__ import annotations
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 from shm_schema import ArrayBlock, Block, Field, StructBlock
 
 from .heightmap import grid_shape
-from .patterns import beam_table
+from cosim.world.patterns import beam_table
 
 __all__ = ["WRITER", "STATE_BLOCK", "HEIGHTS_BLOCK", "POINTS_BLOCK", "RANGE_BANDS_M", "band_name",
            "state_fields", "declare_blocks", "ACCURACY_FIELDS"]

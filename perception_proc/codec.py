@@ -14,7 +14,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from cosim.config import Codec
+from cosim.scenario.config import Codec
 
 __all__ = ["decode_depth", "decode_bytes", "decode_lut", "decode_words", "lut_key", "CM_PER_M", "R_SATURATED"]
 

@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from cosim.config import Cart
+from cosim.scenario.config import Cart
 
 __all__ = ["HeightMap", "height_map", "grid_shape", "WALL_CLEAR_M", "CLUSTER_GAP_M", "CLUSTER_NOISE_SIGMAS",
            "STREAM_STEP_M",

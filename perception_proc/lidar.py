@@ -1,6 +1,6 @@
 """Range limits, the noise model and the point-cloud record of the simulated LiDAR.
 
-Noise (``cosim.config.Noise``): every valid return gets Gaussian range noise of ``range_sigma_m`` along its
+Noise (``cosim.scenario.config.Noise``): every valid return gets Gaussian range noise of ``range_sigma_m`` along its
 beam, and each beam independently drops out with probability ``dropout``. The generator is seeded from the
 scenario seed and the frame id (:func:`frame_generator`), so a run is reproducible frame by frame whatever
 order frames are computed in. Limits (``Sensor.range_min_m`` / ``range_max_m``) apply to the noisy range;
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cosim.config import Sensor
+from cosim.scenario.config import Sensor
 
 __all__ = ["frame_generator", "apply_noise_and_limits", "to_points", "point_basis", "NOISE_STREAM"]
 

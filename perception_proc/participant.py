@@ -1,6 +1,6 @@
 """The perception participant: a thin shell around :class:`perception_proc.pipeline.Perception`.
 
-``start`` plans the rig (``renderer_proc.rig.plan_rig``, the same pure function the renderer and the schema
+``start`` plans the rig (``cosim.world.rig.plan_rig``, the same pure function the renderer and the schema
 use) and precomputes the beam tables. ``step(frame)`` checks that every ``<cam>_depth`` image carries the
 frame, makes the LiDAR ranges (decode, resample, noise seeded from ``scenario.seed`` and the frame), runs
 the cart / height map / impact algorithms and writes ``perc_state``, ``heightmap_perceived`` and
@@ -13,7 +13,7 @@ never feeds an estimate.
 The sensor's parent pose (the combine's GNSS) comes from ``dyn_state``; it places the perceived cart in the
 world and orients the towing direction. The cart itself is found from the points alone.
 
-Overlap (``cosim.participant.perception_overlaps``, on by default when the latency allows): ``step(frame)``
+Overlap (``cosim.runtime.participant.perception_overlaps``, on by default when the latency allows): ``step(frame)``
 publishes the outputs kept from the previous frame, copies what it reads from the dynamics blocks and the
 raw image words its beams need (``Perception.gather``: the only read of the images) and returns the rest (noise, algorithms, accuracy) as a callable that the
 ring runs after passing the token on; the outputs go into private buffers and are published at the next turn
@@ -28,11 +28,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cosim.camera import Rig
-from cosim.config import Scenario
+from cosim.world.camera import Rig
+from cosim.scenario.config import Scenario
 from cosim.errors import FrameMismatch
-from cosim.geometry import invert
-from cosim.participant import perception_overlaps
+from cosim.world.geometry import invert
+from cosim.runtime.participant import perception_overlaps
 
 from . import accuracy as acc
 from .blocks import ACCURACY_FIELDS, HEIGHTS_BLOCK, POINTS_BLOCK, STATE_BLOCK, WRITER
@@ -49,7 +49,7 @@ _MS_PER_S = 1e3
 class PerceptionParticipant:
     """Ring member ``perception``. Create with :func:`create`; the ring calls start, step, close.
 
-    ``rig``: optional rig to use instead of ``renderer_proc.rig.plan_rig(scenario)`` (tests, studies)."""
+    ``rig``: optional rig to use instead of ``cosim.world.rig.plan_rig(scenario)`` (tests, studies)."""
 
     name = WRITER
 
@@ -59,7 +59,7 @@ class PerceptionParticipant:
         self.pipeline: Perception | None = None
         self.segment: "Segment | None" = None
         self.last: FrameResult | None = None
-        #: publish one turn late, overlapping the next frame (cosim.participant)
+        #: publish one turn late, overlapping the next frame (cosim.runtime.participant)
         self.deferred = perception_overlaps(scenario)
         self._pending: _Outputs | None = None
 
@@ -68,7 +68,7 @@ class PerceptionParticipant:
         """Bind views and precompute the beam-to-pixel tables."""
         rig = self._rig
         if rig is None:
-            from renderer_proc.rig import plan_rig
+            from cosim.world.rig import plan_rig
 
             rig = plan_rig(self.scenario)
         self.pipeline = Perception(self.scenario, rig)

@@ -17,14 +17,14 @@ from typing import Sequence
 
 import numpy as np
 
-from cosim.camera import Rig, beam_directions
-from cosim.config import Scenario
-from cosim.geometry import body_from_camera_axes, mount_transform
+from cosim.world.camera import Rig, beam_directions
+from cosim.scenario.config import Scenario
+from cosim.world.geometry import body_from_camera_axes, mount_transform
 
 from .heightmap import HeightMap, grid_shape, height_map
 from .impact import Impact, blank_under_stream, find_impact
 from .lidar import apply_noise_and_limits, frame_generator, point_basis, to_points
-from .patterns import beam_table, pattern_shape
+from cosim.world.patterns import beam_table, pattern_shape
 from .resample import beam_words, build_table, resample, resample_words
 from .resample_offset import build_offset_table, is_offset, resample_offset
 from .rim import CartEstimate, border_beams, find_cart

@@ -30,8 +30,8 @@ from typing import Literal, Sequence
 
 import numpy as np
 
-from cosim.camera import Rig
-from cosim.config import Codec
+from cosim.world.camera import Rig
+from cosim.scenario.config import Codec
 
 from .codec import decode_lut, decode_words
 

@@ -49,8 +49,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cosim.camera import Rig, beam_directions
-from cosim.config import Codec
+from cosim.world.camera import Rig, beam_directions
+from cosim.scenario.config import Codec
 
 from .codec import decode_lut, decode_words, lut_key
 from .resample import DISCONTINUITY_REL, words_of
@@ -217,7 +217,7 @@ def _elevation_band(a: np.ndarray, t: np.ndarray, w_max: float) -> tuple[np.ndar
 def build_offset_table(rig: Rig, elevation: np.ndarray, azimuth: np.ndarray,
                        shape: tuple[int, int] | None = None) -> OffsetTable:
     """Precompute the pixel windows, row bands and the beam look-up. ``elevation``, ``azimuth``: (N,) rad;
-    ``shape``: (rows, cols) when the table is a row-major grid (``perception_proc.patterns.pattern_shape``)."""
+    ``shape``: (rows, cols) when the table is a row-major grid (``cosim.world.patterns.pattern_shape``)."""
     e = np.asarray(elevation, np.float64)
     a = np.asarray(azimuth, np.float64)
     dirs = beam_directions(e, a)

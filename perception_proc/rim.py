@@ -34,8 +34,8 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from cosim.config import Cart
-from cosim.geometry import cart_body_from_grid, make_transform, rot_z
+from cosim.scenario.config import Cart
+from cosim.world.geometry import cart_body_from_grid, make_transform, rot_z
 
 from .orderstats import percentiles
 

@@ -12,7 +12,7 @@ from typing import Mapping
 
 import numpy as np
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 
 from . import accuracy as acc
 from .blocks import RANGE_BANDS_M, band_name

@@ -3,7 +3,7 @@
 Shapes are given in one common frame (whatever the caller uses: sensor or vehicle body frame). ``raycast``
 returns the exact distance along each unit ray to the first surface, inf on a miss. ``render_depth`` turns that
 into a camera's planar-depth image and ``encode_linear`` into the linear-byte RGBA8 of Eqs 1-2, so a test can
-produce exactly what the renderer would send. The grain cart scene mirrors ``cosim.config.Cart``: interior
+produce exactly what the renderer would send. The grain cart scene mirrors ``cosim.scenario.config.Cart``: interior
 |x| <= L/2, |y| <= W/2 in the cart body frame, walls ``rim_width_m`` thick from ``WALL_BOTTOM_M`` to the rim
 top, a floor, a grain height field over the floor and an optional vertical grain stream.
 """
@@ -15,9 +15,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from cosim.camera import Pinhole, Rig, RigCamera, yaw_transform
-from cosim.config import Cart, Codec
-from cosim.geometry import apply, invert
+from cosim.world.camera import Pinhole, Rig, RigCamera, yaw_transform
+from cosim.scenario.config import Cart, Codec
+from cosim.world.geometry import apply, invert
 
 __all__ = [
     "Plane", "Box", "Cylinder", "HeightField", "raycast", "render_depth", "encode_linear", "cart_shapes",
@@ -258,7 +258,7 @@ def stitched_rig(n: int = 2, width: int = 640, height: int = 480, hfov_deg: floa
                  pitch_deg: float = 0.0) -> Rig:
     """A rig of ``n`` cameras side by side, turned ``yaw_step_deg`` apart (default: hfov - 5 deg overlap),
     symmetric about the sensor's forward axis, all at ``offset_m`` (sensor frame, m) from the LiDAR origin and
-    pitched ``pitch_deg`` (positive looks up). For tests and benchmarks; the run uses renderer_proc.rig."""
+    pitched ``pitch_deg`` (positive looks up). For tests and benchmarks; the run uses cosim.world.rig."""
     step = hfov_deg - 5.0 if yaw_step_deg is None else yaw_step_deg
     cams = []
     c, s = math.cos(math.radians(pitch_deg)), math.sin(math.radians(pitch_deg))

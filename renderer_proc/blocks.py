@@ -9,10 +9,10 @@ Sizes follow the renderer actually used (``plan_rig`` applies ``render.mock_scal
 """
 from __future__ import annotations
 
-from cosim.config.scenario import Scenario
+from cosim.scenario.config.scenario import Scenario
 from shm_schema import ArrayBlock, Block, Field, StructBlock, image_block
 
-from .rig import plan_rig
+from cosim.world.rig import plan_rig
 
 __all__ = ["STATE_BLOCK", "WRITER", "declare_blocks", "wants_rgb"]
 

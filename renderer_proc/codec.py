@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cosim.config.sensing import Codec
+from cosim.scenario.config.sensing import Codec
 
 __all__ = ["BYTE_MAX", "CM_PER_M", "VALID_ALPHA", "decode_depth", "encode_depth", "valid_depth_mask"]
 

@@ -26,15 +26,15 @@ from typing import Any
 
 import numpy as np
 
-from cosim.camera import Rig
-from cosim.config.sensing import Codec
+from cosim.world.camera import Rig
+from cosim.scenario.config.sensing import Codec
 from cosim.errors import RendererUnavailable
-from cosim.geometry import invert
+from cosim.world.geometry import invert
 
 from .codec import BYTE_MAX, CM_PER_M
-from .heightfield import padded_heights
+from cosim.world.heightfield import padded_heights
 from .hfmesh import SurfaceMesh
-from .meshes import (
+from cosim.world.meshes import (
     INSTANCE_FLOATS,
     box_instances,
     cylinder_instances,
@@ -43,7 +43,7 @@ from .meshes import (
     unit_cylinder,
 )
 from .projection import NEAR_M, far_plane_m, gl_projection, gl_view
-from .scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
+from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
 
 __all__ = ["GL_REQUIRE", "SHADER_DIR", "GLRenderer", "create_gl_context"]
 

@@ -1,9 +1,9 @@
-"""The grain surface's draw mesh: the triangulated height field of ``renderer_proc.heightfield`` with its flat
+"""The grain surface's draw mesh: the triangulated height field of ``cosim.world.heightfield`` with its flat
 blocks merged into a few large triangles, and no T-junctions (pure numpy, no GL).
 
 llvmpipe pays per triangle and per partly covered 4 x 4 pixel block, so the 2 (nx + 1) (ny + 1) small triangles of
 the full grid cost several times what the same screen area costs in large triangles. The quad grid (quads
-(a, b), a = 0..nx, b = 0..ny, over the padded vertex grid of :func:`~renderer_proc.heightfield.grid_vertices`)
+(a, b), a = 0..nx, b = 0..ny, over the padded vertex grid of :func:`~cosim.world.heightfield.grid_vertices`)
 is cut into blocks of ``block`` x ``block`` quads (smaller at the far edges). Each frame:
 
 * a block whose vertices all have one height (the untouched initial fill, an empty floor, a full plateau) is
@@ -16,13 +16,13 @@ is cut into blocks of ``block`` x ``block`` quads (smaller at the far edges). Ea
 
 Vertex buffer: the (nx + 2) (ny + 2) grid vertices (k = a (ny + 2) + b), then one centre per block. Heights
 (:meth:`SurfaceMesh.heights`) follow the same order, so the surface is the same piecewise-linear function as
-:func:`~renderer_proc.heightfield.surface_height` (up to float32 interpolation).
+:func:`~cosim.world.heightfield.surface_height` (up to float32 interpolation).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .heightfield import grid_vertices
+from cosim.world.heightfield import grid_vertices
 
 __all__ = ["MERGE_BLOCK", "SurfaceMesh"]
 

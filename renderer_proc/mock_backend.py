@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from cosim.camera import Rig
-from cosim.config.sensing import Codec
+from cosim.world.camera import Rig
+from cosim.scenario.config.sensing import Codec
 
 from .codec import encode_depth, valid_depth_mask
 from .projection import NEAR_M, far_plane_m, pixel_rays
-from .raycast import raycast
-from .scene import SKY_RGBA, SUN_WORLD, Scene
+from cosim.world.raycast import raycast
+from cosim.world.scene import SKY_RGBA, SUN_WORLD, Scene
 
 __all__ = ["AMBIENT", "DIFFUSE", "MOCK_GREY", "MockRenderer"]
 

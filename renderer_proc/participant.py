@@ -1,7 +1,7 @@
 """The renderer ring member: reads the dynamics state, renders every camera, writes the image blocks.
 
 Thin shell (STYLE.md 3): ``start`` makes the backend (GL context or the numpy mock) and binds the segment's
-views; ``step(frame)`` checks the state's frame stamp, rebuilds the :class:`~renderer_proc.scene.Scene`,
+views; ``step(frame)`` checks the state's frame stamp, rebuilds the :class:`~cosim.world.scene.Scene`,
 uploads it (poses as instance records, grain heights as a buffer write), then per camera draws and reads
 straight into the shared-memory blocks under their seqlocks.
 """
@@ -12,13 +12,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cosim.config.scenario import Scenario
+from cosim.scenario.config.scenario import Scenario
 from cosim.errors import FrameMismatch
 
 from .blocks import STATE_BLOCK, WRITER, wants_rgb
 from .projection import camera_poses
-from .rig import plan_rig
-from .scene import scene_from_state
+from cosim.world.rig import plan_rig
+from cosim.world.scene import scene_from_state
 
 if TYPE_CHECKING:
     from shm_schema.segment import Segment

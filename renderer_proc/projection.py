@@ -12,9 +12,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from cosim.camera import Pinhole, Rig
-from cosim.config.scenario import Scenario
-from cosim.geometry import body_from_camera_axes, invert, mount_transform, vehicle_pose
+from cosim.world.camera import Pinhole, Rig
+from cosim.scenario.config.scenario import Scenario
+from cosim.world.geometry import body_from_camera_axes, invert, mount_transform, vehicle_pose
 
 __all__ = [
     "FAR_MARGIN",

@@ -11,10 +11,10 @@ import math
 
 import numpy as np
 
-from cosim.config.scenario import Scenario
-from cosim.geometry import apply, cart_grid_from_body, invert, vehicle_pose
+from cosim.scenario.config.scenario import Scenario
+from cosim.world.geometry import apply, cart_grid_from_body, invert, vehicle_pose
 
-from .scene import STREAM_ROWS
+from cosim.world.scene import STREAM_ROWS
 
 __all__ = ["GRAVITY_MPS2", "PILE_HEIGHT_M", "STREAM_SAMPLES", "sample_frame"]
 

@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from cosim.specs import ParticipantSpec
+from cosim.runtime.specs import ParticipantSpec
 from shm_schema import ArrayBlock, Field, StructBlock, image_block
 
 IMG_H, IMG_W = 48, 64
@@ -44,7 +44,7 @@ class Fake:
     def __init__(self, scenario, role, crash_at=-1, kill_at=-1, exit_at=-1, hang_at=-1, start_delay_s=0.0,
                  stamp_file="", defer=False, rest_s=0.0):
         self.name = role
-        #: perception only: publish one turn late and return the rest of the step (cosim.participant);
+        #: perception only: publish one turn late and return the rest of the step (cosim.runtime.participant);
         #: ``rest_s``: how long that rest takes (a sleep: lets a test see it overlap the next frame)
         self.defer, self.rest_s, self.pending = defer, rest_s, None
         self.scenario = scenario

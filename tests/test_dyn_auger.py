@@ -9,8 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import quad
 
-from cosim.config import Scenario
-from cosim.geometry import cart_grid_from_body, invert, vehicle_pose
+from cosim.scenario.config import Scenario
+from cosim.world.geometry import cart_grid_from_body, invert, vehicle_pose
 from dynamics_proc import auger as ag
 
 

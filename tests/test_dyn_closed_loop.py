@@ -6,7 +6,7 @@ import functools
 import numpy as np
 import pytest
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 from dynamics_proc.closed_loop import noisy_measurement, simulate
 from dynamics_proc.grainfill import GrainGrid, max_slope
 from dynamics_proc.summary import summarize

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 from dynamics_proc.auger import landing_point
 from dynamics_proc.closed_loop import occluded_measurement, simulate
 from dynamics_proc.estimator import FusionParams, initial_estimate, landing_on, predict, update

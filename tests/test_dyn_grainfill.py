@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 from dynamics_proc.grainfill import (GrainGrid, deposit, initial_heights, max_slope, relax, resample,
                                      section_rows, volume)
 

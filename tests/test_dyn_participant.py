@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 from cosim.errors import FrameMismatch
 from dynamics_proc.blocks import declare_blocks
 from dynamics_proc.closed_loop import simulate
@@ -76,7 +76,7 @@ def test_ground_truth_participant_equals_pure_closed_loop():
 def test_perception_feedback_applies_latency(latency, overlap):
     """A stand-in perception that reports the truth (float32) must give exactly the pure loop whose
     measurement is the same float32 truth, under the same latency rule; overlapping, the stand-in publishes
-    P(m) one turn late, after dynamics' frame m + 1 (cosim.participant), with the same result."""
+    P(m) one turn late, after dynamics' frame m + 1 (cosim.runtime.participant), with the same result."""
     s = scen(feedback="perception", renderer="mock",
              timing={"latency_frames": latency, "overlap_perception": overlap})
     perc = [ArrayBlock("heightmap_perceived", "perception", "f4", (60, 30), unit="m"),
@@ -143,7 +143,7 @@ def test_perception_feedback_needs_a_matching_perceived_block():
 
 
 def test_runs_in_the_inprocess_runtime_and_summarizes():
-    from cosim.inprocess import simulate as run
+    from cosim.runtime.inprocess import simulate as run
     from dynamics_proc.summary import summarize
     s = scen(duration_s=15.0)
     r = run(s)

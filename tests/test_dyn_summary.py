@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 from dynamics_proc.summary import summarize
 
 

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 from dynamics_proc.integrators import integrate, step_exponential, step_exponential_values, step_ivp
 from dynamics_proc.machine_sync import cart_offset, sync_command, tractor_offset
 from dynamics_proc.vehicles import (CX, CY, DELTA, PYAW, TX, TY, TYAW, V, VehicleParams, cart_pose, initial_state,

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from cosim.errors import RendererUnavailable
-from cosim.inprocess import simulate
-from cosim.loader import load_scenario, packaged_scenarios
-from cosim.outputs import compose_summary
+from cosim.runtime.inprocess import simulate
+from cosim.scenario.loader import load_scenario, packaged_scenarios
+from cosim.runtime.outputs import compose_summary
 
 pytestmark = pytest.mark.gl
 

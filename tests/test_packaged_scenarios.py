@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cosim.inprocess import simulate
-from cosim.loader import load_scenario, packaged_scenarios
-from cosim.outputs import compose_summary
+from cosim.runtime.inprocess import simulate
+from cosim.scenario.loader import load_scenario, packaged_scenarios
+from cosim.runtime.outputs import compose_summary
 
 NAMES = sorted(packaged_scenarios())
 

@@ -6,13 +6,13 @@ import math
 import numpy as np
 import pytest
 
-from cosim.camera import beam_directions
-from cosim.config import Cart, Mount, Noise, Pattern, Sensor
-from cosim.geometry import apply, body_from_camera_axes, cart_body_from_grid, mount_transform, vehicle_pose
+from cosim.world.camera import beam_directions
+from cosim.scenario.config import Cart, Mount, Noise, Pattern, Sensor
+from cosim.world.geometry import apply, body_from_camera_axes, cart_body_from_grid, mount_transform, vehicle_pose
 from perception_proc.heightmap import grid_shape, height_map
 from perception_proc.impact import blank_under_stream, find_impact
 from perception_proc.lidar import apply_noise_and_limits, frame_generator
-from perception_proc.patterns import beam_table, pattern_shape
+from cosim.world.patterns import beam_table, pattern_shape
 from perception_proc.rim import border_beams, find_cart
 from perception_proc.synthetic import Box, cart_shapes, raycast
 
@@ -167,7 +167,7 @@ def test_height_map_rejects_bad_pose_input_shapes():
 
 
 def test_returns_on_the_sensors_own_vehicle_are_masked():
-    from cosim.config import Scenario
+    from cosim.scenario.config import Scenario
     from perception_proc.pipeline import OWN_BOX_MARGIN_M, Perception
     from perception_proc.synthetic import stitched_rig
 
@@ -192,7 +192,7 @@ OWN_BOX_MOUNTS = [((0.0, -1.0, 5.0), (0.0, 45.0, 90.0)), ((3.0, 0.0, 4.0), (0.0,
 
 def _own_mask_case(xyz, rpy) -> tuple[int, int, int]:
     """Check level_points' own-vehicle mask against the box test of every point; returns the axis order."""
-    from cosim.config import Scenario
+    from cosim.scenario.config import Scenario
     from perception_proc.pipeline import Perception, own_vehicle_box
     from perception_proc.synthetic import stitched_rig
 

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cosim.config import Codec
+from cosim.scenario.config import Codec
 from perception_proc.codec import decode_depth
 from perception_proc.synthetic import encode_linear
 

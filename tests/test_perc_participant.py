@@ -9,9 +9,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as hst
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 from cosim.errors import FrameMismatch
-from cosim.geometry import vehicle_pose
+from cosim.world.geometry import vehicle_pose
 from dynamics_proc.blocks import declare_blocks as dynamics_blocks
 from perception_proc.orderstats import median_sorted, percentile_sorted, percentiles
 from perception_proc.accuracy_report import render_markdown, write_report
@@ -19,8 +19,8 @@ from perception_proc.blocks import declare_blocks
 from perception_proc.participant import PerceptionParticipant, create
 from perception_proc.summary import summarize
 from perception_proc.synthetic import encode_linear, stitched_rig
-from renderer_proc.raycast import raycast
-from renderer_proc.scene import scene_from_state
+from cosim.world.raycast import raycast
+from cosim.world.scene import scene_from_state
 from shm_schema import Schema, Segment, image_block
 
 SCENARIO = Scenario.model_validate_json(json.dumps({
@@ -195,7 +195,7 @@ def test_create_and_missing_blocks():
 
 @pytest.mark.slow
 def test_full_ring_with_the_mock_renderer():
-    from cosim.inprocess import simulate
+    from cosim.runtime.inprocess import simulate
 
     sc = Scenario.model_validate_json(json.dumps({
         "format_version": 1, "renderer": "mock", "render": {"mock_scale": 0.5},

@@ -8,9 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cosim.config import Noise, Pattern, Sensor
+from cosim.scenario.config import Noise, Pattern, Sensor
 from perception_proc.lidar import apply_noise_and_limits, frame_generator, to_points
-from perception_proc.patterns import (HONEYCOMB_DENSITY_RATIO, HONEYCOMB_VFOV_DEG, PatternError, beam_table,
+from cosim.world.patterns import (HONEYCOMB_DENSITY_RATIO, HONEYCOMB_VFOV_DEG, PatternError, beam_table,
                                       honeycomb_elevations, load_csv_table, pattern_shape, validate_table)
 
 

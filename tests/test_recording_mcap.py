@@ -20,7 +20,7 @@ import pytest
 
 import test_viewer_standins as standins
 from cosim.errors import ParticipantDied
-from cosim.launcher import launch
+from cosim.runtime.launcher import launch
 from cosim.recording import RecordingError, RecordOptions, mcap_sink, read_recording
 from cosim.recording.encode import heights_from_grid, image_from_msg, points_from_cloud
 
@@ -276,7 +276,7 @@ KILL_SCRIPT = textwrap.dedent("""
     import sys
     sys.path.insert(0, {tests!r})
     import test_viewer_standins as standins
-    from cosim.launcher import launch
+    from cosim.runtime.launcher import launch
     from cosim.recording import mcap_sink
     if __name__ == "__main__":
         launch(standins.scenario(600.0), {out!r}, specs=standins.specs(pace_s=0.005), console_log=False,

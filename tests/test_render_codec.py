@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cosim.config.sensing import Codec
+from cosim.scenario.config.sensing import Codec
 from renderer_proc.codec import decode_depth, encode_depth, valid_depth_mask
 
 CODEC = Codec()
@@ -106,7 +106,7 @@ def test_ratio_strictly_between_254_and_255_breaks_the_bound():
 def test_codec_ratios_above_254_are_refused():
     from pydantic import ValidationError
 
-    from cosim.config import Codec
+    from cosim.scenario.config import Codec
 
     Codec(alpha_cm=25400.0, beta_cm=100.0)
     Codec(alpha_cm=5000.0, beta_cm=5000.0 / 254.0)

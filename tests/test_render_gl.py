@@ -6,16 +6,16 @@ import math
 import numpy as np
 import pytest
 
-from cosim.camera import Pinhole, Rig, RigCamera
-from cosim.config import Scenario
-from cosim.config.sensing import Codec
+from cosim.world.camera import Pinhole, Rig, RigCamera
+from cosim.scenario.config import Scenario
+from cosim.scenario.config.sensing import Codec
 from cosim.errors import RendererUnavailable
-from cosim.geometry import make_transform, rot_x, rot_y
+from cosim.world.geometry import make_transform, rot_x, rot_y
 from renderer_proc.codec import decode_depth, encode_depth
 from renderer_proc.mock_backend import MockRenderer
 from renderer_proc.projection import camera_poses
 from renderer_proc.sample import sample_frame
-from renderer_proc.scene import Boxes, Cylinders, HeightField, Scene, scene_from_state
+from cosim.world.scene import Boxes, Cylinders, HeightField, Scene, scene_from_state
 
 pytestmark = pytest.mark.gl
 CODEC = Codec()
@@ -202,7 +202,7 @@ def test_mesh_file_geometry_matches_box(ctx, tmp_path):
     """A mesh loaded with trimesh from an OBJ file renders like the equivalent box primitive."""
     import trimesh
 
-    from renderer_proc.scene import MeshInstance, load_mesh
+    from cosim.world.scene import MeshInstance, load_mesh
     path = tmp_path / "slab.obj"
     trimesh.creation.box(extents=(2.0, 3.0, 1.0)).export(path)
     v, f = load_mesh(path)
@@ -223,9 +223,9 @@ def test_lidar_beams_land_on_their_pixels(ctx):
     """End to end through the planned rig: each beam of the default pattern, mapped to its camera and nearest
     pixel (yaw of the rig, the v flip, Eq 5), reads a range that matches the exact ray cast along the beam
     itself, up to the nearest-pixel offset."""
-    from cosim.camera import beam_directions
-    from renderer_proc.raycast import raycast
-    from renderer_proc.rig import beam_angles, beam_pixel_error, plan_rig
+    from cosim.world.camera import beam_directions
+    from cosim.world.raycast import raycast
+    from cosim.world.rig import beam_angles, beam_pixel_error, plan_rig
 
     s = Scenario.model_validate({"format_version": 1, "sensor": {"max_angular_error_deg": 0.3}})
     rig = plan_rig(s)
@@ -352,7 +352,7 @@ def test_cached_ground_image_matches_a_fresh_render(ctx):
     """The ground slab is drawn once per camera and copied into later frames while the camera's pose relative
     to the ground plane is unchanged (a mounted camera on a vehicle driving and turning on flat ground): a
     later frame, vehicles elsewhere and turned, equals what a fresh renderer draws for it."""
-    from renderer_proc.rig import plan_rig
+    from cosim.world.rig import plan_rig
 
     s0 = Scenario.model_validate({"format_version": 1, "sensor": {"max_angular_error_deg": 0.5}})
     s1 = Scenario.model_validate({"format_version": 1, "sensor": {"max_angular_error_deg": 0.5},
@@ -399,7 +399,7 @@ def test_cached_ground_image_matches_a_fresh_render(ctx):
 def test_ground_drawn_directly_when_its_edge_is_in_reach(ctx):
     """A ground square too small for the camera's reach has visible edges: no cached image, drawn per frame."""
     s = Scenario.model_validate({"format_version": 1, "render": {"ground_size_m": 60.0}})
-    from renderer_proc.rig import plan_rig
+    from cosim.world.rig import plan_rig
 
     rig = plan_rig(s)
     state, h, stream = sample_frame(s)

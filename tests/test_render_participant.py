@@ -7,12 +7,12 @@ import sys
 import numpy as np
 import pytest
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 from cosim.errors import FrameMismatch, RendererUnavailable
 from renderer_proc.blocks import declare_blocks
 from renderer_proc.codec import decode_depth
 from renderer_proc.participant import create
-from renderer_proc.rig import plan_rig
+from cosim.world.rig import plan_rig
 from renderer_proc.sample import sample_frame
 from shm_schema import ArrayBlock, Field, Schema, Segment, StructBlock
 
@@ -137,8 +137,8 @@ def test_gl_unavailable_names_cause_and_mock(monkeypatch):
 
 
 def test_import_never_touches_gl():
-    code = ("import sys, renderer_proc, renderer_proc.participant, renderer_proc.blocks, renderer_proc.rig, "
-            "renderer_proc.scene, renderer_proc.raycast, renderer_proc.mock_backend, renderer_proc.gl_backend\n"
+    code = ("import sys, renderer_proc, renderer_proc.participant, renderer_proc.blocks, cosim.world.rig, "
+            "cosim.world.scene, cosim.world.raycast, renderer_proc.mock_backend, renderer_proc.gl_backend\n"
             "assert 'moderngl' not in sys.modules, 'moderngl imported'\n"
             "assert not any(m.startswith('glcontext') for m in sys.modules)\n")
     subprocess.run([sys.executable, "-c", code], check=True, cwd=str(__import__("pathlib").Path(__file__).parents[1]))

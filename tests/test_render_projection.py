@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from cosim.camera import Pinhole, Rig, RigCamera, yaw_transform
-from cosim.config import Scenario
-from cosim.geometry import apply, body_from_camera_axes, mount_transform, vehicle_pose
+from cosim.world.camera import Pinhole, Rig, RigCamera, yaw_transform
+from cosim.scenario.config import Scenario
+from cosim.world.geometry import apply, body_from_camera_axes, mount_transform, vehicle_pose
 from renderer_proc.projection import GL_FROM_CAMERA, camera_poses, gl_projection, gl_view, pixel_rays, world_from_sensor
 
 CAM = Pinhole(640, 480, math.radians(70.0))

@@ -9,13 +9,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from cosim.config import Scenario
-from cosim.geometry import make_transform, rot_z
-from renderer_proc.heightfield import grid_triangles, grid_vertices, padded_heights, surface_height
-from renderer_proc.meshes import CYLINDER_SIDES
-from renderer_proc.raycast import ray_boxes, ray_cylinders, ray_heightfield, ray_mesh, raycast
+from cosim.scenario.config import Scenario
+from cosim.world.geometry import make_transform, rot_z
+from cosim.world.heightfield import grid_triangles, grid_vertices, padded_heights, surface_height
+from cosim.world.meshes import CYLINDER_SIDES
+from cosim.world.raycast import ray_boxes, ray_cylinders, ray_heightfield, ray_mesh, raycast
 from renderer_proc.sample import sample_frame
-from renderer_proc.scene import Boxes, Cylinders, HeightField, MeshInstance, scene_from_state
+from cosim.world.scene import Boxes, Cylinders, HeightField, MeshInstance, scene_from_state
 
 
 def boxes(*specs) -> Boxes:
@@ -52,7 +52,7 @@ def test_prism_flat_and_vertex_distances():
     flat at r cos(pi / n), a ray at a vertex meets it at r."""
     r = 0.5
     cyl = Cylinders(np.array([[0.0, 0.0, -1.0]]), np.array([[0.0, 0.0, 1.0]]), np.array([r]), np.zeros((1, 3)))
-    from renderer_proc.meshes import orthonormal_frames
+    from cosim.world.meshes import orthonormal_frames
     frame = orthonormal_frames(np.array([[0.0, 0.0, 2.0]]))[0]
     mid = frame @ np.array([math.cos(math.pi / CYLINDER_SIDES), math.sin(math.pi / CYLINDER_SIDES), 0.0])
     vert = frame @ np.array([1.0, 0.0, 0.0])

@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cosim.config import Scenario
-from renderer_proc.rig import (
+from cosim.scenario.config import Scenario
+from cosim.world.rig import (
     MAX_FOV_DEG,
     beam_angles,
     beam_pixel_error,

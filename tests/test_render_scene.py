@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from cosim.config import Scenario
-from cosim.geometry import apply, cart_body_from_grid, vehicle_pose
-from renderer_proc.meshes import unit_cube, unit_cylinder
-from renderer_proc.raycast import raycast
+from cosim.scenario.config import Scenario
+from cosim.world.geometry import apply, cart_body_from_grid, vehicle_pose
+from cosim.world.meshes import unit_cube, unit_cylinder
+from cosim.world.raycast import raycast
 from renderer_proc.sample import sample_frame
-from renderer_proc.scene import scene_from_state
+from cosim.world.scene import scene_from_state
 
 #: the default scene's triangle budget (one 640 x 480 camera in ~5 ms on llvmpipe)
 TRIANGLE_BUDGET = 10_000
@@ -105,7 +105,7 @@ def test_sample_frame_puts_stream_into_cart():
 def test_hidden_top_faces_are_covered():
     """The top faces the GL renderer skips (cart floor and walls) are covered: each point of them lies on the
     grain grid's floor inside the interior (under the grain surface, heights >= 0) or inside another box."""
-    from renderer_proc.parts import CART_WALL_BOXES
+    from cosim.world.parts import CART_WALL_BOXES
 
     s = Scenario(format_version=1)
     state, h, stream = sample_frame(s)
@@ -139,7 +139,7 @@ def _surface_checks(h: np.ndarray, cell: float, block: int) -> int:
     """Build the merged draw mesh of ``h`` and check it: counter-clockwise, area L x W, every interior edge
     shared by exactly two triangles in opposite directions (no T-junction, no crack), the same surface as
     ``surface_height``. Returns the triangle count."""
-    from renderer_proc.heightfield import padded_heights, surface_height
+    from cosim.world.heightfield import padded_heights, surface_height
     from renderer_proc.hfmesh import SurfaceMesh
 
     nx, ny = h.shape

@@ -5,9 +5,9 @@ import json
 
 import numpy as np
 
-from cosim.config import Scenario
-from cosim.inprocess import simulate
-from cosim.outputs import run_data, write_outputs, write_scenario
+from cosim.scenario.config import Scenario
+from cosim.runtime.inprocess import simulate
+from cosim.runtime.outputs import run_data, write_outputs, write_scenario
 from cosim.report import load_run
 
 

@@ -1,4 +1,4 @@
-"""Perception overlapping the next frame (cosim.participant): late publication, the flush turn, same results."""
+"""Perception overlapping the next frame (cosim.runtime.participant): late publication, the flush turn, same results."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 import fakes
-from cosim.config import Scenario
-from cosim.inprocess import simulate
-from cosim.launcher import launch
-from cosim.lockstep import RingPlan
-from cosim.participant import perception_overlaps
+from cosim.scenario.config import Scenario
+from cosim.runtime.inprocess import simulate
+from cosim.runtime.launcher import launch
+from cosim.runtime.lockstep import RingPlan
+from cosim.runtime.participant import perception_overlaps
 
 ROLES = ("dynamics", "renderer", "perception")
 

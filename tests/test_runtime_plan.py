@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 
 import fakes
-from cosim.config import Scenario
-from cosim.inprocess import simulate
-from cosim.launcher import launch
-from cosim.lockstep import RingPlan
-from cosim.specs import DEFAULT_SPECS, SUPERVISOR, ring_specs
+from cosim.scenario.config import Scenario
+from cosim.runtime.inprocess import simulate
+from cosim.runtime.launcher import launch
+from cosim.runtime.lockstep import RingPlan
+from cosim.runtime.specs import DEFAULT_SPECS, SUPERVISOR, ring_specs
 
 
 @pytest.mark.parametrize("feedback, renderer, viewer, ring", [

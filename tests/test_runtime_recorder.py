@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cosim.recorder import FRAME_COPY_LIMIT, Recorder
+from cosim.runtime.recorder import FRAME_COPY_LIMIT, Recorder
 from shm_schema import ArrayBlock, Field, Schema, Segment, StructBlock
 
 #: rows of the large test array: float32 (LARGE_ROWS, 100) is larger than FRAME_COPY_LIMIT

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 import fakes
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 from cosim.errors import FrameMismatch, HandoffTimeout, ParticipantCrashed, ParticipantDied
-from cosim.inprocess import simulate
-from cosim.launcher import EXIT_INTERRUPTED, EXIT_RUN_ERROR, launch
-from cosim.lockstep import RingPlan, Token
+from cosim.runtime.inprocess import simulate
+from cosim.runtime.launcher import EXIT_INTERRUPTED, EXIT_RUN_ERROR, launch
+from cosim.runtime.lockstep import RingPlan, Token
 from shm_schema import Schema, Segment, StructBlock, Field
 
 ROLES = ("dynamics", "renderer", "perception")
@@ -177,8 +177,8 @@ SIGNAL_SCRIPT = textwrap.dedent("""
     import sys
     sys.path.insert(0, {tests!r})
     import fakes
-    from cosim.config import Scenario
-    from cosim.launcher import launch
+    from cosim.scenario.config import Scenario
+    from cosim.runtime.launcher import launch
     if __name__ == "__main__":
         sc = Scenario(format_version=1, duration_s=3600.0, renderer="mock")
         res = launch(sc, {out!r}, specs=fakes.specs(), console_log=False)

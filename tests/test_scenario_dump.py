@@ -8,14 +8,14 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from cosim.config import Scenario
-from cosim.loader import (
+from cosim.scenario.config import Scenario
+from cosim.scenario.loader import (
     dump_resolved,
     load_scenario,
     load_scenario_text,
     resolve_scenario_arg,
 )
-from cosim.yamlmarks import Loader as _Loader
+from cosim.scenario.yamlmarks import Loader as _Loader
 
 
 def roundtrip(scenario: Scenario) -> Scenario:

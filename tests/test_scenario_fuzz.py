@@ -6,9 +6,9 @@ import string
 
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 from cosim.errors import ScenarioError
-from cosim.loader import _model_of, load_scenario_text
+from cosim.scenario.loader import _model_of, load_scenario_text
 
 import yaml
 

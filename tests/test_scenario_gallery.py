@@ -8,7 +8,7 @@ import pytest
 import yaml
 
 from cosim.errors import ScenarioError
-from cosim.loader import SET_FILE, load_scenario
+from cosim.scenario.loader import SET_FILE, load_scenario
 
 GALLERY = Path(__file__).parent / "scenarios_bad"
 EXPECTED: dict = yaml.safe_load((GALLERY / "expected.yaml").read_text(encoding="utf-8"))

@@ -6,14 +6,14 @@ import json
 import pytest
 import yaml
 
-from cosim.jsonschema import SCHEMA_DIALECT, SCHEMA_PATH, scenario_json_schema, schema_text, write_json_schema
-from cosim.loader import packaged_scenarios
-from cosim.yamlmarks import Loader as _Loader
+from cosim.scenario.jsonschema import SCHEMA_DIALECT, SCHEMA_PATH, scenario_json_schema, schema_text, write_json_schema
+from cosim.scenario.loader import packaged_scenarios
+from cosim.scenario.yamlmarks import Loader as _Loader
 
 
 def test_committed_schema_is_current():
     assert SCHEMA_PATH.read_text(encoding="utf-8") == schema_text(), \
-        "cosim/schema/scenario.schema.json is stale: run `python -m cosim.jsonschema`"
+        "cosim/schema/scenario.schema.json is stale: run `python -m cosim.scenario.jsonschema`"
 
 
 def test_schema_header_and_shape():

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from cosim.config import Scenario
+from cosim.scenario.config import Scenario
 from cosim.errors import Problem, ScenarioError
-from cosim.loader import (
+from cosim.scenario.loader import (
     OPTIONS_FILE, SET_FILE, load_scenario, load_scenario_text, packaged_scenarios, path_fields,
     resolve_scenario_arg,
 )

@@ -5,8 +5,8 @@ import csv
 
 import pytest
 
-from cosim.config import Scenario
-from cosim.study import KNOBS, apply_overrides, run_study
+from cosim.scenario.config import Scenario
+from cosim.studies.study import KNOBS, apply_overrides, run_study
 
 
 def test_apply_overrides_validates_and_refuses_unknown_paths():

@@ -1,4 +1,4 @@
-"""Thread pools of the run's processes (cosim.threadpools): single-threaded BLAS/OpenMP/OpenCV unless the user says."""
+"""Thread pools of the run's processes (cosim.runtime.threadpools): single-threaded BLAS/OpenMP/OpenCV unless the user says."""
 from __future__ import annotations
 
 import multiprocessing as mp
@@ -6,7 +6,7 @@ import os
 
 import pytest
 
-from cosim.threadpools import POOL_VARIABLES, default_to_single_threaded_pools, single_threaded_pools
+from cosim.runtime.threadpools import POOL_VARIABLES, default_to_single_threaded_pools, single_threaded_pools
 
 
 def _report(q) -> None:

@@ -32,7 +32,7 @@ RUN_SCRIPT = textwrap.dedent("""
     import sys
     sys.path.insert(0, {tests!r})
     import test_viewer_standins as standins
-    from cosim.launcher import ObserverSpec, launch
+    from cosim.runtime.launcher import ObserverSpec, launch
     if __name__ == "__main__":
         obs = ObserverSpec("viewer", "cosim.viewer.server:observe", {{"port": 0, "announce": {announce!r}}})
         res = launch(standins.scenario(600.0), {out!r}, specs=standins.specs(pace_s=0.02), console_log=False,

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 import test_viewer_standins as standins
-from cosim.launcher import ObserverSpec, launch
+from cosim.runtime.launcher import ObserverSpec, launch
 from cosim.viewer import LiveSource, RunEnded, RunNotFound, resolve_run
 from cosim.viewer.live import SHM_DIR
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import test_viewer_standins as standins
-from cosim.launcher import launch
+from cosim.runtime.launcher import launch
 from cosim.recording import ReplaySource, mcap_sink
 from cosim.viewer.page import page_html
 from cosim.viewer.panels import IMAGE_PANELS, PANELS, PLOT_H, PLOT_W, panel_info, render_panel

@@ -35,7 +35,7 @@ from pathlib import Path
 
 from shm_schema import Schema, Segment
 
-from ..threadpools import single_threaded_pools
+from cosim.runtime.threadpools import single_threaded_pools
 from .slots import FrameSlots
 from .writer import (
     DEFAULT_NAME,

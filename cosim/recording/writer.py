@@ -176,7 +176,7 @@ class RunInfo:
 
     @classmethod
     def of(cls, scenario) -> "RunInfo":
-        from cosim.geometry import cart_body_from_grid, mount_transform
+        from cosim.world.geometry import cart_body_from_grid, mount_transform
 
         mount, cart = scenario.sensor.mount, scenario.cart
         return cls(scenario.name, float(scenario.timing.sensor_period_s),

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from ..config import Scenario
+from cosim.scenario.config import Scenario
 
 __all__ = ["RunData", "load_run"]
 
@@ -42,7 +42,7 @@ class RunData:
 
 
 def load_run(path: str | Path) -> RunData:
-    """Load a run directory written by :func:`cosim.launcher.launch`."""
+    """Load a run directory written by :func:`cosim.runtime.launcher.launch`."""
     path = Path(path)
     scenario = Scenario.model_validate_json(json.dumps(yaml.safe_load((path / "scenario.yaml").read_text())))
     summary = json.loads((path / "summary.json").read_text())

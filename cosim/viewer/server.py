@@ -46,7 +46,7 @@ NICE = 10
 #: how often the server checks whether the run has ended (to unmap promptly), s
 HOUSEKEEPING_S = 1.0
 #: longest wait, when stopping, for the responses being sent to finish, s (the launcher allows its observers
-#: cosim.launcher.TERMINATE_GRACE_S = 0.5 s after SIGTERM before it kills them)
+#: cosim.runtime.launcher.TERMINATE_GRACE_S = 0.5 s after SIGTERM before it kills them)
 DRAIN_S = 0.3
 
 

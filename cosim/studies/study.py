@@ -18,13 +18,13 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .config import Scenario
-from .inprocess import simulate
-from .outputs import clean_json, compose_summary
+from cosim.scenario.config import Scenario
+from cosim.runtime.inprocess import simulate
+from cosim.runtime.outputs import clean_json, compose_summary
 
 __all__ = ["Setting", "Knob", "KNOBS", "apply_overrides", "run_setting", "run_study"]
 
-log = logging.getLogger("cosim.study")
+log = logging.getLogger("cosim.studies.study")
 
 
 @dataclass(frozen=True)

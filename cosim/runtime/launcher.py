@@ -24,8 +24,8 @@ from shm_schema import Phase, Segment
 from shm_schema.layout import SLOT_WORD
 
 from .child import ChildArgs, child_main
-from .config import Scenario
-from .errors import ParticipantCrashed, ParticipantDied, RunError, RunInterrupted
+from cosim.scenario.config import Scenario
+from cosim.errors import ParticipantCrashed, ParticipantDied, RunError, RunInterrupted
 from .lockstep import RingPlan, Token
 from .logs import configure_logging
 from .outputs import default_run_dir, run_data, write_outputs, write_scenario
@@ -35,7 +35,7 @@ from .threadpools import single_threaded_pools
 
 __all__ = ["RunResult", "ObserverSpec", "launch", "EXIT_OK", "EXIT_RUN_ERROR", "EXIT_INTERRUPTED", "JOIN_TIMEOUT_S"]
 
-log = logging.getLogger("cosim.launcher")
+log = logging.getLogger("cosim.runtime.launcher")
 
 EXIT_OK, EXIT_RUN_ERROR, EXIT_INTERRUPTED = 0, 1, 130
 #: how long a child may take to close after the last frame (GL teardown) before it is terminated, s
@@ -79,7 +79,7 @@ class RunResult:
     exit_code: int = EXIT_OK
     children: dict[str, int | None] = field(default_factory=dict)
     #: last completed frame's copy of every recorded (non-image) array block (a block larger than
-    #: cosim.recorder.FRAME_COPY_LIMIT that a writer touched after that frame is left out: zeros)
+    #: cosim.runtime.recorder.FRAME_COPY_LIMIT that a writer touched after that frame is left out: zeros)
     arrays: dict = field(default_factory=dict)
 
     @property
@@ -270,7 +270,7 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
     t_outputs = time.perf_counter()
     if scenario.outputs.figures and "dyn_state" in schema and recorder is not None and recorder.frames:
         try:
-            from .report import write_run_figures
+            from cosim.report import write_run_figures
 
             write_run_figures(run_data(run_dir, scenario, summary, recorder))
         except Exception:  # noqa: BLE001 - figures are a convenience; the run's data is already written

@@ -7,7 +7,7 @@ from typing import Any, Callable, Mapping
 
 from shm_schema import Schema
 
-from .config import Scenario
+from cosim.scenario.config import Scenario
 
 __all__ = ["ParticipantSpec", "DEFAULT_SPECS", "SUPERVISOR", "load_callable", "build_schema", "ring_specs"]
 
@@ -24,7 +24,7 @@ class ParticipantSpec:
     factory: str
     blocks: str
     summary: str | None = None
-    #: ``predicate(scenario) -> bool``: whether this member publishes one turn late (cosim.participant)
+    #: ``predicate(scenario) -> bool``: whether this member publishes one turn late (cosim.runtime.participant)
     defers: str | None = None
     kwargs: Mapping[str, Any] = field(default_factory=dict)
 
@@ -45,7 +45,7 @@ DEFAULT_SPECS: dict[str, ParticipantSpec] = {
     "renderer": ParticipantSpec("renderer", "renderer_proc.participant:create", "renderer_proc.blocks:declare_blocks"),
     "perception": ParticipantSpec("perception", "perception_proc.participant:create",
                                   "perception_proc.blocks:declare_blocks", "perception_proc.summary:summarize",
-                                  defers="cosim.participant:perception_overlaps"),
+                                  defers="cosim.runtime.participant:perception_overlaps"),
 }
 
 

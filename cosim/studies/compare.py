@@ -5,14 +5,14 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from .config import Scenario
-from .launcher import launch
-from .report.html import write_comparison_report
-from .report.rundata import load_run
+from cosim.scenario.config import Scenario
+from cosim.runtime.launcher import launch
+from cosim.report.html import write_comparison_report
+from cosim.report.rundata import load_run
 
 __all__ = ["VARIANTS", "variants", "compare"]
 
-log = logging.getLogger("cosim.compare")
+log = logging.getLogger("cosim.studies.compare")
 
 #: run name -> (feedback, estimator)
 VARIANTS = {

@@ -104,7 +104,7 @@ class Cart(Model):
 
     Cart body frame: origin on the ground under the centre of the interior footprint, x forward (towing
     direction), y left, z up. Interior box: |x| <= L/2, |y| <= W/2, floor_height <= z <= floor_height + D.
-    The cart grid frame (height map, sections) is derived in ``cosim.geometry``.
+    The cart grid frame (height map, sections) is derived in ``cosim.world.geometry``.
     """
 
     interior_length_m: PosFloat = 6.0

@@ -21,9 +21,9 @@ import math
 
 import numpy as np
 
-from cosim.camera import Pinhole, Rig, RigCamera, beam_directions, yaw_transform
-from cosim.config.scenario import Scenario
-from cosim.config.sensing import Pattern
+from cosim.world.camera import Pinhole, Rig, RigCamera, beam_directions, yaw_transform
+from cosim.scenario.config.scenario import Scenario
+from cosim.scenario.config.sensing import Pattern
 
 __all__ = [
     "MAX_CAMERAS",
@@ -68,12 +68,12 @@ def pitch_transform(pitch_up_rad: float) -> np.ndarray:
 
 
 def beam_angles(pattern: Pattern) -> tuple[np.ndarray, np.ndarray]:
-    """(elevation_rad (N,), azimuth_rad (N,)) of the pattern's beams (LiDAR frame, see cosim.camera).
+    """(elevation_rad (N,), azimuth_rad (N,)) of the pattern's beams (LiDAR frame, see cosim.world.camera).
 
-    Uses ``perception_proc.patterns.beam_table`` when it exists; otherwise the regular grid spanned by the
+    Uses ``cosim.world.patterns.beam_table`` when it exists; otherwise the regular grid spanned by the
     pattern's min / max / count (inclusive end points)."""
     try:
-        from perception_proc.patterns import beam_table
+        from cosim.world.patterns import beam_table
     except ImportError:
         el = np.radians(np.linspace(pattern.elevation_min_deg, pattern.elevation_max_deg, pattern.elevation_count))
         az = np.radians(np.linspace(pattern.azimuth_min_deg, pattern.azimuth_max_deg, pattern.azimuth_count))

@@ -15,7 +15,7 @@ BAR_WIDTH = 30
 
 
 class ProgressPrinter:
-    """Callable ``(frame, frames, sim_time_s, wall_s)`` for :func:`cosim.launcher.launch`."""
+    """Callable ``(frame, frames, sim_time_s, wall_s)`` for :func:`cosim.runtime.launcher.launch`."""
 
     def __init__(self, stream: TextIO = sys.stderr, tty: bool | None = None):
         self.stream = stream

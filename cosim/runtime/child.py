@@ -20,8 +20,8 @@ from typing import Mapping
 
 from shm_schema import Phase, Segment
 
-from .config import Scenario
-from .errors import RunError
+from cosim.scenario.config import Scenario
+from cosim.errors import RunError
 from .lockstep import RingPlan, Token, member_loop
 from .logs import configure_logging
 from .specs import ParticipantSpec

@@ -11,7 +11,7 @@ from typing import Mapping
 
 from shm_schema import Segment
 
-from .config import Scenario
+from cosim.scenario.config import Scenario
 from .lockstep import run_inprocess
 from .recorder import Recorder
 from .specs import ParticipantSpec, build_schema, ring_specs

@@ -1,13 +1,13 @@
 """JSON Schema (draft 2020-12) of scenario files, so that editors can complete and check them.
 
 The committed copy lives at ``cosim/schema/scenario.schema.json``; regenerate it after changing any record in
-``cosim/config`` with ``python -m cosim.jsonschema`` (a test fails while the committed copy is stale). To use it
+``cosim/scenario/config`` with ``python -m cosim.scenario.jsonschema`` (a test fails while the committed copy is stale). To use it
 in an editor with the YAML language server, start a scenario file with::
 
     # yaml-language-server: $schema=<path to>/cosim/schema/scenario.schema.json
 
 The schema checks keys, types, enums and ranges field by field; cross-field rules (integer rate ratios, codec
-alpha/beta, ...) are checked only by the loader (``cosim.loader``).
+alpha/beta, ...) are checked only by the loader (``cosim.scenario.loader``).
 """
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from .config import Scenario
 __all__ = ["SCHEMA_PATH", "SCHEMA_DIALECT", "scenario_json_schema", "schema_text", "write_json_schema"]
 
 #: where the generated schema is committed
-SCHEMA_PATH = Path(__file__).resolve().parent / "schema" / "scenario.schema.json"
+SCHEMA_PATH = Path(__file__).resolve().parent.parent / "schema" / "scenario.schema.json"
 SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"
 
 
@@ -56,5 +56,5 @@ def write_json_schema(path: str | os.PathLike = SCHEMA_PATH) -> Path:
     return path
 
 
-if __name__ == "__main__":  # python -m cosim.jsonschema [PATH]
+if __name__ == "__main__":  # python -m cosim.scenario.jsonschema [PATH]
     print(write_json_schema(*sys.argv[1:2]))

@@ -4,7 +4,7 @@ One turn per frame: dynamics -> renderer -> perception -> supervisor -> dynamics
 own semaphore; the sender writes the frame id into the receiver's header slot before releasing it, and the
 receiver checks it. Every wait has a deadline and raises a named error. Waits are sliced (``POLL_S``) only to
 check liveness between slices; nothing spins and nothing sleeps to synchronise. A deferred member
-(``RingPlan.deferred``, see cosim.participant) passes the token on before the rest of its step, so its work
+(``RingPlan.deferred``, see cosim.runtime.participant) passes the token on before the rest of its step, so its work
 overlaps the next members' turns; a flush turn after the last frame lets it publish its final outputs.
 
 The same member code runs over OS processes (:class:`Token` over multiprocessing semaphores) or in one process
@@ -19,7 +19,7 @@ from typing import Callable, Mapping, Sequence
 from shm_schema import Phase, Segment
 from shm_schema.layout import SLOT_WORD
 
-from .errors import FrameMismatch, HandoffTimeout
+from cosim.errors import FrameMismatch, HandoffTimeout
 
 _TOKEN, _PHASE, _FRAME = SLOT_WORD["token"], SLOT_WORD["phase"], SLOT_WORD["frame"]
 _HEARTBEAT, _STEP = SLOT_WORD["heartbeat_ns"], SLOT_WORD["step_ns"]
@@ -37,7 +37,7 @@ class RingPlan:
     members: tuple[str, ...]
     frames: int
     supervisor: str = "supervisor"
-    #: members that publish one turn late (cosim.participant): after the last frame a flush turn passes the
+    #: members that publish one turn late (cosim.runtime.participant): after the last frame a flush turn passes the
     #: token through them, in ring order, and back to the supervisor
     deferred: tuple[str, ...] = ()
 

@@ -1,9 +1,9 @@
-"""Exact ray casting of a :class:`~renderer_proc.scene.Scene` (numpy, vectorised).
+"""Exact ray casting of a :class:`~cosim.world.scene.Scene` (numpy, vectorised).
 
 The reference that perception accuracy is measured against and the core of the mock renderer. Every
 primitive is intersected in closed form: boxes by slabs, cylinders as the capped regular prisms the GL renderer
-draws (``renderer_proc.meshes.CYLINDER_SIDES`` facets; the scene's cylinders are defined as those prisms),
-the grain height field as the exact triangulated surface the GL renderer draws (``renderer_proc.heightfield``),
+draws (``cosim.world.meshes.CYLINDER_SIDES`` facets; the scene's cylinders are defined as those prisms),
+the grain height field as the exact triangulated surface the GL renderer draws (``cosim.world.heightfield``),
 meshes by Moller-Trumbore. Rays are world frame: ``origins`` (N, 3) m and unit ``directions`` (N, 3); the
 result ``t`` (N,) float64 is the distance in m to the first hit with t > 0, ``inf`` on a miss.
 """
@@ -214,7 +214,7 @@ def _hf_chunk(og, dg, a, b, hp: np.ndarray, cell: float) -> np.ndarray:
     """First crossing of the surface for rays (K,) with windows [a, b]; inf where none.
 
     The height along a ray is linear between the crossings of the lines x / c + 1/2 = integer,
-    y / c + 1/2 = integer and (x - y) / c = integer (``renderer_proc.heightfield``), so the ray's height above
+    y / c + 1/2 = integer and (x - y) / c = integer (``cosim.world.heightfield``), so the ray's height above
     the surface is evaluated at those crossings only, and the first sign change is solved linearly (exact).
 
     ``og``, ``dg`` (3, K) coordinate rows (grid frame). The work arrays are (crossings, K): each ray's values

@@ -15,15 +15,15 @@ from typing import Sequence
 
 import numpy as np
 
-from .config import Scenario
-from .errors import RunError
+from cosim.scenario.config import Scenario
+from cosim.errors import RunError
 from .recorder import Recorder
 from .specs import ParticipantSpec, load_callable
 
 __all__ = ["default_run_dir", "write_scenario", "compose_summary", "write_outputs", "saved_maps", "run_data",
            "clean_json", "STAGE_KEYS", "SAVED_MAPS"]
 
-log = logging.getLogger("cosim.outputs")
+log = logging.getLogger("cosim.runtime.outputs")
 
 #: participant name -> timing_ms key in summary.json
 STAGE_KEYS = {"dynamics": "dynamics", "renderer": "render", "perception": "perception"}
@@ -44,7 +44,7 @@ def default_run_dir(scenario: Scenario, root: Path = Path("runs")) -> Path:
 
 def write_scenario(run_dir: Path, scenario: Scenario) -> None:
     """scenario.yaml: the fully resolved scenario (every field, defaults included)."""
-    from .loader import dump_resolved
+    from cosim.scenario.loader import dump_resolved
 
     (run_dir / "scenario.yaml").write_text(dump_resolved(scenario))
 
@@ -128,7 +128,7 @@ def saved_maps(recorder: Recorder) -> dict[str, np.ndarray]:
 def run_data(run_dir: Path, scenario: Scenario, summary: dict, recorder: Recorder):
     """The :class:`~cosim.report.RunData` that ``load_run(run_dir)`` reads back after :func:`write_outputs`, taken
     from memory (no re-reading of timeseries.csv, scenario.yaml and the maps before the figures)."""
-    from .report.rundata import RunData
+    from cosim.report.rundata import RunData
 
     maps = saved_maps(recorder)
     return RunData(Path(run_dir), scenario, clean_json(summary), recorder.series(), maps.get("heightmap_truth"),

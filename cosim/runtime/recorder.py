@@ -9,7 +9,7 @@ which spares the supervisor a 0.6 MB copy per frame on the ring's critical path.
 apart from the timeseries, so two runs of the same scenario and seed write byte-identical CSV files.
 
 A struct row goes to the frame of its block's stamp (``Segment.frame_of``), not to the frame being recorded: a
-deferred member (cosim.participant) publishes frame m's outputs at the next turn, and the flush turn's
+deferred member (cosim.runtime.participant) publishes frame m's outputs at the next turn, and the flush turn's
 :meth:`Recorder.record_flush` adds the last. A frame whose block was not (re)written repeats the block's
 latest earlier row, as a block that is not rewritten would read.
 """

@@ -29,7 +29,7 @@ import yaml
 from pydantic import BaseModel, ValidationError
 
 from .config import FORMAT_VERSION, Scenario
-from .errors import Problem, ScenarioError
+from cosim.errors import Problem, ScenarioError
 from .yamlmarks import (Doc as _Doc, Dumper as _Dumper, Loc, Mark as _Mark,
                         dotted as _dotted, parse as _parse, show as _show)
 
@@ -39,7 +39,7 @@ __all__ = [
 ]
 
 #: directory of the scenarios shipped with the package
-SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
 #: pseudo file name of problems in ``--set`` overrides
 SET_FILE = "<--set>"
 #: pseudo file name of problems in options passed as ``extra``

@@ -61,7 +61,7 @@ class Pattern(Model):
     """Beam pattern: a preset grid, a Honeycomb-like unit, or a CSV table (elevation_deg, azimuth_deg per row).
 
     Angles are in the LiDAR frame (aligned with the camera frame: X right, Y up, Z forward). Azimuth is measured
-    from the forward axis towards the left (positive yaw) ... see perception_proc.patterns for the exact
+    from the forward axis towards the left (positive yaw) ... see cosim.world.patterns for the exact
     convention and the conversion to the paper's (theta, phi).
     """
 

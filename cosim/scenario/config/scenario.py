@@ -34,7 +34,7 @@ class Timing(Model):
     latency_frames: int = Field(default=1, ge=0, le=100)
     #: with latency_frames >= 1 (or ground-truth feedback) perception of frame m runs while dynamics and the
     #: renderer do frame m + 1 and publishes its outputs at its next turn; the results are the same either way
-    #: (cosim.participant.perception_overlaps)
+    #: (cosim.runtime.participant.perception_overlaps)
     overlap_perception: bool = True
     handoff_timeout_s: PosFloat = 30.0
     startup_timeout_s: PosFloat = 120.0

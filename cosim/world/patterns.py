@@ -1,11 +1,11 @@
 """LiDAR beam patterns as data: a table of (elevation, azimuth) per beam.
 
 Angles are in the LiDAR (sensor) frame, which is the camera-convention frame X right, Y up, Z forward
-(``cosim.camera``): elevation is the angle above the X-Z plane (towards +Y), azimuth is measured from +Z
-(forward) towards the LEFT (-X), so ``cosim.camera.beam_directions(elevation, azimuth)`` gives the unit beam
-direction and ``cosim.camera.paper_angles`` the paper's (theta, phi).
+(``cosim.world.camera``): elevation is the angle above the X-Z plane (towards +Y), azimuth is measured from +Z
+(forward) towards the LEFT (-X), so ``cosim.world.camera.beam_directions(elevation, azimuth)`` gives the unit beam
+direction and ``cosim.world.camera.paper_angles`` the paper's (theta, phi).
 
-Presets (``cosim.config.Pattern.preset``):
+Presets (``cosim.scenario.config.Pattern.preset``):
 
 * ``grid`` - uniform in elevation and azimuth over the record's closed ranges (both ends included), with
   ``elevation_count`` x ``azimuth_count`` beams.
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim.config import Pattern
+from cosim.scenario.config import Pattern
 
 __all__ = [
     "PatternError", "beam_table", "grid_table", "honeycomb_elevations", "load_csv_table", "validate_table",

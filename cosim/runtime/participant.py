@@ -2,7 +2,7 @@
 
 A participant is created from the scenario, started with the run's segment, then stepped once per frame in
 ring order (dynamics -> renderer -> perception). The same object runs in-process (tests, debugging:
-``cosim.lockstep.run_inprocess``) or inside an OS process over shared memory (``cosim.launcher``); it never
+``cosim.runtime.lockstep.run_inprocess``) or inside an OS process over shared memory (``cosim.runtime.launcher``); it never
 knows which. It must not synchronise, sleep or spin: the ring calls ``step`` when its turn comes.
 
 Frame ids: frame 0 publishes the initial state (dynamics does not integrate); at frame m >= 1 dynamics

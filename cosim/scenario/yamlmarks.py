@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import yaml
 
-from .errors import Problem
+from cosim.errors import Problem
 
 __all__ = ["Loader", "Dumper", "Mark", "Doc", "Loc", "INVALID", "parse", "build", "dotted", "show",
            "INT_12", "FLOAT_12", "BOOL_12"]

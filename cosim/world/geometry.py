@@ -16,8 +16,8 @@ import math
 
 import numpy as np
 
-from .config.base import Mount
-from .config.machines import Cart
+from cosim.scenario.config.base import Mount
+from cosim.scenario.config.machines import Cart
 
 __all__ = [
     "rot_x", "rot_y", "rot_z", "rpy_matrix", "make_transform", "invert", "apply",
@@ -86,7 +86,7 @@ def vehicle_pose(x_m: float, y_m: float, yaw_rad: float, z_m: float = 0.0) -> np
 
 
 def mount_transform(mount: Mount) -> np.ndarray:
-    """parent_from_mount for a :class:`~cosim.config.base.Mount` (body-convention axes, x forward)."""
+    """parent_from_mount for a :class:`~cosim.scenario.config.base.Mount` (body-convention axes, x forward)."""
     r, p, y = (math.radians(a) for a in mount.rpy_deg)
     return make_transform(rpy_matrix(r, p, y), mount.xyz_m)
 

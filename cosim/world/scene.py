@@ -6,7 +6,7 @@ geometry by construction. It holds only a few kinds of primitive, each exact in 
 * :class:`Boxes` - oriented boxes (combine body, cab, header, tractor, cart floor / walls / rim / tongue, the
   ground slab whose top face is the ground plane z = 0);
 * :class:`Cylinders` - capped finite cylinders (auger tube, wheels, the grain stream between polyline points);
-* :class:`HeightField` - the grain surface over the cart floor (``renderer_proc.heightfield``);
+* :class:`HeightField` - the grain surface over the cart floor (``cosim.world.heightfield``);
 * :class:`MeshInstance` - an optional triangle mesh loaded with trimesh from a scenario ``mesh_file``
   (replaces that entity's procedural boxes).
 
@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim.config.scenario import Scenario
-from cosim.geometry import apply, cart_body_from_grid, vehicle_pose
+from cosim.scenario.config.scenario import Scenario
+from cosim.world.geometry import apply, cart_body_from_grid, vehicle_pose
 
 from .parts import EntityParts, entity_parts
 
@@ -94,7 +94,7 @@ class Cylinders:
 class HeightField:
     """Grain heights ``heights`` (nx, ny) float32 m above the cart floor, cell (i, j) centred at ((i + 0.5) c,
     (j + 0.5) c) in the cart grid frame; ``world_from_grid`` (4, 4) float64; interior ``length_m`` x
-    ``width_m``. The drawn surface is defined in ``renderer_proc.heightfield``."""
+    ``width_m``. The drawn surface is defined in ``cosim.world.heightfield``."""
 
     world_from_grid: np.ndarray
     heights: np.ndarray

@@ -14,7 +14,7 @@ class Render(Model):
     """Renderer options. The camera rig is planned from the LiDAR pattern unless ``rig`` is ``fixed``.
 
     * ``rig``: ``auto`` plans the fewest cameras (then the fewest pixels) that cover ``sensor.pattern`` with a
-      nearest-pixel angular error <= ``sensor.max_angular_error_deg`` (``renderer_proc.rig``); ``fixed`` uses
+      nearest-pixel angular error <= ``sensor.max_angular_error_deg`` (``cosim.world.rig``); ``fixed`` uses
       ``cameras`` cameras of ``width_px`` x ``height_px`` and ``hfov_deg``, side by side in yaw.
     * ``rgb``: ``auto`` renders the shaded image only when something consumes it (a viewer); ``on`` always;
       ``off`` never.

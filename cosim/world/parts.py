@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim.config.scenario import Scenario
-from cosim.geometry import make_transform
+from cosim.scenario.config.scenario import Scenario
+from cosim.world.geometry import make_transform
 
 __all__ = ["CART_FLOOR_BOX", "CART_WALL_BOXES", "EntityParts", "box_from_bounds", "cart_boxes", "entity_parts"]
 

@@ -1,0 +1,1 @@
+"""Many runs: the fidelity study and the ground-truth-against-perception comparison."""
