@@ -24,6 +24,7 @@ from shm_schema import Phase, Segment
 from shm_schema.layout import SLOT_WORD
 
 from .child import ChildArgs, child_main
+from .daemonic import children_allowed
 from cosim.scenario.config import Scenario
 from cosim.errors import ParticipantCrashed, ParticipantDied, RunError, RunInterrupted
 from .lockstep import RingPlan, Token
@@ -163,7 +164,7 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
         for obs in observers:
             w = ctx.Process(target=_observer_main, args=(obs, name, str(log_path)), name=f"cosim-{obs.name}",
                             daemon=True)
-            with single_threaded_pools():
+            with single_threaded_pools(), children_allowed():
                 w.start()
             watchers[obs.name] = w
         for make_sink in sinks:
@@ -173,7 +174,7 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
             args = ChildArgs(spec, scenario_json, name, schema.fingerprint, plan, sems, str(log_path), os.getpid(),
                              scenario.timing.startup_timeout_s, scenario.timing.handoff_timeout_s + 5.0, time.time())
             p = ctx.Process(target=child_main, args=(args,), name=f"cosim-{spec.name}", daemon=True)
-            with single_threaded_pools():
+            with single_threaded_pools(), children_allowed():
                 p.start()
             procs[spec.name] = p
         recorder = Recorder(seg, plan.members, deferred=bool(plan.deferred))
