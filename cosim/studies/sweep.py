@@ -1,0 +1,182 @@
+"""The sweep engine: a sweep's runs on Dask distributed (issue 17, DESIGN.md section 8, docs/sweeps.md).
+
+Each run is an ordinary launched run (``launch()``, its own OS processes) executed by a Dask worker into
+``OUT/runs/<id>/``. Locally an embedded ``LocalCluster`` is started (one single-threaded worker process per
+job; jobs = cores // cores per run unless given); with ``scheduler`` the runs go to an existing cluster, GL runs
+only to workers that declare the ``EGL`` resource. A run with a completed summary.json is never run again
+(resume); a failed one is retried ``retries`` times, then recorded with its error. A worker that dies costs
+only its run: Dask reschedules it, and if the scheduler gives up the run counts as a failed attempt. The
+results table is rewritten as each run finishes; Ctrl-C cancels what is queued and keeps what finished.
+"""
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import shutil
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterator
+
+from cosim.scenario.config import Scenario
+from .results import ResultsTable, read_summary
+from .sweepfile import RunSpec, Sweep
+
+__all__ = ["EGL", "SweepOutcome", "execute_run", "local_jobs", "open_client", "run_sweep"]
+
+log = logging.getLogger("cosim.studies.sweep")
+
+#: the Dask worker resource a GL run asks for (``dask worker ... --resources EGL=1``)
+EGL = "EGL"
+LOCAL = "local"
+
+
+@dataclass(frozen=True)
+class SweepOutcome:
+    """How a sweep ended: counts of runs, the results table's path, whether Ctrl-C stopped it."""
+
+    total: int
+    completed: int
+    failed: int
+    skipped: int
+    interrupted: bool
+    results: Path
+
+
+def execute_run(run_dir: str, scenario_json: str) -> dict:
+    """Run one scenario into ``run_dir`` (on a Dask worker, or anywhere): summary, error text and worker."""
+    from cosim.runtime.launcher import launch
+
+    try:
+        from distributed import get_worker
+
+        worker = get_worker().address
+    except (ImportError, ValueError):
+        worker = LOCAL
+    path = Path(run_dir)
+    if path.exists():  # an earlier, failed attempt: start clean so its files do not mix with this one's
+        shutil.rmtree(path)
+    result = launch(Scenario.model_validate_json(scenario_json), path, console_log=False)
+    return {"summary": result.summary, "error": "" if result.error is None else str(result.error),
+            "worker": worker}
+
+
+def local_jobs(runs: tuple[RunSpec, ...] | list[RunSpec], cores: int | None = None) -> int:
+    """Workers for a local sweep: the cores over the most cores one run keeps busy, at least 1."""
+    cores = cores or len(os.sched_getaffinity(0))
+    need = max((r.cores for r in runs), default=1)
+    return max(1, min(len(runs) or 1, cores // need))
+
+
+@contextlib.contextmanager
+def open_client(scheduler: str | None, jobs: int, gl: bool) -> Iterator:
+    """A Dask client: on ``scheduler`` when given, else on an embedded LocalCluster of ``jobs`` workers."""
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        with Client(scheduler, timeout="30s") as client:
+            yield client
+        return
+    resources = {EGL: 1} if gl else None
+    with LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None, resources=resources, silence_logs=logging.ERROR) as cluster, \
+            Client(cluster) as client:
+        yield client
+
+
+def _check_egl(client, runs: list[RunSpec]) -> None:
+    if any(r.needs_gl for r in runs):
+        workers = client.scheduler_info().get("workers", {}).values()
+        if not any((w.get("resources") or {}).get(EGL) for w in workers):
+            raise RuntimeError(f"{sum(r.needs_gl for r in runs)} runs render with GL but no worker of the cluster "
+                               f"declares the {EGL} resource: start GL-capable workers with "
+                               f"'dask worker SCHEDULER --resources {EGL}=1' (docs/sweeps.md)")
+
+
+def _progress(total: int, done: int, quiet: bool):
+    from tqdm import tqdm
+
+    return tqdm(total=total, initial=done, unit="run", disable=quiet, file=sys.stderr, dynamic_ncols=True,
+                desc="sweep")
+
+
+def run_sweep(sweep: Sweep, out: Path, *, scheduler: str | None = None, jobs: int | None = None,
+              quiet: bool = False, retries: int = 1, runner: Callable[[str, str], dict] = execute_run,
+              figures: bool = True) -> SweepOutcome:
+    """Run ``sweep`` into ``out`` (runs/<id>/, results.csv, figures); see the module docstring.
+
+    ``runner(run_dir, scenario_json) -> {"summary", "error", "worker"}`` executes one run on a worker
+    (default :func:`execute_run`). Never raises for a run's failure; raises RuntimeError when a GL run has
+    nowhere to go.
+    """
+    out = Path(out)
+    (out / "runs").mkdir(parents=True, exist_ok=True)
+    table = ResultsTable(out, sweep.labels, sweep.parameters)
+    pending: list[RunSpec] = []
+    for run in sweep.runs:
+        summary = read_summary(out / "runs" / run.id)
+        if summary is not None and summary.get("completed"):
+            table.set(run, summary=summary, error="", attempts=0, worker="")  # finished before: kept as is
+        else:
+            pending.append(run)
+    skipped = len(sweep.runs) - len(pending)
+    table.write()
+    failed, interrupted = 0, False
+    if pending:
+        jobs = jobs or local_jobs(pending)
+        bar = _progress(len(sweep.runs), skipped, quiet)
+        with open_client(scheduler, jobs, any(r.needs_gl for r in pending)) as client:
+            failed, interrupted = _drive(client, pending, out, table, bar, retries, runner)
+        bar.close()
+    if figures:
+        from .figures import write_sweep_figures
+
+        write_sweep_figures(out, list(table.rows.values()), sweep.parameters)
+    completed = sum(1 for r in table.rows.values() if r["completed"])
+    return SweepOutcome(len(sweep.runs), completed, failed, skipped, interrupted, out / "results.csv")
+
+
+def _drive(client, pending: list[RunSpec], out: Path, table: ResultsTable, bar, retries: int,
+           runner) -> tuple[int, bool]:
+    """Submit the runs, collect them as they finish, retry failures; returns (failed, interrupted)."""
+    from distributed import as_completed
+
+    _check_egl(client, pending)
+    attempts: dict[str, int] = {}
+    by_key: dict[str, RunSpec] = {}
+
+    def submit(run: RunSpec):
+        attempts[run.id] = attempts.get(run.id, 0) + 1
+        fut = client.submit(runner, str(out / "runs" / run.id), run.scenario.model_dump_json(),
+                            key=f"run-{run.id}-{attempts[run.id]}", pure=False,
+                            resources={EGL: 1} if run.needs_gl else None)
+        by_key[fut.key] = run
+        return fut
+
+    futures = [submit(r) for r in pending]
+    failed = 0
+    queue = as_completed(futures)
+    try:
+        for fut in queue:
+            run = by_key.pop(fut.key)
+            try:
+                res = fut.result()
+            except Exception as exc:  # noqa: BLE001 - the task itself failed (e.g. its worker died): one attempt
+                res = {"summary": read_summary(out / "runs" / run.id), "worker": "",
+                       "error": f"{type(exc).__name__}: {exc}"}
+            ok = bool(res["summary"] and res["summary"].get("completed")) and not res["error"]
+            if not ok and attempts[run.id] <= retries:
+                log.warning("run %s failed (%s); retrying", run.id, res["error"])
+                queue.add(submit(run))
+                continue
+            table.set(run, summary=res["summary"], error=res["error"] or ("" if ok else "no summary"),
+                      attempts=attempts[run.id], worker=res["worker"])
+            table.write()
+            failed += not ok
+            bar.update(1)
+            bar.set_postfix(failed=failed, refresh=False)
+    except KeyboardInterrupt:
+        client.cancel(list(queue.futures) if hasattr(queue, "futures") else futures)
+        return failed, True
+    return failed, False
