@@ -13,11 +13,12 @@ from pathlib import Path
 from typing import Sequence
 
 from .errors import ScenarioError
+from .studies.commands import add_sweep_parser, study_command, sweep_command
 from cosim.runtime.threadpools import default_to_single_threaded_pools
 
 __all__ = ["main", "build_parser", "run_extras", "VERBS"]
 
-VERBS = ("run", "validate", "schema", "compare", "study")
+VERBS = ("run", "validate", "schema", "compare", "study", "sweep")
 EXIT_SCENARIO = 2
 
 
@@ -60,6 +61,13 @@ def build_parser() -> argparse.ArgumentParser:
                     "beams, perception_grid (default: %(default)s)")
     st.add_argument("--sim-seconds", type=float, default=20.0, help="simulated seconds per setting")
     st.add_argument("--out", type=Path, help="output directory (default runs/study-<scenario>-<timestamp>)")
+    st.add_argument("--knob", action="append", default=[], metavar="NAME=PATH:V1,V2",
+                    help="a knob of your own: one field over values, the last the reference (repeatable)")
+    st.add_argument("--jobs", type=int, default=1, metavar="N", help="runs at once (default 1: timings stay "
+                    "comparable)")
+    st.add_argument("--scheduler", metavar="ADDRESS", help="run on an existing Dask cluster")
+    st.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_sweep_parser(sub)
     sch = sub.add_parser("schema", help="write the scenario JSON Schema")
     sch.add_argument("--out", type=Path, help="output file (default: stdout)")
     view = sub.add_parser("view", help="attach the live viewer to a running run (python -m cosim.viewer --attach)")
@@ -144,6 +152,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return viewer_main(["--attach", args.run, "--port", str(args.port)])
         return viewer_main(["--replay", str(args.file), "--port", str(args.port), "--speed", str(args.speed)]
                            + (["--loop"] if args.loop else []))
+    if args.verb == "sweep":
+        return sweep_command(args)
     if args.verb == "schema":
         from cosim.scenario.jsonschema import schema_text
 
@@ -173,18 +183,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from cosim.runtime.progress import ProgressPrinter
 
     if args.verb == "study":
-        from cosim.runtime.outputs import default_run_dir
-        from cosim.studies.study import KNOBS, run_study
-
-        knobs = [k.strip() for k in args.knobs.split(",") if k.strip()]
-        unknown = [k for k in knobs if k not in KNOBS]
-        if unknown:
-            sys.stderr.write(f"unknown knobs {unknown}; choose from {sorted(KNOBS)}\n")
-            return EXIT_SCENARIO
-        out = args.out or default_run_dir(scenario.model_copy(update={"name": f"study-{scenario.name}"}))
-        md = run_study(scenario, knobs, out, args.sim_seconds)
-        sys.stdout.write(md.read_text() + f"\nstudy written to {out}\n")
-        return 0
+        return study_command(args, scenario)
     if args.verb == "compare":
         from cosim.studies.compare import compare
         from cosim.runtime.outputs import default_run_dir

@@ -1,28 +1,36 @@
-"""``launch.py study``: error against run time over the fidelity knobs (issue 6).
+"""``launch.py study``: error against run time over the fidelity knobs (issues 6 and 17).
 
-Each knob is a list of settings (dotted-path overrides of the scenario). Every setting runs in process (the same
-participants as a launched run, without process start-up in the timing) for a short duration; its error is
-measured against the knob's highest-fidelity setting or an absolute reference (the exact ray cast, the ground-
-truth height map), and its cost as wall time per simulated second. The result is a table, a CSV and one plot
-per knob of error against run time with the default marked, so a user can pick a point on the curve.
+Each knob is a list of settings (dotted-path overrides of the scenario). The study is a sweep (same engine and
+results table as ``launch.py sweep``, cosim/studies/sweep.py): every setting is one launched run of a short
+duration, into ``OUT/runs/<id>/``. Its error is measured against the knob's highest-fidelity setting or an
+absolute reference (the exact ray cast, the ground-truth height map), its cost as the median wall time of a
+frame per simulated second (process start-up excluded). Besides the sweep's results.csv the study writes
+study.csv, study.md and one plot per knob of error against run time with the default marked (study.png).
+User knobs (``--knob NAME=PATH:V1,V2,...``) vary one field; their error is the final section mean height's
+largest difference from the last value's run.
 """
 from __future__ import annotations
 
 import csv
 import json
 import logging
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
+import yaml
+from pydantic import ValidationError
 
+from cosim.errors import Problem, ScenarioError
 from cosim.scenario.config import Scenario
-from cosim.runtime.inprocess import simulate
-from cosim.runtime.outputs import clean_json, compose_summary
+from cosim.scenario.yamlmarks import Loader
+from cosim.runtime.outputs import clean_json
+from .results import read_summary
+from .sweep import run_sweep
+from .sweepfile import RunSpec, Sweep, run_id
 
-__all__ = ["Setting", "Knob", "KNOBS", "apply_overrides", "run_setting", "run_study"]
+__all__ = ["Setting", "Knob", "KNOBS", "KNOB_FILE", "apply_overrides", "parse_knob", "study_sweep", "run_study"]
 
 log = logging.getLogger("cosim.studies.study")
 
@@ -35,10 +43,11 @@ class Setting:
 
 @dataclass
 class Result:
+    """One setting's run: its summary, its time series (column -> array) and its cost."""
+
     setting: Setting
     summary: dict
     series: dict
-    arrays: dict
     wall_per_sim_s: float
 
 
@@ -73,16 +82,6 @@ def apply_overrides(scenario: Scenario, overrides: dict) -> Scenario:
             raise KeyError(f"study override {path!r}: no such field")
         node[leaf] = value
     return Scenario.model_validate_json(json.dumps(data))
-
-
-def run_setting(scenario: Scenario) -> tuple[dict, dict, dict, float]:
-    """Run in process; return (summary, series, final arrays, wall time per simulated second)."""
-    t0 = time.perf_counter()
-    run = simulate(scenario)
-    wall = time.perf_counter() - t0
-    summary = compose_summary(scenario, run.recorder, run.ring, wall_time_s=wall, error=None)
-    sim = max(scenario.frames * scenario.timing.sensor_period_s, 1e-9)
-    return summary, run.recorder.series(), dict(run.recorder.arrays), wall / sim
 
 
 def _track_error(res: Result, ref: Result | None) -> float:
@@ -143,59 +142,139 @@ KNOBS: dict[str, Knob] = {
 }
 
 
-def run_study(scenario: Scenario, knobs: Sequence[str], out: Path, duration_s: float = 20.0) -> Path:
-    """Run the named knobs, write results.csv, study.md and study.png into ``out``; returns study.md."""
-    import matplotlib
+#: pseudo file name of problems in ``--knob`` options
+KNOB_FILE = "<--knob>"
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
-    out.mkdir(parents=True, exist_ok=True)
-    rows = []
-    fig, axes = plt.subplots(1, len(knobs), figsize=(5 * len(knobs), 4), squeeze=False)
-    for ax, name in zip(axes[0], knobs):
-        knob = KNOBS[name]
-        base = apply_overrides(scenario, {**knob.base, "duration_s": duration_s})
-        if name == "render" and base.renderer == "none":
-            base = apply_overrides(base, {"renderer": "mock"})
-        results = {}
+def parse_knob(text: str, index: int = 1) -> Knob:
+    """A user knob from ``NAME=PATH:V1,V2,...`` (values as YAML scalars); the last value is the reference."""
+    name, sep, rest = text.partition("=")
+    path, sep2, values = rest.partition(":")
+    items = [yaml.load(v, Loader=Loader) for v in values.split(",") if v.strip()] if sep2 else []
+    if not (sep and sep2 and name.strip() and path.strip()) or len(items) < 2:
+        raise ScenarioError([Problem(KNOB_FILE, index, 1, "", f"malformed knob {text!r}: expected "
+                                     "NAME=PATH:V1,V2[,...] with at least two values, e.g. "
+                                     "cell=grain.cell_m:0.2,0.1,0.05")])
+    path = path.strip()
+    settings = tuple(Setting(f"{path.rsplit('.', 1)[-1]}={v}", {path: v}) for v in items)
+    return Knob(name.strip(), f"section mean height error vs {settings[-1].label} (m)", settings, "",
+                _section_error, settings[-1].label)
+
+
+def _knob_base(scenario: Scenario, knob: Knob, duration_s: float) -> Scenario:
+    base = apply_overrides(scenario, {**knob.base, "duration_s": duration_s})
+    if knob.name == "render" and base.renderer == "none":
+        base = apply_overrides(base, {"renderer": "mock"})
+    return base
+
+
+def study_sweep(scenario: Scenario, knobs: Sequence[Knob], duration_s: float) -> Sweep:
+    """The study as a sweep: one run per knob setting, labelled with its knob and setting. Raises ScenarioError
+    naming the knob and setting when a setting's overrides are not a valid scenario."""
+    runs, problems, params = [], [], {}
+    for i, knob in enumerate(knobs, start=1):
+        base = _knob_base(scenario, knob, duration_s)
         for st in knob.settings:
-            log.info("study %s: %s", name, st.label)
-            summary, series, arrays, cost = run_setting(apply_overrides(base, st.overrides))
-            results[st.label] = Result(st, summary, series, arrays, cost)
+            try:
+                sc = apply_overrides(base, st.overrides)
+            except (KeyError, ValidationError) as exc:
+                msg = str(exc).strip("'\"").replace("\n", " ")
+                problems.append(Problem(KNOB_FILE, i, 1, f"{knob.name}.{st.label}", msg))
+                continue
+            params.update(dict.fromkeys(st.overrides))
+            fixed = {**knob.base, "duration_s": duration_s, "scenario": scenario.model_dump(mode="json")}
+            runs.append(RunSpec(run_id(knob.name, fixed, st.overrides, sc.seed), dict(st.overrides), sc.seed, sc,
+                                {"knob": knob.name, "setting": st.label}))
+    if problems:
+        raise ScenarioError(problems)
+    return Sweep(f"study-{scenario.name}", tuple(params), tuple(runs), ("knob", "setting"))
+
+
+def _series(run_dir: Path) -> dict:
+    """A run's timeseries.csv as column -> array (empty when it has none)."""
+    try:
+        with open(run_dir / "timeseries.csv", newline="") as f:
+            header = next(csv.reader(f))
+            data = np.loadtxt(f, delimiter=",", ndmin=2)
+    except (OSError, StopIteration, ValueError):
+        return {}
+    return {name: data[:, i] for i, name in enumerate(header)}
+
+
+def _result(run: RunSpec, out: Path, setting: Setting) -> Result | None:
+    summary = read_summary(out / "runs" / run.id)
+    if not summary or not summary.get("completed"):
+        return None
+    frame_ms = (summary.get("timing_ms") or {}).get("frame")
+    period = run.scenario.timing.sensor_period_s
+    cost = frame_ms / 1000.0 / period if frame_ms else summary["wall_time_s"] / max(summary["sim_time_s"], 1e-9)
+    return Result(setting, summary, _series(out / "runs" / run.id), cost)
+
+
+def run_study(scenario: Scenario, knobs: Sequence[str | Knob], out: Path, duration_s: float = 20.0, *,
+              jobs: int | None = 1, scheduler: str | None = None, quiet: bool = True) -> Path:
+    """Run the knobs (names of :data:`KNOBS` or :class:`Knob`) as a sweep into ``out``; write study.csv,
+    study.md, study.json and study.png beside the sweep's results.csv; returns study.md.
+
+    ``jobs`` defaults to 1 so that runs do not share cores: the cost axis is a wall time.
+    """
+    knobs = [KNOBS[k] if isinstance(k, str) else k for k in knobs]
+    sweep = study_sweep(scenario, knobs, duration_s)
+    run_sweep(sweep, out, jobs=jobs, scheduler=scheduler, quiet=quiet, figures=False)
+    rows, panels = [], []
+    runs = iter(sweep.runs)
+    for knob in knobs:
+        results = {st.label: _result(next(runs), out, st) for st in knob.settings}
         pts = []
         for label, res in results.items():
             ref_label = knob.reference(label) if callable(knob.reference) else knob.reference
-            err = knob.error(res, results[ref_label] if ref_label else None)
-            pts.append((label, res.wall_per_sim_s, err))
-            rows.append({"knob": name, "setting": label, "wall_s_per_sim_s": res.wall_per_sim_s, "error": err,
+            ref = results.get(ref_label) if ref_label else None
+            err = float("nan") if res is None or (ref_label and ref is None) else knob.error(res, ref)
+            cost = float("nan") if res is None else res.wall_per_sim_s
+            pts.append((label, cost, err))
+            rows.append({"knob": knob.name, "setting": label, "wall_s_per_sim_s": cost, "error": err,
                          "error_label": knob.error_label, "default": label == knob.default,
-                         "reference": label == ref_label})
-        xs = np.array([p[1] for p in pts])
-        ys = np.array([p[2] for p in pts])
-        ax.loglog(xs, np.maximum(ys, 1e-12), "o")
-        for label, x, y in pts:
-            ax.annotate(label, (x, max(y, 1e-12)), fontsize=7, xytext=(3, 3), textcoords="offset points")
-            if label == knob.default:
-                ax.plot([x], [max(y, 1e-12)], "*", ms=16, color="tab:red", label="default")
-        ax.set_xlabel("wall time per simulated second (s)")
-        ax.set_ylabel(knob.error_label)
-        ax.set_title(name)
-        ax.legend(fontsize=8)
-        ax.grid(alpha=0.3, which="both")
-    fig.tight_layout()
-    fig.savefig(out / "study.png", dpi=110)
-    plt.close(fig)
-    with open(out / "results.csv", "w", newline="") as f:
+                         "reference": label == ref_label, "completed": res is not None})
+        panels.append((knob, pts))
+    _plot(out / "study.png", panels)
+    with open(out / "study.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
     lines = ["| knob | setting | wall s per sim s | error | |", "|---|---|---|---|---|"]
     for r in rows:
         tag = "default" if r["default"] else ("reference" if r["reference"] else "")
+        tag = tag if r["completed"] else "failed (see results.csv)"
         lines.append(f"| {r['knob']} | {r['setting']} | {r['wall_s_per_sim_s']:.4f} | {r['error']:.3g} "
                      f"({r['error_label']}) | {tag} |")
     md = out / "study.md"
     md.write_text("\n".join(lines) + "\n")
-    (out / "results.json").write_text(json.dumps(clean_json(rows), indent=2))
+    (out / "study.json").write_text(json.dumps(clean_json(rows), indent=2))
     return md
+
+
+def _plot(path: Path, panels: list) -> None:
+    """One log-log panel per knob: error against wall time per simulated second, the default starred."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels), 4), squeeze=False)
+    for ax, (knob, pts) in zip(axes[0], panels):
+        for label, x, y in pts:
+            if not (np.isfinite(x) and np.isfinite(y)):
+                continue
+            ax.loglog([x], [max(y, 1e-12)], "o", color="tab:blue")
+            ax.annotate(label, (x, max(y, 1e-12)), fontsize=7, xytext=(3, 3), textcoords="offset points")
+            if label == knob.default:
+                ax.plot([x], [max(y, 1e-12)], "*", ms=16, color="tab:red", label="default")
+        ax.set_xlabel("wall time per simulated second (s)")
+        ax.set_ylabel(knob.error_label)
+        ax.set_title(knob.name)
+        if knob.default:
+            ax.legend(fontsize=8)
+        ax.grid(alpha=0.3, which="both")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
