@@ -35,16 +35,21 @@ SLUG_CHARS = 48  # readable part of a run id
 _UNSAFE = re.compile(r"[^A-Za-z0-9._=+-]+")
 _UNION_TAG = re.compile(r"[\[\]-]")
 _PATH_FIELDS = {".".join(loc) for loc in path_fields()}
+#: the loader's messages about an override's path rather than its value (reported at the sweep file's key)
+_PATH_PROBLEMS = ("unknown key", "malformed override", "cannot set a key", "'")
 
 
 @dataclass(frozen=True)
 class Override:
-    """One scenario override: dotted ``path``, ``value``, and where the sweep file gave it (``mark``, ``where``)."""
+    """One scenario override: dotted ``path``, ``value``, and where the sweep file gave it: the value (``mark``,
+    ``where``) and its key (``key_mark``, ``key_where``: where an unknown field is reported)."""
 
     path: str
     value: object
     mark: Mark
     where: str
+    key_mark: Mark | None = None
+    key_where: str = ""
 
 
 @dataclass(frozen=True)
@@ -174,7 +179,7 @@ def _points(doc: Doc, spec: SweepFile) -> list[list[Override]]:
     """Every combination of the varied values, each as its overrides (grid x zip x random)."""
     def over(section: str, key: str, i: int, value) -> Override:
         loc = (section, key, i) if (section, key, i) in doc.values else (section, key)
-        return Override(key, value, doc.values[loc], dotted(loc))
+        return Override(key, value, doc.values[loc], dotted(loc), doc.keys[(section, key)], f"{section}.{key}")
 
     axes = [[over("grid", k, i, v) for i, v in enumerate(vals)] for k, vals in spec.grid.items()]
     if spec.zip:
@@ -184,8 +189,8 @@ def _points(doc: Doc, spec: SweepFile) -> list[list[Override]]:
         rng = np.random.default_rng(spec.sample_seed)
         drawn = {k: sample(d, rng) for k, d in spec.random.items()}
         n = next(iter(spec.random.values())).count
-        axes.append([[Override(k, drawn[k][i], doc.keys[("random", k)], f"random.{k} (value {drawn[k][i]!r})")
-                      for k in spec.random] for i in range(n)])
+        axes.append([[Override(k, drawn[k][i], doc.keys[("random", k)], f"random.{k} (value {drawn[k][i]!r})",
+                               doc.keys[("random", k)], f"random.{k}") for k in spec.random] for i in range(n)])
     points = []
     for combo in itertools.product(*axes):
         points.append([o for item in combo for o in (item if isinstance(item, list) else [item])])
@@ -217,7 +222,10 @@ def build_runs(base_text: str, base_file: str, base_label: str, fixed: list[Over
                 for p in exc.problems:
                     if p.file == SET_FILE and 1 <= p.line <= len(items):
                         o = items[p.line - 1]
-                        p = Problem(o.mark.file, o.mark.line, o.mark.col, o.where, p.message)
+                        if p.message.startswith(_PATH_PROBLEMS) and o.key_mark is not None:
+                            p = Problem(o.key_mark.file, o.key_mark.line, o.key_mark.col, o.key_where, p.message)
+                        else:
+                            p = Problem(o.mark.file, o.mark.line, o.mark.col, o.where, p.message)
                     problems.add(p)
                 continue
             params = {o.path: o.value for o in point}
@@ -243,10 +251,11 @@ def load_sweep(path: str | os.PathLike) -> Sweep:
         m = doc.values.get(("base",), doc.values[()])
         raise ScenarioError([Problem(m.file, m.line, m.col, "base", f"no such packaged scenario or file "
                                      f"{spec.base!r} (a path is relative to the sweep file)")]) from None
-    fixed = [Override(k, v, doc.values[("set", k)], f"set.{k}") for k, v in spec.set.items()]
+    fixed = [Override(k, v, doc.values[("set", k)], f"set.{k}", doc.keys[("set", k)], f"set.{k}")
+             for k, v in spec.set.items()]
     points = _points(doc, spec)
     seed_loc = lambda i: ("seeds", i) if isinstance(spec.seeds, list) else ("seeds",)  # noqa: E731
-    seeds = [Override("seed", s, doc.values[seed_loc(i)], dotted(seed_loc(i))) for i, s in enumerate(spec.seed_list)]
+    seeds = [Override("seed", s, doc.values.get(seed_loc(i), doc.values[()]), dotted(seed_loc(i))) for i, s in enumerate(spec.seed_list)]
     total = len(points) * len(seeds)
     if total > MAX_RUNS:
         m = doc.values[()]

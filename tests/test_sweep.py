@@ -1,0 +1,235 @@
+"""``launch.py sweep``: sweep files validated whole, runs on a LocalCluster and on a scheduler with workers,
+resume, failures, the results table (issue 17)."""
+from __future__ import annotations
+
+import csv
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from cosim.cli import main
+from cosim.errors import ScenarioError
+from cosim.runtime.launcher import launch
+from cosim.studies.results import METRICS
+from cosim.studies.sweep import run_sweep
+from cosim.studies.sweepfile import load_sweep
+
+distributed = pytest.importorskip("distributed")
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLE = ROOT / "docs" / "examples" / "strategies_sweep.yaml"
+SHM = Path("/dev/shm")
+
+
+def _rows(out: Path) -> dict[str, dict]:
+    with open(out / "results.csv", newline="") as f:
+        return {r["id"]: r for r in csv.DictReader(f)}
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def _assert_gone(pids) -> None:
+    deadline = time.monotonic() + 20
+    while any(map(_alive, pids)) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not [p for p in pids if _alive(p)], "worker processes still running"
+
+
+def _assert_nothing_left(out: Path, workers_closed: bool = True) -> None:
+    """Every run's segment is gone and (once the cluster is closed) every process that launched one has ended."""
+    infos = [json.loads(p.read_text()) for p in (out / "runs").glob("*/run.json")]
+    assert infos
+    for info in infos:
+        assert info["ended"] is True
+        assert not (SHM / info["segment"]).exists(), info["segment"]
+    if workers_closed:
+        _assert_gone({info["launcher_pid"] for info in infos})
+
+
+def _write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "sweep.yaml"
+    path.write_text(text)
+    return path
+
+
+# ------------------------------------------------------------------------------------------- sweep files
+HEAD = "format_version: 1\nset: {renderer: none, feedback: ground_truth, duration_s: 5.0}\n"
+
+
+@pytest.mark.parametrize("body, where", [
+    ("grid:\n  controller.stratgy: [front_to_back, lowest_first]\n", r"sweep.yaml:4:3: grid.controller.stratgy: unknown key "
+     r"'stratgy' in 'controller' \(did you mean 'strategy'\?\)"),
+    ("grid:\n  timing.latency_frames: [1, '2']\n", r"sweep.yaml:4:30: grid.timing.latency_frames\[1\]: Input "
+     r"should be a valid integer, got '2'"),
+    ("grid:\n  timing.sensor_period_s: [0.1, -0.1]\n", r"sweep.yaml:4:33: grid.timing.sensor_period_s\[1\]: Input "
+     r"should be greater than 0, got -0.1"),
+    ("zip:\n  combine.speed_mps: [1.0, 1.5]\n  timing.latency_frames: [1]\n", r"sweep.yaml:5:3: "
+     r"zip.timing.latency_frames: zip parameters are varied together, so their lengths must be equal: "
+     r"'timing.latency_frames' has 1, 'combine.speed_mps' has 2"),
+    ("grid: {controller.strategy: [front_to_back]}\nseed: 3\n", r"sweep.yaml:4:1: seed: unknown key 'seed'"),
+    ("random:\n  combine.speed_mps: {distribution: uniform, low: 2.0, high: 1.0, count: 3}\n",
+     r"sweep.yaml:4:3: random.combine.speed_mps: low \(2.0\) must be below high \(1.0\)"),
+    ("random:\n  combine.speed_mps: {distribution: uniform, low: -3.0, high: -2.0, count: 2}\n",
+     r"sweep.yaml:4:3: random.combine.speed_mps \(value -2\.\d+\): Input should be greater than or equal to 0"),
+    ("base: nowhere.yaml\n", r"sweep.yaml:3:7: base: no such packaged scenario or file 'nowhere.yaml'"),
+])
+def test_bad_sweep_files_are_rejected_with_their_lines(tmp_path, body, where):
+    with pytest.raises(ScenarioError, match=where):
+        load_sweep(_write(tmp_path, HEAD + body))
+
+
+def test_every_problem_is_reported_at_once_and_the_cli_starts_nothing(tmp_path, capsys):
+    path = _write(tmp_path, HEAD + "grid:\n  controller.strategy: [front_to_back, sideways]\n"
+                  "  grain.cell_m: [0.1, 0.0]\nseeds: [0, 0]\n")
+    assert main(["sweep", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "sweep.yaml:6:1: seeds: seeds repeat: [0, 0]" in err
+    assert "1 problem(s); nothing was started." in err
+    path.write_text(HEAD + "grid:\n  controller.strategy: [front_to_back, sideways]\n  grain.cell_m: [0.1, 0.0]\n")
+    assert main(["sweep", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "sweep.yaml:4:40: grid.controller.strategy[1]: Input should be" in err
+    assert "sweep.yaml:5:23: grid.grain.cell_m[1]: Input should be greater than 0" in err
+    assert "2 problem(s); nothing was started." in err and not (tmp_path / "out").exists()
+
+
+def test_expansion_counts_ids_and_reproducible_samples(tmp_path):
+    text = HEAD + ("grid:\n  controller.strategy: [front_to_back, lowest_first]\n"
+                   "zip:\n  combine.speed_mps: [1.0, 1.2, 1.4]\n  timing.latency_frames: [1, 2, 3]\n"
+                   "random:\n  sensor.noise.range_sigma_m: {distribution: loguniform, low: 0.001, high: 0.1, "
+                   "count: 4}\nseeds: 2\n")
+    a, b = load_sweep(_write(tmp_path, text)), load_sweep(tmp_path / "sweep.yaml")
+    assert len(a.runs) == 2 * 3 * 4 * 2 and len({r.id for r in a.runs}) == len(a.runs)
+    assert [r.id for r in a.runs] == [r.id for r in b.runs]  # stable: resume relies on it
+    sigmas = sorted({r.params["sensor.noise.range_sigma_m"] for r in a.runs})
+    assert len(sigmas) == 4 and all(0.001 <= s <= 0.1 for s in sigmas)
+    for r in a.runs:  # zip moves together; the scenario carries every override and the seed
+        assert r.params["timing.latency_frames"] == round((r.params["combine.speed_mps"] - 1.0) / 0.2) + 1
+        assert r.scenario.combine.speed_mps == r.params["combine.speed_mps"] and r.scenario.seed == r.seed
+        assert r.scenario.sensor.noise.range_sigma_m == r.params["sensor.noise.range_sigma_m"]
+        assert r.scenario.duration_s == 5.0 and not r.needs_gl and r.cores == 1
+    _write(tmp_path, text.replace("seeds: 2", "seeds: 2\nsample_seed: 1"))
+    assert sorted({r.params["sensor.noise.range_sigma_m"] for r in load_sweep(tmp_path / "sweep.yaml").runs}) != sigmas
+
+
+# ------------------------------------------------------------------------------------------------ runs
+@pytest.fixture(scope="module")
+def local_sweep(tmp_path_factory):
+    """The documented command: the example sweep on an embedded LocalCluster of 2 worker processes."""
+    out = tmp_path_factory.mktemp("local")
+    assert main(["sweep", str(EXAMPLE), "--jobs", "2", "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+def test_local_sweep_writes_one_row_per_run_with_the_runs_metrics(local_sweep):
+    rows = _rows(local_sweep)
+    sweep = load_sweep(EXAMPLE)
+    assert sorted(rows) == sorted(r.id for r in sweep.runs) and len(rows) == 4
+    for run in sweep.runs:
+        row = rows[run.id]
+        summary = json.loads((local_sweep / "runs" / run.id / "summary.json").read_text())
+        assert row["completed"] == "True" and row["error"] == "" and row["attempts"] == "1"
+        assert row["controller.strategy"] == run.scenario.controller.strategy
+        assert float(row["profile_rmse_m"]) == summary["fill"]["profile_rmse_m"]
+        assert float(row["sim_time_s"]) == pytest.approx(10.0)
+        assert row["worker"].startswith("tcp://127.0.0.1:")
+        assert list(METRICS) == [c for c in row if c in METRICS]
+    # the strategy changes the outcome: the table is not one run copied four times
+    assert len({rows[r.id]["profile_rmse_m"] for r in sweep.runs}) == 4
+    # a plain launched run of the same scenario gives the same numbers
+    one = sweep.runs[0]
+    ref = launch(one.scenario, local_sweep / "reference", console_log=False).summary
+    assert float(rows[one.id]["profile_rmse_m"]) == ref["fill"]["profile_rmse_m"]
+    assert sorted(p.name for p in local_sweep.glob("sweep_*.png")) == [
+        "sweep_fill_fraction.png", "sweep_max_overfill_m.png", "sweep_profile_rmse_m.png",
+        "sweep_real_time_factor.png", "sweep_spill_kg.png", "sweep_wall_time_s.png"]
+    _assert_nothing_left(local_sweep)
+
+
+def test_resume_runs_nothing_again(local_sweep, capsys):
+    before = {p: p.stat().st_mtime_ns for p in local_sweep.glob("runs/*/summary.json")}
+    assert main(["sweep", str(EXAMPLE), "--out", str(local_sweep), "--quiet"]) == 0
+    assert "0 failed, 4 finished before" in capsys.readouterr().out
+    assert {p: p.stat().st_mtime_ns for p in local_sweep.glob("runs/*/summary.json")} == before
+    assert len(_rows(local_sweep)) == 4
+
+
+@pytest.fixture
+def cluster(tmp_path):
+    """A scheduler and two workers (nannies, so the workers are daemonic) as subprocesses on 127.0.0.1."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), str(ROOT / "tests")])}
+    sched_file, pids = tmp_path / "scheduler.json", set()
+    cli = [sys.executable, "-m"]
+    procs = [subprocess.Popen(cli + ["distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", "0",
+                                     "--no-dashboard", "--scheduler-file", str(sched_file)], env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        deadline = time.monotonic() + 60
+        while not sched_file.exists() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        address = json.loads(sched_file.read_text())["address"]
+        for _ in range(2):
+            procs.append(subprocess.Popen(cli + ["distributed.cli.dask_worker", address, "--nthreads", "1",
+                                                 "--host", "127.0.0.1", "--no-dashboard"], env=env,
+                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        with distributed.Client(address) as client:
+            client.wait_for_workers(2, timeout=90)
+            pids = set(client.run(os.getpid).values())
+        yield address
+    finally:
+        for p in reversed(procs):
+            p.terminate()
+        for p in reversed(procs):
+            try:
+                p.wait(30)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+    _assert_gone(pids)
+
+
+def test_scheduler_and_workers_give_the_same_metrics_per_run(local_sweep, cluster, tmp_path):
+    sweep = load_sweep(EXAMPLE)
+    outcome = run_sweep(sweep, tmp_path / "remote", scheduler=cluster, quiet=True, figures=False)
+    assert (outcome.completed, outcome.failed, outcome.skipped) == (4, 0, 0)
+    local, remote = _rows(local_sweep), _rows(tmp_path / "remote")
+    assert sorted(local) == sorted(remote)
+    for rid in local:
+        for col in ("profile_rmse_m", "fill_fraction", "max_overfill_m", "spill_kg", "sim_time_s"):
+            assert remote[rid][col] == local[rid][col], (rid, col)
+        assert remote[rid]["worker"].startswith("tcp://127.0.0.1:")
+    # a GL run has nowhere to go on this cluster: no worker declares EGL
+    gl = type(sweep)(sweep.name, sweep.parameters, (sweep.runs[0].__class__(
+        "gl-run", {}, 0, sweep.runs[0].scenario.model_copy(update={"renderer": "gl", "feedback": "perception"})),))
+    with pytest.raises(RuntimeError, match="no worker of the cluster declares the EGL resource"):
+        run_sweep(gl, tmp_path / "gl", scheduler=cluster, quiet=True, figures=False)
+    _assert_nothing_left(tmp_path / "remote", workers_closed=False)  # the fixture checks the workers end
+
+
+def test_a_failing_run_is_recorded_and_a_dead_worker_costs_only_its_run(tmp_path):
+    from sweep_runners import faulty
+
+    _write(tmp_path, HEAD + "grid:\n  controller.strategy: [front_to_back, back_to_front, lowest_first]\n")
+    sweep = load_sweep(tmp_path / "sweep.yaml")
+    outcome = run_sweep(sweep, tmp_path / "out", jobs=2, quiet=True, runner=faulty, figures=False)
+    assert (outcome.total, outcome.completed, outcome.failed) == (3, 2, 1)
+    rows = {r["controller.strategy"]: r for r in _rows(tmp_path / "out").values()}
+    bad = rows["back_to_front"]
+    assert bad["completed"] == "False" and bad["attempts"] == "2"
+    assert bad["error"] == "RuntimeError: injected failure for back_to_front" and bad["profile_rmse_m"] == ""
+    killed = rows["lowest_first"]  # its first worker died; Dask ran it again elsewhere
+    assert killed["completed"] == "True" and killed["error"] == ""
+    assert (tmp_path / "out" / "runs" / f"{killed['id']}.killed").exists()
+    assert rows["front_to_back"]["completed"] == "True"
+    _assert_nothing_left(tmp_path / "out")
