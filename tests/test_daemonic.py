@@ -75,7 +75,8 @@ def test_launch_inside_a_pool_worker(tmp_path, reference, shm_clean):
 
 def test_launch_inside_a_dask_worker(tmp_path, reference, shm_clean):
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
-                                  host="127.0.0.1") as cluster, distributed.Client(cluster) as client:
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address="127.0.0.1:0", scheduler_kwargs={"dashboard": False}) as cluster, \
+            distributed.Client(cluster) as client:
         got = client.submit(_launch_here, str(tmp_path / "run"), pure=False).result()
     _check(got, reference)

@@ -172,7 +172,8 @@ def cluster(tmp_path):
     sched_file, pids = tmp_path / "scheduler.json", set()
     cli = [sys.executable, "-m"]
     procs = [subprocess.Popen(cli + ["distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", "0",
-                                     "--no-dashboard", "--scheduler-file", str(sched_file)], env=env,
+                                     "--no-dashboard", "--dashboard-address", "127.0.0.1:0",
+                                     "--scheduler-file", str(sched_file)], env=env,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
     try:
         deadline = time.monotonic() + 60
@@ -181,7 +182,8 @@ def cluster(tmp_path):
         address = json.loads(sched_file.read_text())["address"]
         for _ in range(2):
             procs.append(subprocess.Popen(cli + ["distributed.cli.dask_worker", address, "--nthreads", "1",
-                                                 "--host", "127.0.0.1", "--no-dashboard"], env=env,
+                                                 "--host", "127.0.0.1", "--no-dashboard",
+                                                 "--dashboard-address", "127.0.0.1:0"], env=env,
                                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
         with distributed.Client(address) as client:
             client.wait_for_workers(2, timeout=90)

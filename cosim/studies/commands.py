@@ -33,6 +33,18 @@ def _report(outcome, out: Path) -> int:
     return EXIT_OK if outcome.completed == outcome.total else EXIT_FAILED
 
 
+def _missing_engine() -> bool:
+    """Whether the sweep extra is missing (then say how to install it)."""
+    try:
+        import distributed  # noqa: F401
+        import tqdm  # noqa: F401
+    except ImportError as exc:
+        sys.stderr.write(f"sweeps and studies run on Dask: {exc}; install it with pip install -e '.[sweep]' "
+                         "(or pip install 'graincosim[sweep]')\n")
+        return True
+    return False
+
+
 def _problems(exc: ScenarioError) -> int:
     sys.stderr.write(f"{exc}\n{len(exc.problems)} problem(s); nothing was started.\n")
     return EXIT_USAGE
@@ -44,6 +56,8 @@ def sweep_command(args: argparse.Namespace) -> int:
 
     if args.jobs is not None and args.jobs < 1:
         sys.stderr.write("--jobs must be at least 1\n")
+        return EXIT_USAGE
+    if _missing_engine():
         return EXIT_USAGE
     try:
         sweep = load_sweep(args.file)
@@ -63,6 +77,8 @@ def study_command(args: argparse.Namespace, scenario) -> int:
     from cosim.runtime.outputs import default_run_dir
     from .study import KNOBS, parse_knob, run_study
 
+    if _missing_engine():
+        return EXIT_USAGE
     names = [k.strip() for k in args.knobs.split(",") if k.strip()]
     unknown = [k for k in names if k not in KNOBS]
     if unknown:

@@ -30,6 +30,7 @@ log = logging.getLogger("cosim.studies.sweep")
 #: the Dask worker resource a GL run asks for (``dask worker ... --resources EGL=1``)
 EGL = "EGL"
 LOCAL = "local"
+LOOPBACK_ANY_PORT = "127.0.0.1:0"
 
 
 @dataclass(frozen=True)
@@ -79,8 +80,11 @@ def open_client(scheduler: str | None, jobs: int, gl: bool) -> Iterator:
             yield client
         return
     resources = {EGL: 1} if gl else None
+    # no dashboard; Dask's HTTP routes (health, metrics) on a free loopback port, not 0.0.0.0:8787
     with LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None, resources=resources, silence_logs=logging.ERROR) as cluster, \
+                      dashboard_address=LOOPBACK_ANY_PORT, scheduler_kwargs={"dashboard": False},
+                      worker_dashboard_address=LOOPBACK_ANY_PORT, resources=resources,
+                      silence_logs=logging.ERROR) as cluster, \
             Client(cluster) as client:
         yield client
 
