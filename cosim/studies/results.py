@@ -63,10 +63,12 @@ def _cell(value):
 
 
 class ResultsTable:
-    """Rows by run id, kept in the sweep's order; :meth:`write` replaces the files atomically."""
+    """Rows by run id, written in the sweep's order (``order``: the run ids); :meth:`write` replaces the files
+    atomically."""
 
-    def __init__(self, out: Path, labels: tuple[str, ...], parameters: tuple[str, ...]):
+    def __init__(self, out: Path, labels: tuple[str, ...], parameters: tuple[str, ...], order: list[str]):
         self.out = Path(out)
+        self.rank = {rid: i for i, rid in enumerate(order)}
         self.columns = ["id", *labels, *parameters, "seed", "completed", "error", "attempts", *METRICS,
                         "worker", "run_dir"]
         self.rows: dict[str, dict] = {}
@@ -77,6 +79,7 @@ class ResultsTable:
                "completed": bool(summary and summary.get("completed")), "error": error, "attempts": attempts,
                **metrics_of(summary or {}), "worker": worker, "run_dir": f"runs/{run.id}"}
         self.rows[run.id] = row
+        self.rows = dict(sorted(self.rows.items(), key=lambda kv: self.rank.get(kv[0], len(self.rank))))
         return row
 
     def write(self) -> Path:

@@ -116,7 +116,7 @@ def run_sweep(sweep: Sweep, out: Path, *, scheduler: str | None = None, jobs: in
     """
     out = Path(out)
     (out / "runs").mkdir(parents=True, exist_ok=True)
-    table = ResultsTable(out, sweep.labels, sweep.parameters)
+    table = ResultsTable(out, sweep.labels, sweep.parameters, [r.id for r in sweep.runs])
     pending: list[RunSpec] = []
     for run in sweep.runs:
         summary = read_summary(out / "runs" / run.id)
