@@ -235,3 +235,21 @@ def test_a_failing_run_is_recorded_and_a_dead_worker_costs_only_its_run(tmp_path
     assert (tmp_path / "out" / "runs" / f"{killed['id']}.killed").exists()
     assert rows["front_to_back"]["completed"] == "True"
     _assert_nothing_left(tmp_path / "out")
+
+
+def test_the_documented_sweep_files_and_errors(tmp_path, monkeypatch, capsys):
+    """docs/sweeps.md: the reference example is valid and expands as said; the bad one gives the errors shown."""
+    text = (ROOT / "docs" / "sweeps.md").read_text()
+    blocks = text.split("```yaml\n")[1:]
+    reference, bad = (b.split("```", 1)[0] for b in blocks[:2])
+    sweep = load_sweep(_write(tmp_path, reference))
+    assert len(sweep.runs) == 3 * 2 * 3 * 4 * 3
+    assert sweep.parameters == ("controller.strategy", "timing.latency_frames", "combine.speed_mps",
+                                "machine_sync.initial_long_error_m", "sensor.noise.range_sigma_m", "grain.cell_m")
+    assert {r.params["grain.cell_m"] for r in sweep.runs} <= {0.1, 0.05}
+    shown = text.split("gives\n\n```text\n", 1)[1].split("```", 1)[0]
+    _write(tmp_path, bad)
+    monkeypatch.chdir(tmp_path)
+    assert main(["sweep", "sweep.yaml"]) == 2
+    assert capsys.readouterr().err == shown
+    assert not (tmp_path / "runs").exists()

@@ -183,12 +183,12 @@ def _points(doc: Doc, spec: SweepFile) -> list[list[Override]]:
 
     axes = [[over("grid", k, i, v) for i, v in enumerate(vals)] for k, vals in spec.grid.items()]
     if spec.zip:
-        n = len(next(iter(spec.zip.values())))
+        n = min(len(v) for v in spec.zip.values())  # unequal lengths are reported; the rest is still checked
         axes.append([[over("zip", k, i, vals[i]) for k, vals in spec.zip.items()] for i in range(n)])
     if spec.random:
         rng = np.random.default_rng(spec.sample_seed)
         drawn = {k: sample(d, rng) for k, d in spec.random.items()}
-        n = next(iter(spec.random.values())).count
+        n = min(d.count for d in spec.random.values())
         axes.append([[Override(k, drawn[k][i], doc.keys[("random", k)], f"random.{k} (value {drawn[k][i]!r})",
                                doc.keys[("random", k)], f"random.{k}") for k in spec.random] for i in range(n)])
     points = []
@@ -242,7 +242,7 @@ def load_sweep(path: str | os.PathLike) -> Sweep:
     except (OSError, UnicodeDecodeError) as e:
         raise ScenarioError([Problem(str(path), 0, 0, "", f"cannot read sweep file: {e}")]) from None
     doc, spec = _parse_structure(text, str(path))
-    if spec is None or doc.problems:
+    if spec is None:
         raise ScenarioError(doc.problems)
     base_arg = spec.base if (path.parent / spec.base).suffix == "" else str(path.parent / spec.base)
     try:
@@ -255,13 +255,15 @@ def load_sweep(path: str | os.PathLike) -> Sweep:
              for k, v in spec.set.items()]
     points = _points(doc, spec)
     seed_loc = lambda i: ("seeds", i) if isinstance(spec.seeds, list) else ("seeds",)  # noqa: E731
-    seeds = [Override("seed", s, doc.values.get(seed_loc(i), doc.values[()]), dotted(seed_loc(i))) for i, s in enumerate(spec.seed_list)]
+    seeds = [Override("seed", s, doc.values.get(seed_loc(i), doc.values[()]), dotted(seed_loc(i)))
+             for i, s in enumerate(spec.seed_list)]
     total = len(points) * len(seeds)
     if total > MAX_RUNS:
         m = doc.values[()]
         raise ScenarioError([Problem(m.file, m.line, m.col, "", f"{total} runs: more than {MAX_RUNS}")])
     runs, problems = build_runs(base.read_text(encoding="utf-8"), str(base), spec.base, fixed, points, seeds,
                                 path.parent.resolve())
+    problems = sorted(set(doc.problems) | set(problems), key=lambda p: (p.file != str(path), p.file, p.line, p.col))
     ids = [r.id for r in runs]
     if not problems and len(set(ids)) != len(ids):
         dup = next(i for i in ids if ids.count(i) > 1)
