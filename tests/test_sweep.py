@@ -68,8 +68,8 @@ HEAD = "format_version: 1\nset: {renderer: none, feedback: ground_truth, duratio
 
 
 @pytest.mark.parametrize("body, where", [
-    ("grid:\n  controller.stratgy: [front_to_back, lowest_first]\n", r"sweep.yaml:4:3: grid.controller.stratgy: unknown key "
-     r"'stratgy' in 'controller' \(did you mean 'strategy'\?\)"),
+    ("grid:\n  controller.stratgy: [front_to_back, lowest_first]\n",
+     r"sweep.yaml:4:3: grid.controller.stratgy: unknown key 'stratgy' in 'controller' \(did you mean 'strategy'\?\)"),
     ("grid:\n  timing.latency_frames: [1, '2']\n", r"sweep.yaml:4:30: grid.timing.latency_frames\[1\]: Input "
      r"should be a valid integer, got '2'"),
     ("grid:\n  timing.sensor_period_s: [0.1, -0.1]\n", r"sweep.yaml:4:33: grid.timing.sensor_period_s\[1\]: Input "
