@@ -12,13 +12,15 @@ ground truth, renderer none, ``--duration`` simulated seconds, seeds 0..N-1:
 * C: ``run_sweep`` with 2 local workers.
 
 Reported (medians over the rounds, min-max): wall per run, runs per hour, and A's overhead against B per run,
-both with the cluster's start-up and shut-down amortised over the N runs and without them (the start-up is
-timed apart by opening and closing the same cluster). The figures (``write_sweep_figures``) are timed once: they
-are a per-sweep cost, like the cluster.
+both with the cluster's start-up and shut-down amortised over the N runs and in steady state: the interval
+between the first and the last run's summary.json (mtimes) over N - 1, the same measure for A and B, which
+leaves out the cluster's start-up, the worker's first imports and the shut-down. The cluster's start-up and
+shut-down are also timed apart, and the figures (``write_sweep_figures``) once: both are per-sweep costs.
 """
 from __future__ import annotations
 
 import argparse
+import resource
 import statistics
 import sys
 import tempfile
@@ -44,21 +46,34 @@ def make_sweep(n: int, duration: float) -> Sweep:
     return Sweep("bench", (), tuple(runs))
 
 
-def time_sweep(sweep: Sweep, jobs: int) -> float:
+def steady(runs_dir: Path) -> float:
+    """Seconds per run between the first and the last run's summary.json."""
+    t = sorted(p.stat().st_mtime_ns for p in runs_dir.glob("*/summary.json"))
+    return (t[-1] - t[0]) / 1e9 / (len(t) - 1)
+
+
+def cpu() -> float:
+    """CPU seconds of this process and of its reaped descendants (a worker's runs are reaped by the worker,
+    the worker by this process once the cluster closes)."""
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def time_sweep(sweep: Sweep, jobs: int) -> tuple[float, float, float]:
     with tempfile.TemporaryDirectory(prefix="sweepbench-") as tmp:
-        t = time.perf_counter()
+        t, c = time.perf_counter(), cpu()
         out = run_sweep(sweep, Path(tmp), jobs=jobs, quiet=True, figures=False)
         wall = time.perf_counter() - t
-    assert out.completed == len(sweep.runs), out
-    return wall
+        assert out.completed == len(sweep.runs), out
+        return wall, steady(Path(tmp) / "runs"), cpu() - c
 
 
-def time_plain(sweep: Sweep) -> float:
+def time_plain(sweep: Sweep) -> tuple[float, float, float]:
     with tempfile.TemporaryDirectory(prefix="sweepbench-") as tmp:
-        t = time.perf_counter()
+        t, c = time.perf_counter(), cpu()
         for run in sweep.runs:
-            assert launch(run.scenario, Path(tmp) / run.id, console_log=False).completed
-        return time.perf_counter() - t
+            assert launch(run.scenario, Path(tmp) / "runs" / run.id, console_log=False).completed
+        return time.perf_counter() - t, steady(Path(tmp) / "runs"), cpu() - c
 
 
 def time_cluster(jobs: int) -> float:
@@ -81,11 +96,17 @@ def main() -> None:
     sweep = make_sweep(args.runs, args.duration)
     n = args.runs
     res = {"A": [], "B": [], "C": [], "start1": []}
+    st = {"A": [], "B": [], "C": []}
+    cp = {"A": [], "B": [], "C": []}
     steps = {"A": lambda: time_sweep(sweep, 1), "B": lambda: time_plain(sweep), "C": lambda: time_sweep(sweep, 2)}
     for r in range(args.rounds):
         for key in ("ABC" if r % 2 == 0 else "CBA"):
-            res[key].append(steps[key]())
-            print(f"round {r + 1} {key}: {res[key][-1]:.2f} s", file=sys.stderr)
+            wall, per_run, used = steps[key]()
+            res[key].append(wall)
+            st[key].append(per_run)
+            cp[key].append(used / n)
+            print(f"round {r + 1} {key}: {wall:.2f} s, steady {per_run:.2f} s per run, cpu {used / n:.2f} s per run",
+                  file=sys.stderr)
         res["start1"].append(time_cluster(1))
     with tempfile.TemporaryDirectory() as tmp:
         rows = [{"seed": s, "completed": True, "wall_time_s": 1.0 + s} for s in range(n)]
@@ -93,18 +114,20 @@ def main() -> None:
         write_sweep_figures(Path(tmp), rows, ())
         figures = time.perf_counter() - t
     per = {k: [w / n for w in v] for k, v in res.items() if k in "ABC"}
-    marginal = [(a - s) / n for a, s in zip(res["A"], res["start1"])]
     plain = statistics.median(per["B"])
     print(f"\n{n} runs x {args.duration:g} s simulated, {args.rounds} rounds; medians (min-max)\n")
-    print("| | wall per run (s) | runs per hour |")
-    print("|---|---:|---:|")
+    print("| | wall per run, all in (s) | runs per hour, all in | steady state per run (s) | CPU per run, all in (s) |")
+    print("|---|---:|---:|---:|---:|")
     for key, label in (("B", "plain launch() loop"), ("A", "sweep, 1 local worker"), ("C", "sweep, 2 local workers")):
-        print(f"| {label} | {med(per[key])} | {3600 / statistics.median(per[key]):.0f} |")
+        print(f"| {label} | {med(per[key])} | {3600 / statistics.median(per[key]):.0f} | {med(st[key])} | "
+              f"{med(cp[key])} |")
     a_ratio = [a / b for a, b in zip(per["A"], per["B"])]
-    m_ratio = [m / b for m, b in zip(marginal, per["B"])]
-    print(f"\nengine overhead per run, 1 worker against the plain loop (same round): "
-          f"{(statistics.median(a_ratio) - 1) * 100:+.1f} % with the cluster's start-up amortised over {n} runs, "
-          f"{(statistics.median(m_ratio) - 1) * 100:+.1f} % without it; cluster start-up + shut-down "
+    m_ratio = [a / b for a, b in zip(st["A"], st["B"])]
+    print(f"\nengine overhead per run, 1 worker against the plain loop (ratio in each round, median): "
+          f"{(statistics.median(a_ratio) - 1) * 100:+.1f} % all in (the cluster's start-up amortised over {n} runs), "
+          f"{(statistics.median(m_ratio) - 1) * 100:+.1f} % in steady state, CPU "
+          f"{(statistics.median([a / b for a, b in zip(cp['A'], cp['B'])]) - 1) * 100:+.1f} % all in; "
+          f"cluster start-up + shut-down "
           f"{med(res['start1'])} s; figures {figures:.2f} s per sweep; 2 workers / 1 worker throughput "
           f"{statistics.median([a / c for a, c in zip(res['A'], res['C'])]):.2f}x; plain run {plain:.2f} s")
 

@@ -79,9 +79,12 @@ def open_client(scheduler: str | None, jobs: int, gl: bool) -> Iterator:
         with Client(scheduler, timeout="30s") as client:
             yield client
         return
+    import dask
+
     resources = {EGL: 1} if gl else None
-    # no dashboard; Dask's HTTP routes (health, metrics) on a free loopback port, not 0.0.0.0:8787
-    with LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
+    # no dashboard; Dask's HTTP routes (health, metrics) on a free loopback port, not 0.0.0.0:8787; no
+    # statistical profiler (it samples every thread of a worker every 10 ms, the run's supervisor included)
+    with dask.config.set({"distributed.worker.profile.enabled": False}), LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
                       dashboard_address=LOOPBACK_ANY_PORT, scheduler_kwargs={"dashboard": False},
                       worker_dashboard_address=LOOPBACK_ANY_PORT, resources=resources,
                       silence_logs=logging.ERROR) as cluster, \
