@@ -162,7 +162,18 @@ def test_resume_runs_nothing_again(local_sweep, capsys):
     assert main(["sweep", str(EXAMPLE), "--out", str(local_sweep), "--quiet"]) == 0
     assert "0 failed, 4 finished before" in capsys.readouterr().out
     assert {p: p.stat().st_mtime_ns for p in local_sweep.glob("runs/*/summary.json")} == before
-    assert len(_rows(local_sweep)) == 4
+    rows = _rows(local_sweep)
+    assert len(rows) == 4 and {r["attempts"] for r in rows.values()} == {"0"}
+    assert all(r["worker"].startswith("tcp://127.0.0.1:") and r["completed"] == "True" for r in rows.values())
+    # a run without a completed summary (failed, or stopped by Ctrl-C) runs again, and only that one
+    gone = sorted(before)[0]
+    gone.write_text(gone.read_text().replace('"completed": true', '"completed": false'))
+    assert main(["sweep", str(EXAMPLE), "--out", str(local_sweep), "--quiet", "--jobs", "1"]) == 0
+    after = {p: p.stat().st_mtime_ns for p in local_sweep.glob("runs/*/summary.json")}
+    assert [p for p in after if after[p] != before[p]] == [gone]
+    rows = _rows(local_sweep)
+    assert sorted(r["attempts"] for r in rows.values()) == ["0", "0", "0", "1"]
+    assert rows[gone.parent.name]["completed"] == "True"
 
 
 @pytest.fixture

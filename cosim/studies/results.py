@@ -15,7 +15,7 @@ import math
 import os
 from pathlib import Path
 
-__all__ = ["METRICS", "metrics_of", "read_summary", "ResultsTable"]
+__all__ = ["METRICS", "metrics_of", "read_summary", "read_table", "ResultsTable"]
 
 log = logging.getLogger("cosim.studies.results")
 
@@ -52,6 +52,15 @@ def read_summary(run_dir: Path) -> dict | None:
         return json.loads((Path(run_dir) / "summary.json").read_text())
     except (OSError, ValueError):
         return None
+
+
+def read_table(out: Path) -> dict[str, dict]:
+    """An existing results.csv as id -> row of strings (empty when there is none)."""
+    try:
+        with open(Path(out) / "results.csv", newline="") as f:
+            return {row["id"]: row for row in csv.DictReader(f)}
+    except (OSError, KeyError, csv.Error):
+        return {}
 
 
 def _cell(value):

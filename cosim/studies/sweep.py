@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from cosim.scenario.config import Scenario
-from .results import ResultsTable, read_summary
+from .results import ResultsTable, read_summary, read_table
 from .sweepfile import RunSpec, Sweep
 
 __all__ = ["EGL", "SweepOutcome", "execute_run", "local_jobs", "open_client", "run_sweep"]
@@ -31,6 +31,12 @@ log = logging.getLogger("cosim.studies.sweep")
 EGL = "EGL"
 LOCAL = "local"
 LOOPBACK_ANY_PORT = "127.0.0.1:0"
+#: Dask settings of the embedded cluster: its idle work competes with the runs for the cores. No statistical
+#: profiler (it samples every thread of a worker every 10 ms, the run's supervisor included); event-loop health
+#: ticks, system and memory monitors at 1-2 s instead of 20-500 ms
+QUIET_CLUSTER = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "1s",
+                 "distributed.admin.system-monitor.interval": "2s",
+                 "distributed.worker.memory.monitor-interval": "1s"}
 
 
 @dataclass(frozen=True)
@@ -82,9 +88,8 @@ def open_client(scheduler: str | None, jobs: int, gl: bool) -> Iterator:
     import dask
 
     resources = {EGL: 1} if gl else None
-    # no dashboard; Dask's HTTP routes (health, metrics) on a free loopback port, not 0.0.0.0:8787; no
-    # statistical profiler (it samples every thread of a worker every 10 ms, the run's supervisor included)
-    with dask.config.set({"distributed.worker.profile.enabled": False}), LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
+    # no dashboard; Dask's HTTP routes (health, metrics) on a free loopback port, not 0.0.0.0:8787
+    with dask.config.set(QUIET_CLUSTER), LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
                       dashboard_address=LOOPBACK_ANY_PORT, scheduler_kwargs={"dashboard": False},
                       worker_dashboard_address=LOOPBACK_ANY_PORT, resources=resources,
                       silence_logs=logging.ERROR) as cluster, \
@@ -121,10 +126,11 @@ def run_sweep(sweep: Sweep, out: Path, *, scheduler: str | None = None, jobs: in
     (out / "runs").mkdir(parents=True, exist_ok=True)
     table = ResultsTable(out, sweep.labels, sweep.parameters, [r.id for r in sweep.runs])
     pending: list[RunSpec] = []
+    before = read_table(out)
     for run in sweep.runs:
         summary = read_summary(out / "runs" / run.id)
-        if summary is not None and summary.get("completed"):
-            table.set(run, summary=summary, error="", attempts=0, worker="")  # finished before: kept as is
+        if summary is not None and summary.get("completed"):  # finished before: kept as is
+            table.set(run, summary=summary, error="", attempts=0, worker=before.get(run.id, {}).get("worker", ""))
         else:
             pending.append(run)
     skipped = len(sweep.runs) - len(pending)
