@@ -70,6 +70,9 @@ def sweep_command(args: argparse.Namespace) -> int:
     except RuntimeError as exc:
         sys.stderr.write(f"{exc}\n")
         return EXIT_USAGE
+    except KeyboardInterrupt:  # a second Ctrl-C while the cluster closes
+        sys.stderr.write(f"interrupted: the runs that finished are in {out}; run the same command to resume\n")
+        return EXIT_INTERRUPTED
     return _report(outcome, out)
 
 

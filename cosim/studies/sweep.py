@@ -181,7 +181,8 @@ def _drive(client, pending: list[RunSpec], out: Path, table: ResultsTable, bar, 
             ok = bool(res["summary"] and res["summary"].get("completed")) and not res["error"]
             if not ok and attempts[run.id] <= retries:
                 log.warning("run %s failed (%s); retrying", run.id, res["error"])
-                queue.add(submit(run))
+                futures.append(submit(run))
+                queue.add(futures[-1])
                 continue
             table.set(run, summary=res["summary"], error=res["error"] or ("" if ok else "no summary"),
                       attempts=attempts[run.id], worker=res["worker"])
@@ -190,6 +191,6 @@ def _drive(client, pending: list[RunSpec], out: Path, table: ResultsTable, bar, 
             bar.update(1)
             bar.set_postfix(failed=failed, refresh=False)
     except KeyboardInterrupt:
-        client.cancel(list(queue.futures) if hasattr(queue, "futures") else futures)
+        client.cancel(futures)
         return failed, True
     return failed, False
