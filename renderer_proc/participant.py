@@ -53,13 +53,14 @@ def make_backend(scenario: Scenario, rig, context: Any = None):
 
 
 def _beam_backend(scenario: Scenario, context: Any = None):
-    """The beam-native backend (``sensor.method: beam_native``): ``GLBeamRenderer`` or ``MockBeamRenderer``."""
+    """The beam-native backend (``sensor.method: beam_native``): ``GLBeamRenderer`` (gl, grid and honeycomb
+    patterns) or ``MockBeamRenderer`` (mock; gl with a CSV pattern)."""
     layout, codec, rgb = beam_layout(scenario.sensor.pattern), scenario.sensor.codec, wants_rgb(scenario)
-    if scenario.renderer == "gl":
+    if scenario.renderer == "gl" and layout.gridded:
         from .beam_gl import GLBeamRenderer
 
         return GLBeamRenderer(layout, codec, rgb=rgb, context=context)
-    if scenario.renderer == "mock":
+    if scenario.renderer in ("gl", "mock"):       # a CSV table has no angle grid: its exact ray cast under gl too
         from .beam_mock import MockBeamRenderer
 
         return MockBeamRenderer(layout, codec, rgb=rgb)

@@ -1,0 +1,248 @@
+"""The GL beam-native renderer: the scene drawn from the LiDAR origin into one pixel per beam (docs/lidar.md).
+
+``sensor.method: beam_native`` with ``renderer: gl``. The target's pixel (col, row) is the beam of azimuth
+column ``col`` and elevation row ``row`` of a grid or honeycomb pattern (``cosim.world.beamtarget``). Each
+triangle goes through three stages:
+
+* vertex shader (``shaders/beam_instanced.vert``, ``shaders/beam_heightfield.vert``): vertices into the LiDAR
+  frame relative to its origin (float64 pose on the CPU, float32 offsets on the GPU);
+* geometry shader (``shaders/beam.geom``): the triangle's conservative bounds in azimuth and elevation, seen
+  from the origin (corners, each edge's extreme elevation, a pole it holds, the back seam), emitted as the
+  rectangle of beam pixels inside them, with the triangle's corner and edges as flat outputs;
+* fragment shader (``shaders/beam.frag`` after ``shaders/codec.glsl``): the pixel's own beam direction (a
+  texture of the pattern's directions) against the triangle, Moller-Trumbore from the origin: outside the
+  triangle it is discarded (exact coverage at silhouettes), inside it writes the range along the beam with
+  Eqs 1-2 and depth t / far for the nearest hit.
+
+There is no projection, so no near plane, no stitching, no parallax and no resample, and a 360 deg field is one
+target (rectangles across the back seam are emitted twice). The ground slab is drawn like every box: its top
+face is the ground plane exactly. CSV patterns have no grid of angles to bound in; the participant gives them
+the exact ray cast of :class:`renderer_proc.beam_mock.MockBeamRenderer` instead.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from cosim.scenario.config.sensing import Codec
+from cosim.world.beamtarget import BeamLayout
+from cosim.world.heightfield import padded_heights
+from cosim.world.meshes import INSTANCE_FLOATS, box_instances, cylinder_instances, pack_instances, unit_cube, unit_cylinder
+from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
+
+from .beam_mock import check_target
+from .codec import BYTE_MAX, CM_PER_M
+from .gl_backend import SHADER_DIR, create_gl_context
+from .hfmesh import SurfaceMesh
+from .projection import far_plane_m
+
+__all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "GLBeamRenderer"]
+
+#: slack of every angular bound in the geometry shader, rad (float32 round-off of atan is ~1e-7 rad; a beam
+#: pitch is ~5e-3 rad): only widens the rectangles, the fragment test decides
+ANGLE_SLACK_RAD = 1e-4
+#: inclusive slack of the fragment's inside-triangle test, barycentric: closes float32 cracks on shared edges
+#: (a beam this close to a silhouette edge, 2e-6 of the triangle's size, is counted as a hit)
+EDGE_SLACK = 2e-6
+
+
+def _src(name: str) -> str:
+    return (SHADER_DIR / name).read_text()
+
+
+def _fragment(rgb: bool, mishandled: bool) -> str:
+    head, body = _src("beam.frag").split("\n", 1)
+    defines = (["#define MISHANDLED_GAMMA"] if mishandled else []) + (["#define OUT_RGB 1"] if rgb else [])
+    return "\n".join([head, *defines, _src("codec.glsl"), body])
+
+
+def _mat(m: np.ndarray) -> bytes:
+    return np.asarray(m, dtype=np.float32).T.tobytes()
+
+
+class GLBeamRenderer:
+    """Beam-native GL renderer of a gridded :class:`BeamLayout`: ``set_scene``, ``draw(0, world_from_sensor)``,
+    ``read_depth(0, out)``, ``read_rgb(0, out)``, ``close`` (the renderer interface with one target)."""
+
+    def __init__(self, layout: BeamLayout, codec: Codec, *, rgb: bool = False, context: Any = None):
+        if not layout.gridded:
+            raise ValueError("the GL beam-native renderer needs a grid or honeycomb pattern (a CSV table has no "
+                             "angle grid); use the exact ray cast (renderer_proc.beam_mock.MockBeamRenderer)")
+        self.layout, self.codec, self.rgb = layout, codec, rgb
+        self._own_ctx = context is None
+        self._made: list = []
+        self.ctx = context if context is not None else create_gl_context()
+        import moderngl  # after create_gl_context, which turns a missing moderngl into RendererUnavailable
+
+        ctx = self.ctx
+        frag = _fragment(rgb, codec.gamma_mode == "mishandled")
+        geom = _src("beam.geom")
+        self.prog_inst = self._m(ctx.program(vertex_shader=_src("beam_instanced.vert"), geometry_shader=geom,
+                                             fragment_shader=frag))
+        self.prog_hf = self._m(ctx.program(vertex_shader=_src("beam_heightfield.vert"), geometry_shader=geom,
+                                           fragment_shader=frag))
+        rows, cols = layout.shape
+        az = layout.azimuth[:cols]
+        centre = 0.5 * float(az[0] + az[-1])
+        self.far_m = far_plane_m(codec.max_depth_m)
+        values = {"u_q_per_m": CM_PER_M / codec.beta_cm, "u_q_max": codec.alpha_cm / codec.beta_cm,
+                  "u_r_per_period": BYTE_MAX * codec.beta_cm / codec.alpha_cm, "u_gamma": codec.gamma,
+                  "u_az_centre": centre, "u_az_first": float(az[0]) - centre,
+                  "u_daz": float(az[0] - az[1]) if cols > 1 else 1.0, "u_size": (cols, rows),
+                  "u_margin": ANGLE_SLACK_RAD, "u_far": self.far_m, "u_edge": EDGE_SLACK,
+                  "u_row_el": 0, "u_dirs": 1, "u_colour": GRAIN_COLOUR}
+        for prog in (self.prog_inst, self.prog_hf):
+            for name, value in values.items():
+                if name in prog:
+                    prog[name].value = value
+        row_el = np.ascontiguousarray(layout.elevation[::cols], np.float32)
+        self._row_tex = self._m(ctx.texture((rows, 1), 1, row_el.tobytes(), dtype="f4"))
+        self._dir_tex = self._m(ctx.texture((cols, rows), 3, layout.direction_image().tobytes(), dtype="f4"))
+        for tex in (self._row_tex, self._dir_tex):
+            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        size = (cols, rows)
+        self._enc = self._m(ctx.renderbuffer(size, 4, dtype="u1"))
+        atts = [self._enc]
+        self._clears = [(self._m(ctx.framebuffer([self._enc], self._m(ctx.depth_renderbuffer(size)))),
+                         (0.0, 0.0, 0.0, 0.0))]
+        if rgb:
+            atts.append(self._m(ctx.renderbuffer(size, 4, dtype="f1")))
+            self._clears.append((self._m(ctx.framebuffer([atts[-1]])), SKY_RGBA))
+        self._fbo = self._m(ctx.framebuffer(atts, self._clears[0][0].depth_attachment))
+        self._units = {}
+        for key, (v, f) in {"box": unit_cube(), "box_open": unit_cube(open_top=True), "cyl": unit_cylinder()}.items():
+            self._units[key] = self._instanced(v, f)
+        self._meshes: dict[str, list] = {}
+        self._mesh_names: list[str] = []
+        self._hf = None
+        self._origin = np.zeros(3)
+        self._depth_test = moderngl.DEPTH_TEST
+
+    # -- set-up ------------------------------------------------------------------------------------------------
+    def _m(self, obj):
+        self._made.append(obj)
+        return obj
+
+    def _instanced(self, vertices: np.ndarray, faces: np.ndarray, reserve: int = 64) -> list:
+        """[vao, instance buffer, count] of a unit mesh drawn per instance record."""
+        ctx = self.ctx
+        vbo = self._m(ctx.buffer(np.asarray(vertices, np.float32).tobytes()))
+        ibo = self._m(ctx.buffer(np.asarray(faces, np.int32).tobytes()))
+        inst = self._m(ctx.buffer(reserve=reserve * INSTANCE_FLOATS * 4, dynamic=True))
+        fmt = (inst, "16f 3f/i", "in_model", "in_colour") if "in_colour" in self.prog_inst else \
+            (inst, "16f 12x/i", "in_model")
+        vao = self._m(ctx.vertex_array(self.prog_inst, [(vbo, "3f", "in_pos"), fmt], index_buffer=ibo,
+                                       index_element_size=4))
+        return [vao, inst, 0]
+
+    @staticmethod
+    def _upload(unit: list, records: np.ndarray) -> None:
+        data = np.ascontiguousarray(records, dtype=np.float32)
+        if data.nbytes > unit[1].size:
+            unit[1].orphan(data.nbytes)
+        if data.nbytes:
+            unit[1].write(data)
+        unit[2] = len(data)
+
+    def _heightfield(self, scene: Scene) -> None:
+        hf = scene.heightfield
+        hp = padded_heights(np.asarray(hf.heights, dtype=np.float32))
+        if self._hf is None or self._hf[0].shape != hf.heights.shape:
+            nx, ny = hf.heights.shape
+            mesh = SurfaceMesh(nx, ny, hf.cell_m, hf.length_m, hf.width_m)
+            xy = self._m(self.ctx.buffer(mesh.vertices.tobytes()))
+            hbuf = self._m(self.ctx.buffer(reserve=len(mesh.vertices) * 4, dynamic=True))
+            ibo = self._m(self.ctx.buffer(reserve=2 * (nx + 1) * (ny + 1) * 3 * 4, dynamic=True))
+            vao = self._m(self.ctx.vertex_array(self.prog_hf, [(xy, "2f", "in_xy"), (hbuf, "1f", "in_h")],
+                                                index_buffer=ibo, index_element_size=4))
+            self._hf = [mesh, vao, hbuf, ibo, 0]
+        mesh, _, hbuf, ibo, _ = self._hf
+        hbuf.write(mesh.heights(hp))
+        tri, changed = mesh.triangles(hp)
+        if changed:
+            if tri.nbytes > ibo.size:
+                ibo.orphan(tri.nbytes)
+            ibo.write(tri)
+            self._hf[4] = tri.size
+        local = hf.world_from_grid.copy()
+        local[:3, 3] -= self._origin
+        self.prog_hf["u_model"].write(_mat(local))
+
+    def set_scene(self, scene: Scene) -> None:
+        """Upload one frame: box (the ground slab among them) and cylinder instances, mesh poses, grain heights."""
+        self._origin = scene.heightfield.world_from_grid[:3, 3].copy()
+        boxes = box_instances(scene.boxes, self._origin)
+        hidden = scene.boxes.hidden_top if scene.boxes.hidden_top is not None else np.zeros(len(boxes), bool)
+        self._upload(self._units["box"], boxes[~hidden])
+        self._upload(self._units["box_open"], boxes[hidden])
+        self._upload(self._units["cyl"], cylinder_instances(scene.cylinders, self._origin))
+        self._heightfield(scene)
+        for mesh in scene.meshes:
+            if mesh.name not in self._meshes:
+                self._meshes[mesh.name] = self._instanced(mesh.vertices, mesh.faces, reserve=1)
+            self._upload(self._meshes[mesh.name],
+                         pack_instances(mesh.world_from_mesh[None], np.array([mesh.colour]), self._origin))
+        self._mesh_names = [m.name for m in scene.meshes]
+
+    # -- per frame ---------------------------------------------------------------------------------------------
+    def draw(self, k: int, world_from_sensor: np.ndarray) -> None:
+        """Draw every beam of the LiDAR at ``world_from_sensor`` (4 x 4, sensor axes X right, Y up, Z forward)."""
+        check_target(k)
+        local = np.eye(4)
+        local[:3, 3] = self._origin
+        sensor_from_local = np.linalg.inv(world_from_sensor) @ local                  # float64, then float32
+        light = tuple(np.asarray(world_from_sensor)[:3, :3].T @ SUN_WORLD)
+        for prog in (self.prog_inst, self.prog_hf):
+            prog["u_sensor_from_local"].write(_mat(sensor_from_local))
+            if "u_light" in prog:
+                prog["u_light"].value = light
+        for fbo, colour in self._clears:
+            fbo.clear(*colour, depth=1.0)
+        self._fbo.use()
+        self.ctx.enable(self._depth_test)
+        self.ctx.disable(self.ctx.CULL_FACE)
+        self._row_tex.use(0)
+        self._dir_tex.use(1)
+        for unit in (self._units["cyl"],):
+            if unit[2]:
+                unit[0].render(instances=unit[2])
+        if self._hf is not None and self._hf[4]:
+            self._hf[1].render(vertices=self._hf[4])
+        for name in ("box_open", "box"):
+            unit = self._units[name]
+            if unit[2]:
+                unit[0].render(instances=unit[2])
+        for name in self._mesh_names:
+            self._meshes[name][0].render(instances=1)
+
+    def _check(self, out: np.ndarray) -> None:
+        want = self.layout.shape + (4,)
+        if out.shape != want or out.dtype != np.uint8 or not out.flags.c_contiguous:
+            raise ValueError(f"destination must be C-contiguous {want} uint8, got {out.shape} {out.dtype}")
+
+    def read_depth(self, k: int, out: np.ndarray) -> None:
+        """The encoded ranges into ``out`` (rows, cols, 4) uint8 in place (row r = elevation row r)."""
+        check_target(k)
+        self._check(out)
+        self._fbo.read_into(out, components=4, attachment=0, alignment=1, dtype="u1")
+
+    def read_rgb(self, k: int, out: np.ndarray) -> None:
+        """The shaded beams into ``out`` (rows, cols, 4) uint8 in place."""
+        check_target(k)
+        if not self.rgb:
+            raise ValueError("this renderer was made without the rgb output")
+        self._check(out)
+        self._fbo.read_into(out, components=4, attachment=1, alignment=1, dtype="f1")
+
+    def close(self) -> None:
+        """Release the GL context (when this renderer made it), else every object made in it."""
+        if self.ctx is None:
+            return
+        if self._own_ctx:
+            self.ctx.release()
+        else:
+            for obj in reversed(self._made):
+                obj.release()
+        self._made.clear()
+        self.ctx = None
