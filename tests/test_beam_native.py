@@ -1,0 +1,209 @@
+"""Beam-native LiDAR (sensor.method: beam_native): closed-form scenes, GL against the exact ray cast beam for
+beam, per-beam decoding and a short run (docs/lidar.md)."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from cosim.errors import RendererUnavailable
+from cosim.scenario.config import Scenario
+from cosim.scenario.config.sensing import Codec, Pattern
+from cosim.world.beamtarget import BEAMS_DEPTH_BLOCK, TABLE_WIDTH, beam_layout
+from cosim.world.geometry import make_transform
+from cosim.world.scene import Boxes, Cylinders, HeightField, Scene, scene_from_state
+from perception_proc.beam_decode import BeamDecoder
+from renderer_proc.beam_mock import MockBeamRenderer
+from renderer_proc.blocks import declare_blocks
+from renderer_proc.codec import decode_depth
+from renderer_proc.projection import world_from_sensor
+from renderer_proc.sample import sample_frame
+
+CODEC = Codec()
+#: float32 arithmetic of the GL fragment (beam directions, the intersection) beyond the codec bound, m
+GL_F32_M = 1e-4
+
+
+@pytest.fixture(scope="module")
+def ctx():
+    from renderer_proc.gl_backend import create_gl_context
+    try:
+        c = create_gl_context()
+    except RendererUnavailable as exc:
+        pytest.skip(str(exc))
+    yield c
+    c.release()
+
+
+def boxes_scene(poses, halves) -> Scene:
+    """Boxes (poses (K, 4, 4), halves (K, 3)) in the sensor frame (world = sensor), a tiny grain patch 50 m
+    straight down, out of every test pattern's field."""
+    hf = HeightField(make_transform(np.eye(3), (0.0, -50.0, 0.0)), np.zeros((2, 2), np.float32), 0.1, 0.2, 0.2)
+    k = len(halves)
+    return Scene(Boxes(np.asarray(poses, float), np.asarray(halves, float), np.ones((k, 3), np.float32)),
+                 Cylinders(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3), np.float32)), hf)
+
+
+def both_ranges(ctx, pattern: Pattern, scene: Scene) -> dict[str, np.ndarray]:
+    """Decoded ranges (N,) m of the mock and (with a context) the GL beam-native renderer, sensor at the origin."""
+    from renderer_proc.beam_gl import GLBeamRenderer
+
+    lay = beam_layout(pattern)
+    out = {}
+    for name, r in (("mock", MockBeamRenderer(lay, CODEC)), ("gl", GLBeamRenderer(lay, CODEC, context=ctx))):
+        img = np.zeros(lay.shape + (4,), np.uint8)
+        r.set_scene(scene)
+        r.draw(0, np.eye(4))
+        r.read_depth(0, img)
+        r.close()
+        out[name] = lay.beams_of(decode_depth(img, CODEC))
+    return out
+
+
+def grid(az, el) -> Pattern:
+    return Pattern(preset="grid", azimuth_min_deg=az[0], azimuth_max_deg=az[1], azimuth_count=az[2],
+                   elevation_min_deg=el[0], elevation_max_deg=el[1], elevation_count=el[2])
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("h", [0.4, 1.5])
+def test_plane_at_grazing_incidence(ctx, h):
+    # a floor y = -h under the sensor: a beam at elevation e < 0 meets it at h / sin(-e), down to 1.5 deg grazing
+    pattern = grid((-60.0, 60.0, 41), (-40.0, -1.5, 40))
+    floor = make_transform(np.eye(3), (0.0, -h - 1.0, 0.0))
+    got = both_ranges(ctx, pattern, boxes_scene([floor], [(500.0, 1.0, 500.0)]))
+    lay = beam_layout(pattern)
+    exact = h / np.sin(-lay.elevation)
+    inside = exact < CODEC.max_depth_m * 254.5 / 255.0      # below the saturation of R
+    beyond = exact >= CODEC.max_depth_m
+    assert inside.sum() > 1000 and (h < 1.0 or beyond.sum() > 10)      # 1.5 m: beams past alpha too
+    for name, r in got.items():
+        assert np.all(np.isfinite(r[inside])), name
+        err = np.abs(r[inside] - exact[inside])
+        assert err.max() <= CODEC.bound_m + (GL_F32_M if name == "gl" else 1e-9), name
+        assert np.all(np.isnan(r[beyond])), name           # beyond alpha: invalid, never a wrong range
+
+
+@pytest.mark.gl
+def test_box_edge_exactly_between_two_beams(ctx):
+    # beams 1 deg apart at elevation 0; a wall at Z = 5 whose edge lies at azimuth 0.5 deg (half way between the
+    # beams at 0 and 1 deg), a back wall at Z = 10: each beam keeps its own surface, nothing is mixed
+    pattern = grid((-10.0, 10.0, 21), (-1.0, 1.0, 1))
+    edge_x = -5.0 * math.tan(math.radians(0.5))            # azimuth turns towards -X
+    near = make_transform(np.eye(3), ((edge_x - 3.0) / 2.0, 0.0, 5.1))
+    back = make_transform(np.eye(3), (0.0, 0.0, 10.1))
+    got = both_ranges(ctx, pattern, boxes_scene([near, back], [((3.0 + edge_x) / 2.0, 1.0, 0.1), (20.0, 1.0, 0.1)]))
+    az = beam_layout(pattern).azimuth
+    exact = np.where(az > math.radians(0.5), 5.0, 10.0) / np.cos(az)
+    for name, r in got.items():
+        assert np.abs(r - exact).max() <= CODEC.bound_m + 1e-5, name
+    assert np.min(np.abs(np.degrees(az) - 0.5)) == pytest.approx(0.5)       # the edge is half a pitch from both
+
+
+def octagon_room(radius: float, ceiling: float):
+    """Eight walls whose inner faces form a regular octagon at ``radius`` around the Y axis (faces normal to
+    azimuths 0, 45, ... deg), and a ceiling at y = ``ceiling`` whose lower face holds the +Y pole."""
+    poses, halves = [], []
+    for k in range(8):
+        a = math.radians(45.0 * k)
+        n = np.array([-math.sin(a), 0.0, math.cos(a)])        # the beam direction of azimuth a at elevation 0
+        t = np.array([math.cos(a), 0.0, math.sin(a)])
+        poses.append(make_transform(np.stack([t, [0.0, 1.0, 0.0], n], axis=1), (radius + 0.1) * n))
+        halves.append((radius * math.tan(math.radians(22.5)), 4.0, 0.1))
+    poses.append(make_transform(np.eye(3), (0.0, ceiling + 0.1, 0.0)))
+    halves.append((30.0, 0.1, 30.0))
+    return poses, halves
+
+
+@pytest.mark.gl
+def test_full_turn_ring_of_walls_and_a_ceiling(ctx):
+    # 360 deg of azimuth in one target (across the back seam at +-180 deg), walls all round, a ceiling above
+    radius, ceiling = 6.0, 2.5
+    pattern = grid((-180.0, 180.0, 73), (-10.0, 60.0, 8))
+    got = both_ranges(ctx, pattern, boxes_scene(*octagon_room(radius, ceiling)))
+    lay = beam_layout(pattern)
+    rel = (lay.azimuth + math.radians(22.5)) % math.radians(45.0) - math.radians(22.5)   # from the nearest normal
+    wall = radius / (np.cos(lay.elevation) * np.cos(rel))
+    with np.errstate(divide="ignore"):
+        roof = np.where(lay.elevation > 0, ceiling / np.sin(lay.elevation), np.inf)
+    exact = np.minimum(wall, roof)
+    assert np.any(roof < wall) and np.any(wall < roof)
+    for name, r in got.items():
+        assert np.abs(r - exact).max() <= CODEC.bound_m + 1e-5, name
+
+
+@pytest.mark.gl
+def test_gl_matches_the_exact_cast_beam_for_beam_on_the_default_frame(ctx):
+    from renderer_proc.beam_gl import GLBeamRenderer
+
+    sc = Scenario(format_version=1, sensor={"method": "beam_native"})
+    state, heights, stream = sample_frame(sc)
+    scene, pose = scene_from_state(sc, state, heights, stream), world_from_sensor(sc, state)
+    lay = beam_layout(sc.sensor.pattern)
+    imgs = {}
+    for name, r in (("mock", MockBeamRenderer(lay, CODEC)), ("gl", GLBeamRenderer(lay, CODEC, context=ctx))):
+        imgs[name] = np.zeros(lay.shape + (4,), np.uint8)
+        r.set_scene(scene)
+        r.draw(0, pose)
+        r.read_depth(0, imgs[name])
+        if name == "mock":
+            exact = r.ranges()
+        r.close()
+    gl, mock = (lay.beams_of(decode_depth(imgs[k], CODEC)) for k in ("gl", "mock"))
+    assert np.array_equal(np.isfinite(gl), np.isfinite(exact) & (exact < CODEC.max_depth_m))   # same coverage
+    ok = np.isfinite(gl)
+    assert ok.sum() > 0.9 * lay.n_beams
+    assert np.abs(gl[ok] - exact[ok]).max() <= CODEC.bound_m + GL_F32_M
+    # the same bytes except where float32 and float64 round a range to neighbouring codes: one code apart
+    assert np.abs(gl[ok] - mock[ok]).max() <= 2.0 * CODEC.bound_m + 1e-6
+    assert np.mean(np.all(imgs["gl"] == imgs["mock"], axis=2)) > 0.999
+
+
+def test_decoder_round_trip_and_layouts(tmp_path):
+    pattern = Pattern(preset="grid", azimuth_count=30, elevation_count=20)
+    lay = beam_layout(pattern)
+    assert lay.shape == (20, 30) and lay.gridded
+    ranges = np.linspace(0.3, 60.0, lay.n_beams)                    # beyond alpha = 50 m: invalid
+    from renderer_proc.codec import encode_depth
+    img = encode_depth(ranges.reshape(lay.shape), CODEC)
+    dec = BeamDecoder(lay, CODEC).ranges([img])
+    ok = ranges < CODEC.max_depth_m * 254.5 / 255.0                  # R rounds to 255 (saturated) above it
+    assert np.abs(dec[ok] - ranges[ok]).max() <= CODEC.bound_m + 1e-6
+    assert np.all(np.isnan(dec[~ok]))
+    with pytest.raises(ValueError, match="beams target has shape"):
+        BeamDecoder(lay, CODEC).gather([img[:10]])
+    # a CSV table: a direction table, beam i at flat pixel i, the last row padded
+    csv = tmp_path / "beams.csv"
+    csv.write_text("elevation_deg,azimuth_deg\n" + "".join(f"{-20 + k * 0.01},{k * 0.03 - 30}\n" for k in range(1500)))
+    lay = beam_layout(Pattern(preset="csv", csv_file=csv))
+    assert not lay.gridded and lay.shape == (2, TABLE_WIDTH) and lay.n_beams == 1500
+
+
+def test_blocks_follow_the_method():
+    sc = Scenario(format_version=1, renderer="mock", sensor={"method": "beam_native"})
+    names = {b.name: b for b in declare_blocks(sc)}
+    assert BEAMS_DEPTH_BLOCK in names and not any(n.startswith("cam") for n in names)
+    assert names[BEAMS_DEPTH_BLOCK].shape == (160, 240, 4)
+
+
+def test_short_run_is_exact_in_the_working_range():
+    from cosim.runtime.inprocess import simulate
+    from perception_proc.summary import summarize
+
+    sc = Scenario.model_validate_json(json.dumps({
+        "format_version": 1, "renderer": "mock", "sensor": {"method": "beam_native"},
+        "perception": {"accuracy_every_frames": 1, "accuracy_beams": 0}}))
+    run = simulate(sc, frames=2)
+    s = run.recorder.series()
+    assert s["perc_state.frame"].tolist() == [0.0, 1.0, 2.0]
+    assert np.all(s["perc_state.cart_valid"] == 1)
+    out = summarize(sc, {k: v for k, v in s.items() if k.startswith("perc_state.")},
+                    run.segment.view("heightmap_truth"), run.segment.view("heightmap_perceived"))
+    rng = out["perception"]["range_error"]
+    assert rng["beams"] > 0.9 * 3 * 160 * 240
+    assert rng["working_frac_above_5cm"] == 0.0
+    assert rng["max_m"] <= CODEC.bound_m + 1e-6                      # the mock is exact: the codec alone
+    assert rng["working_p99_m"] <= CODEC.bound_m + 0.5e-3
+    assert rng["beam_missing_frac"] == 0.0
