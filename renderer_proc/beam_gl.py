@@ -37,24 +37,51 @@ from .gl_backend import SHADER_DIR, create_gl_context
 from .hfmesh import SurfaceMesh
 from .projection import far_plane_m
 
-__all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "GLBeamRenderer"]
+__all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "ROW_BINS", "GLBeamRenderer", "row_bounds"]
 
 #: slack of every angular bound in the geometry shader, rad (float32 round-off of atan is ~1e-7 rad; a beam
 #: pitch is ~5e-3 rad): only widens the rectangles, the fragment test decides
 ANGLE_SLACK_RAD = 1e-4
+#: the GLSL snippet of the target's angle coordinates (vertex and geometry shaders)
+ANGLES = "beam_angles.glsl"
+#: elevation bins of the geometry shader's row table (row_bounds)
+ROW_BINS = 4096
 #: inclusive slack of the fragment's inside-triangle test, barycentric: closes float32 cracks on shared edges
 #: (a beam this close to a silhouette edge, 2e-6 of the triangle's size, is counted as a hit)
 EDGE_SLACK = 2e-6
+
+
+def row_bounds(row_el: np.ndarray, bins: int = ROW_BINS) -> tuple[float, float, np.ndarray]:
+    """The geometry shader's elevation-to-rows table: ``row_el`` (rows,) rad, falling (the target's row
+    elevations). Elevations from ``base`` up are cut into ``bins`` equal bins (``per_rad`` bins per rad) that
+    span the rows with :data:`ANGLE_SLACK_RAD` to spare; returns (base, per_rad, table (bins, 2) float32) with,
+    per bin, the first row whose elevation is at most the bin's top edge and the last row whose elevation is
+    at least its bottom edge: the rows of any elevation interval are within [table[k_hi, 0], table[k_lo, 1]]
+    of the bins k_lo, k_hi of its ends (conservative; exact row counts fit float32)."""
+    el = np.asarray(row_el, np.float64)
+    base = float(el[-1]) - 2.0 * ANGLE_SLACK_RAD
+    span = float(el[0]) + 2.0 * ANGLE_SLACK_RAD - base
+    edges = base + span * np.arange(bins + 1) / bins
+    asc = el[::-1]                                                  # rising, for searchsorted
+    above_top = len(el) - np.searchsorted(asc, edges[1:], side="right")      # rows with el > top edge
+    at_or_above_bottom = len(el) - np.searchsorted(asc, edges[:-1], side="left")
+    table = np.stack([above_top, at_or_above_bottom - 1], axis=1).astype(np.float32)
+    return base, bins / span, np.ascontiguousarray(table)
 
 
 def _src(name: str) -> str:
     return (SHADER_DIR / name).read_text()
 
 
+def _assemble(name: str, *parts: str, defines: tuple[str, ...] = ()) -> str:
+    """Shader ``name`` with ``defines`` and the shared snippets ``parts`` inserted after its #version line."""
+    head, body = _src(name).split("\n", 1)
+    return "\n".join([head, *defines, *(_src(p) for p in parts), body])
+
+
 def _fragment(rgb: bool, mishandled: bool) -> str:
-    head, body = _src("beam.frag").split("\n", 1)
     defines = (["#define MISHANDLED_GAMMA"] if mishandled else []) + (["#define OUT_RGB 1"] if rgb else [])
-    return "\n".join([head, *defines, _src("codec.glsl"), body])
+    return _assemble("beam.frag", "codec.glsl", defines=tuple(defines))
 
 
 def _mat(m: np.ndarray) -> bytes:
@@ -77,11 +104,11 @@ class GLBeamRenderer:
 
         ctx = self.ctx
         frag = _fragment(rgb, codec.gamma_mode == "mishandled")
-        geom = _src("beam.geom")
-        self.prog_inst = self._m(ctx.program(vertex_shader=_src("beam_instanced.vert"), geometry_shader=geom,
-                                             fragment_shader=frag))
-        self.prog_hf = self._m(ctx.program(vertex_shader=_src("beam_heightfield.vert"), geometry_shader=geom,
-                                           fragment_shader=frag))
+        geom = _assemble("beam.geom", ANGLES)
+        self.prog_inst = self._m(ctx.program(vertex_shader=_assemble("beam_instanced.vert", ANGLES),
+                                             geometry_shader=geom, fragment_shader=frag))
+        self.prog_hf = self._m(ctx.program(vertex_shader=_assemble("beam_heightfield.vert", ANGLES),
+                                           geometry_shader=geom, fragment_shader=frag))
         rows, cols = layout.shape
         az = layout.azimuth[:cols]
         centre = 0.5 * float(az[0] + az[-1])
@@ -91,13 +118,15 @@ class GLBeamRenderer:
                   "u_az_centre": centre, "u_az_first": float(az[0]) - centre,
                   "u_daz": float(az[0] - az[1]) if cols > 1 else 1.0, "u_size": (cols, rows),
                   "u_margin": ANGLE_SLACK_RAD, "u_far": self.far_m, "u_edge": EDGE_SLACK,
-                  "u_row_el": 0, "u_dirs": 1, "u_colour": GRAIN_COLOUR}
+                  "u_rows": 0, "u_dirs": 1, "u_colour": GRAIN_COLOUR}
         for prog in (self.prog_inst, self.prog_hf):
             for name, value in values.items():
                 if name in prog:
                     prog[name].value = value
-        row_el = np.ascontiguousarray(layout.elevation[::cols], np.float32)
-        self._row_tex = self._m(ctx.texture((rows, 1), 1, row_el.tobytes(), dtype="f4"))
+        base, per_rad, table = row_bounds(layout.elevation[::cols])
+        for prog in (self.prog_inst, self.prog_hf):
+            prog["u_bins"].value = (base, per_rad)
+        self._row_tex = self._m(ctx.texture((len(table), 1), 2, table.tobytes(), dtype="f4"))
         self._dir_tex = self._m(ctx.texture((cols, rows), 3, layout.direction_image().tobytes(), dtype="f4"))
         for tex in (self._row_tex, self._dir_tex):
             tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
@@ -193,8 +222,11 @@ class GLBeamRenderer:
         local[:3, 3] = self._origin
         sensor_from_local = np.linalg.inv(world_from_sensor) @ local                  # float64, then float32
         light = tuple(np.asarray(world_from_sensor)[:3, :3].T @ SUN_WORLD)
+        front = 1.0 if np.linalg.det(sensor_from_local[:3, :3]) > 0.0 else -1.0
         for prog in (self.prog_inst, self.prog_hf):
             prog["u_sensor_from_local"].write(_mat(sensor_from_local))
+            prog["u_front"].value = front
+            prog["u_cull"].value = True
             if "u_light" in prog:
                 prog["u_light"].value = light
         for fbo, colour in self._clears:
@@ -213,6 +245,7 @@ class GLBeamRenderer:
             unit = self._units[name]
             if unit[2]:
                 unit[0].render(instances=unit[2])
+        self.prog_inst["u_cull"].value = False             # mesh files have unknown winding: two-sided
         for name in self._mesh_names:
             self._meshes[name][0].render(instances=1)
 

@@ -2,7 +2,7 @@
 // Beam-native pass: bound each triangle in angle space and emit the pixel rectangle(s) that hold every beam it
 // can cover (conservative); beam.frag then tests each of those beams against the triangle exactly.
 // Target: pixel (col, row) is the beam of azimuth column col (azimuth falling with col, step u_daz) and
-// elevation row row (elevation falling with row, table u_row_el). Azimuth a is measured from +Z towards -X
+// elevation row row (elevation falling with row, bounds from the bin table u_rows). Azimuth a is measured from +Z towards -X
 // (atan(-x, z)), relative to the field's centre u_az_centre; elevation e = atan(y, |xz|).
 // Bounds (docs/lidar.md): a triangle that does not hold the origin spans, seen from it, the azimuths of its
 // edges (each edge sweeps monotonically the shorter way between its ends, unless its XZ projection passes
@@ -13,32 +13,30 @@ layout(triangles) in;
 layout(triangle_strip, max_vertices = 8) out;     // one rectangle, two across the seam
 in vec3 v_p[];
 in vec3 v_colour[];
+in vec2 v_ae[];                // (azimuth, elevation) of each corner, from the vertex shader
 flat out vec3 f_v0;
 flat out vec3 f_e1;
 flat out vec3 f_e2;
 flat out vec3 f_colour;
-uniform float u_az_centre;     // azimuth of the field's centre, rad
 uniform float u_az_first;      // azimuth of column 0 relative to the centre, rad
 uniform float u_daz;           // azimuth step from one column to the next (> 0, azimuth falls), rad
 uniform ivec2 u_size;          // (cols, rows)
-uniform sampler2D u_row_el;    // (rows, 1) R32F: elevation of each row, rad, falling
+uniform sampler2D u_rows;      // (bins, 1) RG32F: per elevation bin, the first row at or below its top edge and
+                               // the last row at or above its bottom edge (renderer_proc.beam_gl.row_bounds)
+uniform vec2 u_bins;           // (elevation of bin 0's bottom edge, bins per rad)
 uniform float u_margin;        // angular slack of every bound, rad (covers float32 round-off)
+uniform bool u_cull;           // closed, outward-wound solids: skip the faces turned away from the origin
+uniform float u_front;         // +1 or -1: the sign of det(sensor_from_local), which flips cross products
 
-const float PI = 3.14159265358979;
-const float TWO_PI = 6.28318530717959;
 
-float wrap(float a) { return a - TWO_PI * floor((a + PI) / TWO_PI); }      // into [-pi, pi)
-float azimuth(vec3 p) { return wrap(atan(-p.x, p.z) - u_az_centre); }
-float elevation(vec3 p) { return atan(p.y, length(p.xz)); }
-
-// number of rows whose elevation is > e (rows fall, so these are the rows above e)
-int rows_above(float e) {
-    int lo = 0, hi = u_size.y;
-    while (lo < hi) {
-        int mid = (lo + hi) / 2;
-        if (texelFetch(u_row_el, ivec2(mid, 0), 0).r > e) lo = mid + 1; else hi = mid;
-    }
-    return lo;
+// rows r0..r1 whose elevations can lie in [e_lo, e_hi] (conservative: from the elevation bins' tables)
+ivec2 row_range(float e_lo, float e_hi) {
+    int bins = textureSize(u_rows, 0).x;
+    float k_hi = floor((e_hi - u_bins.x) * u_bins.y), k_lo = floor((e_lo - u_bins.x) * u_bins.y);
+    if (k_hi < 0.0 || k_lo >= float(bins)) return ivec2(1, 0);          // below or above every row
+    int r0 = k_hi >= float(bins) ? 0 : int(texelFetch(u_rows, ivec2(int(k_hi), 0), 0).r);
+    int r1 = k_lo < 0.0 ? u_size.y - 1 : int(texelFetch(u_rows, ivec2(int(k_lo), 0), 0).g);
+    return ivec2(r0, r1);
 }
 
 // widen [e_lo, e_hi] by the extreme elevations of the great-circle arc a -> b where they lie inside it
@@ -78,12 +76,13 @@ void emit_rect(float a_lo, float a_hi, int r0, int r1) {
 void main() {
     vec3 p0 = v_p[0], p1 = v_p[1], p2 = v_p[2];
     vec3 e1 = p1 - p0, e2 = p2 - p0;
-    if (dot(cross(e1, e2), p0) == 0.0) return;                  // seen edge-on (or degenerate): no beam hits it
+    float facing = dot(cross(e1, e2), p0) * u_front;            // < 0: the outward side faces the origin
+    if (facing == 0.0 || (u_cull && facing > 0.0)) return;      // edge-on (or degenerate), or a back face
     f_v0 = p0; f_e1 = e1; f_e2 = e2;
     f_colour = v_colour[0];
     // elevation
-    float e_lo = min(min(elevation(p0), elevation(p1)), elevation(p2));
-    float e_hi = max(max(elevation(p0), elevation(p1)), elevation(p2));
+    float e_lo = min(min(v_ae[0].y, v_ae[1].y), v_ae[2].y);
+    float e_hi = max(max(v_ae[0].y, v_ae[1].y), v_ae[2].y);
     edge_elevation(p0, p1, e_lo, e_hi);
     edge_elevation(p1, p2, e_lo, e_hi);
     edge_elevation(p2, p0, e_lo, e_hi);
@@ -102,7 +101,7 @@ void main() {
         if (y <= ytol || n.y == 0.0) e_lo = -0.5 * PI;
         a_lo = -PI; a_hi = PI;
     } else {
-        float a0 = azimuth(p0), a1 = azimuth(p1), a2 = azimuth(p2);
+        float a0 = v_ae[0].x, a1 = v_ae[1].x, a2 = v_ae[2].x;
         a_lo = min(min(a0, a1), a2);
         a_hi = max(max(a0, a1), a2);
         if (a_hi - a_lo > PI) {                                 // across the back seam: unwrap the negative side
@@ -113,8 +112,8 @@ void main() {
             a_hi = max(max(a0, a1), a2);
         }
     }
-    int r0 = rows_above(e_hi + u_margin);
-    int r1 = rows_above(e_lo - u_margin) - 1;
+    ivec2 rr = row_range(e_lo - u_margin, e_hi + u_margin);
+    int r0 = rr.x, r1 = rr.y;
     if (r0 > r1) return;
     a_lo -= u_margin;
     a_hi += u_margin;
