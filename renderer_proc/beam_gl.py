@@ -125,7 +125,8 @@ class GLBeamRenderer:
                     prog[name].value = value
         base, per_rad, table = row_bounds(layout.elevation[::cols])
         for prog in (self.prog_inst, self.prog_hf):
-            prog["u_bins"].value = (base, per_rad)
+            if "u_bins" in prog:
+                prog["u_bins"].value = (base, per_rad)
         self._row_tex = self._m(ctx.texture((len(table), 1), 2, table.tobytes(), dtype="f4"))
         self._dir_tex = self._m(ctx.texture((cols, rows), 3, layout.direction_image().tobytes(), dtype="f4"))
         for tex in (self._row_tex, self._dir_tex):
@@ -225,8 +226,9 @@ class GLBeamRenderer:
         front = 1.0 if np.linalg.det(sensor_from_local[:3, :3]) > 0.0 else -1.0
         for prog in (self.prog_inst, self.prog_hf):
             prog["u_sensor_from_local"].write(_mat(sensor_from_local))
-            prog["u_front"].value = front
-            prog["u_cull"].value = True
+            for name, value in (("u_front", front), ("u_cull", True)):
+                if name in prog:
+                    prog[name].value = value
             if "u_light" in prog:
                 prog["u_light"].value = light
         for fbo, colour in self._clears:
@@ -245,7 +247,8 @@ class GLBeamRenderer:
             unit = self._units[name]
             if unit[2]:
                 unit[0].render(instances=unit[2])
-        self.prog_inst["u_cull"].value = False             # mesh files have unknown winding: two-sided
+        if "u_cull" in self.prog_inst:
+            self.prog_inst["u_cull"].value = False            # mesh files have unknown winding: two-sided
         for name in self._mesh_names:
             self._meshes[name][0].render(instances=1)
 
