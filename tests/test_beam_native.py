@@ -207,3 +207,35 @@ def test_short_run_is_exact_in_the_working_range():
     assert rng["max_m"] <= CODEC.bound_m + 1e-6                      # the mock is exact: the codec alone
     assert rng["working_p99_m"] <= CODEC.bound_m + 0.5e-3
     assert rng["beam_missing_frac"] == 0.0
+
+
+@pytest.mark.parametrize("preset", ["grid", "honeycomb"])
+def test_row_table_is_conservative(preset):
+    from renderer_proc.beam_gl import row_bounds
+
+    row_el = beam_layout(Pattern(preset=preset, elevation_count=37))
+    row_el = row_el.elevation[::row_el.shape[1]]
+    base, per_rad, table = row_bounds(row_el, bins=257)
+    rng = np.random.default_rng(3)
+    lo = rng.uniform(row_el[-1] - 0.1, row_el[0] + 0.1, 2000)
+    hi = lo + rng.uniform(0.0, 0.3, lo.size)
+    for a, b in zip(lo, hi):
+        want = np.flatnonzero((row_el >= a) & (row_el <= b))         # the rows an elevation interval holds
+        k_hi, k_lo = math.floor((b - base) * per_rad), math.floor((a - base) * per_rad)
+        r0 = 0 if k_hi >= len(table) else (len(row_el) if k_hi < 0 else int(table[k_hi, 0]))
+        r1 = len(row_el) - 1 if k_lo < 0 else (-1 if k_lo >= len(table) else int(table[k_lo, 1]))
+        if want.size:
+            assert r0 <= want[0] and r1 >= want[-1]
+        assert r1 - r0 <= want.size + 1                              # and at most one bin's slack either side
+
+
+def test_compare_reproduces_the_paper_with_the_camera_rig_and_study_plots_both():
+    from cosim.studies.compare import variants
+    from cosim.studies.study import KNOBS
+
+    sc = Scenario(format_version=1, sensor={"method": "beam_native"})
+    v = variants(sc)
+    assert v["perception_paper"].sensor.method == "camera_rig"
+    assert v["perception_fused"].sensor.method == "beam_native"
+    methods = {st.overrides.get("sensor.method") for st in KNOBS["render"].settings}
+    assert methods == {"camera_rig", "beam_native"}
