@@ -21,6 +21,7 @@ the exact ray cast of :class:`renderer_proc.beam_mock.MockBeamRenderer` instead.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -28,7 +29,8 @@ import numpy as np
 from cosim.scenario.config.sensing import Codec
 from cosim.world.beamtarget import BeamLayout
 from cosim.world.heightfield import padded_heights
-from cosim.world.meshes import INSTANCE_FLOATS, box_instances, cylinder_instances, pack_instances, unit_cube, unit_cylinder
+from cosim.world.meshes import (INSTANCE_FLOATS, box_instances, cylinder_instances, pack_instances, unit_cube,
+                                unit_cylinder)
 from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
 
 from .beam_mock import check_target
@@ -37,7 +39,7 @@ from .gl_backend import SHADER_DIR, create_gl_context
 from .hfmesh import SurfaceMesh
 from .projection import far_plane_m
 
-__all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "ROW_BINS", "GLBeamRenderer", "row_bounds"]
+__all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "ROW_BINS", "GLBeamRenderer", "ground_key", "row_bounds"]
 
 #: slack of every angular bound in the geometry shader, rad (float32 round-off of atan is ~1e-7 rad; a beam
 #: pitch is ~5e-3 rad): only widens the rectangles, the fragment test decides
@@ -88,6 +90,30 @@ def _mat(m: np.ndarray) -> bytes:
     return np.asarray(m, dtype=np.float32).T.tobytes()
 
 
+def ground_key(world_from_slab: np.ndarray, half: np.ndarray, world_from_sensor: np.ndarray,
+               reach_m: float) -> tuple | None:
+    """What the ground slab looks like from the LiDAR, or None when a cached image cannot be used.
+
+    While every beam's reach (``reach_m``) stays inside the slab's top face, the slab is an unbounded plane
+    (and the plane below it): the range along each beam depends only on the third row of slab_from_sensor (the
+    sensor axes' z components and its height) and the slab's thickness, not on turns about the slab's z axis
+    or shifts along x and y (as ``renderer_proc.gl_backend.GLRenderer._ground_key`` for cameras)."""
+    slab_from_sensor = np.linalg.inv(world_from_slab) @ world_from_sensor
+    x, y = slab_from_sensor[0, 3], slab_from_sensor[1, 3]
+    if abs(x) + reach_m > half[0] or abs(y) + reach_m > half[1]:
+        return None
+    return (*slab_from_sensor[2].tolist(), float(half[2]))
+
+
+@dataclass
+class _Buffers:
+    """A framebuffer with every attachment (``draw``) and one per attachment with its clear colour (``clears``;
+    the first holds the depth buffer)."""
+
+    draw: Any
+    clears: list
+
+
 class GLBeamRenderer:
     """Beam-native GL renderer of a gridded :class:`BeamLayout`: ``set_scene``, ``draw(0, world_from_sensor)``,
     ``read_depth(0, out)``, ``read_rgb(0, out)``, ``close`` (the renderer interface with one target)."""
@@ -131,17 +157,13 @@ class GLBeamRenderer:
         self._dir_tex = self._m(ctx.texture((cols, rows), 3, layout.direction_image().tobytes(), dtype="f4"))
         for tex in (self._row_tex, self._dir_tex):
             tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        size = (cols, rows)
-        self._enc = self._m(ctx.renderbuffer(size, 4, dtype="u1"))
-        atts = [self._enc]
-        self._clears = [(self._m(ctx.framebuffer([self._enc], self._m(ctx.depth_renderbuffer(size)))),
-                         (0.0, 0.0, 0.0, 0.0))]
-        if rgb:
-            atts.append(self._m(ctx.renderbuffer(size, 4, dtype="f1")))
-            self._clears.append((self._m(ctx.framebuffer([atts[-1]])), SKY_RGBA))
-        self._fbo = self._m(ctx.framebuffer(atts, self._clears[0][0].depth_attachment))
+        self._frame = self._buffers()
+        self._ground_img: _Buffers | None = None          # the ground alone, kept while its key holds
+        self._ground_key: tuple | None = None
+        self._ground: tuple[np.ndarray, np.ndarray] | None = None
         self._units = {}
-        for key, (v, f) in {"box": unit_cube(), "box_open": unit_cube(open_top=True), "cyl": unit_cylinder()}.items():
+        units = {"box": unit_cube(), "box_open": unit_cube(open_top=True), "ground": unit_cube(), "cyl": unit_cylinder()}
+        for key, (v, f) in units.items():
             self._units[key] = self._instanced(v, f)
         self._meshes: dict[str, list] = {}
         self._mesh_names: list[str] = []
@@ -165,6 +187,16 @@ class GLBeamRenderer:
         vao = self._m(ctx.vertex_array(self.prog_inst, [(vbo, "3f", "in_pos"), fmt], index_buffer=ibo,
                                        index_element_size=4))
         return [vao, inst, 0]
+
+    def _buffers(self) -> _Buffers:
+        """A framebuffer of the target's attachments (encoded RGBA8UI, depth, optional shaded RGBA8)."""
+        ctx, size = self.ctx, (self.layout.shape[1], self.layout.shape[0])
+        enc, depth = self._m(ctx.renderbuffer(size, 4, dtype="u1")), self._m(ctx.depth_renderbuffer(size))
+        atts, clears = [enc], [(self._m(ctx.framebuffer([enc], depth)), (0.0, 0.0, 0.0, 0.0))]
+        if self.rgb:
+            atts.append(self._m(ctx.renderbuffer(size, 4, dtype="f1")))
+            clears.append((self._m(ctx.framebuffer([atts[-1]])), SKY_RGBA))
+        return _Buffers(self._m(ctx.framebuffer(atts, depth)), clears)
 
     @staticmethod
     def _upload(unit: list, records: np.ndarray) -> None:
@@ -204,8 +236,14 @@ class GLBeamRenderer:
         self._origin = scene.heightfield.world_from_grid[:3, 3].copy()
         boxes = box_instances(scene.boxes, self._origin)
         hidden = scene.boxes.hidden_top if scene.boxes.hidden_top is not None else np.zeros(len(boxes), bool)
-        self._upload(self._units["box"], boxes[~hidden])
-        self._upload(self._units["box_open"], boxes[hidden])
+        ground = np.zeros(len(boxes), bool)
+        self._ground = None
+        if scene.ground_box is not None:
+            ground[scene.ground_box] = True
+            self._ground = (scene.boxes.world_from_box[scene.ground_box], scene.boxes.half_extents[scene.ground_box])
+        self._upload(self._units["box"], boxes[~hidden & ~ground])
+        self._upload(self._units["box_open"], boxes[hidden & ~ground])
+        self._upload(self._units["ground"], boxes[ground])
         self._upload(self._units["cyl"], cylinder_instances(scene.cylinders, self._origin))
         self._heightfield(scene)
         for mesh in scene.meshes:
@@ -231,26 +269,44 @@ class GLBeamRenderer:
                     prog[name].value = value
             if "u_light" in prog:
                 prog["u_light"].value = light
-        for fbo, colour in self._clears:
-            fbo.clear(*colour, depth=1.0)
-        self._fbo.use()
         self.ctx.enable(self._depth_test)
         self.ctx.disable(self.ctx.CULL_FACE)
         self._row_tex.use(0)
         self._dir_tex.use(1)
-        for unit in (self._units["cyl"],):
-            if unit[2]:
-                unit[0].render(instances=unit[2])
+        key = None if self._ground is None else ground_key(*self._ground, world_from_sensor, self.far_m)
+        if key is not None:
+            # the ground alone, drawn once while the sensor keeps its pose to the ground plane (a vehicle driving
+            # and turning on flat ground), then copied into each frame: its bytes and depth, a clear's cost
+            if self._ground_img is None:
+                self._ground_img = self._buffers()
+            if key != self._ground_key:
+                for fbo, colour in self._ground_img.clears:
+                    fbo.clear(*colour, depth=1.0)
+                self._ground_img.draw.use()
+                self._render("ground")
+                self._ground_key = key
+            for (dst, _), (src, _) in zip(self._frame.clears, self._ground_img.clears):
+                self.ctx.copy_framebuffer(dst, src)
+        else:
+            for fbo, colour in self._frame.clears:
+                fbo.clear(*colour, depth=1.0)
+        self._frame.draw.use()
+        self._render("cyl")
         if self._hf is not None and self._hf[4]:
             self._hf[1].render(vertices=self._hf[4])
-        for name in ("box_open", "box"):
-            unit = self._units[name]
-            if unit[2]:
-                unit[0].render(instances=unit[2])
+        self._render("box_open")
+        self._render("box")
+        if key is None:
+            self._render("ground")
         if "u_cull" in self.prog_inst:
             self.prog_inst["u_cull"].value = False            # mesh files have unknown winding: two-sided
         for name in self._mesh_names:
             self._meshes[name][0].render(instances=1)
+
+    def _render(self, name: str) -> None:
+        vao, _, n = self._units[name]
+        if n:
+            vao.render(instances=n)
 
     def _check(self, out: np.ndarray) -> None:
         want = self.layout.shape + (4,)
@@ -261,7 +317,7 @@ class GLBeamRenderer:
         """The encoded ranges into ``out`` (rows, cols, 4) uint8 in place (row r = elevation row r)."""
         check_target(k)
         self._check(out)
-        self._fbo.read_into(out, components=4, attachment=0, alignment=1, dtype="u1")
+        self._frame.draw.read_into(out, components=4, attachment=0, alignment=1, dtype="u1")
 
     def read_rgb(self, k: int, out: np.ndarray) -> None:
         """The shaded beams into ``out`` (rows, cols, 4) uint8 in place."""
@@ -269,7 +325,7 @@ class GLBeamRenderer:
         if not self.rgb:
             raise ValueError("this renderer was made without the rgb output")
         self._check(out)
-        self._fbo.read_into(out, components=4, attachment=1, alignment=1, dtype="f1")
+        self._frame.draw.read_into(out, components=4, attachment=1, alignment=1, dtype="f1")
 
     def close(self) -> None:
         """Release the GL context (when this renderer made it), else every object made in it."""

@@ -135,30 +135,36 @@ def test_full_turn_ring_of_walls_and_a_ceiling(ctx):
 
 
 @pytest.mark.gl
-def test_gl_matches_the_exact_cast_beam_for_beam_on_the_default_frame(ctx):
+def test_gl_matches_the_exact_cast_beam_for_beam_on_default_frames(ctx):
+    # two frames 4 s apart drawn by the same renderers: the vehicles have moved, the GL renderer's cached ground
+    # image (same pose to the ground plane) is reused, the grain and stream are redrawn
     from renderer_proc.beam_gl import GLBeamRenderer
 
     sc = Scenario(format_version=1, sensor={"method": "beam_native"})
-    state, heights, stream = sample_frame(sc)
-    scene, pose = scene_from_state(sc, state, heights, stream), world_from_sensor(sc, state)
     lay = beam_layout(sc.sensor.pattern)
-    imgs = {}
-    for name, r in (("mock", MockBeamRenderer(lay, CODEC)), ("gl", GLBeamRenderer(lay, CODEC, context=ctx))):
-        imgs[name] = np.zeros(lay.shape + (4,), np.uint8)
-        r.set_scene(scene)
-        r.draw(0, pose)
-        r.read_depth(0, imgs[name])
-        if name == "mock":
-            exact = r.ranges()
-        r.close()
-    gl, mock = (lay.beams_of(decode_depth(imgs[k], CODEC)) for k in ("gl", "mock"))
-    assert np.array_equal(np.isfinite(gl), np.isfinite(exact) & (exact < CODEC.max_depth_m))   # same coverage
-    ok = np.isfinite(gl)
-    assert ok.sum() > 0.9 * lay.n_beams
-    assert np.abs(gl[ok] - exact[ok]).max() <= CODEC.bound_m + GL_F32_M
-    # the same bytes except where float32 and float64 round a range to neighbouring codes: one code apart
-    assert np.abs(gl[ok] - mock[ok]).max() <= 2.0 * CODEC.bound_m + 1e-6
-    assert np.mean(np.all(imgs["gl"] == imgs["mock"], axis=2)) > 0.999
+    mock, gl_r = MockBeamRenderer(lay, CODEC), GLBeamRenderer(lay, CODEC, context=ctx)
+    keys = []
+    for t in (0.0, 4.0):
+        state, heights, stream = sample_frame(sc, t)
+        scene, pose = scene_from_state(sc, state, heights, stream), world_from_sensor(sc, state)
+        imgs = {}
+        for name, r in (("mock", mock), ("gl", gl_r)):
+            imgs[name] = np.zeros(lay.shape + (4,), np.uint8)
+            r.set_scene(scene)
+            r.draw(0, pose)
+            r.read_depth(0, imgs[name])
+        keys.append(gl_r._ground_key)
+        exact = mock.ranges()
+        gl, mo = (lay.beams_of(decode_depth(imgs[k], CODEC)) for k in ("gl", "mock"))
+        assert np.array_equal(np.isfinite(gl), np.isfinite(exact) & (exact < CODEC.max_depth_m))   # coverage
+        ok = np.isfinite(gl)
+        assert ok.sum() > 0.9 * lay.n_beams
+        assert np.abs(gl[ok] - exact[ok]).max() <= CODEC.bound_m + GL_F32_M
+        # the same bytes except where float32 and float64 round a range to neighbouring codes: one code apart
+        assert np.abs(gl[ok] - mo[ok]).max() <= 2.0 * CODEC.bound_m + 1e-6
+        assert np.mean(np.all(imgs["gl"] == imgs["mock"], axis=2)) > 0.999
+    assert keys[0] is not None and keys[0] == keys[1]
+    gl_r.close()
 
 
 def test_decoder_round_trip_and_layouts(tmp_path):
