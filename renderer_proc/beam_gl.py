@@ -29,8 +29,7 @@ import numpy as np
 from cosim.scenario.config.sensing import Codec
 from cosim.world.beamtarget import BeamLayout
 from cosim.world.heightfield import padded_heights
-from cosim.world.meshes import (INSTANCE_FLOATS, box_instances, cylinder_instances, pack_instances, unit_cube,
-                                unit_cylinder)
+from cosim.world.meshes import CYLINDER_SIDES, INSTANCE_FLOATS, box_instances, cylinder_instances, pack_instances
 from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
 
 from .beam_mock import check_target
@@ -46,6 +45,9 @@ __all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "ROW_BINS", "GLBeamRenderer", "groun
 ANGLE_SLACK_RAD = 1e-4
 #: the GLSL snippet of the target's angle coordinates (vertex and geometry shaders)
 ANGLES = "beam_angles.glsl"
+#: the GLSL snippets of the target's angle bounds (geometry shaders) and of the codec (fragment shaders)
+BOUNDS = "beam_bounds.glsl"
+CODEC = "codec.glsl"
 #: elevation bins of the geometry shader's row table (row_bounds)
 ROW_BINS = 4096
 #: inclusive slack of the fragment's inside-triangle test, barycentric: closes float32 cracks on shared edges
@@ -81,9 +83,10 @@ def _assemble(name: str, *parts: str, defines: tuple[str, ...] = ()) -> str:
     return "\n".join([head, *defines, *(_src(p) for p in parts), body])
 
 
-def _fragment(rgb: bool, mishandled: bool) -> str:
-    defines = (["#define MISHANDLED_GAMMA"] if mishandled else []) + (["#define OUT_RGB 1"] if rgb else [])
-    return _assemble("beam.frag", "codec.glsl", defines=tuple(defines))
+def _set(prog, name: str, value) -> None:
+    """Set a uniform where the program keeps it (the compiler drops unused ones)."""
+    if name in prog:
+        prog[name].value = value
 
 
 def _mat(m: np.ndarray) -> bytes:
@@ -129,12 +132,23 @@ class GLBeamRenderer:
         import moderngl  # after create_gl_context, which turns a missing moderngl into RendererUnavailable
 
         ctx = self.ctx
-        frag = _fragment(rgb, codec.gamma_mode == "mishandled")
-        geom = _assemble("beam.geom", ANGLES)
+        defines = (("#define MISHANDLED_GAMMA",) if codec.gamma_mode == "mishandled" else ()) + \
+            (("#define OUT_RGB 1",) if rgb else ())
+        frag = _assemble("beam.frag", CODEC, defines=defines)
+        geom = _assemble("beam.geom", ANGLES, BOUNDS)
+        # triangles (the grain surface, mesh files): bounded per triangle, Moller-Trumbore per beam
         self.prog_inst = self._m(ctx.program(vertex_shader=_assemble("beam_instanced.vert", ANGLES),
                                              geometry_shader=geom, fragment_shader=frag))
         self.prog_hf = self._m(ctx.program(vertex_shader=_assemble("beam_heightfield.vert", ANGLES),
                                            geometry_shader=geom, fragment_shader=frag))
+        # convex solids (boxes, cylinders as prisms): one point per instance, bounded whole, clipped per beam
+        solid_geom = _assemble("solid.geom", ANGLES, BOUNDS)
+        self.prog_box = self._m(ctx.program(vertex_shader=_src("solid.vert"), geometry_shader=solid_geom,
+                                            fragment_shader=_assemble("solid.frag", CODEC, defines=defines)))
+        self.prog_prism = self._m(ctx.program(
+            vertex_shader=_src("solid.vert"), geometry_shader=solid_geom,
+            fragment_shader=_assemble("solid.frag", CODEC, defines=defines + (f"#define PRISM_SIDES {CYLINDER_SIDES}",))))
+        self._progs = (self.prog_inst, self.prog_hf, self.prog_box, self.prog_prism)
         rows, cols = layout.shape
         az = layout.azimuth[:cols]
         centre = 0.5 * float(az[0] + az[-1])
@@ -145,14 +159,13 @@ class GLBeamRenderer:
                   "u_daz": float(az[0] - az[1]) if cols > 1 else 1.0, "u_size": (cols, rows),
                   "u_margin": ANGLE_SLACK_RAD, "u_far": self.far_m, "u_edge": EDGE_SLACK,
                   "u_rows": 0, "u_dirs": 1, "u_colour": GRAIN_COLOUR}
-        for prog in (self.prog_inst, self.prog_hf):
-            for name, value in values.items():
-                if name in prog:
-                    prog[name].value = value
         base, per_rad, table = row_bounds(layout.elevation[::cols])
-        for prog in (self.prog_inst, self.prog_hf):
-            if "u_bins" in prog:
-                prog["u_bins"].value = (base, per_rad)
+        values["u_bins"] = (base, per_rad)
+        for prog in self._progs:
+            for name, value in values.items():
+                _set(prog, name, value)
+        _set(self.prog_box, "u_z0", -1.0)                      # the unit cube's hull: itself
+        _set(self.prog_prism, "u_z0", 0.0)                     # the unit prism's hull: [-1, 1]^2 x [0, 1]
         self._row_tex = self._m(ctx.texture((len(table), 1), 2, table.tobytes(), dtype="f4"))
         self._dir_tex = self._m(ctx.texture((cols, rows), 3, layout.direction_image().tobytes(), dtype="f4"))
         for tex in (self._row_tex, self._dir_tex):
@@ -161,10 +174,9 @@ class GLBeamRenderer:
         self._ground_img: _Buffers | None = None          # the ground alone, kept while its key holds
         self._ground_key: tuple | None = None
         self._ground: tuple[np.ndarray, np.ndarray] | None = None
-        self._units = {}
-        units = {"box": unit_cube(), "box_open": unit_cube(open_top=True), "ground": unit_cube(), "cyl": unit_cylinder()}
-        for key, (v, f) in units.items():
-            self._units[key] = self._instanced(v, f)
+        self._units = {key: self._solids(prog) for key, prog in
+                       (("box", self.prog_box), ("ground", self.prog_box), ("cyl", self.prog_prism))}
+        self._points = moderngl.POINTS
         self._meshes: dict[str, list] = {}
         self._mesh_names: list[str] = []
         self._hf = None
@@ -175,6 +187,12 @@ class GLBeamRenderer:
     def _m(self, obj):
         self._made.append(obj)
         return obj
+
+    def _solids(self, prog, reserve: int = 64) -> list:
+        """[vao, instance buffer, count] of convex solids drawn as one point per instance record."""
+        inst = self._m(self.ctx.buffer(reserve=reserve * INSTANCE_FLOATS * 4, dynamic=True))
+        fmt = (inst, "16f 3f", "in_model", "in_colour") if "in_colour" in prog else (inst, "16f 12x", "in_model")
+        return [self._m(self.ctx.vertex_array(prog, [fmt])), inst, 0]
 
     def _instanced(self, vertices: np.ndarray, faces: np.ndarray, reserve: int = 64) -> list:
         """[vao, instance buffer, count] of a unit mesh drawn per instance record."""
@@ -235,14 +253,12 @@ class GLBeamRenderer:
         """Upload one frame: box (the ground slab among them) and cylinder instances, mesh poses, grain heights."""
         self._origin = scene.heightfield.world_from_grid[:3, 3].copy()
         boxes = box_instances(scene.boxes, self._origin)
-        hidden = scene.boxes.hidden_top if scene.boxes.hidden_top is not None else np.zeros(len(boxes), bool)
         ground = np.zeros(len(boxes), bool)
         self._ground = None
         if scene.ground_box is not None:
             ground[scene.ground_box] = True
             self._ground = (scene.boxes.world_from_box[scene.ground_box], scene.boxes.half_extents[scene.ground_box])
-        self._upload(self._units["box"], boxes[~hidden & ~ground])
-        self._upload(self._units["box_open"], boxes[hidden & ~ground])
+        self._upload(self._units["box"], boxes[~ground])        # whole solids: a hidden top costs nothing here
         self._upload(self._units["ground"], boxes[ground])
         self._upload(self._units["cyl"], cylinder_instances(scene.cylinders, self._origin))
         self._heightfield(scene)
@@ -262,13 +278,10 @@ class GLBeamRenderer:
         sensor_from_local = np.linalg.inv(world_from_sensor) @ local                  # float64, then float32
         light = tuple(np.asarray(world_from_sensor)[:3, :3].T @ SUN_WORLD)
         front = 1.0 if np.linalg.det(sensor_from_local[:3, :3]) > 0.0 else -1.0
-        for prog in (self.prog_inst, self.prog_hf):
+        for prog in self._progs:
             prog["u_sensor_from_local"].write(_mat(sensor_from_local))
-            for name, value in (("u_front", front), ("u_cull", True)):
-                if name in prog:
-                    prog[name].value = value
-            if "u_light" in prog:
-                prog["u_light"].value = light
+            for name, value in (("u_front", front), ("u_cull", True), ("u_light", light)):
+                _set(prog, name, value)
         self.ctx.enable(self._depth_test)
         self.ctx.disable(self.ctx.CULL_FACE)
         self._row_tex.use(0)
@@ -294,19 +307,17 @@ class GLBeamRenderer:
         self._render("cyl")
         if self._hf is not None and self._hf[4]:
             self._hf[1].render(vertices=self._hf[4])
-        self._render("box_open")
         self._render("box")
         if key is None:
             self._render("ground")
-        if "u_cull" in self.prog_inst:
-            self.prog_inst["u_cull"].value = False            # mesh files have unknown winding: two-sided
+        _set(self.prog_inst, "u_cull", False)                  # mesh files have unknown winding: two-sided
         for name in self._mesh_names:
             self._meshes[name][0].render(instances=1)
 
     def _render(self, name: str) -> None:
         vao, _, n = self._units[name]
         if n:
-            vao.render(instances=n)
+            vao.render(mode=self._points, vertices=n)
 
     def _check(self, out: np.ndarray) -> None:
         want = self.layout.shape + (4,)

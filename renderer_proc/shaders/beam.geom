@@ -18,60 +18,10 @@ flat out vec3 f_v0;
 flat out vec3 f_e1;
 flat out vec3 f_e2;
 flat out vec3 f_colour;
-uniform float u_az_first;      // azimuth of column 0 relative to the centre, rad
-uniform float u_daz;           // azimuth step from one column to the next (> 0, azimuth falls), rad
-uniform ivec2 u_size;          // (cols, rows)
-uniform sampler2D u_rows;      // (bins, 1) RG32F: per elevation bin, the first row at or below its top edge and
-                               // the last row at or above its bottom edge (renderer_proc.beam_gl.row_bounds)
-uniform vec2 u_bins;           // (elevation of bin 0's bottom edge, bins per rad)
-uniform float u_margin;        // angular slack of every bound, rad (covers float32 round-off)
+// (the target's uniforms and the bound functions: beam_bounds.glsl, inserted before this text)
 uniform bool u_cull;           // closed, outward-wound solids: skip the faces turned away from the origin
 uniform float u_front;         // +1 or -1: the sign of det(sensor_from_local), which flips cross products
 
-
-// rows r0..r1 whose elevations can lie in [e_lo, e_hi] (conservative: from the elevation bins' tables)
-ivec2 row_range(float e_lo, float e_hi) {
-    int bins = textureSize(u_rows, 0).x;
-    float k_hi = floor((e_hi - u_bins.x) * u_bins.y), k_lo = floor((e_lo - u_bins.x) * u_bins.y);
-    if (k_hi < 0.0 || k_lo >= float(bins)) return ivec2(1, 0);          // below or above every row
-    int r0 = k_hi >= float(bins) ? 0 : int(texelFetch(u_rows, ivec2(int(k_hi), 0), 0).r);
-    int r1 = k_lo < 0.0 ? u_size.y - 1 : int(texelFetch(u_rows, ivec2(int(k_lo), 0), 0).g);
-    return ivec2(r0, r1);
-}
-
-// widen [e_lo, e_hi] by the extreme elevations of the great-circle arc a -> b where they lie inside it
-void edge_elevation(vec3 a, vec3 b, inout float e_lo, inout float e_hi) {
-    vec3 n = cross(a, b);
-    float len = length(n);
-    if (len < 1e-12 * length(a) * length(b)) return;          // degenerate: the ends bound it
-    n /= len;
-    float s = 1.0 - n.y * n.y;
-    if (s <= 0.0) return;                                       // the arc is horizontal: constant elevation 0
-    vec3 top = (vec3(0.0, 1.0, 0.0) - n.y * n) / sqrt(s);       // highest point of the great circle
-    for (int k = 0; k < 2; ++k) {
-        vec3 p = k == 0 ? top : -top;
-        if (dot(cross(a, p), n) >= 0.0 && dot(cross(p, b), n) >= 0.0) {
-            float e = asin(clamp(p.y, -1.0, 1.0));
-            e_lo = min(e_lo, e);
-            e_hi = max(e_hi, e);
-        }
-    }
-}
-
-void emit_rect(float a_lo, float a_hi, int r0, int r1) {
-    // columns whose azimuth lies in [a_lo, a_hi]: col = (u_az_first - a) / u_daz
-    int c0 = max(int(ceil((u_az_first - a_hi) / u_daz)), 0);
-    int c1 = min(int(floor((u_az_first - a_lo) / u_daz)), u_size.x - 1);
-    if (c0 > c1) return;
-    // window rectangle over pixels c0..c1, r0..r1 (pixel centres at +0.5, strictly inside); NDC, row r at y = r
-    vec2 lo = 2.0 * vec2(c0, r0) / vec2(u_size) - 1.0;
-    vec2 hi = 2.0 * vec2(c1 + 1, r1 + 1) / vec2(u_size) - 1.0;
-    gl_Position = vec4(lo.x, lo.y, 0.0, 1.0); EmitVertex();
-    gl_Position = vec4(hi.x, lo.y, 0.0, 1.0); EmitVertex();
-    gl_Position = vec4(lo.x, hi.y, 0.0, 1.0); EmitVertex();
-    gl_Position = vec4(hi.x, hi.y, 0.0, 1.0); EmitVertex();
-    EndPrimitive();
-}
 
 void main() {
     vec3 p0 = v_p[0], p1 = v_p[1], p2 = v_p[2];
@@ -86,13 +36,8 @@ void main() {
     edge_elevation(p0, p1, e_lo, e_hi);
     edge_elevation(p1, p2, e_lo, e_hi);
     edge_elevation(p2, p0, e_lo, e_hi);
-    // does the XZ projection hold the XZ origin? (then a pole lies inside the triangle, seen from the origin)
-    vec2 q0 = p0.xz, q1 = p1.xz, q2 = p2.xz;
-    float w0 = q1.x * q2.y - q1.y * q2.x, w1 = q2.x * q0.y - q2.y * q0.x, w2 = q0.x * q1.y - q0.y * q1.x;
-    float tol = 1e-6 * (abs(w0) + abs(w1) + abs(w2));
-    bool pole = (w0 >= -tol && w1 >= -tol && w2 >= -tol) || (w0 <= tol && w1 <= tol && w2 <= tol);
     float a_lo, a_hi;
-    if (pole) {
+    if (holds_pole(p0, p1, p2)) {
         // the pole the triangle holds: the sign of y where the triangle meets the Y axis (both, when unsure)
         vec3 n = cross(e1, e2);
         float y = n.y != 0.0 ? dot(n, p0) / n.y : 0.0;
@@ -101,23 +46,11 @@ void main() {
         if (y <= ytol || n.y == 0.0) e_lo = -0.5 * PI;
         a_lo = -PI; a_hi = PI;
     } else {
-        float a0 = v_ae[0].x, a1 = v_ae[1].x, a2 = v_ae[2].x;
-        a_lo = min(min(a0, a1), a2);
-        a_hi = max(max(a0, a1), a2);
-        if (a_hi - a_lo > PI) {                                 // across the back seam: unwrap the negative side
-            a0 += a0 < 0.0 ? TWO_PI : 0.0;
-            a1 += a1 < 0.0 ? TWO_PI : 0.0;
-            a2 += a2 < 0.0 ? TWO_PI : 0.0;
-            a_lo = min(min(a0, a1), a2);
-            a_hi = max(max(a0, a1), a2);
-        }
+        float a[8];
+        for (int i = 0; i < 3; ++i) a[i] = v_ae[i].x;
+        vec2 ar = azimuth_range(a, 3);
+        a_lo = ar.x;
+        a_hi = ar.y;
     }
-    ivec2 rr = row_range(e_lo - u_margin, e_hi + u_margin);
-    int r0 = rr.x, r1 = rr.y;
-    if (r0 > r1) return;
-    a_lo -= u_margin;
-    a_hi += u_margin;
-    emit_rect(a_lo, a_hi, r0, r1);
-    if (a_hi > PI) emit_rect(a_lo - TWO_PI, a_hi - TWO_PI, r0, r1);         // the part beyond the seam
-    else if (a_lo < -PI) emit_rect(a_lo + TWO_PI, a_hi + TWO_PI, r0, r1);
+    emit_box(a_lo, a_hi, e_lo, e_hi);
 }
