@@ -13,7 +13,8 @@ from cosim.scenario.config import Scenario
 from cosim.scenario.config.sensing import Codec, Pattern
 from cosim.world.beamtarget import BEAMS_DEPTH_BLOCK, TABLE_WIDTH, beam_layout
 from cosim.world.geometry import make_transform
-from cosim.world.scene import Boxes, Cylinders, HeightField, Scene, scene_from_state
+from cosim.world.meshes import unit_cube
+from cosim.world.scene import Boxes, Cylinders, HeightField, MeshInstance, Scene, scene_from_state
 from perception_proc.beam_decode import BeamDecoder
 from renderer_proc.beam_mock import MockBeamRenderer
 from renderer_proc.blocks import declare_blocks
@@ -37,13 +38,21 @@ def ctx():
     c.release()
 
 
-def boxes_scene(poses, halves) -> Scene:
+def boxes_scene(poses, halves, as_mesh: bool = False) -> Scene:
     """Boxes (poses (K, 4, 4), halves (K, 3)) in the sensor frame (world = sensor), a tiny grain patch 50 m
-    straight down, out of every test pattern's field."""
+    straight down, out of every test pattern's field. ``as_mesh``: the same boxes as one triangle mesh, drawn
+    by the GL renderer's triangle path (as mesh files are) instead of its convex-solid path."""
     hf = HeightField(make_transform(np.eye(3), (0.0, -50.0, 0.0)), np.zeros((2, 2), np.float32), 0.1, 0.2, 0.2)
     k = len(halves)
-    return Scene(Boxes(np.asarray(poses, float), np.asarray(halves, float), np.ones((k, 3), np.float32)),
-                 Cylinders(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3), np.float32)), hf)
+    none = Cylinders(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3), np.float32))
+    if not as_mesh:
+        return Scene(Boxes(np.asarray(poses, float), np.asarray(halves, float), np.ones((k, 3), np.float32)), none, hf)
+    v, f = unit_cube()
+    verts = [(np.asarray(v, float) * h) @ np.asarray(m)[:3, :3].T + np.asarray(m)[:3, 3] for m, h in zip(poses, halves)]
+    faces = [f + 8 * i for i in range(k)]
+    mesh = MeshInstance("room", np.concatenate(verts), np.concatenate(faces), np.eye(4), (0.5, 0.5, 0.5))
+    empty = Boxes(np.zeros((0, 4, 4)), np.zeros((0, 3)), np.zeros((0, 3), np.float32))
+    return Scene(empty, none, hf, (mesh,))
 
 
 def both_ranges(ctx, pattern: Pattern, scene: Scene) -> dict[str, np.ndarray]:
@@ -118,11 +127,13 @@ def octagon_room(radius: float, ceiling: float):
 
 
 @pytest.mark.gl
-def test_full_turn_ring_of_walls_and_a_ceiling(ctx):
+@pytest.mark.parametrize("as_mesh", [False, True], ids=["solids", "triangles"])
+def test_full_turn_ring_of_walls_and_a_ceiling(ctx, as_mesh):
     # 360 deg of azimuth in one target (across the back seam at +-180 deg), walls all round, a ceiling above
+    # whose lower face holds the pole: once as boxes (convex-solid path), once as triangles
     radius, ceiling = 6.0, 2.5
     pattern = grid((-180.0, 180.0, 73), (-10.0, 60.0, 8))
-    got = both_ranges(ctx, pattern, boxes_scene(*octagon_room(radius, ceiling)))
+    got = both_ranges(ctx, pattern, boxes_scene(*octagon_room(radius, ceiling), as_mesh=as_mesh))
     lay = beam_layout(pattern)
     rel = (lay.azimuth + math.radians(22.5)) % math.radians(45.0) - math.radians(22.5)   # from the nearest normal
     wall = radius / (np.cos(lay.elevation) * np.cos(rel))

@@ -313,7 +313,7 @@ def ray_mesh(o: np.ndarray, d: np.ndarray, mesh: MeshInstance) -> np.ndarray:
             qv = np.cross(tv, e1[None])
             vv = np.einsum("nti,nti->nt", np.broadcast_to(dr, qv.shape), qv) * inv
             t = np.einsum("ti,nti->nt", e2, qv) * inv
-        ok = (np.abs(det) > 1e-14) & (u >= 0) & (vv >= 0) & (u + vv <= 1) & (t > T_MIN_M)
+            ok = (np.abs(det) > 1e-14) & (u >= 0) & (vv >= 0) & (u + vv <= 1) & (t > T_MIN_M)   # NaN: False
         best[rays] = np.minimum(best[rays], np.where(ok, t, np.inf).min(axis=1))
     return best
 
