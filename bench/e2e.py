@@ -126,11 +126,13 @@ def report(label: str, runs: list[dict]) -> None:
     print("| " + " | ".join(_cell([v for r in runs if (v := get(r)) is not None]) for _, get in cols) + " |")
     errs = [r["range_error"] for r in runs if r.get("range_error")]
     if errs:
-        keys = ("mean_m", "p99_m", "max_m", "working_frac_above_5cm", "working_p99_m")
-        print("\n| range error | " + " | ".join(keys) + " |")
-        print("|---|" + "---:|" * len(keys))
-        print("| median over runs | " + " | ".join(_cell([e[k] for e in errs if e.get(k) is not None]) for k in keys)
-              + " |")
+        keys = ("mean_m", "p99_m", "max_m", "working_p99_m")
+        print("\n| range error (mm) | " + " | ".join(k[:-2] for k in keys) + " | working share above 5 cm (%) |")
+        print("|---|" + "---:|" * (len(keys) + 1))
+        cells = [_cell([1e3 * e[k] for e in errs if e.get(k) is not None]) for k in keys]
+        cells.append(_cell([100.0 * e["working_frac_above_5cm"] for e in errs
+                            if e.get("working_frac_above_5cm") is not None]))
+        print("| median over runs | " + " | ".join(cells) + " |")
     print("\n| process | CPU ms per frame (steady state) |")
     print("|---|---:|")
     total = []
