@@ -1,23 +1,25 @@
 """The GL beam-native renderer: the scene drawn from the LiDAR origin into one pixel per beam (docs/lidar.md).
 
 ``sensor.method: beam_native`` with ``renderer: gl``. The target's pixel (col, row) is the beam of azimuth
-column ``col`` and elevation row ``row`` of a grid or honeycomb pattern (``cosim.world.beamtarget``). Each
-triangle goes through three stages:
+column ``col`` and elevation row ``row`` of a grid or honeycomb pattern (``cosim.world.beamtarget``). Two paths,
+both exact per beam:
 
-* vertex shader (``shaders/beam_instanced.vert``, ``shaders/beam_heightfield.vert``): vertices into the LiDAR
-  frame relative to its origin (float64 pose on the CPU, float32 offsets on the GPU);
-* geometry shader (``shaders/beam.geom``): the triangle's conservative bounds in azimuth and elevation, seen
-  from the origin (corners, each edge's extreme elevation, a pole it holds, the back seam), emitted as the
-  rectangle of beam pixels inside them, with the triangle's corner and edges as flat outputs;
-* fragment shader (``shaders/beam.frag`` after ``shaders/codec.glsl``): the pixel's own beam direction (a
-  texture of the pattern's directions) against the triangle, Moller-Trumbore from the origin: outside the
-  triangle it is discarded (exact coverage at silhouettes), inside it writes the range along the beam with
-  Eqs 1-2 and depth t / far for the nearest hit.
+* triangles (the grain surface, mesh files): the vertex shader (``shaders/beam_instanced.vert``,
+  ``shaders/beam_heightfield.vert``) puts vertices in the LiDAR frame relative to its origin (float64 pose on
+  the CPU, float32 offsets on the GPU) with their azimuth and elevation; the geometry shader
+  (``shaders/beam.geom``) bounds each triangle in angle space, conservatively (corners, each edge's extreme
+  elevation, a pole it holds, the back seam), and emits the rectangle of beam pixels inside the bound with the
+  triangle as flat outputs; the fragment shader (``shaders/beam.frag``) intersects its own beam (a texture of
+  the pattern's directions) with the triangle, Moller-Trumbore from the origin, discards a miss (exact coverage
+  at silhouettes) and writes the range with Eqs 1-2 and depth t / far for the nearest hit;
+* convex solids (boxes; cylinders as the prisms the ray caster uses): one point per instance
+  (``shaders/solid.*``), the whole solid bounded at once and each beam clipped against its slabs or planes.
 
 There is no projection, so no near plane, no stitching, no parallax and no resample, and a 360 deg field is one
-target (rectangles across the back seam are emitted twice). The ground slab is drawn like every box: its top
-face is the ground plane exactly. CSV patterns have no grid of angles to bound in; the participant gives them
-the exact ray cast of :class:`renderer_proc.beam_mock.MockBeamRenderer` instead.
+target (rectangles across the back seam are emitted twice). The ground slab's top face is the ground plane
+exactly; its image is cached while the LiDAR keeps its pose to the ground (:func:`ground_key`). CSV patterns have
+no grid of angles to bound in; the participant gives them the exact ray cast of
+:class:`renderer_proc.beam_mock.MockBeamRenderer` instead.
 """
 from __future__ import annotations
 
