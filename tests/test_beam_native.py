@@ -256,3 +256,35 @@ def test_compare_reproduces_the_paper_with_the_camera_rig_and_study_plots_both()
     assert v["perception_fused"].sensor.method == "beam_native"
     methods = {st.overrides.get("sensor.method") for st in KNOBS["render"].settings}
     assert methods == {"camera_rig", "beam_native"}
+
+
+def test_csv_patterns_get_the_exact_cast_under_gl_too(tmp_path):
+    from renderer_proc.participant import make_backend
+
+    csv = tmp_path / "beams.csv"
+    csv.write_text("elevation_deg,azimuth_deg\n-10,0\n-20,5\n")
+    sc = Scenario.model_validate({"format_version": 1, "renderer": "gl", "sensor": {
+        "method": "beam_native", "pattern": {"preset": "csv", "csv_file": csv}}})
+    backend = make_backend(sc, None)
+    assert isinstance(backend, MockBeamRenderer) and backend.layout.shape == (1, 2)
+
+
+@pytest.mark.gl
+def test_gl_shaded_image_marks_hits_and_sky(ctx):
+    from renderer_proc.beam_gl import GLBeamRenderer
+    from cosim.world.scene import SKY_RGBA
+
+    pattern = grid((-10.0, 10.0, 21), (-1.0, 1.0, 1))
+    edge_x = -5.0 * math.tan(math.radians(0.5))
+    wall = make_transform(np.eye(3), ((edge_x - 3.0) / 2.0, 0.0, 5.1))       # only the beams left of 0.5 deg
+    lay = beam_layout(pattern)
+    r = GLBeamRenderer(lay, CODEC, rgb=True, context=ctx)
+    r.set_scene(boxes_scene([wall], [((3.0 + edge_x) / 2.0, 1.0, 0.1)]))
+    r.draw(0, np.eye(4))
+    rgb = np.zeros(lay.shape + (4,), np.uint8)
+    r.read_rgb(0, rgb)
+    r.close()
+    sky = np.all(np.abs(rgb[0, :, :3].astype(int) - np.round(np.array(SKY_RGBA[:3]) * 255)) <= 1, axis=1)
+    assert np.array_equal(sky, lay.azimuth <= math.radians(0.5))
+    # the wall faces the LiDAR: Lambert shading of its normal, grey albedo 1 (boxes_scene's colour)
+    assert np.all(rgb[0, ~sky, 3] == 255) and np.all(rgb[0, ~sky, 0] > 0.35 * 255 - 1)
