@@ -132,7 +132,7 @@ KNOBS: dict[str, Knob] = {
                                                  "sensor.max_angular_error_deg": b})
                 for b in (0.05, 0.1, 0.2, 0.4))
         + (Setting("beam native", {"sensor.method": "beam_native"}),),
-        "auto rig 0.1 deg", _range_error, None, {"feedback": "perception"}),
+        "beam native", _range_error, None, {"feedback": "perception"}),
     "beams": Knob(
         "beams", "perceived height map RMSE (m)",
         tuple(Setting(f"{a}x{e} beams", {"sensor.pattern.azimuth_count": a, "sensor.pattern.elevation_count": e})
