@@ -31,8 +31,6 @@ def check_target(k: int) -> None:
         raise IndexError(f"a beam-native renderer has one target (0), asked for {k}")
 
 
-_only_target = check_target
-
 
 def beam_ranges(scene: Scene, world_from_sensor: np.ndarray, directions: np.ndarray) -> np.ndarray:
     """Exact range along each beam: ``directions`` (N, 3) unit, sensor frame; ``world_from_sensor`` 4 x 4.
@@ -60,7 +58,7 @@ class MockBeamRenderer:
         """Cast every beam from the LiDAR at ``world_from_sensor`` (4 x 4, sensor axes X right, Y up, Z forward)."""
         if self._scene is None:
             raise RuntimeError("set_scene must be called before draw")
-        _only_target(k)
+        check_target(k)
         self._range = beam_ranges(self._scene, world_from_sensor, self.layout.directions)
         self._pose = np.array(world_from_sensor, np.float64)
 
@@ -72,7 +70,7 @@ class MockBeamRenderer:
 
     def read_depth(self, k: int, out: np.ndarray) -> None:
         """Encoded ranges (Eqs 1-2) into ``out`` (rows, cols, 4) uint8 in place; padding pixels invalid."""
-        _only_target(k)
+        check_target(k)
         r = self.ranges()
         lay = self.layout
         if out.shape != lay.shape + (4,) or out.dtype != np.uint8:
@@ -83,7 +81,7 @@ class MockBeamRenderer:
 
     def read_rgb(self, k: int, out: np.ndarray) -> None:
         """Grey-shaded image of the beams into ``out`` (rows, cols, 4) uint8 in place (sky where no hit)."""
-        _only_target(k)
+        check_target(k)
         r, lay = self.ranges(), self.layout
         hit = np.zeros(lay.pixels, bool)
         hit[:lay.n_beams] = np.isfinite(r)
