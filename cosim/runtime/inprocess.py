@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Mapping
+from typing import Callable, Mapping
 
 from shm_schema import Segment
 
@@ -36,7 +36,9 @@ class InProcessSession:
     ``step()`` runs the next frame (frames 0..``frames``; the last also runs the flush turn), ``finish()``
     copies the final arrays once the ring is done or stopped, ``close()`` closes every participant (always call
     it; a participant that fails in ``create``/``start`` closes those already started). ``participants`` maps
-    ring name -> participant object.
+    ring name -> participant object. ``sinks`` (append to it before stepping) are called as
+    ``sink(segment, frame)`` after each recorded frame and after the flush turn (frame = last + 1), as a launched
+    run's (cosim.runtime.launcher.SinkFactory).
     """
 
     def __init__(self, scenario: Scenario, specs: Mapping[str, ParticipantSpec] | None = None,
@@ -58,8 +60,9 @@ class InProcessSession:
         except BaseException:
             self.close()
             raise
-        self.turns = InProcessRing(self.segment, list(self.participants.values()), self.frames,
-                                   self.recorder.record, deferred=deferred, on_flush=self.recorder.record_flush)
+        self.sinks: list[Callable] = []
+        self.turns = InProcessRing(self.segment, list(self.participants.values()), self.frames, self._on_frame,
+                                   deferred=deferred, on_flush=self._on_flush)
 
     @property
     def done(self) -> bool:
@@ -69,6 +72,16 @@ class InProcessSession:
     def step(self) -> int:
         """Run the next frame; return its id."""
         return self.turns.step()
+
+    def _on_frame(self, frame: int) -> None:
+        self.recorder.record(frame)
+        for sink in self.sinks:
+            sink(self.segment, frame)
+
+    def _on_flush(self) -> None:
+        self.recorder.record_flush()
+        for sink in self.sinks:
+            sink(self.segment, self.frames + 1)
 
     def finish(self) -> InProcessRun:
         """Copy the final arrays (once the ring has stopped) and return the run's record."""
