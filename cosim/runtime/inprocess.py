@@ -74,7 +74,7 @@ class InProcessSession:
         return self.turns.step()
 
     def _on_frame(self, frame: int) -> None:
-        self.recorder.record(frame)
+        self.recorder.record(frame, self.turns.turn_ns if frame > 0 else None)
         for sink in self.sinks:
             sink(self.segment, frame)
 

@@ -190,6 +190,7 @@ class InProcessRing:
         #: the frame the next :meth:`step` runs (``frames + 1`` once the ring is done)
         self.next_frame = 0
         self.current: str | None = None
+        self.turn_ns = 0
 
     @property
     def done(self) -> bool:
@@ -202,6 +203,7 @@ class InProcessRing:
         if frame > self.frames:
             raise RuntimeError(f"the ring has run all its {self.frames + 1} frames")
         clock = time.monotonic_ns
+        t_turn = clock()
         for p, slot in zip(self.participants, self._slots):
             self.current = p.name
             slot["frame"] = frame
@@ -214,6 +216,7 @@ class InProcessRing:
             slot["step_ns"] = clock() - t0
             slot["phase"] = Phase.WAITING
         self.current = None
+        self.turn_ns = clock() - t_turn
         if self._on_frame is not None:
             self._on_frame(frame)
         if frame == self.frames and self.deferred:
