@@ -20,7 +20,7 @@ from cosim.runtime.inprocess import simulate
 from cosim.scenario.options import load_with_options
 
 #: a short perception-in-the-loop run with the mock renderer (perception overlaps: exercises the flush turn)
-MOCK = {"renderer": "mock", "feedback": "perception", "duration": 2.3}
+MOCK = {"renderer": "mock", "feedback": "perception", "duration": 1.3}
 #: a short ground-truth run without a renderer
 GT = {"renderer": "none", "feedback": "ground_truth", "duration": 3.0}
 
