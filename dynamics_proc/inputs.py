@@ -26,9 +26,6 @@ if TYPE_CHECKING:
 
 __all__ = ["INPUTS", "apply_input"]
 
-_Apply = Callable[["World", "ModelParams", Scenario, float], tuple["World", "ModelParams"]]
-
-
 def _longitudinal(w: "World", p: "ModelParams", s: Scenario, v: float):
     return replace(w, setpoint=(v, w.setpoint[1])), p
 
@@ -47,8 +44,8 @@ def _target_fill(w: "World", p: "ModelParams", s: Scenario, v: float):
     return w, replace(p, control=control)
 
 
-#: settable scenario path -> how it changes the world and the parameters
-INPUTS: dict[str, _Apply] = {
+#: settable scenario path -> ``fn(world, params, scenario, value) -> (world, params)``
+INPUTS: dict[str, Callable] = {
     "machine_sync.longitudinal_offset_m": _longitudinal,
     "machine_sync.lateral_offset_m": _lateral,
     "combine.speed_mps": _combine_speed,
