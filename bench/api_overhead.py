@@ -11,11 +11,15 @@ from __future__ import annotations
 
 import argparse
 import statistics
+import sys
 import time
+from pathlib import Path
 
-from cosim import Simulation
-from cosim.runtime.inprocess import simulate
-from cosim.scenario.options import load_with_options
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from cosim import Simulation  # noqa: E402
+from cosim.runtime.inprocess import simulate  # noqa: E402
+from cosim.scenario.options import load_with_options  # noqa: E402
 
 
 def _simulate(s) -> float:

@@ -248,3 +248,21 @@ def test_result_type():
     res = run("default", **{**GT, "duration": 0.3})
     assert isinstance(res, SimulationResult) and res.run_dir is None and res.error is None
     assert len(res.timeseries["frame"]) == 4 and res.arrays["heightmap_truth"].ndim == 2
+
+
+def _python_blocks(path, after: str = ""):
+    text = (REPO / path).read_text()
+    text = text[text.index(after):] if after else text
+    return [b.split("```", 1)[0] for b in text.split("```python\n")[1:]]
+
+
+REPO = __import__("pathlib").Path(__file__).resolve().parent.parent
+
+
+@pytest.mark.parametrize("path,after", [("README.md", "## Python API"), ("docs/api.md", "")])
+def test_documented_examples_run(path, after, tmp_path, monkeypatch):
+    """The first Python block of the README's API section and of docs/api.md run as written."""
+    monkeypatch.chdir(tmp_path)
+    code = _python_blocks(path, after)[0]
+    exec(compile(code, f"{path} (first python block)", "exec"), {})
+    assert any((tmp_path / "runs").iterdir())
