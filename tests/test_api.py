@@ -266,3 +266,13 @@ def test_documented_examples_run(path, after, tmp_path, monkeypatch):
     code = _python_blocks(path, after)[0]
     exec(compile(code, f"{path} (first python block)", "exec"), {})
     assert any((tmp_path / "runs").iterdir())
+
+
+@pytest.mark.slow
+def test_runs_inside_a_dask_worker():
+    """A Dask worker process is daemonic, so nothing in the run may spawn (start-up of the cluster: ~5 s)."""
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as c, \
+            distributed.Client(c) as client:
+        res = client.submit(run, "default", renderer="mock", feedback="perception", duration=1.0, seed=2).result()
+    assert res.completed and len(res.timeseries["frame"]) == 11 and res.error is None
