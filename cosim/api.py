@@ -4,7 +4,8 @@
 in-process transport (:class:`cosim.runtime.inprocess.InProcessSession`: one process, no shared memory, nothing
 spawned, so it works inside Dask workers and multiprocessing pool workers). ``reset`` runs frame 0, ``step``
 the next frames; ``state`` holds the current frame's values keyed like timeseries.csv; ``set`` changes a
-run-time input (:mod:`dynamics_proc.inputs`) from the next frame on. ``run(scenario, **options)`` runs one to
+run-time input from the next frame on (a participant that takes inputs lists their paths in ``settable`` and
+has ``set_input(path, value)``; today dynamics: :mod:`dynamics_proc.inputs`). ``run(scenario, **options)`` runs one to
 the end and returns a :class:`SimulationResult`. With ``out=DIR`` the run directory is written as a launched
 run writes it (cosim.runtime.outputs).
 
@@ -31,10 +32,9 @@ from cosim.runtime.outputs import compose_summary, write_figures, write_outputs,
 from cosim.runtime.state import FrameState, StateReader
 from cosim.scenario.config import Scenario
 from cosim.scenario.options import load_with_options
-from dynamics_proc.inputs import INPUTS
 
 
-__all__ = ["Simulation", "SimulationResult", "run", "INPUTS"]
+__all__ = ["Simulation", "SimulationResult", "run"]
 
 
 @dataclass(frozen=True)
@@ -89,6 +89,8 @@ class Simulation:
         self._closed = False
         self._live = self._scenario
         self._changes: list[dict] = []
+        #: the input paths of the last run, kept for error messages once its participants are gone
+        self._ended_inputs: dict[str, object] = {}
 
     # -- properties ------------------------------------------------------------------------------------------
     @property
@@ -123,6 +125,14 @@ class Simulation:
         if self._state is None:
             self.reset()
         return self._state
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        """The scenario paths :meth:`set` accepts in this run (starts the run if needed)."""
+        self._check_open()
+        if self._session is None and self._result is None:
+            self.reset()
+        return tuple(self._input_owners())
 
     @property
     def result(self) -> SimulationResult | None:
@@ -160,26 +170,25 @@ class Simulation:
         return self._advance(n)
 
     def set(self, path: str, value: float) -> None:
-        """Change run-time input ``path`` to ``value`` from the next frame on (paths: :data:`INPUTS`).
+        """Change run-time input ``path`` to ``value`` from the next frame on (:attr:`inputs` lists the paths).
 
         Raises :class:`~cosim.errors.UnknownInput` (no such scenario field), :class:`~cosim.errors.InputNotSettable`
         (a field that cannot change during a run) or :class:`~cosim.errors.InputOutOfRange` (the scenario's own
         limits refuse the value). The change is recorded: in the next frame's ``dyn_state`` row and in
-        ``summary["inputs_changed"]``."""
+        ``summary["inputs_changed"]``. Starts the run first if needed."""
         self._check_open()
-        if path not in INPUTS:
-            if _is_scenario_field(path):
-                raise InputNotSettable(f"{path!r} cannot change during a run (set it before with overrides=); "
-                                       f"inputs that can: {', '.join(INPUTS)}")
-            raise UnknownInput(f"{path!r} is not a scenario field; run-time inputs: {', '.join(INPUTS)}")
         if self._session is None and self._result is None:
             self.reset()
+        owners = self._input_owners()
+        if path not in owners:
+            known = ", ".join(owners) or "none"
+            if _is_scenario_field(path):
+                raise InputNotSettable(f"{path!r} cannot change during a run (set it before with overrides=); "
+                                       f"inputs that can: {known}")
+            raise UnknownInput(f"{path!r} is not a scenario field; run-time inputs: {known}")
         self._check_running("set")
         self._live = _validated(self._live, path, value)
-        dynamics = self._session.participants.get("dynamics")
-        if dynamics is None:
-            raise InputNotSettable(f"{path!r}: this run has no dynamics participant to take it")
-        dynamics.set_input(path, float(value))
+        owners[path].set_input(path, float(value))
         frame = self.frame + 1
         self._changes.append({"frame": frame, "t_s": frame * self._scenario.timing.sensor_period_s, "path": path,
                               "value": float(value)})
@@ -257,6 +266,17 @@ class Simulation:
             write_figures(self._out, self._live, summary, run.recorder)
         arrays = {k: v.copy() for k, v in run.recorder.arrays.items()}
         self._result = SimulationResult(self._scenario, summary, run.recorder.series(), arrays, self._out, error)
+
+    def _input_owners(self) -> dict[str, object]:
+        """Run-time input path -> the participant that takes it (empty once the run has ended)."""
+        if self._session is None:
+            return self._ended_inputs
+        owners = {}
+        for p in self._session.participants.values():
+            for path in getattr(p, "settable", ()):
+                owners[path] = p
+        self._ended_inputs = dict.fromkeys(owners)
+        return owners
 
     def _make_sinks(self, segment) -> list:
         """The per-frame sinks ``record=`` asks for (as ``run --record``)."""

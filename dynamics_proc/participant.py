@@ -34,6 +34,8 @@ class DynamicsParticipant:
     """Ground truth of the run: vehicles, auger, grain, controller."""
 
     name = WRITER
+    #: run-time inputs :meth:`set_input` takes (cosim.Simulation.set)
+    settable: tuple[str, ...] = tuple(INPUTS)
 
     def __init__(self, scenario: Scenario):
         self.scenario = scenario

@@ -276,3 +276,10 @@ def test_runs_inside_a_dask_worker():
             distributed.Client(c) as client:
         res = client.submit(run, "default", renderer="mock", feedback="perception", duration=1.0, seed=2).result()
     assert res.completed and len(res.timeseries["frame"]) == 11 and res.error is None
+
+
+def test_inputs_lists_what_set_accepts():
+    with Simulation("default", **GT) as sim:
+        assert sim.inputs == ("machine_sync.longitudinal_offset_m", "machine_sync.lateral_offset_m",
+                              "combine.speed_mps", "controller.target_fill_m")
+        assert sim.frame == 0
