@@ -283,3 +283,14 @@ def test_inputs_lists_what_set_accepts():
         assert sim.inputs == ("machine_sync.longitudinal_offset_m", "machine_sync.lateral_offset_m",
                               "combine.speed_mps", "controller.target_fill_m")
         assert sim.frame == 0
+
+
+def test_record_writes_an_mcap_recording_of_every_frame(tmp_path):
+    from cosim.recording.reader import read_recording
+
+    with pytest.raises(ValueError, match="record= needs out="):
+        Simulation("default", **GT, record=True)
+    res = run("default", **{**GT, "duration": 1.0}, out=tmp_path, record=True)
+    rec = read_recording(tmp_path / "recording.mcap")
+    assert rec.frames == list(range(11)) and not rec.truncated
+    assert res.summary["frames"] == 11
