@@ -19,8 +19,9 @@ from cosim.errors import (InputNotSettable, InputOutOfRange, ParticipantCrashed,
 from cosim.runtime.inprocess import simulate
 from cosim.scenario.options import load_with_options
 
-#: a short perception-in-the-loop run with the mock renderer (perception overlaps: exercises the flush turn)
-MOCK = {"renderer": "mock", "feedback": "perception", "duration": 1.3}
+#: a short perception-in-the-loop run with the mock renderer at a tenth of the rig's resolution (perception
+#: overlaps: exercises the flush turn)
+MOCK = {"renderer": "mock", "feedback": "perception", "duration": 1.3, "overrides": {"render.mock_scale": 0.1}}
 #: a short ground-truth run without a renderer
 GT = {"renderer": "none", "feedback": "ground_truth", "duration": 3.0}
 
@@ -74,7 +75,8 @@ def test_state_is_keyed_like_the_timeseries_and_holds_the_current_frame():
 
 
 def test_reset_with_the_same_seed_reproduces_and_another_seed_differs():
-    with Simulation("default", **MOCK, overrides={"sensor.noise.range_sigma_m": 0.02}) as sim:
+    noisy = {**MOCK, "overrides": {**MOCK["overrides"], "sensor.noise.range_sigma_m": 0.02}}
+    with Simulation("default", **noisy) as sim:
         def first(seed):
             sim.reset(seed=seed)
             sim.step(6)
@@ -228,7 +230,7 @@ def test_a_participant_fault_ends_the_run_named_and_writes_the_outputs(tmp_path,
 
 
 def _pool_job(seed: int) -> tuple[bool, int, float]:
-    res = run("default", renderer="mock", feedback="perception", duration=1.0, seed=seed)
+    res = run("default", **{**MOCK, "duration": 1.0}, seed=seed)
     return res.completed, res.summary["frames"], float(res.timeseries["dyn_state.t_s"][-1])
 
 
