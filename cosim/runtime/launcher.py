@@ -28,7 +28,7 @@ from cosim.scenario.config import Scenario
 from cosim.errors import ParticipantCrashed, ParticipantDied, RunError, RunInterrupted
 from .lockstep import RingPlan, Token
 from .logs import configure_logging
-from .outputs import default_run_dir, run_data, write_outputs, write_scenario
+from .outputs import default_run_dir, write_figures, write_outputs, write_scenario
 from .recorder import Recorder
 from .specs import SUPERVISOR, ParticipantSpec, build_schema, ring_specs
 from .threadpools import single_threaded_pools
@@ -268,13 +268,7 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
         info["ended"] = True
         (run_dir / "run.json").write_text(json.dumps(info, indent=2) + "\n")
     t_outputs = time.perf_counter()
-    if scenario.outputs.figures and "dyn_state" in schema and recorder is not None and recorder.frames:
-        try:
-            from cosim.report import write_run_figures
-
-            write_run_figures(run_data(run_dir, scenario, summary, recorder))
-        except Exception:  # noqa: BLE001 - figures are a convenience; the run's data is already written
-            log.exception("writing the run's figures failed")
+    write_figures(run_dir, scenario, summary, recorder)
     code = EXIT_OK if error is None else EXIT_INTERRUPTED if isinstance(error, RunInterrupted) else EXIT_RUN_ERROR
     t_end = time.perf_counter()
     log.info("run %s %s in %.2f s (exit %d); start-up %.2f s to the first frame (set-up before spawning %.2f s), "

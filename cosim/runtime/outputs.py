@@ -20,8 +20,8 @@ from cosim.errors import RunError
 from .recorder import Recorder
 from .specs import ParticipantSpec, load_callable
 
-__all__ = ["default_run_dir", "write_scenario", "compose_summary", "write_outputs", "saved_maps", "run_data",
-           "clean_json", "STAGE_KEYS", "SAVED_MAPS"]
+__all__ = ["default_run_dir", "write_scenario", "compose_summary", "write_outputs", "write_figures", "saved_maps",
+           "run_data", "clean_json", "STAGE_KEYS", "SAVED_MAPS"]
 
 log = logging.getLogger("cosim.runtime.outputs")
 
@@ -136,15 +136,29 @@ def run_data(run_dir: Path, scenario: Scenario, summary: dict, recorder: Recorde
 
 
 def write_outputs(run_dir: Path, scenario: Scenario, recorder: Recorder | None, ring: Sequence[ParticipantSpec],
-                  *, wall_time_s: float, error: RunError | None) -> dict:
-    """Write timeseries.csv, the final arrays and summary.json; return the summary."""
+                  *, wall_time_s: float, error: RunError | None, extra: dict | None = None) -> dict:
+    """Write timeseries.csv, the final arrays and summary.json (with ``extra``'s keys added); return the summary."""
     if recorder is not None:
         recorder.write_csv(run_dir / "timeseries.csv")
         for name, a in saved_maps(recorder).items():
             np.save(run_dir / f"{name}.npy", a)
     summary = compose_summary(scenario, recorder, ring, wall_time_s=wall_time_s, error=error)
+    summary.update(extra or {})
     (run_dir / "summary.json").write_text(json.dumps(clean_json(summary), indent=2) + "\n")
     return summary
+
+
+def write_figures(run_dir: Path, scenario: Scenario, summary: dict, recorder: Recorder | None) -> None:
+    """The run's figures (``outputs.figures``; needs dynamics' record). A failure is logged, never raised: the
+    run's data is already written."""
+    if not scenario.outputs.figures or recorder is None or not recorder.frames or "dyn_state" not in recorder.blocks:
+        return
+    try:
+        from cosim.report import write_run_figures
+
+        write_run_figures(run_data(run_dir, scenario, summary, recorder))
+    except Exception:  # noqa: BLE001 - figures are a convenience
+        log.exception("writing the run's figures failed")
 
 
 def _summarize(spec: ParticipantSpec, scenario: Scenario, series: dict, recorder: Recorder) -> dict:

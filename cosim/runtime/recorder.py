@@ -37,6 +37,8 @@ class Recorder:
 
     def __init__(self, seg: Segment, members: tuple[str, ...], *, deferred: bool = False):
         self._seg = seg
+        #: names of the segment's blocks
+        self.blocks = frozenset(b.name for b in seg.schema.blocks)
         self.members = members
         #: whether a member publishes one turn late: the hand-off time is then not turn minus steps
         self.deferred = deferred
