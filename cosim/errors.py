@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 __all__ = [
     "CosimError", "Problem", "ScenarioError", "RunError", "HandoffTimeout", "FrameMismatch",
-    "ParticipantCrashed", "ParticipantDied", "RunInterrupted", "RendererUnavailable",
+    "ParticipantCrashed", "ParticipantDied", "ParticipantHung", "RunInterrupted", "OutputError", "RendererUnavailable",
 ]
 
 
@@ -64,6 +64,14 @@ class ParticipantCrashed(RunError):
 
 class ParticipantDied(RunError):
     """A participant process ended without reporting (killed by a signal, os._exit, ...)."""
+
+
+class ParticipantHung(RunError):
+    """A participant process stopped running (SIGSTOP, a deadlock): its liveness heartbeat stopped."""
+
+
+class OutputError(RunError):
+    """Writing the run's outputs failed (no space left on the device, permission): names the path."""
 
 
 class RunInterrupted(RunError):

@@ -2,11 +2,14 @@
 
 Each role writes a struct, a trace array (frame, monotonic ns) and, for the renderer, an image. Faults are
 chosen per role with keyword arguments: ``crash_at`` (raise), ``kill_at`` (SIGKILL itself), ``exit_at``
-(os._exit without report), ``hang_at`` (block far longer than any timeout); ``stamp_file`` receives the
-monotonic time of a ``kill_at`` kill.
+(os._exit without report), ``hang_at`` (block far longer than any timeout, still beating), ``stop_at`` (SIGSTOP
+itself; ``stop_at=-2``: in ``start``, before frame 0), ``deadlock_at`` (sleep in C holding the GIL, so its
+heartbeat thread stops too); ``stamp_file`` receives the monotonic time of a ``kill_at``/``stop_at``/``deadlock_at``
+fault.
 """
 from __future__ import annotations
 
+import ctypes
 import os
 import signal
 import threading
@@ -42,21 +45,30 @@ class Fake:
     """One stand-in role; the fault keywords pick the frame at which it misbehaves (-1: never)."""
 
     def __init__(self, scenario, role, crash_at=-1, kill_at=-1, exit_at=-1, hang_at=-1, start_delay_s=0.0,
-                 stamp_file="", defer=False, rest_s=0.0):
+                 stamp_file="", defer=False, rest_s=0.0, stop_at=-1, deadlock_at=-1):
         self.name = role
         #: perception only: publish one turn late and return the rest of the step (cosim.runtime.participant);
         #: ``rest_s``: how long that rest takes (a sleep: lets a test see it overlap the next frame)
         self.defer, self.rest_s, self.pending = defer, rest_s, None
         self.scenario = scenario
-        self.faults = dict(crash_at=crash_at, kill_at=kill_at, exit_at=exit_at, hang_at=hang_at)
+        self.faults = dict(crash_at=crash_at, kill_at=kill_at, exit_at=exit_at, hang_at=hang_at, stop_at=stop_at,
+                           deadlock_at=deadlock_at)
         self.start_delay_s = start_delay_s
         self.stamp_file = stamp_file
         self.seg = None
 
     def start(self, segment):
         self.seg = segment
+        if self.faults["stop_at"] == -2:
+            self._stamp()
+            os.kill(os.getpid(), signal.SIGSTOP)
         if self.start_delay_s:
             time.sleep(self.start_delay_s)
+
+    def _stamp(self):
+        if self.stamp_file:  # CLOCK_MONOTONIC is system-wide: the test compares it with its own clock
+            with open(self.stamp_file, "w") as f:
+                f.write(repr(time.monotonic()))
 
     def _faults(self, frame):
         if frame == self.faults["crash_at"]:
@@ -70,6 +82,12 @@ class Fake:
             os._exit(3)
         if frame == self.faults["hang_at"]:
             threading.Event().wait(3600.0)
+        if frame == self.faults["stop_at"]:
+            self._stamp()
+            os.kill(os.getpid(), signal.SIGSTOP)
+        if frame == self.faults["deadlock_at"]:
+            self._stamp()
+            ctypes.PyDLL(None).sleep(3600)  # a PyDLL call keeps the GIL: no Python thread runs meanwhile
 
     def step(self, frame):
         self._faults(frame)

@@ -1,0 +1,148 @@
+"""Liveness apart from slowness (DESIGN.md section 1): heartbeats, stopped processes, bounded ends.
+
+A child beats from a thread of its own (:class:`Heartbeat`): every ``BEAT_S`` it stamps CLOCK_MONOTONIC (one
+clock for every process of the machine) into its slot's ``alive_ns``, whatever its frame work does, so a long
+frame still beats. A process stopped by SIGSTOP stops every thread, and one deadlocked while holding the GIL
+stops the beating thread too: its beat ages. :class:`Watch` (run by the supervisor between wait slices) names
+such a process once its beat is older than ``STALL_S`` (confirmed ``CONFIRM_S`` later, so a supervisor that was
+itself descheduled does not blame a child that was not), and names a process the kernel reports stopped
+(``/proc/<pid>/stat`` state ``T``) as soon as it is, before it ever beat included. A process that beats but does
+not finish its frame is left to the hand-off timeout (cosim.runtime.lockstep).
+
+:func:`end_process` ends any child in bounded time: SIGTERM, then SIGKILL (which also ends a stopped process).
+"""
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+from typing import Callable, Mapping
+
+from shm_schema import Phase, Segment
+from shm_schema.layout import SLOT_WORD
+
+from cosim.errors import ParticipantHung
+
+__all__ = ["BEAT_S", "STALL_S", "CONFIRM_S", "Heartbeat", "Watch", "process_state", "is_stopped", "end_process"]
+
+#: period of a child's liveness beat, s
+BEAT_S = 0.1
+#: a beat older than this means the process is not running (stopped, deadlocked), s
+STALL_S = 1.0
+#: a stall is confirmed only if it still holds this much later (the supervisor may itself have been paused), s
+CONFIRM_S = 0.25
+
+_ALIVE = SLOT_WORD["alive_ns"]
+_NS = 1e9
+
+
+class Heartbeat:
+    """A daemon thread stamping ``time.monotonic_ns()`` into ``words[alive_ns]`` every ``period_s``."""
+
+    def __init__(self, words: memoryview, period_s: float = BEAT_S):
+        self._words = words
+        self._period = period_s
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="cosim-heartbeat", daemon=True)
+
+    def start(self) -> "Heartbeat":
+        self._words[_ALIVE] = time.monotonic_ns()
+        self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        words, clock = self._words, time.monotonic_ns
+        while not self._stop.wait(self._period):
+            words[_ALIVE] = clock()
+
+    def stop(self) -> None:
+        """End the thread (idempotent); the slot keeps the last beat."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(2 * self._period)
+
+
+def process_state(pid: int) -> str:
+    """The kernel's one-letter state of ``pid`` (``R`` running, ``S`` sleeping, ``T`` stopped, ``Z`` zombie...),
+    or ``""`` when it cannot be read (gone, not Linux)."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            raw = f.read()
+    except OSError:
+        return ""
+    # "pid (comm) S ...": comm may hold spaces and parentheses, the state follows the last ')'
+    tail = raw[raw.rfind(b")") + 2:]
+    return tail[:1].decode("ascii", "replace")
+
+
+def is_stopped(pid: int) -> bool:
+    """Whether ``pid`` is stopped by a signal (SIGSTOP, SIGTSTP) or a tracer."""
+    return process_state(pid) in ("T", "t")
+
+
+class Watch:
+    """Names a ring child that stopped running; call :meth:`check` between wait slices (it raises)."""
+
+    def __init__(self, seg: Segment, procs: Mapping[str, object], clock: Callable[[], int] = time.monotonic_ns):
+        self._seg = seg
+        self._procs = procs
+        self._clock = clock
+        self._words = {n: seg.slot_words(n) for n in procs}
+        #: name -> (beat seen stale, when it was first seen so) for the confirmation
+        self._suspect: dict[str, tuple[int, int]] = {}
+
+    def check(self) -> None:
+        """Raise :class:`ParticipantHung` for a child stopped by a signal, or whose beat stalled (confirmed)."""
+        now = self._clock()
+        for name, proc in self._procs.items():
+            pid = getattr(proc, "pid", None)
+            if pid is None or getattr(proc, "exitcode", None) is not None:
+                continue
+            words = self._words[name]
+            if int(words[SLOT_WORD["phase"]]) in (Phase.DONE, Phase.CLOSED, Phase.FAILED):
+                continue
+            beat = int(words[_ALIVE])
+            stopped = is_stopped(pid)
+            stale = beat > 0 and (now - beat) / _NS > STALL_S
+            if not (stopped or stale):
+                self._suspect.pop(name, None)
+                continue
+            seen = self._suspect.get(name)
+            if seen is None or seen[0] != beat:
+                self._suspect[name] = (beat, now)
+                continue
+            if (now - seen[1]) / _NS < CONFIRM_S:
+                continue
+            raise self._hung(name, pid, words, beat, now, stopped)
+
+    def _hung(self, name: str, pid: int, words, beat: int, now: int, stopped: bool) -> ParticipantHung:
+        frame = int(words[SLOT_WORD["frame"]])
+        phase = int(words[SLOT_WORD["phase"]])
+        label = Phase.NAMES[phase] if 0 <= phase < len(Phase.NAMES) else str(phase)
+        where = f"during frame {frame} ({label})" if frame >= 0 else f"before frame 0 ({label})"
+        since = f"its last heartbeat was {(now - beat) / _NS:.1f} s ago" if beat > 0 else "it never beat"
+        if stopped:
+            text = f"{name} (pid {pid}) is stopped {where} (by SIGSTOP, Ctrl-Z or a debugger); {since}"
+        else:
+            text = (f"{name} (pid {pid}) stopped beating {where}: deadlocked, or blocked in code that holds the "
+                    f"GIL; {since}")
+        return ParticipantHung(text, process=name, frame=frame)
+
+
+def end_process(proc, grace_s: float) -> None:
+    """End ``proc`` (a multiprocessing process) in bounded time: SIGTERM, ``grace_s`` to go, then SIGKILL (which
+    also ends a stopped process; SIGTERM stays pending in one). Never blocks longer than ``grace_s`` + 2 s."""
+    if proc.exitcode is not None or proc.pid is None:
+        return
+    try:
+        if is_stopped(proc.pid):
+            os.kill(proc.pid, signal.SIGKILL)
+        else:
+            proc.terminate()
+            proc.join(grace_s)
+            if proc.exitcode is None:
+                proc.kill()
+    except ProcessLookupError:
+        pass
+    proc.join(2.0)
