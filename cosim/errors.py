@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 __all__ = [
     "CosimError", "Problem", "ScenarioError", "RunError", "HandoffTimeout", "FrameMismatch",
-    "ParticipantCrashed", "ParticipantDied", "ParticipantHung", "RunInterrupted", "OutputError", "RendererUnavailable",
+    "ParticipantCrashed", "ParticipantDied", "ParticipantHung", "RunInterrupted", "OutputError", "RunRefused", "RendererUnavailable",
 ]
 
 
@@ -38,6 +38,11 @@ class ScenarioError(CosimError):
     def __init__(self, problems: list[Problem]):
         self.problems = list(problems)
         super().__init__("\n".join(str(p) for p in self.problems) or "invalid scenario")
+
+
+class RunRefused(CosimError):
+    """A run cannot start (its ``--out`` is not a writable directory or another run holds it, its shared memory
+    would not fit): nothing was started. The CLI exits 2."""
 
 
 class RunError(CosimError):

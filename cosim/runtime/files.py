@@ -15,7 +15,7 @@ import fcntl
 import os
 from pathlib import Path
 
-from cosim.errors import CosimError, OutputError
+from cosim.errors import OutputError, RunRefused
 
 __all__ = ["LOCK_NAME", "RunDirError", "RunDirLock", "atomic_write", "write_error", "open_run_dir",
            "overwrite_in_place"]
@@ -24,7 +24,7 @@ __all__ = ["LOCK_NAME", "RunDirError", "RunDirLock", "atomic_write", "write_erro
 LOCK_NAME = ".lock"
 
 
-class RunDirError(CosimError):
+class RunDirError(RunRefused):
     """The run directory cannot be used (not a directory, not writable, another run holds it)."""
 
 

@@ -107,8 +107,9 @@ class RunFiles:
     frame k arrive with frame k + 1), held back until :meth:`finish`.
     """
 
-    def __init__(self, run_dir: Path, recorder: Recorder, *, lag: int = 0, block_s: float = BLOCK_S):
-        self.recorder, self.lag, self.block_s = recorder, lag, block_s
+    def __init__(self, run_dir: Path, recorder: Recorder, *, lag: int = 0, block_s: float | None = None):
+        self.recorder, self.lag = recorder, lag
+        self.block_s = BLOCK_S if block_s is None else block_s
         self._carry: dict = {}
         self._written = 0
         self._t_last = time.monotonic()
