@@ -29,6 +29,7 @@ from typing import Callable, Mapping, Sequence
 from shm_schema import Phase, Segment
 from shm_schema.layout import SLOT_WORD
 
+from .capacity import check_segment_fits
 from .child import ChildArgs, child_main
 from cosim.scenario.config import Scenario
 from cosim.errors import OutputError, ParticipantCrashed, ParticipantDied, RunError, RunInterrupted
@@ -153,17 +154,21 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
     completed frame (see :data:`SinkFactory`). The run directory's ``run.json`` names the segment while the run
     lives, so that ``python -m cosim.viewer --attach RUN_DIR`` can find it. Raises
     :class:`cosim.runtime.files.RunDirError` before anything starts when the run directory cannot be used (not a
-    directory, not writable, another run writing there).
+    directory, not writable, another run writing there), and :class:`cosim.errors.RunRefused` when its shared
+    memory would not fit (cosim.runtime.capacity).
     """
     t_enter = time.perf_counter()
     stop = StopSignals().install()
     try:
+        ring = ring_specs(scenario, specs)
+        schema = build_schema(scenario, ring)
+        check_segment_fits(schema)
         run_dir = Path(out_dir) if out_dir is not None else default_run_dir(scenario)
-        run = _Run(scenario, run_dir, open_run_dir(run_dir), stop, t_enter)
+        run = _Run(scenario, run_dir, open_run_dir(run_dir), stop, t_enter, ring=ring, schema=schema)
         try:
             error: RunError | None = None
             try:
-                _set_up(run, specs, console_log, observers, sinks)
+                _set_up(run, console_log, observers, sinks)
                 _supervise(run, progress)
             except RunError as exc:
                 error = exc
@@ -178,7 +183,7 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
         stop.restore()
 
 
-def _set_up(run: _Run, specs, console_log: bool, observers: Sequence[ObserverSpec],
+def _set_up(run: _Run, console_log: bool, observers: Sequence[ObserverSpec],
             sinks: Sequence[SinkFactory]) -> None:
     """Logging, scenario.yaml, the "running" summary, the segment, then observers, sinks and ring children.
     A stop signal is honoured between any two steps."""
@@ -186,8 +191,7 @@ def _set_up(run: _Run, specs, console_log: bool, observers: Sequence[ObserverSpe
     run.log_path = run.run_dir / "log.txt"
     configure_logging(str(run.log_path), console=console_log)
     write_scenario(run.run_dir, scenario)
-    run.ring = ring_specs(scenario, specs)
-    run.schema = schema = build_schema(scenario, run.ring)
+    schema = run.schema
     run.plan = plan = RingPlan(tuple(s.name for s in run.ring), scenario.frames, SUPERVISOR,
                                tuple(s.name for s in run.ring if s.defers_outputs(scenario)))
     run.name = name = f"cosim-{os.getpid()}-{secrets.token_hex(3)}"
