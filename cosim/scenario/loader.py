@@ -364,9 +364,9 @@ def _too_large(filename: str, size: int) -> Problem:
 def _check_world(doc: _Doc, scenario: Scenario, filename: str) -> None:
     """Raise the plausibility problems of the frame-0 world (cosim.scenario.plausibility) at their keys."""
     for loc, message in implausible(scenario):
-        found = _existing(doc.data, loc)
-        mark = doc.values.get(found, doc.values[()])
-        doc.problem(mark, loc, message)
+        found = _existing(doc.data, loc)  # a section's problem at its key, a value's at the value
+        marks = doc.keys if isinstance(_at(doc.data, found), dict) and found else doc.values
+        doc.problem(marks.get(found, doc.values[()]), loc, message)
     _finish(doc, filename)
 
 
