@@ -125,13 +125,14 @@ class Recorder:
         return np.frombuffer(b"".join(out), dtype=dtype)
 
     def series(self) -> dict[str, np.ndarray]:
-        """Column name -> (completed frames,) float64 array (the ``frame`` column included)."""
+        """Column name -> (completed frames,) float64 array (the ``frame`` column included), in the order of
+        timeseries.csv then timing.csv (as ``cosim.report.load_run`` reads them back)."""
         out = {"frame": np.asarray(self.frames, dtype=np.float64)}
         for name, _, b in self._structs:
             rows = self._aligned(name, b.dtype)
             for f in b.fields:
                 out[f"{name}.{f.name}"] = rows[f.name].astype(np.float64)
-        return out
+        return {c: out[c] for c in self.series_columns + self.timing_columns[1:]}
 
     def timing_medians_ms(self) -> dict[str, float]:
         """Median per-frame time of each member's step, of the whole turn (``frame``) and of the hand-offs
