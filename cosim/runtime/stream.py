@@ -25,7 +25,7 @@ from .recorder import Recorder
 __all__ = ["BLOCK_S", "SUMMARY_RESERVE", "RunFiles", "write_running_summary", "write_final_summary"]
 
 #: seconds of run between two appended blocks of rows
-BLOCK_S = 1.0
+BLOCK_S = 0.5
 #: bytes summary.json takes from the start (JSON padded with spaces), so the final one fits on a full disk
 SUMMARY_RESERVE = 16 << 10
 
