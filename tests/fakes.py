@@ -153,3 +153,11 @@ def specs(**faults_by_role):
         out[role] = ParticipantSpec(role, "fakes:make", f"fakes:blocks_{role}", kwargs={"role": role, **kw},
                                     defers="fakes:always" if kw.get("defer") else None)
     return out
+
+
+def observe(segment, stop_self=False):
+    """A stand-in observer (cosim.runtime.launcher.ObserverSpec target): idles until it is ended; with
+    ``stop_self`` it SIGSTOPs itself first (a hung viewer)."""
+    if stop_self:
+        os.kill(os.getpid(), signal.SIGSTOP)
+    threading.Event().wait(3600.0)

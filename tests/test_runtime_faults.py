@@ -98,6 +98,19 @@ def test_a_stopped_recorder_never_holds_the_run(stop_at, tmp_path, shm_clean, ca
     assert len((tmp_path / "run" / "timeseries.csv").read_text().splitlines()) == 1 + 11
 
 
+def test_a_stopped_viewer_is_ended_with_the_run(tmp_path, shm_clean):
+    from cosim.runtime.launcher import ObserverSpec
+
+    t0 = time.monotonic()
+    res = launch(scenario(), tmp_path / "run", specs=fakes.specs(), console_log=False,
+                 observers=[ObserverSpec("stopped", "fakes:observe", {"stop_self": True}),
+                            ObserverSpec("idle", "fakes:observe")])
+    assert res.completed and time.monotonic() - t0 < 15
+    from test_runtime_ring import children_of
+
+    assert not children_of(os.getpid())
+
+
 def test_a_killed_recorder_is_one_line_not_a_traceback(tmp_path, shm_clean, capfd):
     make = mcap_sink(RecordOptions(queue_frames=4))
 

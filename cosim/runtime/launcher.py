@@ -32,9 +32,9 @@ from shm_schema.layout import SLOT_WORD
 from .capacity import check_segment_fits
 from .child import ChildArgs, child_main
 from cosim.scenario.config import Scenario
-from cosim.errors import OutputError, ParticipantCrashed, ParticipantDied, RunError, RunInterrupted
+from cosim.errors import OutputError, RunError, RunInterrupted
 from .files import RunDirLock, atomic_write, open_run_dir
-from .liveness import Watch, end_process
+from .liveness import Watch, child_failure, stop_processes
 from .lockstep import RingPlan, Token
 from .logs import configure_logging
 from .outputs import default_run_dir, finish_outputs, run_data, write_scenario
@@ -96,21 +96,6 @@ class RunResult:
     @property
     def completed(self) -> bool:
         return bool(self.summary.get("completed"))
-
-
-def _child_failure(name: str, proc, seg: Segment) -> RunError:
-    err = seg.read_error(name)
-    slot = seg.slot(name)
-    frame = int(slot["frame"])
-    if err:
-        return ParticipantCrashed(
-            f"{name} raised {err['type']} at frame {err['frame']}: {err['message']}",
-            process=name, frame=int(err["frame"]), detail=err.get("traceback", ""))
-    code = proc.exitcode
-    how = f"signal {signal.Signals(-code).name}" if code is not None and code < 0 else f"exit status {code}"
-    phase = Phase.NAMES[int(slot["phase"])] if 0 <= int(slot["phase"]) < len(Phase.NAMES) else "?"
-    return ParticipantDied(f"{name} (pid {proc.pid}) died with {how} during frame {frame} (phase {phase})",
-                           process=name, frame=frame)
 
 
 @dataclass
@@ -253,7 +238,7 @@ def _supervise(run: _Run, progress: Progress | None) -> None:
             if p.exitcode == 0 and int(seg.slot(n)["phase"]) in (Phase.DONE, Phase.CLOSED):
                 finished.add(n)
                 continue
-            raise _child_failure(n, p, seg)
+            raise child_failure(n, p, seg)
 
     token = Token(seg, run.sems)
     first = plan.members[0]
@@ -310,8 +295,8 @@ def _tear_down(run: _Run, error: RunError | None) -> RunResult:
                 close()
             except Exception:  # noqa: BLE001 - a sink's close must not hide the run's outcome
                 log.exception("closing a frame sink failed")
-    _stop_children(run.procs, graceful=error is None)
-    _stop_children(run.watchers, graceful=False)
+    stop_processes(run.procs, graceful=error is None, join_timeout_s=JOIN_TIMEOUT_S, grace_s=TERMINATE_GRACE_S)
+    stop_processes(run.watchers, graceful=False, join_timeout_s=JOIN_TIMEOUT_S, grace_s=TERMINATE_GRACE_S)
     if run.recorder is not None:
         run.recorder.finish()
     t_stopped = time.perf_counter()
@@ -395,26 +380,3 @@ def _warn_dead_observers(watchers: Mapping[str, mp.process.BaseProcess], warned:
         if w.exitcode is not None and n not in warned:
             warned.add(n)
             log.warning("observer %s ended (exit %s); the run goes on without it", n, w.exitcode)
-
-
-def _stop_children(procs: Mapping[str, mp.process.BaseProcess], *, graceful: bool) -> None:
-    """Join children after a clean finish; otherwise (or past JOIN_TIMEOUT_S) end them: SIGTERM, then SIGKILL,
-    which also ends a stopped one. Never leaves one, never waits unbounded."""
-    if graceful:
-        deadline = time.monotonic() + JOIN_TIMEOUT_S
-        for p in procs.values():
-            p.join(max(0.0, deadline - time.monotonic()))
-    alive = [p for p in procs.values() if p.is_alive()]
-    for p in alive:
-        if p.exitcode is None:
-            try:
-                p.terminate()
-            except ProcessLookupError:
-                pass
-    deadline = time.monotonic() + TERMINATE_GRACE_S
-    for p in alive:
-        p.join(max(0.0, deadline - time.monotonic()))
-    for p in procs.values():
-        if p.is_alive():
-            log.warning("%s (pid %s) did not end on SIGTERM; killing it", p.name, p.pid)
-            end_process(p, 0.0)

@@ -13,6 +13,7 @@ not finish its frame is left to the hand-off timeout (cosim.runtime.lockstep).
 """
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import threading
@@ -22,9 +23,10 @@ from typing import Callable, Mapping
 from shm_schema import Phase, Segment
 from shm_schema.layout import SLOT_WORD
 
-from cosim.errors import ParticipantHung
+from cosim.errors import ParticipantCrashed, ParticipantDied, ParticipantHung, RunError
 
-__all__ = ["BEAT_S", "STALL_S", "CONFIRM_S", "Heartbeat", "Watch", "process_state", "is_stopped", "end_process"]
+__all__ = ["BEAT_S", "STALL_S", "CONFIRM_S", "Heartbeat", "Watch", "process_state", "is_stopped", "end_process",
+           "stop_processes", "child_failure"]
 
 #: period of a child's liveness beat, s
 BEAT_S = 0.1
@@ -32,6 +34,8 @@ BEAT_S = 0.1
 STALL_S = 1.0
 #: a stall is confirmed only if it still holds this much later (the supervisor may itself have been paused), s
 CONFIRM_S = 0.25
+
+log = logging.getLogger("cosim.runtime.liveness")
 
 _ALIVE = SLOT_WORD["alive_ns"]
 _NS = 1e9
@@ -146,3 +150,43 @@ def end_process(proc, grace_s: float) -> None:
     except ProcessLookupError:
         pass
     proc.join(2.0)
+
+
+def child_failure(name: str, proc, seg: Segment) -> RunError:
+    """The error of child ``name`` that ended before its last frame: its own report (with traceback) when it
+    wrote one, else how it died (signal or exit status), the frame and the phase."""
+    err = seg.read_error(name)
+    slot = seg.slot(name)
+    frame = int(slot["frame"])
+    if err:
+        return ParticipantCrashed(
+            f"{name} raised {err['type']} at frame {err['frame']}: {err['message']}",
+            process=name, frame=int(err["frame"]), detail=err.get("traceback", ""))
+    code = proc.exitcode
+    how = f"signal {signal.Signals(-code).name}" if code is not None and code < 0 else f"exit status {code}"
+    phase = Phase.NAMES[int(slot["phase"])] if 0 <= int(slot["phase"]) < len(Phase.NAMES) else "?"
+    return ParticipantDied(f"{name} (pid {proc.pid}) died with {how} during frame {frame} (phase {phase})",
+                           process=name, frame=frame)
+
+
+def stop_processes(procs: Mapping[str, object], *, graceful: bool, join_timeout_s: float, grace_s: float) -> None:
+    """Join children after a clean finish; otherwise (or past ``join_timeout_s``) end them: SIGTERM, ``grace_s``,
+    then SIGKILL, which also ends a stopped one. Never leaves one, never waits unbounded."""
+    if graceful:
+        deadline = time.monotonic() + join_timeout_s
+        for p in procs.values():
+            p.join(max(0.0, deadline - time.monotonic()))
+    alive = [p for p in procs.values() if p.is_alive()]
+    for p in alive:
+        if p.exitcode is None:
+            try:
+                p.terminate()
+            except ProcessLookupError:
+                pass
+    deadline = time.monotonic() + grace_s
+    for p in alive:
+        p.join(max(0.0, deadline - time.monotonic()))
+    for p in procs.values():
+        if p.is_alive():
+            log.warning("%s (pid %s) did not end on SIGTERM; killing it", p.name, p.pid)
+            end_process(p, 0.0)
