@@ -4,7 +4,7 @@ Each role writes a struct, a trace array (frame, monotonic ns) and, for the rend
 chosen per role with keyword arguments: ``crash_at`` (raise), ``kill_at`` (SIGKILL itself), ``exit_at``
 (os._exit without report), ``hang_at`` (block far longer than any timeout, still beating), ``stop_at`` (SIGSTOP
 itself; ``stop_at=-2``: in ``start``, before frame 0), ``deadlock_at`` (sleep in C holding the GIL, so its
-heartbeat thread stops too); ``stamp_file`` receives the monotonic time of a ``kill_at``/``stop_at``/``deadlock_at``
+heartbeat thread stops too), ``busy_at`` (``busy_s`` of CPU inside C calls that keep the GIL: slow, not hung); ``stamp_file`` receives the monotonic time of a ``kill_at``/``stop_at``/``deadlock_at``
 fault.
 """
 from __future__ import annotations
@@ -45,14 +45,15 @@ class Fake:
     """One stand-in role; the fault keywords pick the frame at which it misbehaves (-1: never)."""
 
     def __init__(self, scenario, role, crash_at=-1, kill_at=-1, exit_at=-1, hang_at=-1, start_delay_s=0.0,
-                 stamp_file="", defer=False, rest_s=0.0, stop_at=-1, deadlock_at=-1):
+                 stamp_file="", defer=False, rest_s=0.0, stop_at=-1, deadlock_at=-1, busy_at=-1, busy_s=0.0):
         self.name = role
         #: perception only: publish one turn late and return the rest of the step (cosim.runtime.participant);
         #: ``rest_s``: how long that rest takes (a sleep: lets a test see it overlap the next frame)
         self.defer, self.rest_s, self.pending = defer, rest_s, None
         self.scenario = scenario
         self.faults = dict(crash_at=crash_at, kill_at=kill_at, exit_at=exit_at, hang_at=hang_at, stop_at=stop_at,
-                           deadlock_at=deadlock_at)
+                           deadlock_at=deadlock_at, busy_at=busy_at)
+        self.busy_s = busy_s
         self.start_delay_s = start_delay_s
         self.stamp_file = stamp_file
         self.seg = None
@@ -85,6 +86,8 @@ class Fake:
         if frame == self.faults["stop_at"]:
             self._stamp()
             os.kill(os.getpid(), signal.SIGSTOP)
+        if frame == self.faults["busy_at"]:
+            _busy_holding_the_gil(self.busy_s)
         if frame == self.faults["deadlock_at"]:
             self._stamp()
             ctypes.PyDLL(None).sleep(3600)  # a PyDLL call keeps the GIL: no Python thread runs meanwhile
@@ -134,6 +137,20 @@ class Fake:
 
     def close(self):
         self.seg = None
+
+
+def _busy_holding_the_gil(seconds: float) -> None:
+    """Burn CPU for about ``seconds`` in one C call that keeps the GIL (regex backtracking, ~1.85x per extra
+    character, sized from a short timed call), like one long draw call."""
+    import math
+    import re
+
+    pattern, n0 = re.compile(r"(a+)+$"), 20
+    t0 = time.perf_counter()
+    pattern.match("a" * n0 + "b")
+    small = max(time.perf_counter() - t0, 1e-4)
+    n = n0 + max(0, round(math.log(seconds / small) / math.log(1.85)))
+    pattern.match("a" * n + "b")
 
 
 def make(scenario, role="dynamics", **faults):

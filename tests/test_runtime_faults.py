@@ -65,6 +65,13 @@ def test_a_slow_frame_that_beats_meets_the_handoff_timeout_not_the_heartbeat(tmp
     assert type(res.error) is HandoffTimeout and "renderer is stepping frame 2" in str(res.error)
 
 
+def test_a_child_busy_in_one_long_call_that_keeps_the_gil_is_slow_not_hung(tmp_path, shm_clean):
+    """Its heartbeat thread cannot beat (like a long GL draw), but it uses CPU time: the run completes."""
+    res = launch(scenario(), tmp_path / "run", specs=fakes.specs(renderer={"busy_at": 2, "busy_s": 2.5 * STALL_S}),
+                 console_log=False)
+    assert res.error is None and res.completed
+
+
 def _stopping_sink(stop_at: int):
     """An MCAP sink whose recorder process is SIGSTOPped at frame ``stop_at`` (4 slots: the ring soon waits)."""
     make = mcap_sink(RecordOptions(queue_frames=4))

@@ -4,8 +4,10 @@ A child beats from a thread of its own (:class:`Heartbeat`): every ``BEAT_S`` it
 clock for every process of the machine) into its slot's ``alive_ns``, whatever its frame work does, so a long
 frame still beats. A process stopped by SIGSTOP stops every thread, and one deadlocked while holding the GIL
 stops the beating thread too: its beat ages. :class:`Watch` (run by the supervisor between wait slices) names
-such a process once its beat is older than ``STALL_S`` (confirmed ``CONFIRM_S`` later, so a supervisor that was
-itself descheduled does not blame a child that was not), and names a process the kernel reports stopped
+such a process once its beat is older than ``STALL_S`` and it neither ran nor used CPU time for ``CONFIRM_S``
+more (so a supervisor that was itself descheduled does not blame a child that was not, and a child busy in one
+long call that keeps the GIL - a big GL draw - counts as slow, not hung), and names a process the kernel reports
+stopped
 (``/proc/<pid>/stat`` state ``T``) as soon as it is, before it ever beat included. A process that beats but does
 not finish its frame is left to the hand-off timeout (cosim.runtime.lockstep).
 
@@ -67,17 +69,26 @@ class Heartbeat:
             self._thread.join(2 * self._period)
 
 
-def process_state(pid: int) -> str:
-    """The kernel's one-letter state of ``pid`` (``R`` running, ``S`` sleeping, ``T`` stopped, ``Z`` zombie...),
-    or ``""`` when it cannot be read (gone, not Linux)."""
+def _proc_stat(pid: int) -> tuple[str, int]:
+    """(one-letter state, user + system CPU clock ticks) of ``pid``; ("", -1) when it cannot be read."""
     try:
         with open(f"/proc/{pid}/stat", "rb") as f:
             raw = f.read()
     except OSError:
-        return ""
-    # "pid (comm) S ...": comm may hold spaces and parentheses, the state follows the last ')'
-    tail = raw[raw.rfind(b")") + 2:]
-    return tail[:1].decode("ascii", "replace")
+        return "", -1
+    # "pid (comm) S ppid ...": comm may hold spaces and parentheses; the state follows the last ')', and utime,
+    # stime are fields 14 and 15 (the 12th and 13th after the state)
+    fields = raw[raw.rfind(b")") + 2:].split()
+    try:
+        return fields[0].decode("ascii", "replace"), int(fields[11]) + int(fields[12])
+    except (IndexError, ValueError):
+        return fields[0].decode("ascii", "replace") if fields else "", -1
+
+
+def process_state(pid: int) -> str:
+    """The kernel's one-letter state of ``pid`` (``R`` running, ``S`` sleeping, ``T`` stopped, ``Z`` zombie...),
+    or ``""`` when it cannot be read (gone, not Linux)."""
+    return _proc_stat(pid)[0]
 
 
 def is_stopped(pid: int) -> bool:
@@ -93,8 +104,8 @@ class Watch:
         self._procs = procs
         self._clock = clock
         self._words = {n: seg.slot_words(n) for n in procs}
-        #: name -> (beat seen stale, when it was first seen so) for the confirmation
-        self._suspect: dict[str, tuple[int, int]] = {}
+        #: name -> (beat seen stale, its CPU ticks then, when it was first seen so) for the confirmation
+        self._suspect: dict[str, tuple[int, int, int]] = {}
 
     def check(self) -> None:
         """Raise :class:`ParticipantHung` for a child stopped by a signal, or whose beat stalled (confirmed)."""
@@ -107,16 +118,20 @@ class Watch:
             if int(words[SLOT_WORD["phase"]]) in (Phase.DONE, Phase.CLOSED, Phase.FAILED):
                 continue
             beat = int(words[_ALIVE])
-            stopped = is_stopped(pid)
+            state, ticks = _proc_stat(pid)
+            stopped = state in ("T", "t")
             stale = beat > 0 and (now - beat) / _NS > STALL_S
             if not (stopped or stale):
                 self._suspect.pop(name, None)
                 continue
             seen = self._suspect.get(name)
-            if seen is None or seen[0] != beat:
-                self._suspect[name] = (beat, now)
+            # a stale beat in a child that runs (state R) or whose CPU time still goes is a busy child (one long
+            # call that keeps the GIL): slow, not hung; the hand-off timeout covers it
+            busy = not stopped and (state == "R" or (seen is not None and ticks != seen[1]))
+            if seen is None or seen[0] != beat or busy:
+                self._suspect[name] = (beat, ticks, now)
                 continue
-            if (now - seen[1]) / _NS < CONFIRM_S:
+            if (now - seen[2]) / _NS < CONFIRM_S:
                 continue
             raise self._hung(name, pid, words, beat, now, stopped)
 
