@@ -137,7 +137,8 @@ def _print_summary(result, stream) -> None:
 
 def _interruptible(fn):
     """``main`` ends with exit 130 and one line, no traceback, on Ctrl-C or SIGTERM at any moment (a run handles
-    them itself: cosim.runtime.signals; this covers the start-up before it and the printing after it)."""
+    them itself: cosim.runtime.signals; this covers the start-up before it and the printing after it), and with
+    exit 2 and the reason when a run is refused before it starts (cosim.errors.RunRefused)."""
 
     def term(signum, frame):
         raise KeyboardInterrupt
@@ -149,6 +150,9 @@ def _interruptible(fn):
         code = EXIT_INTERRUPTED
         try:
             code = fn(argv)
+        except RunRefused as exc:  # --out unusable or locked, the segment would not fit: before anything started
+            sys.stderr.write(f"{exc}\nnothing was started.\n")
+            code = EXIT_SCENARIO
         except KeyboardInterrupt:
             sys.stderr.write("interrupted\n")
         finally:
@@ -235,10 +239,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_SCENARIO
     if observers:
         sys.stderr.write(f"viewer: http://127.0.0.1:{args.viewer_port}/ (while the run lasts)\n")
-    try:
-        result = launch(scenario, args.out, progress=progress, observers=observers, sinks=sinks)
-    except RunRefused as exc:
-        sys.stderr.write(f"{exc}\nnothing was started.\n")
-        return EXIT_SCENARIO
+    result = launch(scenario, args.out, progress=progress, observers=observers, sinks=sinks)
     _print_summary(result, sys.stdout)
     return result.exit_code

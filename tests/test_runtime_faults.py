@@ -253,6 +253,15 @@ def test_out_must_be_a_usable_directory(tmp_path):
         launch(scenario(), f / "run", specs=fakes.specs(), console_log=False)
 
 
+def test_an_unwritable_out_is_refused(tmp_path, monkeypatch):
+    """Root may write anywhere: the permission the kernel would refuse a user is injected."""
+    from cosim.runtime import files
+
+    monkeypatch.setattr(files.os, "access", lambda path, mode: False)
+    with pytest.raises(RunDirError, match=r"--out .*run: permission denied \(the directory is not writable\)"):
+        launch(scenario(), tmp_path / "run", specs=fakes.specs(), console_log=False)
+
+
 def test_a_second_run_on_the_same_out_is_refused(tmp_path, shm_clean):
     run_dir = tmp_path / "run"
     run_dir.mkdir()
