@@ -4,8 +4,8 @@ Each role writes a struct, a trace array (frame, monotonic ns) and, for the rend
 chosen per role with keyword arguments: ``crash_at`` (raise), ``kill_at`` (SIGKILL itself), ``exit_at``
 (os._exit without report), ``hang_at`` (block far longer than any timeout, still beating), ``stop_at`` (SIGSTOP
 itself; ``stop_at=-2``: in ``start``, before frame 0), ``deadlock_at`` (sleep in C holding the GIL, so its
-heartbeat thread stops too), ``busy_at`` (``busy_s`` of CPU inside C calls that keep the GIL: slow, not hung); ``stamp_file`` receives the monotonic time of a ``kill_at``/``stop_at``/``deadlock_at``
-fault.
+heartbeat thread stops too), ``busy_at`` (``busy_s`` of CPU in one C call that keeps the GIL: slow, not hung);
+``stamp_file`` receives the monotonic time of a ``kill_at``/``stop_at``/``deadlock_at`` fault.
 """
 from __future__ import annotations
 

@@ -3,8 +3,9 @@
 The child ignores SIGINT (the launcher coordinates a clean stop), turns SIGTERM into SystemExit so that
 ``close`` runs, asks the kernel to SIGTERM it if the launcher dies (PR_SET_PDEATHSIG), and appends its logs and
 stray stdout/stderr to the run's log.txt. From its attach on, a thread beats in its header slot
-(cosim.runtime.liveness.Heartbeat), so the launcher tells a stopped or deadlocked child from a slow one. Any exception is written with its traceback into the process's
-error slot in the segment header before the process exits with status 1. A clean child exits with status 0
+(cosim.runtime.liveness.Heartbeat), so the launcher tells a stopped or deadlocked child from a slow one. Any
+exception is written with its traceback into the process's error slot in the segment header before the process
+exits with status 1. A clean child exits with status 0
 right after closing, without the interpreter's module teardown.
 """
 from __future__ import annotations

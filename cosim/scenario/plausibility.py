@@ -84,8 +84,8 @@ def memory_problems(s: Scenario, free: tuple[int, int] | None = None) -> list[tu
         return []
     return [(("sensor", "pattern"),
              f"{shape[1]} x {shape[0]} = {beams:,} beams need at least {size_text(shared)} of shared memory (block "
-             f"lidar_points) and {size_text(private)} in the processes, but {SHM_DIR} has {size_text(shm_free)} free and "
-             f"the machine {size_text(mem_free)} available; lower azimuth_count or elevation_count")]
+             f"lidar_points) and {size_text(private)} in the processes, but {SHM_DIR} has {size_text(shm_free)} free "
+             f"and the machine {size_text(mem_free)} available; lower azimuth_count or elevation_count")]
 
 
 def _initial_state(s: Scenario) -> tuple[dict, np.ndarray]:
