@@ -304,7 +304,7 @@ def test_process_state_reads_stopped():
 def test_one_seed_twice_gives_byte_identical_outputs(tmp_path, shm_clean):
     """Real participants (mock renderer, perception feedback): the timeseries, maps and summary (less its
     wall-clock fields) are byte for byte the same; the wall-clock columns are in timing.csv."""
-    sc = Scenario(format_version=1, duration_s=1.0, renderer="mock")
+    sc = Scenario(format_version=1, duration_s=0.5, renderer="mock")
     sc = sc.model_copy(update={"outputs": sc.outputs.model_copy(update={"figures": False})})
     runs = [launch(sc, tmp_path / n, console_log=False) for n in ("a", "b")]
     assert all(r.completed for r in runs)
