@@ -328,9 +328,9 @@ def test_one_seed_twice_gives_byte_identical_outputs(tmp_path, shm_clean):
     assert np.load(a / "heightmap_truth.npy").shape == np.load(b / "heightmap_truth.npy").shape
 
 
-def _cli_run(out: Path) -> subprocess.Popen:
+def _cli_run(out: Path, duration_s: float = 3600.0) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, str(REPO / "launch.py"), "run", "default", "--renderer", "none",
-                             "--feedback", "ground_truth", "--duration", "3600", "--quiet", "--out", str(out)],
+                             "--feedback", "ground_truth", "--duration", str(duration_s), "--quiet", "--out", str(out)],
                             cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
@@ -346,13 +346,25 @@ def _frames_done(out: Path) -> int:
     return ts.read_text().count("\n") - 1 if ts.exists() else -1
 
 
-@pytest.mark.parametrize("moment", ["interpreter", "set-up", "children starting", "running"])
+def _summary_status(out: Path) -> str:
+    try:
+        return json.loads((out / "summary.json").read_text())["status"]
+    except (OSError, ValueError, KeyError):
+        return ""
+
+
+@pytest.mark.parametrize("moment", ["interpreter", "set-up", "children starting", "running", "figures"])
 def test_any_number_of_signals_at_any_moment_exit_130_without_traceback(moment, tmp_path):
     """Three SIGINT/SIGTERM 50 ms apart: exit 130, no traceback, and (once the run directory exists) a summary
-    that says the run did not complete, with the frames on disk up to the last one recorded."""
+    that says the run did not complete, with the frames on disk up to the last one recorded; while the figures
+    are drawn, the run's summary stays completed and the figures are cut short."""
     out = tmp_path / "run"
-    proc = _cli_run(out)
-    if moment == "interpreter":
+    proc = _cli_run(out, 2.0 if moment == "figures" else 3600.0)
+    if moment == "figures":  # the final summary is written just before the figures are drawn
+        _wait_for(lambda: _summary_status(out) == "completed" or proc.poll() is not None)
+        if proc.poll() is not None:
+            pytest.skip("the figures were done before the signal could be sent")
+    elif moment == "interpreter":
         time.sleep(0.3)  # imports of the CLI: no handler of the run yet
     elif moment == "set-up":
         _wait_for(lambda: (out / "scenario.yaml").exists())
@@ -366,7 +378,9 @@ def test_any_number_of_signals_at_any_moment_exit_130_without_traceback(moment, 
     stdout, stderr = proc.communicate(timeout=30)
     assert proc.returncode == 130, stderr
     assert "Traceback" not in stderr and "Traceback" not in stdout
-    if (out / "summary.json").exists():
+    if moment == "figures":
+        assert _summary_status(out) == "completed" and "figures not written: stopped by SIGINT" in stderr
+    elif (out / "summary.json").exists():
         summary = json.loads((out / "summary.json").read_text())
         assert summary["completed"] is False and summary["status"] in ("interrupted", "running")
         if moment == "running":
