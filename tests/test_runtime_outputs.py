@@ -9,6 +9,7 @@ import pytest
 from cosim.scenario.config import Scenario
 from cosim.runtime.inprocess import simulate
 from cosim.runtime.outputs import run_data, write_outputs, write_scenario
+from cosim.runtime.stream import RunFiles
 from cosim.report import load_run
 
 
@@ -28,5 +29,16 @@ def test_figures_see_what_the_run_directory_holds(setup, tmp_path):
         assert mem.series[k].dtype == v.dtype and np.array_equal(mem.series[k], v, equal_nan=True), k
     assert (disk.heightmap_perceived is None) == (mem.heightmap_perceived is None) == (sc.feedback == "ground_truth")
     assert (tmp_path / "timing.csv").exists() == (sc.feedback == "perception")
+    # the same rows appended in ragged blocks, as a run streams them, join up byte for byte
+    streamed = tmp_path / "streamed"
+    streamed.mkdir()
+    files = RunFiles(streamed, run.recorder, block_s=0.0)
+    for upto in (1, 2, 2, 5, 9, 17):
+        files.append(min(upto, len(run.recorder.frames)))
+    files.finish()
+    for name in ("timeseries.csv", "timing.csv"):
+        assert (streamed / name).exists() == (tmp_path / name).exists()
+        if (tmp_path / name).exists():
+            assert (streamed / name).read_bytes() == (tmp_path / name).read_bytes(), name
     assert mem.heightmap_truth.dtype == disk.heightmap_truth.dtype
     assert np.array_equal(mem.heightmap_truth, disk.heightmap_truth)

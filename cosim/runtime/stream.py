@@ -115,8 +115,14 @@ class RunFiles:
         self._t_last = time.monotonic()
         self.failed: OutputError | None = None
         self._files = [_Appender(Path(run_dir) / "timeseries.csv", Recorder.csv_header(recorder.series_columns))]
+        timing = Path(run_dir) / "timing.csv"
         if len(recorder.timing_columns) > 1:
-            self._files.append(_Appender(Path(run_dir) / "timing.csv", Recorder.csv_header(recorder.timing_columns)))
+            self._files.append(_Appender(timing, Recorder.csv_header(recorder.timing_columns)))
+        else:
+            try:
+                timing.unlink(missing_ok=True)  # an earlier run's, in a reused --out: not this run's timings
+            except OSError:
+                pass
 
     @property
     def written(self) -> int:
