@@ -38,7 +38,7 @@ from pathlib import Path
 from shm_schema import Schema, Segment
 
 from cosim.runtime.files import write_error
-from cosim.runtime.liveness import STALL_S, end_process, is_stopped
+from cosim.runtime.liveness import STALL_S, cpu_ticks, end_process, is_stopped
 from cosim.runtime.threadpools import single_threaded_pools
 from .slots import FrameSlots
 from .writer import (
@@ -269,7 +269,7 @@ class McapRecorder:
 
     def _wait_recorder(self) -> str:
         """Wait for the recorder to end; "" when it did, else why it was given up on: stopped for STALL_S, no
-        progress (slots given back, file growth) for STALL_TIMEOUT_S, or CLOSE_TIMEOUT_S in all."""
+        progress (slots given back, file growth, CPU time) for STALL_TIMEOUT_S, or CLOSE_TIMEOUT_S in all."""
         p, t0 = self._proc, time.monotonic()
         progress, t_progress, t_stopped = None, t0, None
         while True:
@@ -284,7 +284,7 @@ class McapRecorder:
             else:
                 t_stopped = None
             try:
-                mark = (self._credits.get_value(), self.path.stat().st_size)
+                mark = (self._credits.get_value(), self.path.stat().st_size, cpu_ticks(p.pid))
             except (OSError, NotImplementedError):
                 mark = None
             if mark != progress:

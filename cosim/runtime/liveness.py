@@ -27,7 +27,8 @@ from shm_schema.layout import SLOT_WORD
 
 from cosim.errors import ParticipantCrashed, ParticipantDied, ParticipantHung, RunError
 
-__all__ = ["BEAT_S", "STALL_S", "CONFIRM_S", "Heartbeat", "Watch", "process_state", "is_stopped", "end_process",
+__all__ = ["BEAT_S", "STALL_S", "CONFIRM_S", "Heartbeat", "Watch", "process_state", "cpu_ticks", "is_stopped",
+           "end_process",
            "stop_processes", "child_failure"]
 
 #: period of a child's liveness beat, s
@@ -89,6 +90,11 @@ def process_state(pid: int) -> str:
     """The kernel's one-letter state of ``pid`` (``R`` running, ``S`` sleeping, ``T`` stopped, ``Z`` zombie...),
     or ``""`` when it cannot be read (gone, not Linux)."""
     return _proc_stat(pid)[0]
+
+
+def cpu_ticks(pid: int) -> int:
+    """User + system CPU time of ``pid`` in clock ticks (os.sysconf("SC_CLK_TCK") a second), -1 if unknown."""
+    return _proc_stat(pid)[1]
 
 
 def is_stopped(pid: int) -> bool:
