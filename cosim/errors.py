@@ -13,8 +13,9 @@ from dataclasses import dataclass
 
 __all__ = [
     "CosimError", "Problem", "ScenarioError", "RunError", "HandoffTimeout", "FrameMismatch",
-    "ParticipantCrashed", "ParticipantDied", "RunInterrupted", "RendererUnavailable", "SimulationError",
-    "SimulationClosed", "SimulationDone", "InputError", "UnknownInput", "InputNotSettable", "InputOutOfRange",
+    "ParticipantCrashed", "ParticipantDied", "ParticipantHung", "RunInterrupted", "OutputError", "RunRefused",
+    "RendererUnavailable", "SimulationError", "SimulationClosed", "SimulationDone", "InputError", "UnknownInput",
+    "InputNotSettable", "InputOutOfRange",
 ]
 
 
@@ -44,6 +45,11 @@ class ScenarioError(CosimError):
         super().__init__("\n".join(str(p) for p in self.problems) or "invalid scenario")
 
 
+class RunRefused(CosimError):
+    """A run cannot start (its ``--out`` is not a writable directory or another run holds it, its shared memory
+    would not fit): nothing was started. The CLI exits 2."""
+
+
 class RunError(CosimError):
     """A run stopped before its last frame. ``process`` and ``frame`` say where."""
 
@@ -68,6 +74,14 @@ class ParticipantCrashed(RunError):
 
 class ParticipantDied(RunError):
     """A participant process ended without reporting (killed by a signal, os._exit, ...)."""
+
+
+class ParticipantHung(RunError):
+    """A participant process stopped running (SIGSTOP, a deadlock): its liveness heartbeat stopped."""
+
+
+class OutputError(RunError):
+    """Writing the run's outputs failed (no space left on the device, permission): names the path."""
 
 
 class RunInterrupted(RunError):
