@@ -123,7 +123,7 @@ def _import(target: str, ref: str, base_dir: Path | None):
 
 def _check_signature(group: str, ref: str, obj: object) -> None:
     if not callable(obj):
-        raise PluginError(f"plug-in {ref!r} is a {type(obj).__name__}, not callable; the {group} protocol takes "
+        raise PluginError(f"plug-in {ref!r} is not callable (a {type(obj).__name__!r} object); the {group} protocol takes "
                           f"({', '.join(ARITY[group])})")
     try:
         sig = inspect.signature(obj)
