@@ -198,3 +198,52 @@ def test_a_controller_class_drives_the_plant(tmp_path, monkeypatch):
     assert np.all(ser["dyn_state.target_section"][2:] == ser["dyn_state.target_section"][2])
     assert np.all(np.isnan(ser["dyn_state.control_effort_m"][1:]))     # not reported by this controller
     assert ser["dyn_state.delivered_m3"][-1] > 0.1
+
+
+# ------------------------------------------------------------------------ the documented examples at work
+def _doc_block(marker: str) -> str:
+    """The ```python block of docs/plugins.md that contains ``marker``."""
+    text = (ROOT / "docs" / "plugins.md").read_text()
+    blocks = __import__("re").findall(r"```python\n(.*?)```", text, flags=__import__("re").S)
+    found = [b for b in blocks if marker in b]
+    assert len(found) == 1, marker
+    return found[0]
+
+
+def test_documented_controller_and_algorithm_run(tmp_path, monkeypatch, shm_clean):
+    ctrl = _module(tmp_path, _doc_block("class StayPut"), "docctrl")
+    algo = _module(tmp_path, _doc_block("def no_impact"), "docalgo")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    s = load_scenario_text(f"format_version: 1\nfeedback: ground_truth\nrenderer: none\nduration_s: 3.0\n"
+                           f"controller:\n  model: {ctrl}:StayPut\n")
+    ser = closed_loop.simulate(s).series
+    assert np.all(ser["dyn_state.nudge_count"] == 0) and np.all(ser["dyn_state.auger_on"][2:] == 1)
+    s = load_scenario_text(f"format_version: 1\nrenderer: mock\nperception:\n  algorithm: {algo}:no_impact\n")
+    run = simulate(s, frames=2)
+    ser = run.recorder.series()
+    assert np.all(ser["perc_state.cart_valid"] == 1) and np.all(ser["perc_state.impact_valid"] == 0)
+    assert np.all(np.isnan(ser["perc_state.impact_gx_m"])) and np.all(ser["perc_state.coverage"] > 0.5)
+
+
+def test_own_perception_example_stage_maps_the_grain(shm_clean):
+    """examples/own_perception: the user's height map stage produces the map the controller acts on, within a
+    few cm of the truth over most of the cart."""
+    from perception_proc.accuracy import heightmap_error, truth_on_grid
+
+    s = load_scenario(ROOT / "examples" / "own_perception" / "scenario.yaml")
+    assert s.perception.stages.heightmap == "cell_median:cell_median"
+    run = simulate(s, frames=2)
+    perceived = run.recorder.arrays["heightmap_perceived"]
+    truth = truth_on_grid(run.recorder.arrays["heightmap_truth"], s.grain.cell_m, perceived.shape, s.cart)
+    rmse, bias, coverage = heightmap_error(perceived, truth)
+    assert coverage > 0.6 and rmse < 0.05 and abs(bias) < 0.03, (rmse, bias, coverage)
+    import cell_median                              # imported from the scenario's folder by the loader
+    assert Path(cell_median.__file__).parent == ROOT / "examples" / "own_perception"
+
+
+def test_own_strategy_example_validates_and_is_refused_without_plugins(capsys):
+    path = str(ROOT / "examples" / "own_strategy" / "scenario.yaml")
+    assert main(["validate", path]) == 0
+    assert "plug-in controller.strategy = middle_out:middle_out: EXTERNAL (runs its code)" in capsys.readouterr().out
+    assert main(["validate", path, "--no-plugins"]) == 2
+    assert "plug-ins are disabled" in capsys.readouterr().err

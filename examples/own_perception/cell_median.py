@@ -23,8 +23,9 @@ __all__ = ["cell_median", "WALL_CLEAR_M", "STREAM_ABOVE_RIM_M", "STREAM_ABOVE_CE
 
 #: returns this close to an inner wall are the wall's, m
 WALL_CLEAR_M = 0.05
-#: returns higher than this above the rim top are the stream's (or the auger's), never grain, m
-STREAM_ABOVE_RIM_M = 0.8
+#: returns higher than this above the rim top are the stream's, the auger's or its tube's, never grain (a cart is
+#: filled to below its rim), m
+STREAM_ABOVE_RIM_M = 0.2
 #: a return this far above its cell's median is the stream's, m
 STREAM_ABOVE_CELL_M = 0.3
 
