@@ -8,8 +8,9 @@ untrusted sources). Problems come back as :class:`Issue` (scenario key + message
 ``file:line:col: key: message`` errors.
 
 Hook: :data:`CHECKS` is the tuple of check functions the loader runs, each
-``check(scenario, *, allow_plugins: bool) -> (list[Loaded], list[Issue])``; another kind of external model
-adds its function there.
+``check(scenario, *, allow_plugins: bool, versions: bool) -> (list[Loaded], list[Issue])`` (``versions``: also
+find each item's distribution version, which can be slow; the loader passes False, ``validate`` True); another
+kind of external model adds its function there.
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from pathlib import Path
 from typing import Callable
 
 from .config import Scenario
-from .plugins import PluginError, resolve_plugin
+from .plugins import PluginError, distribution_of, resolve_plugin
 
 __all__ = ["Loaded", "Issue", "Check", "plugin_points", "check_plugins", "CHECKS", "inspect_scenario",
            "format_inventory"]
@@ -61,7 +62,8 @@ def plugin_points(s: Scenario) -> list[tuple[tuple[str, ...], str, str]]:
             (("perception", "stages", "impact"), "perception.impact", st.impact)]
 
 
-def check_plugins(s: Scenario, *, allow_plugins: bool = True) -> tuple[list[Loaded], list[Issue]]:
+def check_plugins(s: Scenario, *, allow_plugins: bool = True,
+                  versions: bool = False) -> tuple[list[Loaded], list[Issue]]:
     """Import and signature-check every plug-in ``s`` names (looked for in ``s.plugin_dir`` first)."""
     base = Path(s.plugin_dir) if s.plugin_dir else None
     loaded, issues = [], []
@@ -71,9 +73,9 @@ def check_plugins(s: Scenario, *, allow_plugins: bool = True) -> tuple[list[Load
         except PluginError as e:
             issues.append(Issue(loc, str(e)))
             continue
+        dist, version = distribution_of(info) if versions else ("", "")
         loaded.append(Loaded("plug-in", ".".join(loc), ref, info.builtin, info.file,
-                             info.version if not info.distribution else f"{info.distribution} {info.version}",
-                             info.target))
+                             f"{dist} {version}" if dist else "", info.target))
     return loaded, issues
 
 
@@ -81,11 +83,12 @@ def check_plugins(s: Scenario, *, allow_plugins: bool = True) -> tuple[list[Load
 CHECKS: tuple[Check, ...] = (check_plugins,)
 
 
-def inspect_scenario(s: Scenario, *, allow_plugins: bool = True) -> tuple[list[Loaded], list[Issue]]:
+def inspect_scenario(s: Scenario, *, allow_plugins: bool = True,
+                     versions: bool = False) -> tuple[list[Loaded], list[Issue]]:
     """Every :data:`CHECKS` function on ``s``: (what it would load, the problems found)."""
     loaded, issues = [], []
     for check in CHECKS:
-        got, bad = check(s, allow_plugins=allow_plugins)
+        got, bad = check(s, allow_plugins=allow_plugins, versions=versions)
         loaded += got
         issues += bad
     return loaded, issues
