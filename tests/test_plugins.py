@@ -138,6 +138,10 @@ def test_no_plugins_refuses_external_and_validate_lists_what_loads(tmp_path, cap
     assert f"plug-in controller.model = section_fill: built in; file {ROOT / 'dynamics_proc' / 'controller.py'}" in out
     with pytest.raises(ScenarioError, match="plug-ins are disabled"):
         load_scenario(scenario, allow_plugins=False)
+    for verb in ("run", "compare"):
+        out = tmp_path / verb
+        assert main([verb, str(scenario), "--no-plugins", "--out", str(out), "--quiet"]) == 2
+        assert "plug-ins are disabled" in capsys.readouterr().err and not out.exists()
 
 
 def test_plugin_dir_is_the_scenario_folder_and_travels():
