@@ -7,7 +7,7 @@ A scenario that names a plug-in runs that code (in the launcher while validating
 untrusted sources). Problems come back as :class:`Issue` (scenario key + message); the loader turns them into
 ``file:line:col: key: message`` errors.
 
-Hook: :data:`CHECKS` is the tuple of check functions the loader runs, each
+Hook: :data:`CHECKS` is the tuple of check functions the loader runs after the plug-in checks, each
 ``check(scenario, *, allow_plugins: bool, versions: bool) -> (list[Loaded], list[Issue])`` (``versions``: also
 find each item's distribution version, which can be slow; the loader passes False, ``validate`` True); another
 kind of external model adds its function there.
@@ -21,8 +21,8 @@ from typing import Callable
 from .config import Scenario
 from .plugins import PluginError, distribution_of, resolve_plugin
 
-__all__ = ["Loaded", "Issue", "Check", "plugin_points", "check_plugins", "CHECKS", "inspect_scenario",
-           "format_inventory"]
+__all__ = ["Loaded", "Issue", "Check", "PLUGIN_POINTS", "plugin_points", "check_plugin_refs", "check_plugins",
+           "CHECKS", "inspect_scenario", "format_inventory"]
 
 
 @dataclass(frozen=True)
@@ -51,23 +51,36 @@ class Issue:
 Check = Callable[..., "tuple[list[Loaded], list[Issue]]"]
 
 
+#: every plug-in point: (scenario key, plug-in group of cosim.scenario.plugins)
+PLUGIN_POINTS: tuple[tuple[tuple[str, ...], str], ...] = (
+    (("controller", "strategy"), "strategies"),
+    (("controller", "model"), "controllers"),
+    (("perception", "algorithm"), "perception"),
+    (("perception", "stages", "rim"), "perception.rim"),
+    (("perception", "stages", "heightmap"), "perception.heightmap"),
+    (("perception", "stages", "impact"), "perception.impact"),
+)
+
+
 def plugin_points(s: Scenario) -> list[tuple[tuple[str, ...], str, str]]:
     """(scenario key, plug-in group, reference) of every plug-in point of ``s``."""
-    st = s.perception.stages
-    return [(("controller", "strategy"), "strategies", s.controller.strategy),
-            (("controller", "model"), "controllers", s.controller.model),
-            (("perception", "algorithm"), "perception", s.perception.algorithm),
-            (("perception", "stages", "rim"), "perception.rim", st.rim),
-            (("perception", "stages", "heightmap"), "perception.heightmap", st.heightmap),
-            (("perception", "stages", "impact"), "perception.impact", st.impact)]
+    out = []
+    for loc, group in PLUGIN_POINTS:
+        node = s
+        for part in loc:
+            node = getattr(node, part)
+        out.append((loc, group, node))
+    return out
 
 
-def check_plugins(s: Scenario, *, allow_plugins: bool = True,
-                  versions: bool = False) -> tuple[list[Loaded], list[Issue]]:
-    """Import and signature-check every plug-in ``s`` names (looked for in ``s.plugin_dir`` first)."""
-    base = Path(s.plugin_dir) if s.plugin_dir else None
+def check_plugin_refs(refs: list[tuple[tuple[str, ...], str, str]], plugin_dir: str, *, allow_plugins: bool = True,
+                      versions: bool = False) -> tuple[list[Loaded], list[Issue]]:
+    """Import and signature-check each (scenario key, group, reference), looked for in ``plugin_dir`` first
+    ('' none). The loader runs this on the raw values too, so that a bad plug-in is reported together with the
+    scenario's other problems."""
+    base = Path(plugin_dir) if plugin_dir else None
     loaded, issues = [], []
-    for loc, group, ref in plugin_points(s):
+    for loc, group, ref in refs:
         try:
             info = resolve_plugin(group, ref, base_dir=base, allow_external=allow_plugins)
         except PluginError as e:
@@ -79,14 +92,20 @@ def check_plugins(s: Scenario, *, allow_plugins: bool = True,
     return loaded, issues
 
 
-#: the checks the loader runs on every validated scenario (another external model kind adds its own)
-CHECKS: tuple[Check, ...] = (check_plugins,)
+def check_plugins(s: Scenario, *, allow_plugins: bool = True,
+                  versions: bool = False) -> tuple[list[Loaded], list[Issue]]:
+    """Every plug-in ``s`` names, checked (:func:`check_plugin_refs`)."""
+    return check_plugin_refs(plugin_points(s), s.plugin_dir, allow_plugins=allow_plugins, versions=versions)
+
+
+#: the checks of other external model kinds (e.g. FMUs), run on every valid scenario after the plug-ins
+CHECKS: tuple[Check, ...] = ()
 
 
 def inspect_scenario(s: Scenario, *, allow_plugins: bool = True,
                      versions: bool = False) -> tuple[list[Loaded], list[Issue]]:
-    """Every :data:`CHECKS` function on ``s``: (what it would load, the problems found)."""
-    loaded, issues = [], []
+    """:func:`check_plugins` and every :data:`CHECKS` function on ``s``: (what it would load, the problems)."""
+    loaded, issues = check_plugins(s, allow_plugins=allow_plugins, versions=versions)
     for check in CHECKS:
         got, bad = check(s, allow_plugins=allow_plugins, versions=versions)
         loaded += got
