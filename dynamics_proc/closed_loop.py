@@ -88,7 +88,7 @@ def simulate(scenario: Scenario, frames: int | None = None, measure: Measure | N
         history[m] = _measure(w, p, measure)
         rows.append(signals(w, p))
         if stop_when_done:
-            if done_at < 0 and w.ctrl.all_full and w.flow_level == 0.0:
+            if done_at < 0 and w.out.all_full and w.flow_level == 0.0:
                 done_at = m
             if done_at >= 0 and m - done_at >= DONE_GRACE_FRAMES:
                 break

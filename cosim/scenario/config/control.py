@@ -9,7 +9,7 @@ from typing import Literal
 
 from pydantic import Field
 
-from .base import Fraction, Model, NonNegFloat, PosFloat
+from .base import Fraction, Model, NonNegFloat, PluginRef, PosFloat
 
 __all__ = ["Grain", "Fusion", "Controller", "Integrator"]
 
@@ -58,11 +58,16 @@ class Controller(Model):
     robust peak (highest 2 x 2 block minimum) from the fused estimate of :class:`Fusion` (perceived heights
     fused with the volume delivered at the predicted impact); ``paper`` takes it from the perceived map alone,
     as the paper does.
-    Strategies: dynamics_proc.strategies.
+
+    Plug-ins (docs/plugins.md; a scenario that names one runs its code): ``strategy`` picks the next section,
+    ``front_to_back`` / ``back_to_front`` / ``lowest_first`` (dynamics_proc.strategies), an entry point name or
+    an import path ``package.module:name``; ``model`` is the whole controller, ``section_fill`` (this one,
+    dynamics_proc.controller) or a plug-in implementing dynamics_proc.control_protocol.
     """
 
     target_fill_m: PosFloat = 1.9
-    strategy: Literal["front_to_back", "back_to_front", "lowest_first"] = "front_to_back"
+    strategy: PluginRef = "front_to_back"
+    model: PluginRef = "section_fill"
     sections: int = Field(default=9, ge=1, le=64)
     grid_cell_m: PosFloat = 0.1
     full_fraction: Fraction = 0.995
