@@ -33,7 +33,7 @@ from cosim.scenario.config import Scenario
 
 from .estimator import FillEstimate, FusionParams, initial_estimate, landing_on, predict, update
 from .grainfill import GrainGrid, section_rows
-from .strategies import get_strategy
+from .strategies import Strategy, get_strategy
 
 __all__ = ["BIAS_TAU_S", "SETTLE_S", "ControllerParams", "ControllerState", "ControllerOutput", "Delivery",
            "min2x2", "section_heights", "section_valid", "initial_controller", "controller_step"]
@@ -74,6 +74,8 @@ class ControllerParams:
     strategy: str
     frame_dt_s: float
     fusion: FusionParams | None      # the fused estimator's constants (estimator "fused"), else None
+    #: the strategy as a callable where it is not a built-in name (strategy "fmu": dynamics_proc.fmus)
+    strategy_fn: Strategy | None = None
 
     @classmethod
     def from_scenario(cls, s: Scenario) -> "ControllerParams":
@@ -85,7 +87,8 @@ class ControllerParams:
         if np.any(counts == 0):
             raise ValueError(f"controller grid ({nx} cells of {cell} m along x) leaves sections without a cell; "
                              f"use fewer than {c.sections} sections or a finer controller.grid_cell_m")
-        get_strategy(c.strategy)
+        if c.strategy != "fmu":             # an FMU strategy is opened with the run (dynamics_proc.fmus)
+            get_strategy(c.strategy)
         sl = k.interior_length_m / c.sections
         return cls(c.target_fill_m, c.full_fraction * c.target_fill_m, c.sections, k.interior_length_m,
                    k.interior_width_m, cell, nx, ny, tuple(int(np.searchsorted(rows, i)) for i in range(c.sections)),
@@ -215,6 +218,14 @@ def initial_controller(p: ControllerParams) -> ControllerState:
                            0.0, -1, -np.inf, 0.0, False, False, False, 0)
 
 
+def _strategy(p: ControllerParams) -> Strategy:
+    if p.strategy_fn is not None:
+        return p.strategy_fn
+    if p.strategy == "fmu":
+        raise ValueError("strategy 'fmu' but no FMU was opened: run through dynamics_proc.fmus.open_fmus")
+    return get_strategy(p.strategy)
+
+
 def _inside(x: float, y: float, margin: float, p: ControllerParams) -> bool:
     return margin <= x <= p.length_m - margin and margin <= y <= p.width_m - margin
 
@@ -262,7 +273,7 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
     with np.errstate(invalid="ignore"):
         full = (heights >= p.full_level_m) | forced      # NaN (unknown) is not full
     full |= st.full                                       # latched: grain does not leave the cart
-    target = get_strategy(p.strategy)(full, heights, st.target) if seen else -1
+    target = _strategy(p)(full, heights, st.target) if seen else -1
     all_full = seen and target < 0
     lo, hi = p.safe_margin_m, p.length_m - p.safe_margin_m
     if target >= 0:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -23,6 +24,9 @@ from .grainfill import GrainGrid, deposit, initial_heights, resample, volume
 from .integrators import integrate, step_exponential_values
 from .machine_sync import SyncGains, cart_offset, sync_command
 from .vehicles import CX, CY, CYAW, DELTA, V, VehicleParams, cart_pose, initial_state, tractor_pose
+
+if TYPE_CHECKING:
+    from .fmus import Fmus
 
 __all__ = ["ModelParams", "World", "SpoutGeometry", "initial_world", "step_frame", "truth_measurement", "signals",
            "spout_grid", "SECTION_FIELD"]
@@ -52,6 +56,7 @@ class ModelParams:
     signal_offset_m: float           # nudge signal = setpoint long + this (spout grid x at the setpoint)
     density_kgpm3: float
     flow_meter_bias: float           # relative error of the flow signal the fused estimator is given
+    fmus: "Fmus | None" = None       # FMUs in place of built-in models (dynamics_proc.fmus.Fmus.params)
 
     @classmethod
     def from_scenario(cls, s: Scenario) -> "ModelParams":
@@ -138,6 +143,8 @@ def _predicted_impacts(spg: np.ndarray, vg: np.ndarray,
 def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
     """Advance the world by one sensor frame acting on ``meas`` (controller grid heights m, NaN holes) or None."""
     x = w.x
+    if p.fmus is not None:
+        p.fmus.begin_frame(w.frame + 1)
     _, vel, spg, g = w.spout
     vg = g[:3, :3] @ vel
     drift, top, floor = _predicted_impacts(spg, vg, p)
@@ -149,7 +156,7 @@ def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
     ctrl, out = controller_step(w.ctrl, p.control, w.t_s, meas, float(spg[0]), (top, floor), drift, signal,
                                 delivery)
     setpoint = (w.setpoint[0] + out.nudge * p.control.nudge_m, w.setpoint[1])
-    x = _advance_vehicles(x, setpoint, p)
+    x = _advance_vehicles(x, setpoint, p, w.frame + 1)
     level, vol = w.flow_level, 0.0
     for _ in range(p.steps):
         level, dv = ag.flow_advance(level, out.auger_cmd, p.dt_s, p.auger)
@@ -167,9 +174,12 @@ def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
                  rows, n, spout)
 
 
-def _advance_vehicles(x: np.ndarray, setpoint: tuple[float, float], p: ModelParams) -> np.ndarray:
-    """The vehicle state (9,) after one frame: ``p.steps`` steps of ``p.dt_s``, each with the Machine Sync input
-    held. The exponential method keeps the state as Python floats between the steps (same bits)."""
+def _advance_vehicles(x: np.ndarray, setpoint: tuple[float, float], p: ModelParams, frame: int) -> np.ndarray:
+    """The vehicle state (9,) at the end of frame ``frame``: ``p.steps`` steps of ``p.dt_s``, each with the Machine
+    Sync input held (or the FMU vehicle's steps). The exponential method keeps the state as Python floats between
+    the steps (same bits)."""
+    if p.fmus is not None and p.fmus.vehicle is not None:
+        return p.fmus.vehicle.advance(x, setpoint, frame)
     if p.method == "exponential":
         xs = x.tolist()
         for _ in range(p.steps):

@@ -25,7 +25,7 @@ def test_schema_header_and_shape():
     assert schema["properties"]["format_version"]["const"] == 1
     assert schema["$defs"]["Timing"]["additionalProperties"] is False
     assert schema["$defs"]["Controller"]["properties"]["strategy"]["enum"] == [
-        "front_to_back", "back_to_front", "lowest_first"]
+        "front_to_back", "back_to_front", "lowest_first", "fmu"]
 
 
 def test_write_json_schema(tmp_path):

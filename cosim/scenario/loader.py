@@ -30,6 +30,7 @@ from pydantic import BaseModel, ValidationError
 
 from .config import FORMAT_VERSION, Scenario
 from cosim.errors import Problem, ScenarioError
+from cosim.fmi.check import fmu_problems
 from .yamlmarks import (Doc as _Doc, Dumper as _Dumper, Loc, Mark as _Mark,
                         dotted as _dotted, parse as _parse, show as _show)
 
@@ -290,6 +291,13 @@ def _error_problem(err: dict, doc: _Doc) -> Problem:
     return Problem(mark.file, mark.line, mark.col, _dotted(loc), msg)
 
 
+def _check_fmus(doc: _Doc) -> None:
+    """FMU files and their variable mappings (cosim.fmi.check), each problem at its key or value."""
+    for loc, message, at_key in fmu_problems(doc.data):
+        mark = (doc.keys if at_key else doc.values).get(loc) or doc.keys.get(_existing(doc.data, loc), doc.values[()])
+        doc.problem(mark, loc, message)
+
+
 def _finish(doc: _Doc, filename: str) -> None:
     """Raise the collected problems, deduplicated, in file order (the file, then ``--set``, then options)."""
     if not doc.problems:
@@ -340,6 +348,7 @@ def load_scenario_text(
     except ValidationError as e:
         doc.problems += [_error_problem(err, doc) for err in e.errors(include_url=False)]
         scenario = None
+    _check_fmus(doc)
     _finish(doc, filename)
     return scenario
 

@@ -7,9 +7,10 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from .base import Fraction, Model, NonNegFloat, PosFloat
+from .fmu import Fmu
 
 __all__ = ["Grain", "Fusion", "Controller", "Integrator"]
 
@@ -58,11 +59,11 @@ class Controller(Model):
     robust peak (highest 2 x 2 block minimum) from the fused estimate of :class:`Fusion` (perceived heights
     fused with the volume delivered at the predicted impact); ``paper`` takes it from the perceived map alone,
     as the paper does.
-    Strategies: dynamics_proc.strategies.
+    Strategies: dynamics_proc.strategies; ``strategy: fmu`` asks the FMU ``fmu`` (docs/fmu.md).
     """
 
     target_fill_m: PosFloat = 1.9
-    strategy: Literal["front_to_back", "back_to_front", "lowest_first"] = "front_to_back"
+    strategy: Literal["front_to_back", "back_to_front", "lowest_first", "fmu"] = "front_to_back"
     sections: int = Field(default=9, ge=1, le=64)
     grid_cell_m: PosFloat = 0.1
     full_fraction: Fraction = 0.995
@@ -73,6 +74,15 @@ class Controller(Model):
     edge_margin_m: NonNegFloat = 0.2
     min_section_cells: int = Field(default=4, ge=1)
     fusion: Fusion = Fusion()
+    fmu: Fmu | None = None
+
+    @model_validator(mode="after")
+    def _fmu_named(self) -> "Controller":
+        if self.strategy == "fmu" and self.fmu is None:
+            raise ValueError("strategy 'fmu' needs the FMU: give controller.fmu (path, inputs, outputs)")
+        if self.fmu is not None and self.strategy != "fmu":
+            raise ValueError("controller.fmu is given but nothing uses it: set controller.strategy: fmu")
+        return self
 
 
 class Integrator(Model):
