@@ -74,16 +74,16 @@ def simulate(scenario: Scenario, frames: int | None = None, measure: Measure | N
     """Run frames 0..``frames`` (default ``scenario.frames``) with height-map feedback.
 
     ``stop_when_done``: end early, DONE_GRACE_FRAMES after the cart is declared full and the flow stopped.
-    The scenario's FMUs (dynamics_proc.fmus) are opened for the run and freed after it.
+    The scenario's FMUs (dynamics_proc.fmus) are opened for the run and freed after it (unless ``params``
+    are given: then they hold them).
     """
-    p = params or ModelParams.from_scenario(scenario)
-    fmus = open_fmus(scenario)
-    if fmus is None:
-        return _simulate(scenario, p, frames, measure, stop_when_done)
+    fmus = open_fmus(scenario) if params is None else None
     try:
-        return _simulate(scenario, fmus.params(p), frames, measure, stop_when_done)
+        return _simulate(scenario, params or ModelParams.from_scenario(scenario, fmus), frames, measure,
+                         stop_when_done)
     finally:
-        fmus.close()
+        if fmus is not None:
+            fmus.close()
 
 
 def _simulate(scenario: Scenario, p: ModelParams, frames: int | None, measure: Measure | None,
@@ -101,7 +101,7 @@ def _simulate(scenario: Scenario, p: ModelParams, frames: int | None, measure: M
         history[m] = _measure(w, p, measure)
         rows.append(signals(w, p))
         if stop_when_done:
-            if done_at < 0 and w.ctrl.all_full and w.flow_level == 0.0:
+            if done_at < 0 and w.out.all_full and w.flow_level == 0.0:
                 done_at = m
             if done_at >= 0 and m - done_at >= DONE_GRACE_FRAMES:
                 break

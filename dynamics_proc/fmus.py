@@ -1,10 +1,10 @@
 """FMUs standing in for the built-in models of the system model (docs/fmu.md): the tractor-and-cart
-dynamics and the fill strategy.
+dynamics, the offloading controller, the fill strategy.
 
-:func:`open_fmus` instantiates the FMUs a scenario names (``vehicles.tractor_cart.fmu``, ``controller.fmu``
-with ``strategy: fmu``) and :meth:`Fmus.params` puts them into the frame step's parameters; ``close`` frees
-them. The participant opens them in ``start`` and closes them in ``close``; the pure closed loop does the same
-around its frames.
+:func:`open_fmus` instantiates the FMUs a scenario names (``vehicles.tractor_cart.fmu``; ``controller.fmu``
+with ``controller.model: fmu`` or ``controller.strategy: fmu``) and ``ModelParams.from_scenario(s, fmus)`` puts
+them in place of the built-in models; ``close`` frees them. The participant opens them in ``start`` and closes
+them in ``close``; the pure closed loop does the same around its frames.
 
 Stepping (lockstep with the dynamics):
 
@@ -15,6 +15,10 @@ Stepping (lockstep with the dynamics):
   :func:`~dynamics_proc.vehicles.combine_advance` (its exact path); the cart's position is derived from the
   tractor's rear axle and the cart heading through the scenario's hitch and tongue geometry, as for the
   built-in model.
+* controller (``controller.model: fmu``, dynamics_proc.control_protocol): once per frame, at the decision time
+  t of frame m (the start of the interval the decision acts over): inputs set, one ``doStep(t, sensor_period_s)``,
+  outputs read. Its per-section heights are the robust section peaks (``controller.section_heights``) of the
+  measurement the latency rule gives that frame (NaN without one).
 * strategy: whenever the controller asks for a section (every frame from the first measurement on), the
   inputs are set and one ``doStep`` runs from the end of the previous one to the end of the current frame.
 """
@@ -27,24 +31,27 @@ from dataclasses import dataclass
 import numpy as np
 
 from cosim.fmi.describe import describe
-from cosim.fmi.roles import STRATEGY, VEHICLE, expand, step_mode
-from cosim.fmi.slave import FmuSlave, FmuStepError
-from cosim.scenario.config import Fmu, Scenario
+from cosim.fmi.roles import CONTROLLER, STRATEGY, VEHICLE, expand, step_mode
+from cosim.fmi.slave import PROCESS, FmuSlave, FmuStepError
+from cosim.scenario.config import FMU_REF, Fmu, Scenario
 
+from .control_protocol import ControllerCommand, ControllerInput
+from .controller import ControllerParams, section_heights
 from .machine_sync import SyncGains, sync_command
 from .vehicles import CX, CY, CYAW, DELTA, PYAW, TX, TY, TYAW, V, VehicleParams, combine_advance, initial_state
 
-__all__ = ["FmuVehicle", "FmuStrategy", "Fmus", "open_fmus", "VEHICLE_LABEL", "STRATEGY_LABEL"]
+__all__ = ["FmuVehicle", "FmuStrategy", "FmuController", "Fmus", "open_fmus", "VEHICLE_LABEL", "CONTROLLER_LABEL"]
 
 VEHICLE_LABEL = "vehicles.tractor_cart.fmu"
-STRATEGY_LABEL = "controller.fmu"
+CONTROLLER_LABEL = "controller.fmu"
 #: state index of each vehicle output, in the order of cosim.fmi.roles.VEHICLE.outputs
 _STATE_INDEX = {"tractor_axle_x_m": TX, "tractor_axle_y_m": TY, "tractor_yaw_rad": TYAW, "tractor_speed_mps": V,
                 "tractor_steer_rad": DELTA, "cart_yaw_rad": PYAW}
 
 
 def _open(fmu: Fmu, role, sections: int, label: str, initial: dict[str, float]) -> FmuSlave:
-    """The slave for ``fmu`` with inputs and outputs in the role's signal order (per-section ones expanded)."""
+    """The slave for ``fmu`` with inputs and outputs in the role's signal order (per-section ones expanded;
+    optional ones only where mapped)."""
     desc = describe(fmu.path)
     names = {}
     for kind in ("inputs", "outputs"):
@@ -77,6 +84,18 @@ class FmuVehicle:
         return np.array(xs)
 
 
+def _fault(slave: FmuSlave, frame: int, cause: str) -> FmuStepError:
+    return FmuStepError(f"FMU {slave.desc.path} ({slave.label}) failed at frame {frame}: {cause}", process=PROCESS,
+                        frame=frame)
+
+
+def _section(slave: FmuSlave, value: float, sections: int, name: str, frame: int) -> int:
+    """An FMU's section output (1..N, 0 none) as a 0-based index (-1 none); FmuStepError when out of range."""
+    if value != math.floor(value) or not 0 <= value <= sections:
+        raise _fault(slave, frame, f"output {name!r} is {value:g}, not a section 1..{sections} or 0 (none)")
+    return int(value) - 1
+
+
 class FmuStrategy:
     """A fill strategy from an FMU, with the strategy signature ``(full (N,) bool, height (N,) m, current
     0-based or -1) -> 0-based section or -1``; the FMU sees sections numbered 1..N (0: none)."""
@@ -88,7 +107,7 @@ class FmuStrategy:
         self.frame, self._t_end = 0, 0.0
 
     def begin_frame(self, frame: int) -> None:
-        """The frame whose decision the next call makes (>= 1): its end is the end of the next doStep."""
+        """The frame (>= 1) whose decision the next call makes: the next doStep ends at its end."""
         self.frame = frame
 
     def __call__(self, full: np.ndarray, height: np.ndarray, current: int) -> int:
@@ -100,12 +119,58 @@ class FmuStrategy:
         t_end = self.frame * self.frame_dt_s
         out = self.slave.step(u, self._t_end, t_end - self._t_end, self.frame)
         self._t_end = t_end
-        k = out[0]
-        if k != math.floor(k) or not 0 <= k <= self.sections:
-            raise FmuStepError(f"FMU {self.slave.desc.path} ({self.slave.label}) failed at frame {self.frame}: output "
-                               f"'section' is {k:g}, not a section 1..{self.sections} or 0 (all full)",
-                               process="dynamics", frame=self.frame)
-        return int(k) - 1
+        return _section(self.slave, out[0], self.sections, "section", self.frame)
+
+
+#: ControllerInput -> value of each optional scalar controller input, in CONTROLLER.inputs order
+_CONTROLLER_INPUTS = {
+    "spout_x_m": lambda i: i.spout_x_m, "drift_x_m": lambda i: i.drift_x_m,
+    "nudge_signal_m": lambda i: i.nudge_signal_m,
+    "impact_top_x_m": lambda i: i.impacts[0][0], "impact_top_y_m": lambda i: i.impacts[0][1],
+    "impact_floor_x_m": lambda i: i.impacts[-1][0], "impact_floor_y_m": lambda i: i.impacts[-1][1],
+    "delivered_m3": lambda i: i.delivery.delivered_m3,
+}
+
+
+class FmuController:
+    """The offloading controller from an FMU (dynamics_proc.control_protocol; memory inside the FMU, so its
+    state is None). Stepped once per frame at the decision time (see the module docstring)."""
+
+    def __init__(self, slave: FmuSlave, fmu: Fmu, params: ControllerParams):
+        self.slave, self.params = slave, params
+        self._inputs = [(n, f) for n, f in _CONTROLLER_INPUTS.items() if n in fmu.inputs]
+        self._outputs = [s.name for s in CONTROLLER.outputs if s.name in fmu.outputs]
+        self._seen = False
+
+    def initial_state(self) -> None:
+        """No memory outside the FMU."""
+        return None
+
+    def step(self, state: None, inp: ControllerInput) -> tuple[None, ControllerCommand]:
+        """Set the inputs, one doStep of a frame at ``inp.t_s``, the outputs as a command."""
+        p, frame = self.params, inp.frame + 1
+        n = p.sections
+        h = section_heights(inp.heights, p) if inp.heights is not None else np.full(n, np.nan)
+        self._seen = self._seen or bool(np.isfinite(h).any())
+        out = self.slave.step(h.tolist() + [f(inp) for _, f in self._inputs], inp.t_s, p.frame_dt_s, frame)
+        got = dict(zip(self._outputs, out))
+        nudge = got["nudge"]
+        if nudge not in (-1.0, 0.0, 1.0):
+            raise _fault(self.slave, frame, f"output 'nudge' is {nudge:g}, not -1, 0 or +1")
+        target = _section(self.slave, got.get("target_section", 0.0), n, "target_section", frame)
+        fullness = np.array(out[-n:]) if "fullness" in got else np.full(n, np.nan)
+        return None, ControllerCommand(int(nudge), got["auger_on"] != 0.0, got.get("desired_x_m", inp.spout_x_m),
+                                       got.get("effort_m", math.nan), target, fullness,
+                                       got.get("all_full", 0.0) != 0.0, self._seen)
+
+
+def _not_opened(*_args):
+    raise RuntimeError("this scenario names an FMU, which is opened with the run: build the model parameters with "
+                       "ModelParams.from_scenario(s, dynamics_proc.fmus.open_fmus(s))")
+
+
+class _NotOpenedController:
+    initial_state = step = staticmethod(_not_opened)
 
 
 @dataclass
@@ -114,11 +179,17 @@ class Fmus:
 
     vehicle: FmuVehicle | None = None
     strategy: FmuStrategy | None = None
+    controller: FmuController | None = None
 
-    def params(self, p):
-        """``p`` (model.ModelParams) with these FMUs in place of the built-in models."""
-        control = dataclasses.replace(p.control, strategy_fn=self.strategy) if self.strategy else p.control
-        return dataclasses.replace(p, control=control, fmus=self)
+    def strategy_for(self, s: Scenario):
+        """The fill strategy to use in place of loading ``s.controller.strategy`` by name, or None."""
+        if s.controller.strategy != FMU_REF:
+            return None
+        return self.strategy or _not_opened
+
+    def controller_for(self, s: Scenario):
+        """The controller for ``controller.model: fmu``."""
+        return self.controller or _NotOpenedController()
 
     def begin_frame(self, frame: int) -> None:
         """Tell the stateful FMUs which frame (>= 1) is being computed (their step times and messages)."""
@@ -127,28 +198,32 @@ class Fmus:
 
     def close(self) -> None:
         """Free every FMU (safe to call twice)."""
-        for m in (self.vehicle, self.strategy):
+        for m in (self.vehicle, self.strategy, self.controller):
             if m is not None:
                 m.slave.close()
 
 
 def open_fmus(s: Scenario) -> Fmus | None:
     """Instantiate and initialise the FMUs scenario ``s`` names; None when it names none."""
-    vf, sf = s.vehicles.tractor_cart.fmu, s.controller.fmu
-    if vf is None and sf is None:
+    vf, cf = s.vehicles.tractor_cart.fmu, s.controller.fmu
+    if vf is None and cf is None:
         return None
     fmus = Fmus()
+    n = s.controller.sections
     try:
         if vf is not None:
             vp = VehicleParams.from_scenario(s)
             x0 = initial_state(s, vp)
             initial = {name: float(x0[i]) for name, i in _STATE_INDEX.items()}
-            slave = _open(vf, VEHICLE, s.controller.sections, VEHICLE_LABEL, initial)
+            slave = _open(vf, VEHICLE, n, VEHICLE_LABEL, initial)
             fmus.vehicle = FmuVehicle(slave, step_mode(vf, VEHICLE) == "frame", vp, SyncGains.from_scenario(s),
                                       s.timing.dynamics_dt_s, s.timing.steps_per_frame)
-        if sf is not None and s.controller.strategy == "fmu":
-            slave = _open(sf, STRATEGY, s.controller.sections, STRATEGY_LABEL, {})
-            fmus.strategy = FmuStrategy(slave, sf, s.controller.sections, s.timing.sensor_period_s)
+        if cf is not None and s.controller.strategy == FMU_REF:
+            slave = _open(cf, STRATEGY, n, CONTROLLER_LABEL, {})
+            fmus.strategy = FmuStrategy(slave, cf, n, s.timing.sensor_period_s)
+        if cf is not None and s.controller.model == FMU_REF:
+            slave = _open(cf, CONTROLLER, n, CONTROLLER_LABEL, {})
+            fmus.controller = FmuController(slave, cf, ControllerParams.from_scenario(s, _not_opened))
     except BaseException:
         fmus.close()
         raise

@@ -55,7 +55,7 @@ class DynamicsParticipant:
         FMUs (dynamics_proc.fmus)."""
         self._fmus = open_fmus(self.scenario)
         if self._fmus is not None:
-            self.params = self._fmus.params(self.params)
+            self.params = ModelParams.from_scenario(self.scenario, self._fmus)
         self._seg = segment
         self._state = segment.view("dyn_state")
         self._stream = segment.view("stream")

@@ -1,78 +1,61 @@
-"""Scenario-time checks and listing of the FMUs a scenario names (for the loader and ``validate``).
+"""Scenario-time checks and inventory of the FMUs a scenario names (run by the loader through
+``cosim.scenario.trust.check_fmus``, one of its ``CHECKS``).
 
-:data:`SITES` lists where an FMU may appear and the role it plays there. :func:`fmu_problems` checks every FMU
-in a loaded document (the file is an FMU graincosim can step, the mapping fits the role) and returns the
-problems with their locations, for the loader to mark with file:line:col; it runs on the plain YAML data, so
-an FMU is checked even when unrelated parts of the scenario are invalid. :func:`list_fmus` describes the FMUs a
-validated scenario would load.
+:func:`fmu_sites` lists the FMUs a scenario names and the role each plays. :func:`check_fmus` describes each
+(the file is an FMU graincosim can step: FMI 2.0 co-simulation with a binary for this platform) and checks its
+mapping against the role; it returns the inventory ``validate`` prints and the problems, each at its scenario
+key, which the loader reports as ``file:line:col: key: message``. An FMU runs its own binary code, so
+``allow_plugins=False`` (``--no-plugins``) refuses every FMU.
 """
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
-from pydantic import ValidationError
-
-from cosim.scenario.config import Controller, Fmu, Scenario
+from cosim.scenario.config import FMU_REF, Fmu, Scenario
 
 from .describe import FmiUnavailable, FmuDescription, FmuInvalid, describe
-from .roles import STRATEGY, VEHICLE, Role, mapping_problems
+from .roles import CONTROLLER, STRATEGY, VEHICLE, Role, mapping_problems
 
-__all__ = ["SITES", "fmu_problems", "list_fmus"]
+__all__ = ["FmuLoaded", "fmu_sites", "check_fmus", "list_fmus"]
 
-#: (location of the FMU record in the scenario, the role it plays there)
-SITES: tuple[tuple[tuple[str, ...], Role], ...] = (
-    (("vehicles", "tractor_cart", "fmu"), VEHICLE),
-    (("controller", "fmu"), STRATEGY),
-)
+#: one FMU a scenario loads: (scenario key, file name, path, FMI version / model / tool / GUID, model identifier)
+FmuLoaded = tuple[str, str, str, str, str]
 
 
-def _get(data, loc: tuple[str, ...]):
-    for part in loc:
-        if not isinstance(data, dict) or part not in data:
-            return None
-        data = data[part]
-    return data
+def fmu_sites(s: Scenario) -> list[tuple[tuple[str, ...], Fmu, Role]]:
+    """(scenario key of the record, the record, the role it plays) of every FMU ``s`` names."""
+    out = []
+    if s.vehicles.tractor_cart.fmu is not None:
+        out.append((("vehicles", "tractor_cart", "fmu"), s.vehicles.tractor_cart.fmu, VEHICLE))
+    c = s.controller
+    if c.fmu is not None:
+        role = CONTROLLER if c.model == FMU_REF else STRATEGY if c.strategy == FMU_REF else None
+        if role is not None:        # otherwise Controller's own validator has reported it
+            out.append((("controller", "fmu"), c.fmu, role))
+    return out
 
 
-def _sections(data) -> int:
-    n = _get(data, ("controller", "sections"))
-    ok = isinstance(n, int) and not isinstance(n, bool) and n >= 1
-    return n if ok else Controller.model_fields["sections"].default
-
-
-def fmu_problems(data) -> list[tuple[tuple, str, bool]]:
-    """Problems of every FMU in the scenario data (paths already resolved): (location, message, whether to
-    report it at the key). A record that does not validate, or whose file is missing, is left to the
-    loader's other checks."""
-    out: list[tuple[tuple, str, bool]] = []
-    for site, role in SITES:
-        raw = _get(data, site)
-        if not isinstance(raw, dict):
-            continue
-        try:
-            fmu = Fmu.model_validate_json(json.dumps(raw))
-        except ValidationError:
-            continue
-        if not Path(fmu.path).is_file():
+def check_fmus(s: Scenario, *, allow_plugins: bool = True) -> tuple[list[FmuLoaded], list[tuple[tuple, str]]]:
+    """Describe and check every FMU ``s`` names: (inventory, problems as (scenario key, message))."""
+    loaded, issues = [], []
+    for key, fmu, role in fmu_sites(s):
+        if not allow_plugins:
+            issues.append((key + ("path",), f"{fmu.path}: an FMU runs its own binary code and plug-ins are "
+                                          "refused (--no-plugins)"))
             continue
         try:
             desc = describe(fmu.path)
-        except (FmiUnavailable, FmuInvalid, OSError) as e:
-            what = str(e) if isinstance(e, FmiUnavailable) else f"{fmu.path} {e}"
-            out.append((site + ("path",), what, False))
+        except FmiUnavailable as e:
+            issues.append((key + ("path",), str(e)))
             continue
-        out += [(site + loc, msg, at_key) for loc, msg, at_key in mapping_problems(fmu, desc, role, _sections(data))]
-    return out
+        except (FmuInvalid, OSError) as e:
+            issues.append((key + ("path",), f"{fmu.path} {e}"))
+            continue
+        loaded.append((".".join(key), fmu.path.name, str(fmu.path),
+                       f"FMI {desc.fmi_version} co-simulation, model {desc.model_name!r}, generated by "
+                       f"{desc.generation_tool or 'an unknown tool'}, guid {desc.guid}", desc.model_identifier))
+        issues += [(key + loc, msg) for loc, msg in mapping_problems(fmu, desc, role, s.controller.sections)]
+    return loaded, issues
 
 
-def list_fmus(scenario: Scenario) -> list[tuple[str, FmuDescription]]:
-    """The FMUs ``scenario`` would load, as (dotted location, description); for ``validate``."""
-    out = []
-    for site, _role in SITES:
-        fmu = scenario
-        for part in site:
-            fmu = getattr(fmu, part)
-        if fmu is not None:
-            out.append((".".join(site), describe(fmu.path)))
-    return out
+def list_fmus(s: Scenario) -> list[tuple[str, FmuDescription]]:
+    """(dotted scenario key, description) of every FMU ``s`` would load."""
+    return [(".".join(key), describe(fmu.path)) for key, fmu, _ in fmu_sites(s)]

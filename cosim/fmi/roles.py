@@ -19,7 +19,7 @@ from cosim.scenario.config import Fmu
 
 from .describe import FmuDescription, Variable
 
-__all__ = ["Signal", "Role", "VEHICLE", "STRATEGY", "ROLES", "expand", "step_mode", "mapping_problems"]
+__all__ = ["Signal", "Role", "VEHICLE", "STRATEGY", "CONTROLLER", "ROLES", "expand", "step_mode", "mapping_problems"]
 
 #: FMU variable types that carry a number we can set or read
 NUMERIC = ("Real", "Integer", "Boolean", "Enumeration")
@@ -89,7 +89,38 @@ STRATEGY = Role(
     steps=("frame",),
 )
 
-ROLES = {r.name: r for r in (VEHICLE, STRATEGY)}
+#: the whole offloading controller (dynamics_proc.control_protocol), positions along the cart grid x axis (m from
+#: the front inner wall), sections numbered 1..N
+CONTROLLER = Role(
+    "controller", "controller (model)",
+    inputs=(Signal("height_m", ("Real",), per_section=True,
+                   doc="robust peak height of section k in this frame's measurement, m; NaN: no valid cells or "
+                       "no measurement"),
+            Signal("spout_x_m", ("Real",), required=False, doc="actual auger (spout) location, grid x, m"),
+            Signal("drift_x_m", ("Real",), required=False, doc="predicted impact x minus spout x, m"),
+            Signal("nudge_signal_m", ("Real",), required=False,
+                   doc="spout grid x the current Machine Sync setpoint implies, m"),
+            Signal("impact_top_x_m", ("Real",), required=False, doc="predicted impact at the target fill, grid x, m"),
+            Signal("impact_top_y_m", ("Real",), required=False, doc="predicted impact at the target fill, grid y, m"),
+            Signal("impact_floor_x_m", ("Real",), required=False, doc="predicted impact on the floor, grid x, m"),
+            Signal("impact_floor_y_m", ("Real",), required=False, doc="predicted impact on the floor, grid y, m"),
+            Signal("delivered_m3", ("Real",), required=False, doc="flow signal integrated since the start, m^3")),
+    outputs=(Signal("nudge", ("Integer", "Real", "Enumeration"),
+                    doc="-1, 0 or +1: move the Machine Sync setpoint by that many nudge_m along grid x"),
+             Signal("auger_on", ("Boolean", "Integer", "Real"), doc="run the auger (non-zero: on)"),
+             Signal("desired_x_m", ("Real",), required=False, doc="desired auger location, grid x, m (reported)"),
+             Signal("effort_m", ("Real",), required=False, doc="control effort, grid x, m (reported)"),
+             Signal("target_section", ("Integer", "Real", "Enumeration"), required=False,
+                    doc="section being filled 1..N, 0 none (reported)"),
+             Signal("all_full", ("Boolean", "Integer", "Real"), required=False,
+                    doc="the controller considers the cart full (reported)"),
+             Signal("fullness", ("Real",), required=False, per_section=True,
+                    doc="estimated height / target fill of section k, NaN unknown (reported)")),
+    initial=(),
+    steps=("frame",),
+)
+
+ROLES = {r.name: r for r in (VEHICLE, STRATEGY, CONTROLLER)}
 
 
 def expand(signal: Signal, fmu_name: str, sections: int) -> list[str]:
@@ -130,10 +161,10 @@ def _value_problem(var: Variable, value) -> str | None:
     return None if ok else f"FMU parameter {var.name!r} is {var.type}, got {value!r}"
 
 
-def mapping_problems(fmu: Fmu, desc: FmuDescription, role: Role, sections: int) -> list[tuple[tuple, str, bool]]:
-    """Every problem of ``fmu``'s mapping for ``role`` against ``desc``, as (location inside the record, message,
-    whether to report it at the key rather than the value). ``sections``: the controller's section count N."""
-    out: list[tuple[tuple, str, bool]] = []
+def mapping_problems(fmu: Fmu, desc: FmuDescription, role: Role, sections: int) -> list[tuple[tuple, str]]:
+    """Every problem of ``fmu``'s mapping for ``role`` against ``desc``, as (location inside the record,
+    message). ``sections``: the controller's section count N."""
+    out: list[tuple[tuple, str]] = []
     causality = {"inputs": ("input",), "outputs": ("output",), "initial": SETTABLE_AT_START}
     for kind in ("inputs", "outputs", "initial"):
         signals = {s.name: s for s in role.signals(kind)}
@@ -144,28 +175,28 @@ def mapping_problems(fmu: Fmu, desc: FmuDescription, role: Role, sections: int) 
                 known = ", ".join(signals) or "none"
                 what = {"inputs": "input", "outputs": "output", "initial": "initial value"}[kind]
                 out.append(((kind, ours), _unknown(ours, signals, f"{what} signal") +
-                            f" for the {role.label} FMU; known: {known}", True))
+                            f" for the {role.label} FMU; known: {known}"))
                 continue
             if sig.per_section and "{k}" not in theirs:
                 out.append(((kind, ours), f"{ours!r} is one value per section: the FMU name must hold {{k}} (the "
-                                          f"section number 1..{sections}), e.g. '{theirs}_{{k}}'", False))
+                                          f"section number 1..{sections}), e.g. '{theirs}_{{k}}'"))
                 continue
             for name in expand(sig, theirs, sections):
                 msg = _check_variable(desc.variables.get(name), name, desc, causality[kind], sig.types)
                 if msg:
-                    out.append(((kind, ours), msg, False))
+                    out.append(((kind, ours), msg))
                     break
         missing = [s.name for s in role.signals(kind) if s.required and s.name not in mapping]
         if missing:
             out.append(((kind,) if mapping else (), f"the {role.label} FMU needs {kind} "
-                        f"{', '.join(map(repr, missing))} mapped (our name: FMU variable name)", True))
+                        f"{', '.join(map(repr, missing))} mapped (our name: FMU variable name)"))
     for name, value in fmu.parameters.items():
         var = desc.variables.get(name)
         msg = _check_variable(var, name, desc, ("parameter",), NUMERIC + ("String",))
         if msg:
-            out.append((("parameters", name), msg, True))
+            out.append((("parameters", name), msg))
         elif (msg := _value_problem(var, value)) is not None:
-            out.append((("parameters", name), msg, False))
+            out.append((("parameters", name), msg))
     if fmu.step is not None and fmu.step not in role.steps:
-        out.append((("step",), f"the {role.label} FMU can only be stepped per {' or '.join(role.steps)}", False))
+        out.append((("step",), f"the {role.label} FMU can only be stepped per {' or '.join(role.steps)}"))
     return out

@@ -30,7 +30,7 @@ from pydantic import BaseModel, ValidationError
 
 from .config import FORMAT_VERSION, Scenario
 from cosim.errors import Problem, ScenarioError
-from cosim.fmi.check import fmu_problems
+from .trust import inspect_scenario
 from .yamlmarks import (Doc as _Doc, Dumper as _Dumper, Loc, Mark as _Mark,
                         dotted as _dotted, parse as _parse, show as _show)
 
@@ -220,6 +220,26 @@ def _resolve_paths(doc: _Doc, base_dir: Path) -> None:
             doc.problem(mark, loc, f"file {str(path)!r} {what} (relative paths are resolved against {str(base)!r})")
 
 
+def _set_plugin_dir(doc: _Doc, base_dir: Path) -> None:
+    """``plugin_dir``: the scenario's folder unless given (a relative one is resolved against it)."""
+    given = doc.data.get("plugin_dir")
+    if isinstance(given, str):
+        mark = doc.values.get(("plugin_dir",), doc.values[()])
+        base = Path.cwd() if mark.file in (SET_FILE, OPTIONS_FILE) else base_dir
+        doc.data["plugin_dir"] = str((base / Path(given).expanduser()).resolve()) if given else ""
+    elif "plugin_dir" not in doc.data:
+        doc.data["plugin_dir"] = str(base_dir)
+
+
+def _check_external(doc: _Doc, scenario: Scenario, allow_plugins: bool) -> None:
+    """Import and check every plug-in (and other external model) the scenario names (cosim.scenario.trust)."""
+    _, issues = inspect_scenario(scenario, allow_plugins=allow_plugins)
+    for issue in issues:
+        found = _existing(doc.data, issue.loc)
+        mark = doc.values.get(found, doc.values[()])
+        doc.problem(mark, issue.loc, issue.message)
+
+
 # ------------------------------------------------------------------------------------------- validation
 def _existing(data, loc: Loc) -> Loc:
     """The longest prefix of ``loc`` that names a node present in ``data``."""
@@ -291,13 +311,6 @@ def _error_problem(err: dict, doc: _Doc) -> Problem:
     return Problem(mark.file, mark.line, mark.col, _dotted(loc), msg)
 
 
-def _check_fmus(doc: _Doc) -> None:
-    """FMU files and their variable mappings (cosim.fmi.check), each problem at its key or value."""
-    for loc, message, at_key in fmu_problems(doc.data):
-        mark = (doc.keys if at_key else doc.values).get(loc) or doc.keys.get(_existing(doc.data, loc), doc.values[()])
-        doc.problem(mark, loc, message)
-
-
 def _finish(doc: _Doc, filename: str) -> None:
     """Raise the collected problems, deduplicated, in file order (the file, then ``--set``, then options)."""
     if not doc.problems:
@@ -314,8 +327,13 @@ def load_scenario_text(
     *,
     extra: Mapping | None = None,
     base_dir: str | os.PathLike | None = None,
+    allow_plugins: bool = True,
 ) -> Scenario:
     """Parse, override, resolve and validate scenario ``text``; raise ScenarioError with every problem.
+
+    Every plug-in the scenario names is imported and checked (cosim.scenario.trust: importing runs its code);
+    ``allow_plugins`` False refuses any that is not built in (``--no-plugins``). ``plugin_dir`` (the folder
+    plug-in modules are looked for first) defaults to ``base_dir``.
 
     ``overrides``: ``"PATH=VALUE"`` strings (``--set``); ``extra``: ``{"dotted.path": value}`` from other options,
     entries whose value is None are skipped. ``base_dir``: directory that relative paths in the text are resolved
@@ -343,23 +361,27 @@ def load_scenario_text(
     if base_dir is None:
         base_dir = Path(filename).parent if Path(filename).is_file() else Path.cwd()
     _resolve_paths(doc, Path(base_dir).resolve())
+    _set_plugin_dir(doc, Path(base_dir).resolve())
     try:
         scenario = Scenario.model_validate_json(json.dumps(doc.data))
     except ValidationError as e:
         doc.problems += [_error_problem(err, doc) for err in e.errors(include_url=False)]
         scenario = None
-    _check_fmus(doc)
+    if scenario is not None:
+        _check_external(doc, scenario, allow_plugins)
     _finish(doc, filename)
     return scenario
 
 
-def load_scenario(path: str | os.PathLike, overrides: Sequence[str] = (), *, extra: Mapping | None = None) -> Scenario:
+def load_scenario(path: str | os.PathLike, overrides: Sequence[str] = (), *, extra: Mapping | None = None,
+                  allow_plugins: bool = True) -> Scenario:
     """Load and validate the scenario file ``path`` (see :func:`load_scenario_text`)."""
     try:
         text = Path(path).read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:
         raise ScenarioError([Problem(str(path), 0, 0, "", f"cannot read scenario file: {e}")]) from None
-    return load_scenario_text(text, str(path), overrides, extra=extra, base_dir=Path(path).resolve().parent)
+    return load_scenario_text(text, str(path), overrides, extra=extra, base_dir=Path(path).resolve().parent,
+                              allow_plugins=allow_plugins)
 
 
 # -------------------------------------------------------------------------------------- packaged, dump

@@ -5,7 +5,8 @@ An :class:`Fmu` names the file and maps *our* names (the signals of the role it 
 Where it is used:
 
 * ``vehicles.tractor_cart.fmu``: the tractor-and-cart dynamics, driven by Machine Sync's commands;
-* ``controller.fmu`` with ``controller.strategy: fmu``: the fill strategy.
+* ``controller.fmu`` with ``controller.model: fmu``: the offloading controller; with ``controller.strategy:
+  fmu``: the fill strategy.
 
 Whether the file is an FMI 2.0 co-simulation FMU and whether every mapped variable exists with the right
 causality is checked when the scenario is loaded (``cosim.fmi.check``), each problem at its YAML line.
@@ -19,7 +20,10 @@ from pydantic import Field
 
 from .base import Model
 
-__all__ = ["Fmu", "TractorCart", "Vehicles", "FmuStep", "ParameterValue"]
+__all__ = ["FMU_REF", "Fmu", "TractorCart", "Vehicles", "FmuStep", "ParameterValue"]
+
+#: the plug-in reference (``controller.strategy`` / ``controller.model``) that names ``controller.fmu``
+FMU_REF = "fmu"
 
 #: what one ``doStep`` covers: one dynamics step (``timing.dynamics_dt_s``) or one sensor frame
 FmuStep = Literal["dynamics_step", "frame"]
@@ -40,7 +44,7 @@ class Fmu(Model):
     * ``parameters``: FMU variable (causality ``parameter``) -> value, set before initialisation;
     * ``step``: ``dynamics_step`` (one ``doStep`` of ``timing.dynamics_dt_s`` per dynamics step, inputs
       updated before each) or ``frame`` (one ``doStep`` of ``timing.sensor_period_s`` per frame, inputs held);
-      unset: the role's own (the vehicle ``dynamics_step``; a strategy can only be stepped per ``frame``).
+      unset: the role's own (the vehicle ``dynamics_step``; a controller or strategy only per ``frame``).
     """
 
     path: Path

@@ -93,6 +93,9 @@ class Scenario(Model):
     render: Render = Render()
     perception: Perception = Perception()
     outputs: Outputs = Outputs()
+    #: folder searched first for plug-in modules named by import path (the loader sets it to the scenario
+    #: file's folder; '' only sys.path); carried to the run's processes so that they import the same code
+    plugin_dir: str = ""
 
     @field_validator("renderer")
     @classmethod

@@ -1,0 +1,112 @@
+"""What a scenario would load, checked when it is validated: every plug-in (and, through :data:`CHECKS`, every other
+kind of external model, such as FMUs) it names.
+
+A scenario that names a plug-in runs that code (in the launcher while validating, and in the run's processes).
+:func:`inspect_scenario` imports and checks each one and returns the inventory ``validate`` prints; with
+``allow_plugins=False`` anything not built in is refused instead (``--no-plugins``, for scenarios from
+untrusted sources). Problems come back as :class:`Issue` (scenario key + message); the loader turns them into
+``file:line:col: key: message`` errors.
+
+Hook: :data:`CHECKS` is the tuple of check functions the loader runs, each
+``check(scenario, *, allow_plugins: bool) -> (list[Loaded], list[Issue])``; another kind of external model
+adds its function there.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from cosim.fmi import check as fmi_check
+
+from .config import FMU_REF, Scenario
+from .plugins import PluginError, resolve_plugin
+
+__all__ = ["Loaded", "Issue", "Check", "plugin_points", "check_plugins", "check_fmus", "CHECKS", "inspect_scenario",
+           "format_inventory"]
+
+
+@dataclass(frozen=True)
+class Loaded:
+    """One thing a scenario would load: ``kind`` ('plug-in', 'fmu', ...), ``key`` the scenario key naming it,
+    ``ref`` as named there, ``builtin`` whether it ships with graincosim, ``file`` the file that would be
+    loaded, ``version`` of its distribution ('' unknown), ``target`` what the reference resolved to."""
+
+    kind: str
+    key: str
+    ref: str
+    builtin: bool
+    file: str
+    version: str
+    target: str = ""
+
+
+@dataclass(frozen=True)
+class Issue:
+    """A problem found at scenario key ``loc`` (a tuple of keys)."""
+
+    loc: tuple[str, ...]
+    message: str
+
+
+Check = Callable[..., "tuple[list[Loaded], list[Issue]]"]
+
+
+def plugin_points(s: Scenario) -> list[tuple[tuple[str, ...], str, str]]:
+    """(scenario key, plug-in group, reference) of every plug-in point of ``s``."""
+    st = s.perception.stages
+    return [(("controller", "strategy"), "strategies", s.controller.strategy),
+            (("controller", "model"), "controllers", s.controller.model),
+            (("perception", "algorithm"), "perception", s.perception.algorithm),
+            (("perception", "stages", "rim"), "perception.rim", st.rim),
+            (("perception", "stages", "heightmap"), "perception.heightmap", st.heightmap),
+            (("perception", "stages", "impact"), "perception.impact", st.impact)]
+
+
+def check_plugins(s: Scenario, *, allow_plugins: bool = True) -> tuple[list[Loaded], list[Issue]]:
+    """Import and signature-check every plug-in ``s`` names (looked for in ``s.plugin_dir`` first)."""
+    base = Path(s.plugin_dir) if s.plugin_dir else None
+    loaded, issues = [], []
+    for loc, group, ref in plugin_points(s):
+        if ref == FMU_REF and loc[0] == "controller":
+            continue                        # controller.fmu: check_fmus
+        try:
+            info = resolve_plugin(group, ref, base_dir=base, allow_external=allow_plugins)
+        except PluginError as e:
+            issues.append(Issue(loc, str(e)))
+            continue
+        loaded.append(Loaded("plug-in", ".".join(loc), ref, info.builtin, info.file,
+                             info.version if not info.distribution else f"{info.distribution} {info.version}",
+                             info.target))
+    return loaded, issues
+
+
+def check_fmus(s: Scenario, *, allow_plugins: bool = True) -> tuple[list[Loaded], list[Issue]]:
+    """Describe and check every FMU ``s`` names (cosim.fmi.check; refused with ``allow_plugins=False``)."""
+    rows, problems = fmi_check.check_fmus(s, allow_plugins=allow_plugins)
+    return ([Loaded("fmu", key, ref, False, file, version, target) for key, ref, file, version, target in rows],
+            [Issue(loc, message) for loc, message in problems])
+
+
+#: the checks the loader runs on every validated scenario (another external model kind adds its own)
+CHECKS: tuple[Check, ...] = (check_plugins, check_fmus)
+
+
+def inspect_scenario(s: Scenario, *, allow_plugins: bool = True) -> tuple[list[Loaded], list[Issue]]:
+    """Every :data:`CHECKS` function on ``s``: (what it would load, the problems found)."""
+    loaded, issues = [], []
+    for check in CHECKS:
+        got, bad = check(s, allow_plugins=allow_plugins)
+        loaded += got
+        issues += bad
+    return loaded, issues
+
+
+def format_inventory(loaded: list[Loaded]) -> str:
+    """The inventory as text lines, one per item: kind, key, ref, built-in or external, file, version."""
+    lines = []
+    for item in loaded:
+        origin = "built in" if item.builtin else "EXTERNAL (runs its code)"
+        lines.append(f"  {item.kind} {item.key} = {item.ref}: {origin}; file {item.file or '?'}; "
+                     f"version {item.version or 'unknown'}")
+    return "\n".join(lines)
