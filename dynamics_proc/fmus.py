@@ -57,9 +57,11 @@ def _open(fmu: Fmu, role, sections: int, label: str, initial: dict[str, float]) 
     for kind in ("inputs", "outputs"):
         names[kind] = [n for s in role.signals(kind) if s.name in getattr(fmu, kind)
                        for n in expand(s, getattr(fmu, kind)[s.name], sections)]
+    nan_ok = [n for s in role.outputs if s.nan_ok and s.name in fmu.outputs
+              for n in expand(s, fmu.outputs[s.name], sections)]
     start = dict(fmu.parameters)
     start.update({fmu.initial[ours]: value for ours, value in initial.items() if ours in fmu.initial})
-    return FmuSlave(desc, names["inputs"], names["outputs"], start, label, 0.0, fmu.instance_name)
+    return FmuSlave(desc, names["inputs"], names["outputs"], start, label, 0.0, fmu.instance_name, nan_ok)
 
 
 class FmuVehicle:
@@ -161,7 +163,7 @@ class FmuController:
         fullness = np.array(out[-n:]) if "fullness" in got else np.full(n, np.nan)
         return None, ControllerCommand(int(nudge), got["auger_on"] != 0.0, got.get("desired_x_m", inp.spout_x_m),
                                        got.get("effort_m", math.nan), target, fullness,
-                                       got.get("all_full", 0.0) != 0.0, self._seen)
+                                       got.get("all_full", 0.0) != 0.0, self._seen, got.get("bias_m", 0.0))
 
 
 def _not_opened(*_args):

@@ -41,6 +41,8 @@ def check_fmus(s: Scenario, *, allow_plugins: bool = True) -> tuple[list[FmuLoad
             issues.append((key + ("path",), f"{fmu.path}: an FMU runs its own binary code and plug-ins are "
                                           "refused (--no-plugins)"))
             continue
+        if not fmu.path.is_file():
+            continue                        # the loader's path check has reported it
         try:
             desc = describe(fmu.path)
         except FmiUnavailable as e:

@@ -30,13 +30,15 @@ SETTABLE_AT_START = ("parameter", "input")
 @dataclass(frozen=True)
 class Signal:
     """One of our signals: ``name`` (units in it), FMU types it may map to, whether a mapping must give it,
-    whether it is one variable per section (``{k}`` in the FMU name)."""
+    whether it is one variable per section (``{k}`` in the FMU name), whether NaN is a valid value (an output
+    that is NaN otherwise ends the run)."""
 
     name: str
     types: tuple[str, ...]
     required: bool = True
     per_section: bool = False
     doc: str = ""
+    nan_ok: bool = False
 
 
 @dataclass(frozen=True)
@@ -109,12 +111,14 @@ CONTROLLER = Role(
                     doc="-1, 0 or +1: move the Machine Sync setpoint by that many nudge_m along grid x"),
              Signal("auger_on", ("Boolean", "Integer", "Real"), doc="run the auger (non-zero: on)"),
              Signal("desired_x_m", ("Real",), required=False, doc="desired auger location, grid x, m (reported)"),
-             Signal("effort_m", ("Real",), required=False, doc="control effort, grid x, m (reported)"),
+             Signal("effort_m", ("Real",), required=False, nan_ok=True,
+                    doc="control effort, grid x, m (reported; NaN: none)"),
              Signal("target_section", ("Integer", "Real", "Enumeration"), required=False,
                     doc="section being filled 1..N, 0 none (reported)"),
              Signal("all_full", ("Boolean", "Integer", "Real"), required=False,
                     doc="the controller considers the cart full (reported)"),
-             Signal("fullness", ("Real",), required=False, per_section=True,
+             Signal("bias_m", ("Real",), required=False, doc="learnt steady-state offset, m (reported)"),
+             Signal("fullness", ("Real",), required=False, per_section=True, nan_ok=True,
                     doc="estimated height / target fill of section k, NaN unknown (reported)")),
     initial=(),
     steps=("frame",),
@@ -135,16 +139,16 @@ def step_mode(fmu: Fmu, role: Role) -> str:
     return fmu.step or role.steps[0]
 
 
-def _unknown(name: str, known, what: str) -> str:
+def _unknown(name: str, known, what: str, where: str = "") -> str:
     close = difflib.get_close_matches(name, list(known), n=1)
     hint = f" (did you mean {close[0]!r}?)" if close else ""
-    return f"no {what} {name!r}{hint}"
+    return f"no {what} {name!r}{where}{hint}"
 
 
 def _check_variable(var: Variable | None, fmu_name: str, desc: FmuDescription, causalities: tuple[str, ...],
                     types: tuple[str, ...]) -> str | None:
     if var is None:
-        return _unknown(fmu_name, desc.variables, "variable") + f" in the FMU {desc.path.name}"
+        return _unknown(fmu_name, desc.variables, "variable", f" in the FMU {desc.path.name}")
     if var.causality not in causalities:
         return (f"FMU variable {fmu_name!r} has causality {var.causality!r}; it must be "
                 f"{' or '.join(map(repr, causalities))} here")

@@ -54,17 +54,18 @@ class FmuSlave:
     ``inputs`` / ``outputs``: FMU variable names, in the order of the flat lists ``set_inputs`` takes and
     ``outputs`` returns; ``start``: FMU variable -> value set before initialisation (parameters and start
     values); ``label``: how messages name it (e.g. ``vehicles.tractor_cart.fmu``); ``start_time_s`` the
-    experiment's start.
+    experiment's start; ``nan_ok``: outputs that may be NaN (any other non-finite output is a fault).
     """
 
     def __init__(self, desc: FmuDescription, inputs: Sequence[str], outputs: Sequence[str],
                  start: Mapping[str, object], label: str, start_time_s: float = 0.0,
-                 instance_name: str = "graincosim"):
+                 instance_name: str = "graincosim", nan_ok: Sequence[str] = ()):
         fmpy = require_fmpy()
         from fmpy.fmi2 import FMU2Slave
 
         self.desc, self.label = desc, label
         self.output_names = tuple(outputs)
+        self._checked = tuple(i for i, n in enumerate(outputs) if n not in set(nan_ok))
         self._in = _groups(desc, inputs)
         self._out = _groups(desc, outputs)
         self._n_in = len(inputs)
@@ -97,9 +98,9 @@ class FmuSlave:
         else:
             self._fmu.setString(ref, [str(value)])
 
-    def _fail(self, what: str, frame: int, t_s: float, cause: object) -> FmuStepError:
-        return FmuStepError(f"FMU {self.desc.path} ({self.label}) failed at frame {frame} (t = {t_s:.3f} s): "
-                            f"{what}: {cause}", process=PROCESS, frame=frame)
+    def _fail(self, cause: str, frame: int, t_s: float) -> FmuStepError:
+        return FmuStepError(f"FMU {self.desc.path} ({self.label}) failed at frame {frame} (t = {t_s:.3f} s): {cause}",
+                            process=PROCESS, frame=frame)
 
     def step(self, inputs: Sequence[float], t_s: float, h_s: float, frame: int) -> list[float]:
         """Set ``inputs`` (our order), ``doStep(t_s, h_s)``, return the outputs (our order) as floats.
@@ -122,10 +123,10 @@ class FmuSlave:
                 for i, x in zip(g.index, got):
                     out[i] = float(x)
         except Exception as e:  # noqa: BLE001 - fmpy's FMICallException and ctypes errors
-            raise self._fail("doStep", frame, t_s, e) from e
-        for name, x in zip(self.output_names, out):
-            if not math.isfinite(x):
-                raise self._fail("output", frame, t_s, f"{name!r} is {x}")
+            raise self._fail(f"doStep: {e}", frame, t_s) from e
+        for i in self._checked:
+            if not math.isfinite(out[i]):
+                raise self._fail(f"output {self.output_names[i]!r} is {out[i]}", frame, t_s)
         return out
 
     def close(self) -> None:
