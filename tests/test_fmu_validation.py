@@ -143,3 +143,12 @@ def test_no_plugins_refuses_fmus_and_validate_lists_them(tmp_path, built_fmus, c
     line = next(x for x in out.splitlines() if x.strip().startswith("fmu vehicles.tractor_cart.fmu"))
     assert (f"file {tmp_path / 'TractorCart.fmu'}; version FMI 2.0 co-simulation, model 'TractorCart', generated "
             f"by PythonFMU" in line and d.guid in line and "EXTERNAL" in line)
+
+
+def test_scenario_with_fmu_is_hashable(tmp_path, built_fmus):
+    """Frozen records are cache keys (the renderer's scene parts): the FMU record's mappings hash by content."""
+    path = _scenario(tmp_path, built_fmus, CONTROLLER_TEXT, "SectionFill")
+    a, b = load_scenario(path), load_scenario(path)
+    assert a == b and hash(a) == hash(b)
+    c = load_scenario(path, ["controller.fmu.parameters.nudge_m=0.25"])
+    assert c != a and hash(c.controller.fmu) != hash(a.controller.fmu)

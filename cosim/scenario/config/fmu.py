@@ -55,6 +55,12 @@ class Fmu(Model):
     step: FmuStep | None = None
     instance_name: str = Field(default="graincosim", pattern=_NAME, max_length=64)
 
+    def __hash__(self) -> int:
+        # frozen records are hashable (the scenario is a cache key); the mappings hash as their items
+        return hash((self.path, *(tuple(getattr(self, k).items()) for k in ("inputs", "outputs", "initial",
+                                                                              "parameters")),
+                     self.step, self.instance_name))
+
 
 class TractorCart(Model):
     """The tractor towing the cart: the built-in model (``dynamics_proc.vehicles``) unless ``fmu`` is given."""
