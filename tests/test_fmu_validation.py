@@ -150,5 +150,5 @@ def test_scenario_with_fmu_is_hashable(tmp_path, built_fmus):
     path = _scenario(tmp_path, built_fmus, CONTROLLER_TEXT, "SectionFill")
     a, b = load_scenario(path), load_scenario(path)
     assert a == b and hash(a) == hash(b)
-    c = load_scenario(path, ["controller.fmu.parameters.nudge_m=0.25"])
+    c = load_scenario(path, ["controller.fmu.parameters={nudge_m: 0.25}"])
     assert c != a and hash(c.controller.fmu) != hash(a.controller.fmu)
