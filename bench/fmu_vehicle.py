@@ -9,6 +9,7 @@ one doStep per 10 ms dynamics step). Scenario: the example scenario on a 60 m ar
    interleaved A/B/C rounds, each round timing every frame of the run's state trajectory; medians over rounds.
 2. Whole run in-process (``cosim.runtime.inprocess.simulate``): wall time, interleaved, medians.
 3. Trajectory error: largest difference of tractor and cart positions (m) over the run, FMU against each built-in.
+4. The bare FMU call (inputs set, doStep, outputs read) per step, for the share of the interface.
 
 Run: ``python bench/fmu_vehicle.py [--rounds 7]`` (prints Markdown).
 """
@@ -64,6 +65,15 @@ def _time_steps(p, states) -> float:
     return (time.perf_counter() - t0) / (len(states) * p.steps)
 
 
+def _time_slave(fmus, n: int = 3000) -> float:
+    """Seconds per bare FMU step (set 2 inputs, doStep, get 6 outputs) at a fixed held command."""
+    slave = fmus.vehicle.slave
+    t0 = time.perf_counter()
+    for i in range(n):
+        slave.step([2.0, 0.01], 100.0 + i * 0.01, 0.01, 1)
+    return (time.perf_counter() - t0) / n
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=7)
@@ -77,11 +87,13 @@ def main() -> None:
         p_in = {k: ModelParams.from_scenario(s) for k, s in s_in.items()}
         states = _trajectory(s_in["exponential"], p_in["exponential"])
         step_us = {k: [] for k in ("fmu", *BUILTIN)}
+        bare_us = []
         run_s = {k: [] for k in ("fmu", *BUILTIN)}
         for _ in range(args.rounds):
             fmus = open_fmus(s_fmu)
             try:
                 step_us["fmu"].append(1e6 * _time_steps(ModelParams.from_scenario(s_fmu, fmus), states))
+                bare_us.append(1e6 * _time_slave(fmus))
             finally:
                 fmus.close()
             for k, p in p_in.items():
@@ -99,6 +111,7 @@ def main() -> None:
             float(np.max(np.abs(series["fmu"][f"dyn_state.{c}"] - series[k][f"dyn_state.{c}"]))) for c in COLUMNS)
         name = "FMU (pythonfmu, RK4)" if k == "fmu" else f"built-in {k}"
         print(f"| {name} | {statistics.median(step_us[k]):.1f} | {statistics.median(run_s[k]):.2f} | {err} |")
+    print(f"\nof which the FMU call alone (set 2 inputs, doStep, get 6 outputs): {statistics.median(bare_us):.1f} us")
 
 
 if __name__ == "__main__":
