@@ -3,6 +3,7 @@ the line of the offending value, every one at once, nothing started (docs/fmu.md
 from __future__ import annotations
 
 import shutil
+import sys
 from pathlib import Path
 
 import pytest
@@ -10,7 +11,7 @@ import pytest
 import fmu_builds
 from cosim.cli import main
 from cosim.errors import ScenarioError
-from cosim.fmi.describe import describe
+from cosim.fmi.describe import FmiUnavailable, describe, require_fmpy
 from cosim.scenario.loader import load_scenario
 
 EXAMPLES = fmu_builds.ROOT / "examples"
@@ -152,3 +153,9 @@ def test_scenario_with_fmu_is_hashable(tmp_path, built_fmus):
     assert a == b and hash(a) == hash(b)
     c = load_scenario(path, ["controller.fmu.parameters={nudge_m: 0.25}"])
     assert c != a and hash(c.controller.fmu) != hash(a.controller.fmu)
+
+
+def test_fmpy_missing_says_what_to_install(monkeypatch):
+    monkeypatch.setitem(sys.modules, "fmpy", None)            # import fmpy now raises ImportError
+    with pytest.raises(FmiUnavailable, match=r'FMUs need fmpy, which is not installed: pip install "graincosim\[fmi\]"'):
+        require_fmpy()
