@@ -173,7 +173,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             sys.stdout.write(f"{args.scenario}: valid ({scenario.frames + 1} frames, ring "
                              f"{' -> '.join(scenario.participants)})\nloads (a plug-in runs its code):\n"
-                             f"{format_inventory(inspect_scenario(scenario)[0])}\n")
+                             f"{format_inventory(inspect_scenario(scenario, versions=True)[0])}\n")
         return 0
     from cosim.runtime.progress import ProgressPrinter
 

@@ -24,7 +24,6 @@ Stepping (lockstep with the dynamics):
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 

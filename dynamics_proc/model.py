@@ -14,14 +14,13 @@ from functools import lru_cache
 
 import numpy as np
 
+from cosim.errors import PluginFault
 from cosim.scenario.config import FMU_REF, Scenario
+from cosim.scenario.plugins import load_plugin
 from cosim.world.geometry import cart_grid_from_body, invert, vehicle_pose
 
 from . import auger as ag
 from .blocks import SECTION_FIELD
-from cosim.errors import PluginFault
-from cosim.scenario.plugins import load_plugin
-
 from .control_protocol import (CONTROLLER_POINT, ControllerCommand, ControllerInput, Delivery, OffloadingController,
                                check_command)
 from .controller import ControllerParams, plugin_dir

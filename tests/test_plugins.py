@@ -17,7 +17,8 @@ from cosim.cli import main
 from cosim.errors import ScenarioError
 from cosim.runtime.inprocess import simulate
 from cosim.scenario.loader import load_scenario, load_scenario_text, resolve_scenario_arg
-from cosim.scenario.plugins import BUILTINS, ENTRY_POINT_GROUPS, PluginError, load_plugin, resolve_plugin
+from cosim.scenario.plugins import (BUILTINS, ENTRY_POINT_GROUPS, PluginError, distribution_of, load_plugin,
+                                    resolve_plugin)
 from dynamics_proc import closed_loop
 from dynamics_proc.strategies import front_to_back
 
@@ -84,7 +85,7 @@ def test_entry_point_from_an_installed_distribution(tmp_path, monkeypatch):
     monkeypatch.syspath_prepend(str(tmp_path))
     info = resolve_plugin("strategies", "middle_out")
     assert not info.builtin and info.target == f"{name}:middle_out"
-    assert (info.distribution, info.version) == ("fillers", "1.2.3")
+    assert distribution_of(info) == ("fillers", "1.2.3")
     assert info.obj(np.zeros(9, bool), np.zeros(9), -1) == 4
     with pytest.raises(PluginError, match="'middle_out' is not built in and plug-ins are disabled"):
         resolve_plugin("strategies", "middle_out", allow_external=False)
@@ -137,6 +138,10 @@ def test_no_plugins_refuses_external_and_validate_lists_what_loads(tmp_path, cap
     assert f"plug-in controller.model = section_fill: built in; file {ROOT / 'dynamics_proc' / 'controller.py'}" in out
     with pytest.raises(ScenarioError, match="plug-ins are disabled"):
         load_scenario(scenario, allow_plugins=False)
+    for verb in ("run", "compare"):
+        out = tmp_path / verb
+        assert main([verb, str(scenario), "--no-plugins", "--out", str(out), "--quiet"]) == 2
+        assert "plug-ins are disabled" in capsys.readouterr().err and not out.exists()
 
 
 def test_plugin_dir_is_the_scenario_folder_and_travels():

@@ -30,7 +30,7 @@ from pydantic import BaseModel, ValidationError
 
 from .config import FORMAT_VERSION, Scenario
 from cosim.errors import Problem, ScenarioError
-from .trust import inspect_scenario
+from .trust import CHECKS, PLUGIN_POINTS, check_plugin_refs
 from .yamlmarks import (Doc as _Doc, Dumper as _Dumper, Loc, Mark as _Mark,
                         dotted as _dotted, parse as _parse, show as _show)
 
@@ -231,9 +231,19 @@ def _set_plugin_dir(doc: _Doc, base_dir: Path) -> None:
         doc.data["plugin_dir"] = str(base_dir)
 
 
-def _check_external(doc: _Doc, scenario: Scenario, allow_plugins: bool) -> None:
-    """Import and check every plug-in (and other external model) the scenario names (cosim.scenario.trust)."""
-    _, issues = inspect_scenario(scenario, allow_plugins=allow_plugins)
+def _check_external(doc: _Doc, scenario: Scenario | None, allow_plugins: bool) -> None:
+    """Import and check every plug-in the document names (its raw values, so that they are checked even when
+    other keys are invalid; keys already reported are skipped), then, on a valid scenario, every other external
+    model (cosim.scenario.trust.CHECKS)."""
+    reported = {p.path for p in doc.problems}
+    refs = []
+    for loc, group in PLUGIN_POINTS:
+        if _existing(doc.data, loc) == loc and isinstance(_at(doc.data, loc), str) and _dotted(loc) not in reported:
+            refs.append((loc, group, _at(doc.data, loc)))
+    plugin_dir = doc.data.get("plugin_dir") if isinstance(doc.data.get("plugin_dir"), str) else ""
+    _, issues = check_plugin_refs(refs, plugin_dir, allow_plugins=allow_plugins)
+    for check in CHECKS if scenario is not None else ():
+        issues += check(scenario, allow_plugins=allow_plugins, versions=False)[1]
     for issue in issues:
         found = _existing(doc.data, issue.loc)
         mark = doc.values.get(found, doc.values[()])
@@ -367,8 +377,7 @@ def load_scenario_text(
     except ValidationError as e:
         doc.problems += [_error_problem(err, doc) for err in e.errors(include_url=False)]
         scenario = None
-    if scenario is not None:
-        _check_external(doc, scenario, allow_plugins)
+    _check_external(doc, scenario, allow_plugins)
     _finish(doc, filename)
     return scenario
 

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 __all__ = ["BUILTINS", "ENTRY_POINT_GROUPS", "ARITY", "PluginError", "PluginInfo", "load_plugin", "resolve_plugin",
-           "is_import_path"]
+           "is_import_path", "distribution_of"]
 
 #: plug-in group -> built-in short name -> import path (the same as the package's entry points)
 BUILTINS: dict[str, dict[str, str]] = {
@@ -73,16 +73,14 @@ class PluginError(ValueError):
 @dataclass(frozen=True)
 class PluginInfo:
     """A resolved plug-in: ``obj`` the loaded object; ``builtin`` whether it ships with graincosim; ``target``
-    the import path it was loaded from; ``file`` its module's file ('' unknown); ``distribution`` and
-    ``version`` of the installed distribution providing it ('' when not known, e.g. a loose module)."""
+    the import path it was loaded from; ``file`` its module's file ('' unknown). Which distribution provides it:
+    :func:`distribution_of` (a scan of the installed packages, so only on demand)."""
 
     group: str
     ref: str
     target: str
     builtin: bool
     file: str
-    distribution: str
-    version: str
     obj: object
 
 
@@ -136,18 +134,21 @@ def _check_signature(group: str, ref: str, obj: object) -> None:
                           f"({', '.join(ARITY[group])}): {e}") from None
 
 
-def _provenance(obj: object) -> tuple[str, str, str]:
-    """(file, distribution, version) of the module defining ``obj``."""
+def _module_file(obj: object) -> str:
     module = sys.modules.get(getattr(obj, "__module__", "") or "")
-    file = str(getattr(module, "__file__", "") or "")
-    top = (getattr(module, "__name__", "") or "").split(".")[0]
-    dists = metadata.packages_distributions().get(top, []) if top else []
-    for dist in dists:
+    return str(getattr(module, "__file__", "") or "")
+
+
+def distribution_of(info: PluginInfo) -> tuple[str, str]:
+    """(name, version) of the installed distribution providing the plug-in's top-level package, ('', '') when
+    none does (a loose module, an uninstalled checkout). Scans the installed packages: slow, for listings only."""
+    top = (getattr(info.obj, "__module__", "") or info.target).split(".")[0].split(":")[0]
+    for dist in metadata.packages_distributions().get(top, []):
         try:
-            return file, dist, metadata.version(dist)
+            return dist, metadata.version(dist)
         except metadata.PackageNotFoundError:
             continue
-    return file, "", ""
+    return "", ""
 
 
 def resolve_plugin(group: str, ref: str, *, base_dir: Path | None = None, allow_external: bool = True,
@@ -175,8 +176,7 @@ def resolve_plugin(group: str, ref: str, *, base_dir: Path | None = None, allow_
     obj = _import(target, ref, base_dir if builtin is None else None)
     if check:
         _check_signature(group, ref, obj)
-    file, dist, version = _provenance(obj)
-    return PluginInfo(group, ref, target, builtin is not None, file, dist, version, obj)
+    return PluginInfo(group, ref, target, builtin is not None, _module_file(obj), obj)
 
 
 def load_plugin(group: str, ref: str, *, base_dir: Path | None = None, allow_external: bool = True) -> object:
