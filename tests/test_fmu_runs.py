@@ -162,3 +162,13 @@ def test_example_builds_and_runs_launched(tmp_path, built_fmus, shm_clean, examp
                  "--quiet"]) == 0
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summary["completed"] is True and summary["frames"] == 51
+
+
+def test_adapters_follow_the_roles_signal_order():
+    """The adapters read the FMU's values by position in the role's signal order (cosim.fmi.roles)."""
+    from cosim.fmi.roles import CONTROLLER, VEHICLE
+    from dynamics_proc import fmus
+
+    assert list(fmus._STATE_INDEX) == [s.name for s in VEHICLE.outputs]
+    assert list(fmus._CONTROLLER_INPUTS) == [s.name for s in CONTROLLER.inputs[1:]]
+    assert CONTROLLER.inputs[0].name == "height_m" and CONTROLLER.outputs[-1].per_section
