@@ -67,20 +67,21 @@ class FmuVehicle:
     """The tractor and cart from an FMU: :meth:`advance` maps the state (9,) over one frame, as
     ``model._advance_vehicles`` does for the built-in model (see the module docstring for the stepping)."""
 
-    def __init__(self, slave: FmuSlave, per_frame: bool, p: VehicleParams, gains: SyncGains, dt_s: float,
-                 steps: int):
-        self.slave, self.p, self.gains = slave, p, gains
+    def __init__(self, slave: FmuSlave, per_frame: bool, dt_s: float, steps: int):
+        self.slave = slave
         self.n, self.h = (1, dt_s * steps) if per_frame else (steps, dt_s)
         self.frame_dt_s = dt_s * steps
 
-    def advance(self, x: np.ndarray, setpoint: tuple[float, float], frame: int) -> np.ndarray:
-        """State (9,) at the end of frame ``frame`` (>= 1) from the state ``x`` at its start."""
+    def advance(self, x: np.ndarray, setpoint: tuple[float, float], frame: int, p: VehicleParams,
+                gains: SyncGains) -> np.ndarray:
+        """State (9,) at the end of frame ``frame`` (>= 1) from the state ``x`` at its start; ``p`` and ``gains``
+        the frame's (run-time inputs such as the combine speed may change them between frames)."""
         xs = x.tolist()
         t0 = (frame - 1) * self.frame_dt_s
         for i in range(self.n):
-            u = sync_command(xs, setpoint, self.p, self.gains)
+            u = sync_command(xs, setpoint, p, gains)
             out = self.slave.step(u, t0 + i * self.h, self.h, frame)
-            cx, cy, cyaw = combine_advance(xs[CX], xs[CY], xs[CYAW], self.p, self.h)
+            cx, cy, cyaw = combine_advance(xs[CX], xs[CY], xs[CYAW], p, self.h)
             xs = [cx, cy, cyaw, out[0], out[1], out[2], out[3], out[4], out[5]]
         return np.array(xs)
 
@@ -217,8 +218,8 @@ def open_fmus(s: Scenario) -> Fmus | None:
             x0 = initial_state(s, vp)
             initial = {name: float(x0[i]) for name, i in _STATE_INDEX.items()}
             slave = _open(vf, VEHICLE, n, VEHICLE_LABEL, initial)
-            fmus.vehicle = FmuVehicle(slave, step_mode(vf, VEHICLE) == "frame", vp, SyncGains.from_scenario(s),
-                                      s.timing.dynamics_dt_s, s.timing.steps_per_frame)
+            fmus.vehicle = FmuVehicle(slave, step_mode(vf, VEHICLE) == "frame", s.timing.dynamics_dt_s,
+                                      s.timing.steps_per_frame)
         if cf is not None and s.controller.strategy == FMU_REF:
             slave = _open(cf, STRATEGY, n, CONTROLLER_LABEL, {})
             fmus.strategy = FmuStrategy(slave, cf, n, s.timing.sensor_period_s)

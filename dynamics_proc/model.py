@@ -232,7 +232,7 @@ def _advance_vehicles(x: np.ndarray, setpoint: tuple[float, float], p: ModelPara
     Sync input held (or the FMU vehicle's steps). The exponential method keeps the state as Python floats between
     the steps (same bits)."""
     if p.fmus is not None and p.fmus.vehicle is not None:
-        return p.fmus.vehicle.advance(x, setpoint, frame)
+        return p.fmus.vehicle.advance(x, setpoint, frame, p.vehicles, p.gains)
     if p.method == "exponential":
         xs = x.tolist()
         for _ in range(p.steps):
