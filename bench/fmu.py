@@ -1,4 +1,5 @@
-"""Cost and accuracy of an FMU vehicle against the built-in tractor-cart model (docs/fmu.md).
+"""Cost and accuracy of the FMUs in the loop against the built-in models (docs/fmu.md): the vehicle, and the
+controller.
 
 The FMU is the example's (examples/fmu_vehicle/TractorCart.py, built with pythonfmu: Python inside the FMU, RK4,
 one doStep per 10 ms dynamics step). Scenario: the example scenario on a 60 m arc with the cart 1.5 m behind and
@@ -10,8 +11,10 @@ one doStep per 10 ms dynamics step). Scenario: the example scenario on a 60 m ar
 2. Whole run in-process (``cosim.runtime.inprocess.simulate``): wall time, interleaved, medians.
 3. Trajectory error: largest difference of tractor and cart positions (m) over the run, FMU against each built-in.
 4. The bare FMU call (inputs set, doStep, outputs read) per step, for the share of the interface.
+5. The controller FMU (examples/fmu_controller/SectionFill.py, pythonfmu) against the built-in ``section_fill``
+   with ``estimator: paper`` (the same decisions): whole 60 s example run in-process, interleaved, medians.
 
-Run: ``python bench/fmu_vehicle.py [--rounds 7]`` (prints Markdown).
+Run: ``python bench/fmu.py [--rounds 7]`` (prints Markdown).
 """
 from __future__ import annotations
 
@@ -40,8 +43,8 @@ BUILTIN = {"exponential": ["vehicles.tractor_cart.fmu=null"],
 COLUMNS = ("tractor_x_m", "tractor_y_m", "cart_x_m", "cart_y_m")
 
 
-def _build(dest: Path) -> Path:
-    spec = importlib.util.spec_from_file_location("build_fmu_vehicle", ROOT / "examples/fmu_vehicle/build.py")
+def _build(dest: Path, example: str = "fmu_vehicle") -> Path:
+    spec = importlib.util.spec_from_file_location(f"build_{example}", ROOT / f"examples/{example}/build.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod.build(dest)
@@ -74,6 +77,22 @@ def _time_slave(fmus, n: int = 3000) -> float:
     return (time.perf_counter() - t0) / n
 
 
+def _controller_runs(tmp: Path, rounds: int) -> dict[str, list[float]]:
+    """Wall times of the controller example run, FMU and built-in, interleaved."""
+    scen = tmp / "controller.yaml"
+    scen.write_text((ROOT / "examples/fmu_controller/scenario.yaml").read_text())
+    _build(tmp, "fmu_controller")
+    runs = {"fmu": load_scenario(scen), "builtin": load_scenario(scen, ["controller.model=section_fill",
+                                                                      "controller.fmu=null", "controller.estimator=paper"])}
+    out: dict[str, list[float]] = {k: [] for k in runs}
+    for _ in range(rounds):
+        for k, s in runs.items():
+            t0 = time.perf_counter()
+            simulate(s)
+            out[k].append(time.perf_counter() - t0)
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=7)
@@ -103,6 +122,7 @@ def main() -> None:
                 simulate(s)
                 run_s[k].append(time.perf_counter() - t0)
         series = {k: simulate(s).recorder.series() for k, s in (("fmu", s_fmu), *s_in.items())}
+        ctrl_s = _controller_runs(Path(tmp), args.rounds)
     print(f"| vehicle model | per dynamics step (us, median of {args.rounds}) | whole 30 s run in-process (s) | "
           "max position difference from the FMU (m) |")
     print("|---|---|---|---|")
@@ -112,6 +132,8 @@ def main() -> None:
         name = "FMU (pythonfmu, RK4)" if k == "fmu" else f"built-in {k}"
         print(f"| {name} | {statistics.median(step_us[k]):.1f} | {statistics.median(run_s[k]):.2f} | {err} |")
     print(f"\nof which the FMU call alone (set 2 inputs, doStep, get 6 outputs): {statistics.median(bare_us):.1f} us")
+    print(f"\ncontroller, whole 60 s run in-process (s, median of {args.rounds}): FMU "
+          f"{statistics.median(ctrl_s['fmu']):.2f}, built-in section_fill (paper) {statistics.median(ctrl_s['builtin']):.2f}")
 
 
 if __name__ == "__main__":
