@@ -104,6 +104,7 @@ def test_wrong_kind_of_fmu(tmp_path, built_fmus, edit, message):
 
 
 def test_not_an_fmu(tmp_path):
+    pytest.importorskip("fmpy", reason="FMU checks need fmpy (pip install -e \".[test]\")")
     (tmp_path / "TractorCart.fmu").write_text("not a zip")
     (tmp_path / "scenario.yaml").write_text(VEHICLE_TEXT)
     p = _one(_problems(tmp_path / "scenario.yaml"), "vehicles.tractor_cart.fmu.path")
