@@ -85,7 +85,9 @@ class ControllerParams:
     strategy_ref: str = ""           # controller.strategy as the scenario names it
 
     @classmethod
-    def from_scenario(cls, s: Scenario) -> "ControllerParams":
+    def from_scenario(cls, s: Scenario, strategy: Strategy | None = None) -> "ControllerParams":
+        """The constants of ``s``; ``strategy``: the fill strategy when it is not loaded by its name (an FMU's,
+        dynamics_proc.fmus)."""
         c, k = s.controller, s.cart
         cell = c.grid_cell_m
         nx, ny = max(1, round(k.interior_length_m / cell)), max(1, round(k.interior_width_m / cell))
@@ -94,7 +96,8 @@ class ControllerParams:
         if np.any(counts == 0):
             raise ValueError(f"controller grid ({nx} cells of {cell} m along x) leaves sections without a cell; "
                              f"use fewer than {c.sections} sections or a finer controller.grid_cell_m")
-        strategy = load_plugin("strategies", c.strategy, base_dir=plugin_dir(s))
+        if strategy is None:
+            strategy = load_plugin("strategies", c.strategy, base_dir=plugin_dir(s))
         sl = k.interior_length_m / c.sections
         return cls(c.target_fill_m, c.full_fraction * c.target_fill_m, c.sections, k.interior_length_m,
                    k.interior_width_m, cell, nx, ny, tuple(int(np.searchsorted(rows, i)) for i in range(c.sections)),

@@ -15,7 +15,7 @@ from functools import lru_cache
 import numpy as np
 
 from cosim.errors import PluginFault
-from cosim.scenario.config import Scenario
+from cosim.scenario.config import FMU_REF, Scenario
 from cosim.scenario.plugins import load_plugin
 from cosim.world.geometry import cart_grid_from_body, invert, vehicle_pose
 
@@ -24,6 +24,7 @@ from .blocks import SECTION_FIELD
 from .control_protocol import (CONTROLLER_POINT, ControllerCommand, ControllerInput, Delivery, OffloadingController,
                                check_command)
 from .controller import ControllerParams, plugin_dir
+from .fmus import Fmus
 from .grainfill import GrainGrid, deposit, initial_heights, resample, volume
 from .integrators import integrate, step_exponential_values
 from .machine_sync import SyncGains, cart_offset, sync_command
@@ -59,19 +60,27 @@ class ModelParams:
     flow_meter_bias: float           # relative error of the flow signal the fused estimator is given
     controller: OffloadingController  # controller.model, made by its factory
     controller_ref: str              # controller.model as the scenario names it
+    fmus: Fmus | None = None         # FMUs in place of built-in models (dynamics_proc.fmus)
 
     @classmethod
-    def from_scenario(cls, s: Scenario) -> "ModelParams":
+    def from_scenario(cls, s: Scenario, fmus: Fmus | None = None) -> "ModelParams":
+        """The parameters of ``s``; ``fmus``: the run's open FMUs (:func:`dynamics_proc.fmus.open_fmus`) where the
+        scenario names any (without them, a scenario that does builds parameters that fail when first used)."""
         a = ag.AugerParams.from_scenario(s)
         spout_x = a.pivot[0] + a.arm[0]
-        control = ControllerParams.from_scenario(s)
-        factory = load_plugin("controllers", s.controller.model, base_dir=plugin_dir(s))
+        fmus = fmus or Fmus()
+        control = ControllerParams.from_scenario(s, fmus.strategy_for(s))
+        if s.controller.model == FMU_REF:
+            controller = fmus.controller_for(s)
+        else:
+            factory = load_plugin("controllers", s.controller.model, base_dir=plugin_dir(s))
+            controller = _make_controller(factory, control, s)
         return cls(VehicleParams.from_scenario(s), SyncGains.from_scenario(s), a, GrainGrid.from_scenario(s),
                    control, GrainGrid.from_scenario(s).cap(), cart_grid_from_body(s.cart),
                    s.integrator.method, s.integrator.rtol, s.integrator.atol, s.timing.dynamics_dt_s,
                    s.timing.steps_per_frame, s.timing.sensor_period_s, s.machine_sync.lateral_offset_m,
                    s.cart.interior_length_m / 2.0 - spout_x, s.crop.density, s.controller.fusion.flow_meter_bias,
-                   _make_controller(factory, control, s), s.controller.model)
+                   controller, s.controller.model, fmus if fmus.vehicle or fmus.strategy else None)
 
 
 def _make_controller(factory, control: ControllerParams, s: Scenario) -> OffloadingController:
@@ -170,6 +179,8 @@ def _predicted_impacts(spg: np.ndarray, vg: np.ndarray,
 def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
     """Advance the world by one sensor frame acting on ``meas`` (controller grid heights m, NaN holes) or None."""
     x = w.x
+    if p.fmus is not None:
+        p.fmus.begin_frame(w.frame + 1)
     _, vel, spg, g = w.spout
     vg = g[:3, :3] @ vel
     drift, top, floor = _predicted_impacts(spg, vg, p)
@@ -180,7 +191,7 @@ def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
                           p.control.target_m)
     ctrl, out = _decide(w, inp, p)
     setpoint = (w.setpoint[0] + out.nudge * p.control.nudge_m, w.setpoint[1])
-    x = _advance_vehicles(x, setpoint, p)
+    x = _advance_vehicles(x, setpoint, p, w.frame + 1)
     level, vol = w.flow_level, 0.0
     for _ in range(p.steps):
         level, dv = ag.flow_advance(level, out.auger_on, p.dt_s, p.auger)
@@ -217,9 +228,12 @@ def _decide(w: World, inp: ControllerInput, p: ModelParams) -> tuple[object, Con
         raise e.at_frame(frame) from None
 
 
-def _advance_vehicles(x: np.ndarray, setpoint: tuple[float, float], p: ModelParams) -> np.ndarray:
-    """The vehicle state (9,) after one frame: ``p.steps`` steps of ``p.dt_s``, each with the Machine Sync input
-    held. The exponential method keeps the state as Python floats between the steps (same bits)."""
+def _advance_vehicles(x: np.ndarray, setpoint: tuple[float, float], p: ModelParams, frame: int) -> np.ndarray:
+    """The vehicle state (9,) at the end of frame ``frame``: ``p.steps`` steps of ``p.dt_s``, each with the Machine
+    Sync input held (or the FMU vehicle's steps). The exponential method keeps the state as Python floats between
+    the steps (same bits)."""
+    if p.fmus is not None and p.fmus.vehicle is not None:
+        return p.fmus.vehicle.advance(x, setpoint, frame, p.vehicles, p.gains)
     if p.method == "exponential":
         xs = x.tolist()
         for _ in range(p.steps):

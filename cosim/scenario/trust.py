@@ -18,11 +18,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from .config import Scenario
+from cosim.fmi import check as fmi_check
+
+from .config import FMU_REF, Scenario
 from .plugins import PluginError, distribution_of, resolve_plugin
 
 __all__ = ["Loaded", "Issue", "Check", "PLUGIN_POINTS", "plugin_points", "check_plugin_refs", "check_plugins",
-           "CHECKS", "inspect_scenario", "format_inventory"]
+           "check_fmus", "CHECKS", "inspect_scenario", "format_inventory"]
 
 
 @dataclass(frozen=True)
@@ -81,6 +83,8 @@ def check_plugin_refs(refs: list[tuple[tuple[str, ...], str, str]], plugin_dir: 
     base = Path(plugin_dir) if plugin_dir else None
     loaded, issues = [], []
     for loc, group, ref in refs:
+        if ref == FMU_REF and loc[0] == "controller":
+            continue                        # names controller.fmu: check_fmus
         try:
             info = resolve_plugin(group, ref, base_dir=base, allow_external=allow_plugins)
         except PluginError as e:
@@ -98,8 +102,17 @@ def check_plugins(s: Scenario, *, allow_plugins: bool = True,
     return check_plugin_refs(plugin_points(s), s.plugin_dir, allow_plugins=allow_plugins, versions=versions)
 
 
+def check_fmus(s: Scenario, *, allow_plugins: bool = True,
+               versions: bool = False) -> tuple[list[Loaded], list[Issue]]:
+    """Describe and check every FMU ``s`` names (cosim.fmi.check; refused with ``allow_plugins=False``); an FMU's
+    version is its FMI version, model and GUID, read from the file either way."""
+    rows, problems = fmi_check.check_fmus(s, allow_plugins=allow_plugins)
+    return ([Loaded("fmu", key, ref, False, file, version, target) for key, ref, file, version, target in rows],
+            [Issue(loc, message) for loc, message in problems])
+
+
 #: the checks of other external model kinds (e.g. FMUs), run on every valid scenario after the plug-ins
-CHECKS: tuple[Check, ...] = ()
+CHECKS: tuple[Check, ...] = (check_fmus,)
 
 
 def inspect_scenario(s: Scenario, *, allow_plugins: bool = True,

@@ -8,6 +8,7 @@ from pydantic import Field, ValidationInfo, field_validator
 
 from .base import Model, PosFloat
 from .control import Controller, Grain, Integrator
+from .fmu import Vehicles
 from .machines import Auger, Cart, Combine, Crop, MachineSync, Tractor
 from .rendering import Render
 from .sensing import Perception, Sensor
@@ -84,6 +85,7 @@ class Scenario(Model):
     tractor: Tractor = Tractor()
     cart: Cart = Cart()
     machine_sync: MachineSync = MachineSync()
+    vehicles: Vehicles = Vehicles()
     grain: Grain = Grain()
     controller: Controller = Controller()
     integrator: Integrator = Integrator()
