@@ -35,6 +35,8 @@ def _scenario_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--feedback", choices=("ground_truth", "perception"), help="controller feedback source")
     p.add_argument("--seed", type=int, help="random seed (overrides the scenario)")
     p.add_argument("--duration", type=float, metavar="SECONDS", help="simulated duration (overrides the scenario)")
+    p.add_argument("--no-plugins", dest="allow_plugins", action="store_false",
+                   help="refuse any plug-in that is not built in (a scenario that names a plug-in runs its code)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -120,7 +122,7 @@ def _load(args: argparse.Namespace):
     from cosim.scenario.loader import load_scenario, resolve_scenario_arg
 
     path = resolve_scenario_arg(args.scenario)
-    return load_scenario(path, args.overrides, extra=_extra(args))
+    return load_scenario(path, args.overrides, extra=_extra(args), allow_plugins=args.allow_plugins)
 
 
 def _print_summary(result, stream) -> None:
@@ -213,8 +215,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             sys.stdout.write(dump_resolved(scenario))
         else:
+            from cosim.scenario.trust import format_inventory, inspect_scenario
+
             sys.stdout.write(f"{args.scenario}: valid ({scenario.frames + 1} frames, ring "
-                             f"{' -> '.join(scenario.participants)})\n")
+                             f"{' -> '.join(scenario.participants)})\nloads (a plug-in runs its code):\n"
+                             f"{format_inventory(inspect_scenario(scenario, versions=True)[0])}\n")
         return 0
     from cosim.runtime.progress import ProgressPrinter
 

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 __all__ = [
     "CosimError", "Problem", "ScenarioError", "RunError", "HandoffTimeout", "FrameMismatch",
     "ParticipantCrashed", "ParticipantDied", "ParticipantHung", "RunInterrupted", "OutputError", "RunRefused",
-    "RendererUnavailable", "SimulationError", "SimulationClosed", "SimulationDone", "InputError", "UnknownInput",
-    "InputNotSettable", "InputOutOfRange",
+    "RendererUnavailable", "PluginFault", "SimulationError", "SimulationClosed", "SimulationDone", "InputError",
+    "UnknownInput", "InputNotSettable", "InputOutOfRange",
 ]
 
 
@@ -86,6 +86,24 @@ class OutputError(RunError):
 
 class RunInterrupted(RunError):
     """The run was stopped by SIGINT or SIGTERM."""
+
+
+class PluginFault(RunError):
+    """A plug-in raised or returned a bad value during the run. ``ref`` is the plug-in as the scenario names it,
+    ``point`` its scenario key (``controller.strategy``, ...), ``cause`` what went wrong, ``frame`` where (-1:
+    not known yet; :meth:`at_frame` adds it)."""
+
+    def __init__(self, ref: str, point: str, cause: str, frame: int = -1):
+        self.ref, self.point, self.cause = ref, point, cause
+        where = f" at frame {frame}" if frame >= 0 else ""
+        super().__init__(f"plug-in {point} = {ref!r}{where}: {cause}", process=point, frame=frame)
+
+    def at_frame(self, frame: int) -> "PluginFault":
+        """The same fault at ``frame`` (self when it already names one)."""
+        return self if self.frame >= 0 else PluginFault(self.ref, self.point, self.cause, frame)
+
+    def __reduce__(self):
+        return PluginFault, (self.ref, self.point, self.cause, self.frame)
 
 
 class RendererUnavailable(CosimError):

@@ -21,6 +21,7 @@ from cosim.errors import FrameMismatch
 from cosim.runtime.participant import perception_overlaps
 
 from .blocks import WRITER, state_fields
+from .fmus import Fmus, open_fmus
 from .inputs import INPUTS, apply_input
 from .model import ModelParams, World, initial_world, signals, step_frame, truth_measurement
 
@@ -49,13 +50,18 @@ class DynamicsParticipant:
         self._names = tuple(f.name for f in state_fields(scenario.controller.sections))
         self._history: dict[int, np.ndarray | None] = {}
         self._seg: Segment | None = None
+        self._fmus: Fmus | None = None
         self._next = 0
         #: inputs set since the last frame (path -> value), applied before the next integration
         self._pending: dict[str, float] = {}
 
     # -- contract ----------------------------------------------------------------------------------------
     def start(self, segment: "Segment") -> None:
-        """Bind the views this participant writes and, with perception feedback, reads."""
+        """Bind the views this participant writes and, with perception feedback, reads; open the scenario's
+        FMUs (dynamics_proc.fmus)."""
+        self._fmus = open_fmus(self.scenario)
+        if self._fmus is not None:
+            self.params = ModelParams.from_scenario(self.scenario, self._fmus)
         self._seg = segment
         self._state = segment.view("dyn_state")
         self._stream = segment.view("stream")
@@ -102,7 +108,10 @@ class DynamicsParticipant:
         self._next = frame + 1
 
     def close(self) -> None:
-        """Drop the views (the segment belongs to the runtime)."""
+        """Drop the views (the segment belongs to the runtime) and free the FMUs."""
+        if self._fmus is not None:
+            self._fmus.close()
+            self._fmus = None
         self._seg = None
         self._perceived = self._cart_valid = None
         self._history.clear()

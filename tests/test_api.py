@@ -8,6 +8,7 @@ import math
 import multiprocessing as mp
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -64,7 +65,7 @@ def test_state_is_keyed_like_the_timeseries_and_holds_the_current_frame():
         sim.step(sim.frames)
         series = sim.result.timeseries
     struct_keys = [k for k in state if "." in k or k == "frame"]
-    assert struct_keys == list(series)
+    assert sorted(struct_keys) == sorted(series)      # timing.csv's wall-clock columns come last in series
     assert {"heightmap_truth", "stream", "heightmap_perceived"} <= set(state)
     for f, (t, grain, h) in rows.items():
         assert t == series["dyn_state.t_s"][f] == pytest.approx(f * 0.1, abs=1e-12)
@@ -296,3 +297,13 @@ def test_record_writes_an_mcap_recording_of_every_frame(tmp_path):
     rec = read_recording(tmp_path / "recording.mcap")
     assert rec.frames == list(range(11)) and not rec.truncated
     assert res.summary["frames"] == 11
+
+
+def test_allow_plugins_false_refuses_a_scenario_that_names_a_plug_in():
+    from cosim.errors import ScenarioError
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "own_strategy" / "scenario.yaml"
+    with pytest.raises(ScenarioError, match="controller.strategy"):
+        Simulation(path, allow_plugins=False)
+    with pytest.raises(ScenarioError, match="controller.strategy"):
+        Simulation("default", overrides={"controller.strategy": "json:dumps"}, allow_plugins=False)

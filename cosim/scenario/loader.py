@@ -31,6 +31,7 @@ from pydantic import BaseModel, ValidationError
 from .config import FORMAT_VERSION, Scenario
 from .plausibility import implausible
 from cosim.errors import Problem, ScenarioError
+from .trust import CHECKS, PLUGIN_POINTS, check_plugin_refs
 from .yamlmarks import (Doc as _Doc, Dumper as _Dumper, Loc, Mark as _Mark,
                         dotted as _dotted, parse as _parse, show as _show)
 
@@ -223,6 +224,36 @@ def _resolve_paths(doc: _Doc, base_dir: Path) -> None:
             doc.problem(mark, loc, f"file {str(path)!r} {what} (relative paths are resolved against {str(base)!r})")
 
 
+def _set_plugin_dir(doc: _Doc, base_dir: Path) -> None:
+    """``plugin_dir``: the scenario's folder unless given (a relative one is resolved against it)."""
+    given = doc.data.get("plugin_dir")
+    if isinstance(given, str):
+        mark = doc.values.get(("plugin_dir",), doc.values[()])
+        base = Path.cwd() if mark.file in (SET_FILE, OPTIONS_FILE) else base_dir
+        doc.data["plugin_dir"] = str((base / Path(given).expanduser()).resolve()) if given else ""
+    elif "plugin_dir" not in doc.data:
+        doc.data["plugin_dir"] = str(base_dir)
+
+
+def _check_external(doc: _Doc, scenario: Scenario | None, allow_plugins: bool) -> None:
+    """Import and check every plug-in the document names (its raw values, so that they are checked even when
+    other keys are invalid; keys already reported are skipped), then, on a valid scenario, every other external
+    model (cosim.scenario.trust.CHECKS)."""
+    reported = {p.path for p in doc.problems}
+    refs = []
+    for loc, group in PLUGIN_POINTS:
+        if _existing(doc.data, loc) == loc and isinstance(_at(doc.data, loc), str) and _dotted(loc) not in reported:
+            refs.append((loc, group, _at(doc.data, loc)))
+    plugin_dir = doc.data.get("plugin_dir") if isinstance(doc.data.get("plugin_dir"), str) else ""
+    _, issues = check_plugin_refs(refs, plugin_dir, allow_plugins=allow_plugins)
+    for check in CHECKS if scenario is not None else ():
+        issues += check(scenario, allow_plugins=allow_plugins, versions=False)[1]
+    for issue in issues:
+        found = _existing(doc.data, issue.loc)
+        mark = doc.values.get(found, doc.values[()])
+        doc.problem(mark, issue.loc, issue.message)
+
+
 # ------------------------------------------------------------------------------------------- validation
 def _existing(data, loc: Loc) -> Loc:
     """The longest prefix of ``loc`` that names a node present in ``data``."""
@@ -311,8 +342,13 @@ def load_scenario_text(
     extra: Mapping | None = None,
     base_dir: str | os.PathLike | None = None,
     check_world: bool = False,
+    allow_plugins: bool = True,
 ) -> Scenario:
     """Parse, override, resolve and validate scenario ``text``; raise ScenarioError with every problem.
+
+    Every plug-in the scenario names is imported and checked (cosim.scenario.trust: importing runs its code);
+    ``allow_plugins`` False refuses any that is not built in (``--no-plugins``). ``plugin_dir`` (the folder
+    plug-in modules are looked for first) defaults to ``base_dir``.
 
     ``overrides``: ``"PATH=VALUE"`` strings (``--set``); ``extra``: ``{"dotted.path": value}`` from other options,
     entries whose value is None are skipped. ``base_dir``: directory that relative paths in the text are resolved
@@ -345,11 +381,13 @@ def load_scenario_text(
     if base_dir is None:
         base_dir = Path(filename).parent if Path(filename).is_file() else Path.cwd()
     _resolve_paths(doc, Path(base_dir).resolve())
+    _set_plugin_dir(doc, Path(base_dir).resolve())
     try:
         scenario = Scenario.model_validate_json(json.dumps(doc.data))
     except ValidationError as e:
         doc.problems += [_error_problem(err, doc) for err in e.errors(include_url=False)]
         scenario = None
+    _check_external(doc, scenario, allow_plugins)
     _finish(doc, filename)
     if check_world:
         _check_world(doc, scenario, filename)
@@ -371,7 +409,7 @@ def _check_world(doc: _Doc, scenario: Scenario, filename: str) -> None:
 
 
 def load_scenario(path: str | os.PathLike, overrides: Sequence[str] = (), *, extra: Mapping | None = None,
-                  check_world: bool = True) -> Scenario:
+                  check_world: bool = True, allow_plugins: bool = True) -> Scenario:
     """Load and validate the scenario file ``path``, and check its frame-0 world (see :func:`load_scenario_text`)."""
     try:
         size = os.stat(path).st_size
@@ -381,7 +419,7 @@ def load_scenario(path: str | os.PathLike, overrides: Sequence[str] = (), *, ext
     except (OSError, UnicodeDecodeError) as e:
         raise ScenarioError([Problem(str(path), 0, 0, "", f"cannot read scenario file: {e}")]) from None
     return load_scenario_text(text, str(path), overrides, extra=extra, base_dir=Path(path).resolve().parent,
-                              check_world=check_world)
+                              check_world=check_world, allow_plugins=allow_plugins)
 
 
 # -------------------------------------------------------------------------------------- packaged, dump

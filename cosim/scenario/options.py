@@ -5,12 +5,10 @@ from __future__ import annotations
 import os
 from typing import Any, Mapping, Sequence
 
-from cosim.errors import Problem, ScenarioError
-
 from .config import Scenario
 from .loader import dump_resolved, load_scenario, load_scenario_text, resolve_scenario_arg
 
-__all__ = ["load_with_options", "check_built_in"]
+__all__ = ["load_with_options"]
 
 
 def load_with_options(scenario: str | os.PathLike | Scenario, *, renderer: str | None = None,
@@ -26,22 +24,8 @@ def load_with_options(scenario: str | os.PathLike | Scenario, *, renderer: str |
              **dict(overrides or {})}
     extra = {k: v for k, v in extra.items() if v is not None}
     if isinstance(scenario, Scenario):
-        loaded = scenario if not extra and not set_ else load_scenario_text(
-            dump_resolved(scenario), f"<scenario {scenario.name}>", list(set_), extra=extra)
-    else:
-        loaded = load_scenario(resolve_scenario_arg(scenario), list(set_), extra=extra)
-    if not allow_plugins:
-        check_built_in(loaded)
-    return loaded
-
-
-def check_built_in(scenario: Scenario) -> None:
-    """Refuse a scenario that would load code that is not built in (``allow_plugins=False``, ``--no-plugins``).
-
-    Today every plug-in point of the scenario only takes built-in names, which its schema checks already; the
-    plug-in resolver adds its own points here."""
-    from dynamics_proc.strategies import STRATEGIES
-
-    if scenario.controller.strategy not in STRATEGIES:
-        raise ScenarioError([Problem(f"<scenario {scenario.name}>", 0, 0, "controller.strategy",
-                                     f"{scenario.controller.strategy!r} is not built in and plug-ins are refused")])
+        if not extra and not set_ and allow_plugins:
+            return scenario
+        return load_scenario_text(dump_resolved(scenario), f"<scenario {scenario.name}>", list(set_), extra=extra,
+                                  allow_plugins=allow_plugins)
+    return load_scenario(resolve_scenario_arg(scenario), list(set_), extra=extra, allow_plugins=allow_plugins)
