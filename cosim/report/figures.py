@@ -158,7 +158,7 @@ def fig_fullness(runs: Sequence[RunData]):
     estimate hatched grey (legend)."""
     fig, axes = _stacked(len(runs), 2.8, width_in=10.0, right_in=BAR_MARGIN_IN)
     cmap = matplotlib.colormaps["viridis"].with_extremes(bad=(0, 0, 0, 0))
-    im = None
+    im, missing = None, False
     for ax, run in zip(axes[:, 0], runs):
         n = run.scenario.controller.sections
         cols = [run.col(f"section{k}_fullness") for k in range(1, n + 1)]
@@ -171,8 +171,7 @@ def fig_fullness(runs: Sequence[RunData]):
             _hatch_missing(ax, ext)
             im = ax.imshow(np.ma.masked_invalid(data), aspect="auto", origin="lower", cmap=cmap, vmin=0, vmax=1,
                            extent=ext, interpolation="nearest", zorder=1)
-            if not np.isfinite(data).all():
-                ax.legend(handles=[Patch(label="no estimate", **NO_VALUE)], loc="upper right", fontsize=8)
+            missing |= not np.isfinite(data).all()
         ax.set_yticks(range(1, n + 1))
         ax.set_ylabel("section (front = 1)")
         ax.set_title(_label(run), fontsize=10)
@@ -181,7 +180,9 @@ def fig_fullness(runs: Sequence[RunData]):
         m = MARGINS_IN
         w, h = fig.get_size_inches()
         cax = fig.add_axes((1 - (BAR_MARGIN_IN - 0.25) / w, m["bottom"] / h, 0.15 / w, 1 - (m["bottom"] + m["top"]) / h))
-        fig.colorbar(im, cax=cax, label="fullness (1 = at the target level)")
+        fig.colorbar(im, cax=cax, label="fullness (1 = at the target level)", extend="max")
+    if missing:  # in the bottom left corner, off the data
+        fig.legend(handles=[Patch(label="no estimate", **NO_VALUE)], loc="lower left", fontsize=8, frameon=False)
     return fig
 
 
