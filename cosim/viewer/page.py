@@ -43,6 +43,7 @@ section.panel{background:#1b2027;border:1px solid #2c333d;border-radius:6px;padd
 section.panel h2{font-size:14px;margin:0 0 6px 0;display:flex;justify-content:space-between}
 section.panel h2 .f{color:#9ab;font-weight:400}
 section.panel img{width:100%;height:auto;display:block}
+#p-rgb img,#p-depth img{max-height:min(38vh,420px);object-fit:contain;image-rendering:auto}
 section.panel canvas{width:100%;height:260px;display:block}
 section.absent{opacity:.55}section.absent .body{display:none}
 .note{color:#9ab;font-size:12px}
