@@ -9,14 +9,13 @@ import socket
 import subprocess
 import sys
 import tomllib
-import urllib.request
 from contextlib import redirect_stderr, redirect_stdout
 from pathlib import Path
 
 import pytest
 
 from cosim.cli import VERBS, main
-from cosim.scenario.loader import describe_packaged, packaged_scenarios
+from cosim.scenario.loader import describe_packaged, load_scenario, packaged_scenarios, resolve_scenario_arg
 
 ROOT = Path(__file__).resolve().parent.parent
 #: a verb shown in the docs: "launch.py <verb>" or "python -m cosim <verb>"
@@ -137,27 +136,45 @@ def test_replay_on_a_busy_port_exits_2_with_one_message(recording, busy_port):
     assert "Traceback" not in r.stderr and "BufferError" not in r.stderr
 
 
-def test_the_viewer_address_is_printed_once_it_answers(tmp_path, shm_clean):
-    """Port 0: the address printed is the one the server got, and it answered before it was printed."""
-    from cosim.viewer import address
+def test_the_viewer_address_is_printed_only_once_it_answers(recording):
+    """The announcer waits for the announce file, then for /healthz: a server that listens but does not answer
+    yet is not announced; the address printed is the one the server got (port 0)."""
+    import json
+    import threading
+    import time
 
-    seen = []
-    real = address.wait_until_answers
+    from cosim.recording import ReplaySource
+    from cosim.viewer.address import ViewerAnnouncer
+    from cosim.viewer.server import DashboardServer
 
-    def spy(url, timeout_s=address.ANNOUNCE_TIMEOUT_S):
-        ok = real(url, timeout_s)
-        if ok:
-            with urllib.request.urlopen(url + "api/state", timeout=5) as r:
-                seen.append(r.status)
-        return ok
-
-    address.wait_until_answers = spy
+    stream = io.StringIO()
+    announcer = ViewerAnnouncer(stream)
+    srv = DashboardServer(ReplaySource(recording), port=0)  # bound and listening, not answering yet
     try:
-        code, out, err = call(["run", "default", "--renderer", "mock", "--feedback", "ground_truth", "--duration",
-                               "30", "--viewer", "--viewer-port", "0", "--out", str(tmp_path / "r"), "--quiet"])
+        announcer.path.write_text(json.dumps({"url": srv.url}))
+        time.sleep(1.5)
+        assert stream.getvalue() == "", "announced before the server answered"
+        threading.Thread(target=srv.serve_forever, kwargs={"poll_interval": 0.1}, daemon=True).start()
+        deadline = time.monotonic() + 20
+        while not stream.getvalue() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert stream.getvalue() == f"viewer: {srv.url} (while the run lasts)\n"
+        assert srv.server_port != 0 and f":{srv.server_port}/" in announcer.url
     finally:
-        address.wait_until_answers = real
-    assert code == 0, err
-    urls = re.findall(r"viewer: (http://127\.0\.0\.1:(\d+)/) \(while the run lasts\)", err)
-    assert len(urls) == 1 and urls[0][1] != "0", err
-    assert seen == [200]
+        announcer.close()
+        srv.shutdown()
+        srv.server_close()
+    assert not announcer.path.exists()
+
+
+def test_run_hands_the_viewer_its_host_port_announce_file_and_cart_size():
+    from cosim.cli import build_parser, run_extras
+
+    args = build_parser().parse_args(["run", "default", "--viewer", "--viewer-port", "0", "--viewer-host",
+                                      "127.0.0.2"])
+    args.viewer_announce = "/tmp/x.json"
+    sc = load_scenario(resolve_scenario_arg("default"))
+    (obs,), sinks = run_extras(args, sc)
+    assert obs.target == "cosim.viewer.server:observe" and sinks == []
+    assert dict(obs.kwargs) == {"port": 0, "host": "127.0.0.2", "announce": "/tmp/x.json",
+                                "size_m": (sc.cart.interior_length_m, sc.cart.interior_width_m)}
