@@ -63,6 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "beams, perception_grid (default: %(default)s)")
     st.add_argument("--sim-seconds", type=float, default=20.0, help="simulated seconds per setting")
     st.add_argument("--out", type=Path, help="output directory (default runs/study-<scenario>-<timestamp>)")
+    st.add_argument("--quiet", action="store_true", help="no progress output")
     sch = sub.add_parser("schema", help="write the scenario JSON Schema")
     sch.add_argument("--out", type=Path, help="output file (default: stdout)")
     view = sub.add_parser("view", help="attach the live viewer to a running run (python -m cosim.viewer --attach)")
@@ -204,7 +205,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             sys.stderr.write(f"unknown knobs {unknown}; choose from {sorted(KNOBS)}\n")
             return EXIT_SCENARIO
         out = args.out or default_run_dir(scenario.model_copy(update={"name": f"study-{scenario.name}"}))
-        md = run_study(scenario, knobs, out, args.sim_seconds)
+        md = run_study(scenario, knobs, out, args.sim_seconds, quiet=args.quiet)
         sys.stdout.write(md.read_text() + f"\nstudy written to {out}\n")
         return 0
     if args.verb == "compare":

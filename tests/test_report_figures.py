@@ -133,4 +133,9 @@ def test_study_plot_shows_zero_errors_as_zero_and_labels_do_not_overlap():
     zero_pt = [ln for ln in ax.lines if ln.get_marker() == "v"][0]
     assert zero_pt.get_ydata()[0] > lo and zero_pt.get_ydata()[0] < 1e-6, "0 drawn on the floor, below every error"
     assert ax.get_xlabel() and ax.get_ylabel() == "cart track error (m)"
-    assert overlaps(labels, render(fig)) == []
+    renderer = render(fig)
+    assert overlaps(labels, renderer) == []
+    frame = ax.get_window_extent(renderer)
+    outside = [t.get_text() for t in labels if not frame.contains(*t.get_window_extent(renderer).min)
+               or not frame.contains(*t.get_window_extent(renderer).max)]
+    assert outside == [], "labels drawn outside their axes"

@@ -225,18 +225,28 @@ def fig_study(panels: Sequence[tuple[str, str, Sequence[tuple[str, float, float]
 
 def _place_labels(fig: Figure) -> None:
     """Move each point label to the first of LABEL_OFFSETS_PT where it overlaps no label placed before it and no
-    marker (greedy, in drawing order; measured with the Agg renderer that saves the figure)."""
+    marker and stays inside its axes (greedy, in drawing order; measured with the Agg renderer that saves the
+    figure)."""
     renderer = FigureCanvasAgg(fig).get_renderer()
     for ax in fig.axes:
         taken = [ln.get_window_extent(renderer) for ln in ax.lines]
         taken = [b.expanded(1.0, 1.0) for b in taken if b.width < 40 and b.height < 40]  # markers, not lines
+        frame = ax.get_window_extent(renderer)
         for ann in ax.texts:
+            fits = []
             for off in LABEL_OFFSETS_PT:
                 ann.set_position(off)
                 ann.set_horizontalalignment("right" if off[0] < 0 else "left")
                 box = ann.get_window_extent(renderer)
-                if not any(box.overlaps(b) for b in taken):
+                free = not any(box.overlaps(b) for b in taken)
+                inside = frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0 and box.y1 <= frame.y1
+                if free and inside:
                     break
+                fits.append((not free, not inside, off))
+            else:  # nowhere free inside the axes: the least bad place (free first, then inside)
+                off = min(fits)[2]
+                ann.set_position(off)
+                ann.set_horizontalalignment("right" if off[0] < 0 else "left")
             taken.append(ann.get_window_extent(renderer))
 
 

@@ -30,8 +30,9 @@ class InProcessRun:
 
 
 def simulate(scenario: Scenario, specs: Mapping[str, ParticipantSpec] | None = None,
-             frames: int | None = None) -> InProcessRun:
-    """Run ``scenario`` in this process for ``frames`` frames (default: the whole scenario)."""
+             frames: int | None = None, progress=None) -> InProcessRun:
+    """Run ``scenario`` in this process for ``frames`` frames (default: the whole scenario). ``progress``: called
+    ``(frame, frames, sim_s, wall_s)`` after each frame, like the launcher's (cosim.runtime.progress)."""
     ring = ring_specs(scenario, specs)
     schema = build_schema(scenario, ring)
     n = scenario.frames if frames is None else frames
@@ -46,7 +47,15 @@ def simulate(scenario: Scenario, specs: Mapping[str, ParticipantSpec] | None = N
             p = spec.create(scenario)
             participants.append(p)
             p.start(seg)
-        run_inprocess(seg, participants, n, recorder.record, deferred=deferred, on_flush=recorder.record_flush)
+        record = recorder.record
+        if progress is not None:
+            period = scenario.timing.sensor_period_s
+
+            def record(frame: int, turn_ns: int | None = None) -> None:
+                recorder.record(frame, turn_ns)
+                progress(frame, n, frame * period, time.perf_counter() - t0)
+
+        run_inprocess(seg, participants, n, record, deferred=deferred, on_flush=recorder.record_flush)
         recorder.finish()
     finally:
         for p in participants:

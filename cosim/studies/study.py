@@ -21,6 +21,7 @@ import numpy as np
 from cosim.scenario.config import Scenario
 from cosim.report.figures import DPI, fig_study
 from cosim.runtime.inprocess import simulate
+from cosim.runtime.progress import run_progress
 from cosim.runtime.outputs import clean_json, compose_summary
 
 __all__ = ["Setting", "Knob", "KNOBS", "apply_overrides", "run_setting", "run_study"]
@@ -76,10 +77,11 @@ def apply_overrides(scenario: Scenario, overrides: dict) -> Scenario:
     return Scenario.model_validate_json(json.dumps(data))
 
 
-def run_setting(scenario: Scenario) -> tuple[dict, dict, dict, float]:
-    """Run in process; return (summary, series, final arrays, wall time per simulated second)."""
+def run_setting(scenario: Scenario, progress=None) -> tuple[dict, dict, dict, float]:
+    """Run in process; return (summary, series, final arrays, wall time per simulated second). ``progress``: a
+    per-frame callable (cosim.runtime.progress.run_progress)."""
     t0 = time.perf_counter()
-    run = simulate(scenario)
+    run = simulate(scenario, progress=progress)
     wall = time.perf_counter() - t0
     summary = compose_summary(scenario, run.recorder, run.ring, wall_time_s=wall, error=None)
     sim = max(scenario.frames * scenario.timing.sensor_period_s, 1e-9)
@@ -144,8 +146,10 @@ KNOBS: dict[str, Knob] = {
 }
 
 
-def run_study(scenario: Scenario, knobs: Sequence[str], out: Path, duration_s: float = 20.0) -> Path:
-    """Run the named knobs, write results.csv, study.md and study.png into ``out``; returns study.md."""
+def run_study(scenario: Scenario, knobs: Sequence[str], out: Path, duration_s: float = 20.0,
+              quiet: bool = True) -> Path:
+    """Run the named knobs, write results.csv, study.md and study.png into ``out``; returns study.md. Each
+    setting shows its own progress bar ("knob: setting") unless ``quiet``."""
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     panels = []
@@ -157,7 +161,12 @@ def run_study(scenario: Scenario, knobs: Sequence[str], out: Path, duration_s: f
         results = {}
         for st in knob.settings:
             log.info("study %s: %s", name, st.label)
-            summary, series, arrays, cost = run_setting(apply_overrides(base, st.overrides))
+            progress = run_progress(f"{name}: {st.label}", quiet)
+            try:
+                summary, series, arrays, cost = run_setting(apply_overrides(base, st.overrides), progress)
+            finally:
+                if progress is not None:
+                    progress.close()
             results[st.label] = Result(st, summary, series, arrays, cost)
         pts = []
         for label, res in results.items():
