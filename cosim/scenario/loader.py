@@ -368,9 +368,9 @@ def resolve_scenario_arg(arg: str | os.PathLike) -> Path:
     if str(arg) in packaged:
         return packaged[str(arg)]
     close = difflib.get_close_matches(str(arg), list(packaged), n=1, cutoff=0.6)
-    hint = f"did you mean '{close[0]}'? " if close else ""
-    raise ScenarioError([Problem(str(arg), 0, 0, "", f"no such scenario file or packaged scenario; {hint}(packaged: "
-                                 f"{', '.join(packaged) or 'none'}; launch.py list describes them)")])
+    hint = f"; did you mean '{close[0]}'?" if close else ""
+    raise ScenarioError([Problem(str(arg), 0, 0, "", f"no such scenario file or packaged scenario (packaged: "
+                                 f"{', '.join(packaged) or 'none'}; `launch.py list` describes them){hint}")])
 
 
 def describe_packaged() -> dict[str, str]:
