@@ -9,17 +9,21 @@ Verbs: ``run [SCENARIO]`` (the default verb; no scenario runs the packaged defau
 from __future__ import annotations
 
 import argparse
+import functools
+import signal
 import sys
+import threading
 from pathlib import Path
 from typing import Sequence
 
-from .errors import ScenarioError
+from .errors import RunRefused, ScenarioError
 from cosim.runtime.threadpools import default_to_single_threaded_pools
 
 __all__ = ["main", "build_parser", "run_extras", "VERBS"]
 
 VERBS = ("run", "validate", "schema", "compare", "study", "view", "replay", "list")
 EXIT_SCENARIO = 2
+EXIT_INTERRUPTED = 130
 
 
 def _scenario_options(p: argparse.ArgumentParser) -> None:
@@ -146,6 +150,38 @@ def _print_summary(result, stream) -> None:
     stream.write("\n".join(lines) + "\n")
 
 
+def _interruptible(fn):
+    """``main`` ends with exit 130 and one line, no traceback, on Ctrl-C or SIGTERM at any moment (a run handles
+    them itself: cosim.runtime.signals; this covers the start-up before it and the printing after it), and with
+    exit 2 and the reason when a run is refused before it starts (cosim.errors.RunRefused)."""
+
+    def term(signum, frame):
+        raise KeyboardInterrupt
+
+    @functools.wraps(fn)
+    def wrapper(argv: Sequence[str] | None = None) -> int:
+        main_thread = threading.current_thread() is threading.main_thread()
+        old = signal.signal(signal.SIGTERM, term) if main_thread else None
+        code = EXIT_INTERRUPTED
+        try:
+            code = fn(argv)
+        except RunRefused as exc:  # --out unusable or locked, the segment would not fit: before anything started
+            sys.stderr.write(f"{exc}\nnothing was started.\n")
+            code = EXIT_SCENARIO
+        except KeyboardInterrupt:
+            sys.stderr.write("interrupted\n")
+        finally:
+            if main_thread and code == EXIT_INTERRUPTED:  # ending on a stop: more signals change nothing
+                signal.signal(signal.SIGINT, signal.SIG_IGN)
+                signal.signal(signal.SIGTERM, signal.SIG_IGN)
+            elif main_thread:
+                signal.signal(signal.SIGTERM, old)
+        return code
+
+    return wrapper
+
+
+@_interruptible
 def main(argv: Sequence[str] | None = None) -> int:
     default_to_single_threaded_pools()  # before numpy loads: in-process runs (study, compare) and children
     argv = list(sys.argv[1:] if argv is None else argv)

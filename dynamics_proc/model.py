@@ -210,7 +210,7 @@ def signals(w: World, p: ModelParams) -> dict[str, float]:
         "setpoint_long_m": w.setpoint[0], "setpoint_lat_m": w.setpoint[1],
         "offset_long_err_m": long_m - w.setpoint[0], "offset_lat_err_m": lat_m - w.setpoint[1],
         "target_section": w.ctrl.target + 1, "all_full": int(w.ctrl.all_full),
-        "measurement_seen": int(w.ctrl.seen), "control_bias_m": w.ctrl.bias_m,
+        "measurement_seen": int(w.ctrl.seen), "control_bias_m": w.ctrl.bias_m, "target_fill_m": p.control.target_m,
         "delivered_m3": w.delivered_m3, "in_cart_m3": in_cart, "spilled_m3": w.spilled_m3,
         "spilled_outside_m3": w.spilled_outside_m3, "cart_grain_m3": w.initial_m3 + in_cart,
         "peak_height_m": float(w.heights.max()),

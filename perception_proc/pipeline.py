@@ -21,9 +21,11 @@ from cosim.world.camera import Rig, beam_directions
 from cosim.scenario.config import Scenario
 from cosim.world.geometry import body_from_camera_axes, mount_transform
 
+from .beam_decode import BeamDecoder
 from .heightmap import HeightMap, grid_shape, height_map
 from .impact import Impact, blank_under_stream, find_impact
 from .lidar import apply_noise_and_limits, frame_generator, point_basis, to_points
+from cosim.world.beamtarget import beam_layout
 from cosim.world.patterns import beam_table, pattern_shape
 from .resample import beam_words, build_table, resample, resample_words
 from .resample_offset import build_offset_table, is_offset, resample_offset
@@ -86,17 +88,22 @@ class FrameResult:
 
 
 class Perception:
-    """Per-rig precomputation and the per-frame pure pipeline."""
+    """Per-rig precomputation and the per-frame pure pipeline. ``rig``: the camera rig (None, and unused, with
+    ``sensor.method: beam_native``, whose one image is the beams target)."""
 
-    def __init__(self, scenario: Scenario, rig: Rig):
+    def __init__(self, scenario: Scenario, rig: Rig | None):
         self.scenario = scenario
         self.rig = rig
         sensor = scenario.sensor
         self.elevation, self.azimuth = beam_table(sensor.pattern)
         self.directions = beam_directions(self.elevation, self.azimuth)
         self.shape = pattern_shape(sensor.pattern)
-        self.offset = is_offset(rig)
-        if self.offset:
+        #: ``sensor.method: beam_native``: ranges decoded per beam (perception_proc.beam_decode), no rig
+        self.beams = BeamDecoder(beam_layout(sensor.pattern), sensor.codec) if sensor.method == "beam_native" else None
+        self.offset = self.beams is None and is_offset(rig)
+        if self.beams is not None:
+            self.table = None
+        elif self.offset:
             self.table = build_offset_table(rig, self.elevation, self.azimuth, self.shape)
         else:
             self.table = build_table(rig, self.directions)
@@ -120,6 +127,8 @@ class Perception:
         """Noise-free ranges (N,) float32 m, NaN where no return, from one depth image per rig camera (rig
         order): decode and resample only, no range limits."""
         codec = self.scenario.sensor.codec
+        if self.beams is not None:
+            return self.beams.ranges(images, out=out)
         if self.offset:
             r = resample_offset(images, self.table, codec)
             if out is not None:
@@ -131,6 +140,8 @@ class Perception:
     def gather(self, images: Sequence[np.ndarray]) -> list[np.ndarray]:
         """The part of :meth:`resample` that reads the images, as copies (cheap: the beams' raw words; with an
         offset mount, the whole resampling); :meth:`resample_gathered` finishes it without the images."""
+        if self.beams is not None:
+            return self.beams.gather(images)
         if self.offset:
             return [self.resample(images)]
         sampler = self.scenario.perception.sampler
@@ -138,6 +149,8 @@ class Perception:
 
     def resample_gathered(self, gathered: list[np.ndarray], out: np.ndarray | None = None) -> np.ndarray:
         """:meth:`resample` from :meth:`gather`'s copies: the same ranges (N,) float32 m."""
+        if self.beams is not None:
+            return self.beams.decode(gathered, out=out)
         if self.offset:
             if out is None:
                 return gathered[0]

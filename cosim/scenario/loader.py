@@ -29,13 +29,14 @@ import yaml
 from pydantic import BaseModel, ValidationError
 
 from .config import FORMAT_VERSION, Scenario
+from .plausibility import implausible
 from cosim.errors import Problem, ScenarioError
 from .yamlmarks import (Doc as _Doc, Dumper as _Dumper, Loc, Mark as _Mark,
                         dotted as _dotted, parse as _parse, show as _show)
 
 __all__ = [
     "SCENARIO_DIR", "SET_FILE", "OPTIONS_FILE", "load_scenario", "load_scenario_text", "packaged_scenarios",
-    "resolve_scenario_arg", "dump_resolved", "path_fields", "describe_packaged",
+    "resolve_scenario_arg", "dump_resolved", "path_fields", "MAX_SCENARIO_BYTES", "describe_packaged",
 ]
 
 #: directory of the scenarios shipped with the package
@@ -44,6 +45,9 @@ SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
 SET_FILE = "<--set>"
 #: pseudo file name of problems in options passed as ``extra``
 OPTIONS_FILE = "<options>"
+
+#: largest scenario file (or text) read, bytes: a scenario is a few KiB; a larger one is refused before parsing
+MAX_SCENARIO_BYTES = 1 << 20
 
 _KEY = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -306,15 +310,21 @@ def load_scenario_text(
     *,
     extra: Mapping | None = None,
     base_dir: str | os.PathLike | None = None,
+    check_world: bool = False,
 ) -> Scenario:
     """Parse, override, resolve and validate scenario ``text``; raise ScenarioError with every problem.
 
     ``overrides``: ``"PATH=VALUE"`` strings (``--set``); ``extra``: ``{"dotted.path": value}`` from other options,
     entries whose value is None are skipped. ``base_dir``: directory that relative paths in the text are resolved
     against (default: the directory of ``filename`` if it names a file, else the working directory).
+    ``check_world``: also refuse an implausible world at frame 0 (cosim.scenario.plausibility; on by default in
+    :func:`load_scenario`, which the CLI uses, off here where a text is only parsed and validated). Texts over
+    MAX_SCENARIO_BYTES and alias bombs (cosim.scenario.yamlmarks.MAX_VALUES) are refused before validation.
     """
     if isinstance(overrides, str):
         raise TypeError("overrides must be a sequence of 'PATH=VALUE' strings, not one string")
+    if len(text) > MAX_SCENARIO_BYTES:
+        raise ScenarioError([_too_large(filename, len(text))])
     doc = _parse(text, filename)
     if doc.problems and not doc.values:  # YAML syntax error: nothing to go on
         _finish(doc, filename)
@@ -341,16 +351,37 @@ def load_scenario_text(
         doc.problems += [_error_problem(err, doc) for err in e.errors(include_url=False)]
         scenario = None
     _finish(doc, filename)
+    if check_world:
+        _check_world(doc, scenario, filename)
     return scenario
 
 
-def load_scenario(path: str | os.PathLike, overrides: Sequence[str] = (), *, extra: Mapping | None = None) -> Scenario:
-    """Load and validate the scenario file ``path`` (see :func:`load_scenario_text`)."""
+def _too_large(filename: str, size: int) -> Problem:
+    return Problem(filename, 1, 1, "", f"the scenario is {size / 2**20:.1f} MiB; scenarios are limited to "
+                   f"{MAX_SCENARIO_BYTES / 2**20:g} MiB (put large tables in files, e.g. sensor.pattern.csv_file)")
+
+
+def _check_world(doc: _Doc, scenario: Scenario, filename: str) -> None:
+    """Raise the plausibility problems of the frame-0 world (cosim.scenario.plausibility) at their keys."""
+    for loc, message in implausible(scenario):
+        found = _existing(doc.data, loc)  # a section's problem at its key, a value's at the value
+        marks = doc.keys if isinstance(_at(doc.data, found), dict) and found else doc.values
+        doc.problem(marks.get(found, doc.values[()]), loc, message)
+    _finish(doc, filename)
+
+
+def load_scenario(path: str | os.PathLike, overrides: Sequence[str] = (), *, extra: Mapping | None = None,
+                  check_world: bool = True) -> Scenario:
+    """Load and validate the scenario file ``path``, and check its frame-0 world (see :func:`load_scenario_text`)."""
     try:
+        size = os.stat(path).st_size
+        if size > MAX_SCENARIO_BYTES:
+            raise ScenarioError([_too_large(str(path), size)])
         text = Path(path).read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:
         raise ScenarioError([Problem(str(path), 0, 0, "", f"cannot read scenario file: {e}")]) from None
-    return load_scenario_text(text, str(path), overrides, extra=extra, base_dir=Path(path).resolve().parent)
+    return load_scenario_text(text, str(path), overrides, extra=extra, base_dir=Path(path).resolve().parent,
+                              check_world=check_world)
 
 
 # -------------------------------------------------------------------------------------- packaged, dump

@@ -15,11 +15,12 @@ __all__ = ["VARIANTS", "variants", "compare"]
 
 log = logging.getLogger("cosim.studies.compare")
 
-#: run name -> (feedback, estimator)
+#: run name -> (feedback, estimator, sensor.method or None for the scenario's own): the paper-style run keeps the
+#: paper's LiDAR pipeline (camera rig, Eqs 1-7) whatever the scenario uses, so the paper's method is reproduced
 VARIANTS = {
-    "ground_truth": ("ground_truth", "paper"),
-    "perception_paper": ("perception", "paper"),
-    "perception_fused": ("perception", "fused"),
+    "ground_truth": ("ground_truth", "paper", None),
+    "perception_paper": ("perception", "paper", "camera_rig"),
+    "perception_fused": ("perception", "fused", None),
 }
 
 NOTES = ("Ground truth feeds the controller the exact height map. Perception feedback sees the pile through the "
@@ -38,10 +39,12 @@ NOTES = ("Ground truth feeds the controller the exact height map. Perception fee
 def variants(scenario: Scenario) -> dict[str, Scenario]:
     """The scenarios compared, keyed by run name."""
     out = {}
-    for name, (feedback, estimator) in VARIANTS.items():
+    for name, (feedback, estimator, method) in VARIANTS.items():
         ctrl = scenario.controller.model_copy(update={"estimator": estimator})
+        sensor = scenario.sensor.model_copy(update={"method": method or scenario.sensor.method})
         renderer = scenario.renderer if scenario.renderer != "none" else "mock"
-        out[name] = scenario.model_copy(update={"feedback": feedback, "controller": ctrl, "renderer": renderer})
+        out[name] = scenario.model_copy(update={"feedback": feedback, "controller": ctrl, "renderer": renderer,
+                                                "sensor": sensor})
     return out
 
 

@@ -128,12 +128,14 @@ KNOBS: dict[str, Knob] = {
         "cell=0.1", _section_error, "cell=0.05", _GT),
     "render": Knob(
         "render", "mean LiDAR range error vs exact ray cast (m)",
-        tuple(Setting(f"{n} cam {w}x{h}", {"render.rig": "fixed", "render.cameras": n, "render.width_px": w,
-                                            "render.height_px": h, "render.hfov_deg": 100.0 / n})
+        tuple(Setting(f"{n} cam {w}x{h}", {"sensor.method": "camera_rig", "render.rig": "fixed", "render.cameras": n,
+                                            "render.width_px": w, "render.height_px": h, "render.hfov_deg": 100.0 / n})
               for n in (1, 2) for (w, h) in ((320, 240), (640, 480), (1024, 768)))
-        + tuple(Setting(f"auto rig {b:g} deg", {"render.rig": "auto", "sensor.max_angular_error_deg": b})
-                for b in (0.05, 0.1, 0.2, 0.4)),
-        "auto rig 0.1 deg", _range_error, None, {"feedback": "perception"}),
+        + tuple(Setting(f"auto rig {b:g} deg", {"sensor.method": "camera_rig", "render.rig": "auto",
+                                                 "sensor.max_angular_error_deg": b})
+                for b in (0.05, 0.1, 0.2, 0.4))
+        + (Setting("beam native", {"sensor.method": "beam_native"}),),
+        "beam native", _range_error, None, {"feedback": "perception"}),
     "beams": Knob(
         "beams", "perceived height map RMSE (m)",
         tuple(Setting(f"{a}x{e} beams", {"sensor.pattern.azimuth_count": a, "sensor.pattern.elevation_count": e})

@@ -107,6 +107,9 @@ class Sensor(Model):
     noise: Noise = Noise()
     codec: Codec = Codec()
     max_angular_error_deg: PosFloat = 0.1
+    #: how images become ranges: ``camera_rig`` is the paper's pipeline (camera images, Eqs 5-7 resample);
+    #: ``beam_native`` draws from the LiDAR origin into one pixel per beam and decodes per beam (docs/lidar.md)
+    method: Literal["camera_rig", "beam_native"] = "camera_rig"
 
     @model_validator(mode="after")
     def _limits(self) -> "Sensor":
