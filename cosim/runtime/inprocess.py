@@ -96,12 +96,16 @@ class InProcessSession:
 
 
 def simulate(scenario: Scenario, specs: Mapping[str, ParticipantSpec] | None = None,
-             frames: int | None = None) -> InProcessRun:
-    """Run ``scenario`` in this process for ``frames`` frames (default: the whole scenario)."""
+             frames: int | None = None, progress=None) -> InProcessRun:
+    """Run ``scenario`` in this process for ``frames`` frames (default: the whole scenario). ``progress``: called
+    ``(frame, frames, sim_s, wall_s)`` after each frame, like the launcher's (cosim.runtime.progress)."""
     session = InProcessSession(scenario, specs, frames)
+    period = scenario.timing.sensor_period_s
     try:
         while not session.done:
-            session.step()
+            frame = session.step()
+            if progress is not None and frame <= session.frames:
+                progress(frame, session.frames, frame * period, time.perf_counter() - session.t0)
         return session.finish()
     finally:
         session.close()

@@ -319,7 +319,7 @@ def _tear_down(run: _Run, error: RunError | None) -> RunResult:
         log.error("%s", failure)
         error = error or failure
     t_outputs = time.perf_counter()
-    if run.schema is not None and run.stop.signum is None and failure is None:
+    if run.schema is not None and failure is None:
         _write_figures(run, summary)
     code = _exit_code(error, run.stop)
     t_end = time.perf_counter()
@@ -334,6 +334,9 @@ def _tear_down(run: _Run, error: RunError | None) -> RunResult:
 
 def _write_figures(run: _Run, summary: dict) -> None:
     """The run's figures; a stop signal cuts them short (the run's data is already written)."""
+    if run.stop.signum is not None:
+        log.warning("figures not written: stopped by %s", run.stop.name)
+        return
     try:
         with run.stop.raising():
             write_figures(run.run_dir, run.scenario, summary, run.recorder)

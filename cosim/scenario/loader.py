@@ -37,7 +37,7 @@ from .yamlmarks import (Doc as _Doc, Dumper as _Dumper, Loc, Mark as _Mark,
 
 __all__ = [
     "SCENARIO_DIR", "SET_FILE", "OPTIONS_FILE", "load_scenario", "load_scenario_text", "packaged_scenarios",
-    "resolve_scenario_arg", "dump_resolved", "path_fields", "MAX_SCENARIO_BYTES",
+    "resolve_scenario_arg", "dump_resolved", "path_fields", "MAX_SCENARIO_BYTES", "describe_packaged",
 ]
 
 #: directory of the scenarios shipped with the package
@@ -436,8 +436,20 @@ def resolve_scenario_arg(arg: str | os.PathLike) -> Path:
     packaged = packaged_scenarios()
     if str(arg) in packaged:
         return packaged[str(arg)]
-    raise ScenarioError([Problem(str(arg), 0, 0, "", "no such scenario file or packaged scenario (packaged: "
-                                 f"{', '.join(packaged) or 'none'})")])
+    close = difflib.get_close_matches(str(arg), list(packaged), n=1, cutoff=0.6)
+    hint = f"; did you mean '{close[0]}'?" if close else ""
+    raise ScenarioError([Problem(str(arg), 0, 0, "", f"no such scenario file or packaged scenario (packaged: "
+                                 f"{', '.join(packaged) or 'none'}; `launch.py list` describes them){hint}")])
+
+
+def describe_packaged() -> dict[str, str]:
+    """Packaged scenario name -> its ``description`` (first sentence, whitespace collapsed; "" when none)."""
+    out = {}
+    for name, path in packaged_scenarios().items():
+        doc = yaml.safe_load(path.read_text()) or {}
+        text = " ".join(str(doc.get("description") or "").split())
+        out[name] = text.split(". ")[0].rstrip(".") + "." if text else ""
+    return out
 
 
 def dump_resolved(scenario: Scenario) -> str:

@@ -92,8 +92,13 @@ def _initial_state(s: Scenario) -> tuple[dict, np.ndarray]:
     """dyn_state fields and the truth height map (float32) of frame 0."""
     from dynamics_proc.model import ModelParams, initial_world, signals
 
-    p = ModelParams.from_scenario(s)
-    w = initial_world(s, p)
+    # the frame-0 poses come from the scenario alone: the built-in controller and vehicle model stand in for any
+    # plug-in or FMU (nothing of the user's is opened or stepped to check the geometry)
+    geometry = s.model_copy(update={
+        "controller": s.controller.model_copy(update={"model": "section_fill", "strategy": "front_to_back", "fmu": None}),
+        "vehicles": type(s.vehicles)()})
+    p = ModelParams.from_scenario(geometry)
+    w = initial_world(geometry, p)
     state = signals(w, p)
     state["stream_points"] = 0
     return state, np.asarray(w.heights, dtype=np.float32)

@@ -25,6 +25,7 @@ from pydantic import ValidationError
 from cosim.errors import Problem, ScenarioError
 from cosim.scenario.config import Scenario
 from cosim.scenario.yamlmarks import Loader
+from cosim.report.figures import DPI, fig_study
 from cosim.runtime.outputs import clean_json
 from .results import read_summary
 from .sweep import run_sweep
@@ -237,8 +238,9 @@ def run_study(scenario: Scenario, knobs: Sequence[str | Knob], out: Path, durati
             rows.append({"knob": knob.name, "setting": label, "wall_s_per_sim_s": cost, "error": err,
                          "error_label": knob.error_label, "default": label == knob.default,
                          "reference": label == ref_label, "completed": res is not None})
-        panels.append((knob, pts))
-    _plot(out / "study.png", panels)
+        panels.append((knob.name, knob.error_label, [p for p in pts if np.isfinite(p[1]) and np.isfinite(p[2])],
+                       knob.default))
+    fig_study(panels).savefig(out / "study.png", dpi=DPI)
     with open(out / "study.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
@@ -254,29 +256,3 @@ def run_study(scenario: Scenario, knobs: Sequence[str | Knob], out: Path, durati
     (out / "study.json").write_text(json.dumps(clean_json(rows), indent=2))
     return md
 
-
-def _plot(path: Path, panels: list) -> None:
-    """One log-log panel per knob: error against wall time per simulated second, the default starred."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels), 4), squeeze=False)
-    for ax, (knob, pts) in zip(axes[0], panels):
-        for label, x, y in pts:
-            if not (np.isfinite(x) and np.isfinite(y)):
-                continue
-            ax.loglog([x], [max(y, 1e-12)], "o", color="tab:blue")
-            ax.annotate(label, (x, max(y, 1e-12)), fontsize=7, xytext=(3, 3), textcoords="offset points")
-            if label == knob.default:
-                ax.plot([x], [max(y, 1e-12)], "*", ms=16, color="tab:red", label="default")
-        ax.set_xlabel("wall time per simulated second (s)")
-        ax.set_ylabel(knob.error_label)
-        ax.set_title(knob.name)
-        if knob.default:
-            ax.legend(fontsize=8)
-        ax.grid(alpha=0.3, which="both")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
