@@ -147,6 +147,8 @@ def report(label: str, runs: list[dict]) -> None:
     cores = os.cpu_count() or 1
     bound = statistics.median(total) / cores
     print(f"| all | {_cell(total)} |\n")
+    if bound <= 0.0:                                         # no member process was sampled (in-process run)
+        return
     print(f"{statistics.median(total):.2f} ms of CPU per frame on {cores} cores: no frame shorter than {bound:.2f} ms "
           f"({1e3 * runs[0]['period_s'] / bound:.1f}x real time at {runs[0]['period_s']:g} s frames) however the "
           "stages overlap.\n")
