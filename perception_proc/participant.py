@@ -151,7 +151,7 @@ class PerceptionParticipant:
         t1 = time.perf_counter()
         wfp = acc.world_from_parent(self.scenario, state) if state else np.eye(4)
         heading = self._heading(state, wfp)
-        res = pipe.perceive(ranges, heading, with_points=False)
+        res = pipe.perceive(ranges, heading, with_points=False, frame=frame)
         self.last = res
         pipe.points(ranges, out=out.points)
         t2 = time.perf_counter()

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from cosim.scenario.config import Scenario
 from cosim.runtime.launcher import launch
+from cosim.runtime.progress import run_progress
 from cosim.report.html import write_comparison_report
 from cosim.report.rundata import load_run
 
@@ -47,12 +48,18 @@ def variants(scenario: Scenario) -> dict[str, Scenario]:
     return out
 
 
-def compare(scenario: Scenario, out: Path, progress=None) -> Path:
-    """Run every variant into ``out/<variant>`` and write ``out/report.html``; returns the report path."""
+def compare(scenario: Scenario, out: Path, quiet: bool = True) -> Path:
+    """Run every variant into ``out/<variant>`` and write ``out/report.html``; returns the report path. Each run
+    shows its own progress bar labelled with its name (none when ``quiet``)."""
     out.mkdir(parents=True, exist_ok=True)
     runs = []
-    for name, sc in variants(scenario).items():
+    for k, (name, sc) in enumerate(variants(scenario).items(), start=1):
         log.info("compare: running %s", name)
-        res = launch(sc, out / name, progress=progress)
+        progress = run_progress(f"[{k}/{len(VARIANTS)}] {name}", quiet)
+        try:
+            res = launch(sc, out / name, progress=progress)
+        finally:
+            if progress is not None:
+                progress.close()
         runs.append(load_run(res.run_dir))
     return write_comparison_report(runs, out, NOTES)

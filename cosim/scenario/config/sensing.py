@@ -10,9 +10,9 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from .base import Fraction, Model, Mount, NonNegFloat, PosFloat
+from .base import Fraction, Model, Mount, NonNegFloat, PluginRef, PosFloat
 
-__all__ = ["Codec", "Pattern", "Noise", "Sensor", "Perception"]
+__all__ = ["Codec", "Pattern", "Noise", "Sensor", "Stages", "Perception"]
 
 
 #: largest alpha / beta for which |d' - d| <= beta / 510 holds with Eqs 1-3 as written
@@ -118,15 +118,27 @@ class Sensor(Model):
         return self
 
 
+class Stages(Model):
+    """The stages of the ``staged`` perception algorithm, each replaceable on its own (perception_proc.protocol):
+    ``rim`` finds the cart, ``heightmap`` grids the grain surface, ``impact`` finds where the stream lands.
+    ``builtin``, an entry point name or an import path ``package.module:name``."""
+
+    rim: PluginRef = "builtin"
+    heightmap: PluginRef = "builtin"
+    impact: PluginRef = "builtin"
+
+
 class Perception(Model):
     """Offloading perception: LiDAR resampling, cart boundary, height map, impact location, accuracy.
 
     ``sampler``: ``planar`` interpolates inverse depth inside continuous 2 x 2 pixel patches (exact on planes,
     never across an edge); ``nearest`` is the paper's nearest pixel. ``accuracy_every_frames``: compare with
     an exact ray cast of the same scene every that many frames (0: never; the default 30 keeps it under 3 % of a
-frame's CPU: one evaluation costs about 8 ms); truth never feeds the estimates.
+    frame's CPU: one evaluation costs about 8 ms); truth never feeds the estimates.
     ``accuracy_beams``: how many beams each evaluation casts, one drawn per stratum of equal runs of the beam
     table, seeded by (seed, frame) (0: every beam; see perception_proc.accuracy.sample_beams).
+    ``algorithm``: the per-frame algorithm (points -> cart, height map, impact): ``staged`` runs ``stages``;
+    an entry point name or an import path ``package.module:name`` replaces it whole (docs/plugins.md).
     """
 
     min_points_per_cell: int = Field(default=1, ge=1)
@@ -134,3 +146,5 @@ frame's CPU: one evaluation costs about 8 ms); truth never feeds the estimates.
     sampler: Literal["planar", "nearest"] = "planar"
     accuracy_every_frames: int = Field(default=30, ge=0, le=1_000_000)
     accuracy_beams: int = Field(default=4096, ge=0, le=10_000_000)
+    algorithm: PluginRef = "staged"
+    stages: Stages = Stages()
