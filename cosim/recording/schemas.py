@@ -1,7 +1,7 @@
 """JSON-schema definitions of this project's own channels (JSON message encoding).
 
 Foxglove's well-known messages (PointCloud, RawImage, CompressedImage, Grid, FrameTransform) are written in
-protobuf, their schemas derived in :mod:`cosim.recording.proto`. Our own: ``cosim.struct.<block>`` (one scalar
+protobuf by foxglove-sdk. Our own: ``cosim.struct.<block>`` (one scalar
 time series message per struct block and frame, field descriptions carrying units; Foxglove plots these) and
 ``cosim.Frame`` (the end-of-frame marker that makes a killed run's file readable up to its last completed
 frame). Timestamps are Foxglove's JSON time ``{sec, nsec}``.
@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 from typing import Iterable
 
-__all__ = ["FRAME_MARKER", "struct_schema", "encode_schema"]
+__all__ = ["FRAME_MARKER", "struct_schema", "marker_json"]
 
 
 def _time(desc: str) -> dict:
@@ -43,6 +43,8 @@ def struct_schema(block: str, fields: Iterable[tuple[str, str]]) -> dict:
     return _message(f"cosim.struct.{block}", f"Scalar fields of the shared-memory struct block {block!r}", props)
 
 
-def encode_schema(schema: dict) -> bytes:
-    """Canonical UTF-8 JSON bytes of a schema (what goes into the MCAP Schema record)."""
-    return json.dumps(schema, sort_keys=True, separators=(",", ":")).encode()
+def marker_json(t_ns: int, frame: int, t_s: float) -> bytes:
+    """A ``cosim.Frame`` end-of-frame marker message."""
+    sec, nsec = divmod(max(0, int(t_ns)), 1_000_000_000)
+    return json.dumps({"timestamp": {"sec": sec, "nsec": nsec}, "frame": int(frame), "t_s": float(t_s)},
+                      separators=(",", ":")).encode()
