@@ -46,6 +46,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="write an MCAP recording (Foxglove schemas) to FILE (default <run dir>/recording.mcap)")
     run.add_argument("--record-image-every", type=int, default=None, metavar="N",
                      help="record camera images every N frames (default 5; LiDAR, maps and scalars every frame)")
+    run.add_argument("--foxglove", action="store_true",
+                     help="serve the run live to Foxglove / Lichtblick over WebSocket on 127.0.0.1 (see --foxglove-port)")
+    run.add_argument("--foxglove-port", type=int, default=8765, metavar="PORT",
+                     help="port of the --foxglove server (default %(default)s)")
     run.add_argument("--quiet", action="store_true", help="no progress output")
     val = sub.add_parser("validate", help="validate a scenario and print the resolved result")
     _scenario_options(val)
@@ -73,9 +77,19 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def run_extras(args: argparse.Namespace) -> tuple[list, list]:
-    """(observers, sinks) that ``run``'s --viewer and --record ask for."""
+def run_extras(args: argparse.Namespace, scenario=None) -> tuple[list, list]:
+    """(observers, sinks) that ``run``'s --viewer, --foxglove and --record ask for (``scenario``: the loaded
+    scenario, which --foxglove needs). ValueError (exit 2, nothing started) for a --foxglove-port in use."""
     observers, sinks = [], []
+    if getattr(args, "foxglove", False):
+        from cosim.runtime.launcher import ObserverSpec
+        from .foxglove.live import DEFAULT_HOST, port_in_use
+
+        if port_in_use(DEFAULT_HOST, args.foxglove_port):
+            raise ValueError(f"--foxglove-port {args.foxglove_port}: {DEFAULT_HOST}:{args.foxglove_port} is already "
+                             "in use; choose another port (nothing was started)")
+        observers.append(ObserverSpec("foxglove", "cosim.foxglove.live:observe",
+                                      {"port": args.foxglove_port, "scenario_json": scenario.model_dump_json()}))
     if getattr(args, "viewer", False):
         from cosim.runtime.launcher import ObserverSpec
 
@@ -197,11 +211,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     progress = None if args.quiet else ProgressPrinter()
     try:
-        observers, sinks = run_extras(args)
+        observers, sinks = run_extras(args, scenario)
     except ValueError as exc:
         sys.stderr.write(f"{exc}\n")
         return EXIT_SCENARIO
-    if observers:
+    if args.viewer:
         sys.stderr.write(f"viewer: http://127.0.0.1:{args.viewer_port}/ (while the run lasts)\n")
     result = launch(scenario, args.out, progress=progress, observers=observers, sinks=sinks)
     _print_summary(result, sys.stdout)

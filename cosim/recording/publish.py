@@ -154,6 +154,14 @@ class FramePublisher:
                                  GridChannel(f"/heightmap/{kind}", context=ctx))
         self._marker = foxglove.Channel(FRAME_TOPIC, schema=S.FRAME_MARKER, context=ctx)
 
+    def watched(self, name: str) -> bool:
+        """Whether a sink takes the messages of block ``name`` (an MCAP file always; a WebSocket server while a
+        client subscribes to its topic)."""
+        ch = self._structs.get(name) or (self._grids[name][1] if name in self._grids else None) or \
+            (self._images[name][2] if name in self._images else None) or \
+            (self._lidar if name == "lidar_points" else None)
+        return ch is not None and ch.has_sinks()
+
     # -- frames ------------------------------------------------------------------------------------------
     def _t_ns(self, frame: int) -> int:
         return round(frame * self.period_s * 1e9)
