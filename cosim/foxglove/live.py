@@ -18,6 +18,7 @@ import logging
 import os
 import socket
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -64,6 +65,16 @@ def port_in_use(host: str, port: int) -> bool:
     return False
 
 
+class _Listener:
+    """foxglove.websocket.ServerListener: a subscription sets ``event``."""
+
+    def __init__(self, event: threading.Event):
+        self.event = event
+
+    def on_subscribe(self, client, channel) -> None:
+        self.event.set()
+
+
 class LiveFoxglove:
     """Sends the run in ``seg`` (attached) to the clients of a foxglove-sdk WebSocket server on ``host:port``."""
 
@@ -71,8 +82,11 @@ class LiveFoxglove:
                  interval_s: float = INTERVAL_S):
         self.seg, self.scenario, self.interval_s = seg, scenario, float(interval_s)
         ctx = foxglove.Context()
+        #: set by the server's thread when a client subscribes: the next step sends every block's latest
+        #: contents again, so a client that subscribes while the run holds a frame (or has ended) sees it
+        self._resend = threading.Event()
         self.server = foxglove.start_server(name=f"graincosim {seg.run_id or seg.name}", host=host, port=port,
-                                            context=ctx)
+                                            context=ctx, server_listener=_Listener(self._resend))
         self.host, self.port = host, self.server.port
         self.publisher = FramePublisher(RunInfo.of(scenario), seg.schema, ctx)
         self.recorded = Recorded.of(seg.schema)
@@ -111,6 +125,10 @@ class LiveFoxglove:
         """Send what changed since the last step (a block only while a client watches it). Returns whether
         anything was sent."""
         seg, pub = self.seg, self.publisher
+        if self._resend.is_set():
+            self._resend.clear()
+            self._sent.clear()
+            pub.forget()
         structs, arrays, stamps = {}, {}, {}
         scene = self._scene is not None and self._scene.has_sinks()
         for name in self.recorded.names:

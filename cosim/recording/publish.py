@@ -154,6 +154,11 @@ class FramePublisher:
                                  GridChannel(f"/heightmap/{kind}", context=ctx))
         self._marker = foxglove.Channel(FRAME_TOPIC, schema=S.FRAME_MARKER, context=ctx)
 
+    def forget(self) -> None:
+        """Send every block again from its next publish on, even at a stamp already sent."""
+        self._last.clear()
+        self._static_frame = -1
+
     def watched(self, name: str) -> bool:
         """Whether a sink takes the messages of block ``name`` (an MCAP file always; a WebSocket server while a
         client subscribes to its topic)."""
