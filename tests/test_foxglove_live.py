@@ -231,3 +231,44 @@ def test_run_extras_adds_the_observer():
     assert sinks == [] and [(o.name, o.target, o.kwargs["port"]) for o in observers] == \
         [("foxglove", "cosim.foxglove.live:observe", 0)]
     assert Scenario.model_validate_json(observers[0].kwargs["scenario_json"]) == sc
+
+
+def _layout_topics(node, out: set[str]) -> set[str]:
+    """Topics a layout names: 3D topic settings, image topics and the topic part of plot paths."""
+    if isinstance(node, dict):
+        for k, v in node.items():
+            if k == "topics" and isinstance(v, dict):
+                out.update(v)
+            elif k == "imageTopic":
+                out.add(v)
+            elif k == "value" and isinstance(v, str) and v.startswith("/"):
+                out.add(v.split(".")[0])
+            _layout_topics(v, out)
+    elif isinstance(node, list):
+        for v in node:
+            _layout_topics(v, out)
+    return out
+
+
+def test_the_shipped_layout_is_built_from_the_sdk_and_names_the_runs_topics_and_fields():
+    import foxglove
+
+    from cosim.foxglove import LAYOUT
+    from cosim.foxglove.layout import layout_json
+    from cosim.foxglove.live import SCENE_TOPIC
+    from cosim.recording.publish import FramePublisher, RunInfo
+    from cosim.runtime.specs import build_schema, ring_specs
+    from cosim.scenario.loader import load_scenario, resolve_scenario_arg
+    from shm_schema import StructBlock
+
+    assert LAYOUT.read_text() == layout_json(), "regenerate with python -m cosim.foxglove.layout --out " + str(LAYOUT)
+    layout = json.loads(LAYOUT.read_text())
+    sc = load_scenario(resolve_scenario_arg("default"), [])
+    schema = build_schema(sc, ring_specs(sc))
+    topics = set(FramePublisher(RunInfo.of(sc), schema, foxglove.Context()).topics) | {SCENE_TOPIC}
+    assert {"/lidar/points", "/heightmap/truth", "/cam0/depth_encoded", "/dyn_state"} <= topics
+    named = _layout_topics(layout, set())
+    assert named and named <= topics, named - topics
+    fields = {f"/{b.name}.{f.name}" for b in schema.blocks if isinstance(b, StructBlock) for f in b.fields}
+    paths = {v for v in json.dumps(layout).replace('"', " ").split() if v.startswith("/") and "." in v}
+    assert paths and paths <= fields, paths - fields

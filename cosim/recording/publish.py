@@ -154,6 +154,13 @@ class FramePublisher:
                                  GridChannel(f"/heightmap/{kind}", context=ctx))
         self._marker = foxglove.Channel(FRAME_TOPIC, schema=S.FRAME_MARKER, context=ctx)
 
+    @property
+    def topics(self) -> dict[str, str]:
+        """{topic: schema name} of every channel."""
+        chans = [*self._structs.values(), *(c for _, c in self._grids.values()),
+                 *(c for *_, c in self._images.values()), self._tf, self._marker, self._lidar]
+        return {c.topic(): c.schema_name() for c in chans if c is not None}
+
     def forget(self) -> None:
         """Send every block again from its next publish on, even at a stamp already sent."""
         self._last.clear()
