@@ -183,7 +183,7 @@ def observe(segment_name: str, scenario_json: str, port: int = DEFAULT_PORT, hos
             interval_s: float = INTERVAL_S, announce: str | None = None) -> None:
     """Observer entry (spawned by the launcher): serve run ``segment_name`` (scenario ``scenario_json``) until it
     ends. Prints ``foxglove: ws://HOST:PORT`` on stderr once the server answers; ``announce``: also write
-    ``{"url", "port"}`` as JSON to that file then."""
+    ``{"url", "port", "pid"}`` as JSON to that file then."""
     from cosim.scenario.config import Scenario
 
     try:
@@ -199,7 +199,7 @@ def observe(segment_name: str, scenario_json: str, port: int = DEFAULT_PORT, hos
         log.info("foxglove: serving %s on %s", segment_name, live.url)
         if announce:
             tmp = Path(announce).with_suffix(".tmp")
-            tmp.write_text(json.dumps({"url": live.url, "port": live.port}))
+            tmp.write_text(json.dumps({"url": live.url, "port": live.port, "pid": os.getpid()}))
             os.replace(tmp, announce)
         live.serve()
     finally:
