@@ -48,7 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="record camera images every N frames (default 5; LiDAR, maps and scalars every frame)")
     run.add_argument("--foxglove", action="store_true",
                      help="serve the run live to Foxglove / Lichtblick over WebSocket on 127.0.0.1 (see --foxglove-port)")
-    run.add_argument("--foxglove-port", type=int, default=8765, metavar="PORT",
+    run.add_argument("--foxglove-port", type=int, default=8766, metavar="PORT",
                      help="port of the --foxglove server (default %(default)s)")
     run.add_argument("--quiet", action="store_true", help="no progress output")
     val = sub.add_parser("validate", help="validate a scenario and print the resolved result")
@@ -85,6 +85,9 @@ def run_extras(args: argparse.Namespace, scenario=None) -> tuple[list, list]:
         from cosim.runtime.launcher import ObserverSpec
         from .foxglove.live import DEFAULT_HOST, port_in_use
 
+        if getattr(args, "viewer", False) and args.viewer_port == args.foxglove_port != 0:
+            raise ValueError(f"--foxglove-port {args.foxglove_port} is the dashboard's port too (--viewer-port); "
+                             "choose another (nothing was started)")
         if port_in_use(DEFAULT_HOST, args.foxglove_port):
             raise ValueError(f"--foxglove-port {args.foxglove_port}: {DEFAULT_HOST}:{args.foxglove_port} is already "
                              "in use; choose another port (nothing was started)")

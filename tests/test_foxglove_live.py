@@ -272,3 +272,22 @@ def test_the_shipped_layout_is_built_from_the_sdk_and_names_the_runs_topics_and_
     fields = {f"/{b.name}.{f.name}" for b in schema.blocks if isinstance(b, StructBlock) for f in b.fields}
     paths = {v for v in json.dumps(layout).replace('"', " ").split() if v.startswith("/") and "." in v}
     assert paths and paths <= fields, paths - fields
+
+
+def test_the_dashboard_and_foxglove_ports_must_differ():
+    from cosim.cli import build_parser, run_extras
+    from cosim.scenario.config import Scenario
+
+    args = build_parser().parse_args(["run", "--viewer", "--foxglove", "--foxglove-port", "9123", "--viewer-port",
+                                      "9123"])
+    with pytest.raises(ValueError, match=r"--foxglove-port 9123 is the dashboard's port too"):
+        run_extras(args, Scenario(format_version=1, duration_s=1.0))
+    assert build_parser().parse_args(["run"]).foxglove_port != build_parser().parse_args(["run"]).viewer_port
+
+
+def test_the_layout_command_writes_the_shipped_file(tmp_path):
+    from cosim.foxglove import LAYOUT
+    from cosim.foxglove.layout import main
+
+    assert main(["--out", str(tmp_path / "layout.json")]) == 0
+    assert (tmp_path / "layout.json").read_text() == LAYOUT.read_text()

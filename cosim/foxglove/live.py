@@ -34,8 +34,8 @@ __all__ = ["observe", "LiveFoxglove", "port_in_use", "DEFAULT_PORT", "DEFAULT_HO
 
 log = logging.getLogger("cosim.foxglove")
 
-#: the Foxglove app's default WebSocket port
-DEFAULT_PORT = 8765
+#: default WebSocket port: the Foxglove app's default (8765) plus one, since the dashboard (--viewer) has 8765
+DEFAULT_PORT = 8766
 DEFAULT_HOST = "127.0.0.1"
 #: time between two looks at the segment, s (5 Hz, the dashboard's rate)
 INTERVAL_S = 0.2
