@@ -256,7 +256,7 @@ def test_the_shipped_layout_is_built_from_the_sdk_and_names_the_runs_topics_and_
     from cosim.foxglove import LAYOUT
     from cosim.foxglove.layout import layout_json
     from cosim.foxglove.live import SCENE_TOPIC
-    from cosim.recording.publish import FramePublisher, RunInfo
+    from cosim.foxglove.publish import FramePublisher, RunInfo
     from cosim.runtime.specs import build_schema, ring_specs
     from cosim.scenario.loader import load_scenario, resolve_scenario_arg
     from shm_schema import StructBlock

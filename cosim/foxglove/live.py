@@ -5,7 +5,7 @@ like the dashboard (:mod:`cosim.viewer.live`): it attaches to the run's segment 
 layout from the segment, copies blocks under their seqlocks (``Segment.snapshot``), never writes, never
 unlinks, takes no part in the lockstep and runs at nice 10. Every ``interval_s`` it reads the blocks' frame
 stamps and sends what changed through foxglove-sdk's WebSocket server (subprotocol ``foxglove.sdk.v1``) on
-127.0.0.1: the topics of the recording (:mod:`cosim.recording.publish`: point cloud, camera images, height maps
+127.0.0.1: the topics of the recording (:mod:`cosim.foxglove.publish`: point cloud, camera images, height maps
 as grids, transforms, struct blocks as JSON messages) and ``/scene``, a foxglove.SceneUpdate of the render scene
 (:mod:`cosim.foxglove.scene`). Frames in between are dropped. A big block (image, cloud, map) is copied only
 while a client subscribes to its topic, so an unwatched server costs a few stamp reads per interval. If it fails
@@ -27,7 +27,7 @@ from foxglove.channels import SceneUpdateChannel
 
 from shm_schema import Segment, SnapshotTimeout, StructBlock
 
-from cosim.recording.publish import FramePublisher, Recorded, RunInfo
+from .publish import FramePublisher, Recorded, RunInfo
 from .scene import scene_update
 
 __all__ = ["observe", "LiveFoxglove", "port_in_use", "DEFAULT_PORT", "DEFAULT_HOST", "INTERVAL_S", "NICE", "SCENE_TOPIC"]

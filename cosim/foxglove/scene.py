@@ -31,10 +31,11 @@ from foxglove.messages import (
     Vector3,
 )
 
-from cosim.recording.encode import quaternion_from_matrix, stamp
 from cosim.world.heightfield import grid_triangles, grid_vertices, padded_heights
 from cosim.world.parts import entity_parts
 from cosim.world.scene import GRAIN_COLOUR, Scene
+
+from .messages import quaternion_from_matrix, stamp
 
 __all__ = ["scene_update", "ENTITIES", "srgb"]
 

@@ -5,7 +5,7 @@ Foxglove's well-known schemas in protobuf encoding: foxglove.PointCloud (LiDAR),
 images, lossless) and CompressedImage (RGB), foxglove.Grid (height maps), foxglove.FrameTransform (vehicle and
 sensor poses), plus one JSON scalar topic per struct block, so a run opens in Foxglove or Lichtblick without
 ROS, written through foxglove-sdk's MCAP writer. The sink copies each completed frame into a shared-memory frame
-slot; a recorder process encodes and writes (:mod:`.sink`, :mod:`.slots`, :mod:`.writer`, :mod:`.encode`). :func:`read_recording`
+slot; a recorder process encodes and writes (:mod:`.sink`, :mod:`.slots`, :mod:`.writer`; the messages: :mod:`cosim.foxglove.publish`). :func:`read_recording`
 reads it back (also a file cut off by a killed run, up to its last completed frame); :class:`ReplaySource`
 serves it to the viewer's dashboard.
 """

@@ -1,121 +1,19 @@
-"""Pure message builders: a run's blocks as foxglove-sdk messages (recorded and served live), and back.
+"""Decoded Foxglove messages (dicts from :func:`cosim.recording.reader.read_recording`) back into arrays.
 
-Builders return ``foxglove.messages`` objects (the SDK encodes them in protobuf with Foxglove's schemas);
-decoders take the dicts :func:`cosim.recording.reader.read_recording` returns (``data`` bytes, timestamps
-``{sec, nsec}``).
-
-Frames: the LiDAR block (``lidar_points``) is in the sensor frame with the paper's camera axes (X right, Y up,
-Z forward), which is left-handed and so cannot be reached from a right-handed frame by a rotation. Points are
-therefore stored in the ``lidar`` frame, the sensor *mount* frame with body axes (x forward, y left, z up):
-``p_mount = BODY_FROM_CAMERA @ p_cam``, i.e. (x, y, z) = (Z, -X, Y). :func:`points_from_cloud` undoes it.
-Height maps ``h[i, j]`` (i along cart grid x) become a Grid in the ``cart_grid`` frame with columns along x and
-rows along y (Foxglove's y-major order), i.e. the bytes of ``h.T``.
-
-Images: a depth-encoded image block goes into a RawImage ``rgba8`` byte for byte (R, G, B carry the depth code,
-alpha the validity, DESIGN.md 4): lossless. RGB camera images may be JPEG or PNG CompressedImage, or RawImage.
+The inverses of :mod:`cosim.foxglove.messages`' builders: a PointCloud's ``lidar`` (mount) frame points back to
+the ``lidar_points`` block's camera axes ((X, Y, Z) = (-y, z, x)), a Grid's y-major cells back to (nx, ny),
+and a RawImage or CompressedImage back to its pixels.
 """
 from __future__ import annotations
 
-import json
-import math
-import re
-
 import numpy as np
-from foxglove.messages import (
-    CompressedImage,
-    FrameTransform,
-    Grid,
-    PackedElementField,
-    PackedElementFieldNumericType,
-    PointCloud,
-    Pose,
-    Quaternion,
-    RawImage,
-    Timestamp,
-    Vector2,
-    Vector3,
-)
 
-__all__ = ["CLOUD_FIELDS", "CLOUD_STRIDE", "NS_PER_S", "stamp", "quaternion_from_matrix", "transform_msg",
-           "planar_transform_msg", "point_cloud_msg", "points_from_cloud", "raw_image_msg", "compressed_image_msg",
-           "image_from_msg", "grid_msg", "heights_from_grid", "scalars_json", "identity_pose"]
+from cosim.foxglove.messages import CLOUD_STRIDE
 
-NS_PER_S = 1_000_000_000
-#: fields of a recorded point, float32 each: position in the lidar mount frame (m) and range (m)
-CLOUD_FIELDS = ("x", "y", "z", "range")
-#: bytes per recorded point (CLOUD_FIELDS, float32)
-CLOUD_STRIDE = 4 * len(CLOUD_FIELDS)
-#: PNG compression level for lossless RGB images (0-9): 1 is fast
-PNG_LEVEL = 1
-#: column gathers and signs between camera-axes rows (X, Y, Z, r) and mount-frame rows (x, y, z, r)
-_MOUNT_FROM_CAM, _MOUNT_SIGN = [2, 0, 1, 3], np.array([1, -1, 1, 1], np.float32)
+__all__ = ["points_from_cloud", "image_from_msg", "heights_from_grid"]
+
+#: column gathers and signs from mount-frame rows (x, y, z, r) to camera-axes rows (X, Y, Z, r)
 _CAM_FROM_MOUNT, _CAM_SIGN = [1, 2, 0, 3], np.array([-1, 1, 1, 1], np.float32)
-_F32 = PackedElementFieldNumericType.Float32
-
-
-def stamp(t_ns: int) -> Timestamp:
-    """Foxglove time of a non-negative time in ns."""
-    sec, nsec = divmod(max(0, int(t_ns)), NS_PER_S)
-    return Timestamp(sec, nsec)
-
-
-def identity_pose() -> Pose:
-    return Pose(position=Vector3(x=0.0, y=0.0, z=0.0), orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
-
-
-def quaternion_from_matrix(r) -> tuple[float, float, float, float]:
-    """Unit quaternion (x, y, z, w) of a proper 3 x 3 rotation matrix (Shepperd's method)."""
-    r = np.asarray(r, dtype=np.float64)[:3, :3].tolist()
-    tr = r[0][0] + r[1][1] + r[2][2]
-    if tr > 0.0:
-        s = math.sqrt(tr + 1.0) * 2.0
-        q = (0.25 * s, (r[2][1] - r[1][2]) / s, (r[0][2] - r[2][0]) / s, (r[1][0] - r[0][1]) / s)
-    elif r[0][0] > r[1][1] and r[0][0] > r[2][2]:
-        s = math.sqrt(1.0 + r[0][0] - r[1][1] - r[2][2]) * 2.0
-        q = ((r[2][1] - r[1][2]) / s, 0.25 * s, (r[0][1] + r[1][0]) / s, (r[0][2] + r[2][0]) / s)
-    elif r[1][1] > r[2][2]:
-        s = math.sqrt(1.0 + r[1][1] - r[0][0] - r[2][2]) * 2.0
-        q = ((r[0][2] - r[2][0]) / s, (r[0][1] + r[1][0]) / s, 0.25 * s, (r[1][2] + r[2][1]) / s)
-    else:
-        s = math.sqrt(1.0 + r[2][2] - r[0][0] - r[1][1]) * 2.0
-        q = ((r[1][0] - r[0][1]) / s, (r[0][2] + r[2][0]) / s, (r[1][2] + r[2][1]) / s, 0.25 * s)
-    w, x, y, z = q
-    n = math.sqrt(w * w + x * x + y * y + z * z)
-    return x / n, y / n, z / n, w / n
-
-
-def transform_msg(t_ns: int, parent: str, child: str, parent_from_child: np.ndarray) -> FrameTransform:
-    """FrameTransform from a 4 x 4 rigid transform ``parent_from_child`` (translation in m)."""
-    t = np.asarray(parent_from_child, dtype=np.float64)
-    x, y, z = t[:3, 3].tolist()
-    qx, qy, qz, qw = quaternion_from_matrix(t[:3, :3])
-    return FrameTransform(timestamp=stamp(t_ns), parent_frame_id=parent, child_frame_id=child,
-                          translation=Vector3(x=x, y=y, z=z), rotation=Quaternion(x=qx, y=qy, z=qz, w=qw))
-
-
-def planar_transform_msg(t_ns: int, parent: str, child: str, x_m: float, y_m: float, yaw_rad: float) -> FrameTransform:
-    """FrameTransform of a pose in the plane: translation (x_m, y_m, 0), rotation yaw_rad about z."""
-    return FrameTransform(timestamp=stamp(t_ns), parent_frame_id=parent, child_frame_id=child,
-                          translation=Vector3(x=float(x_m), y=float(y_m), z=0.0),
-                          rotation=Quaternion(x=0.0, y=0.0, z=math.sin(0.5 * yaw_rad), w=math.cos(0.5 * yaw_rad)))
-
-
-def point_cloud_msg(t_ns: int, points_cam: np.ndarray, frame_id: str = "lidar") -> PointCloud:
-    """PointCloud of the valid rows of an (N, 4) float32 ``lidar_points`` record (camera axes, m).
-
-    Rows with a non-finite coordinate are invalid beams and are left out. Points are turned from camera axes
-    into the mount frame's body axes (module docstring); stride 16 bytes, fields x, y, z, range (FLOAT32).
-    """
-    p = np.asarray(points_cam, dtype=np.float32).reshape(-1, points_cam.shape[-1])
-    if p.shape[1] < 4:
-        p = np.column_stack([p[:, :3], np.linalg.norm(p[:, :3], axis=1)])
-    out = p[:, _MOUNT_FROM_CAM].astype("<f4", copy=False)
-    out *= _MOUNT_SIGN
-    if not np.isfinite(out).all():
-        out = out[np.isfinite(out[:, :3]).all(axis=1)]
-    fields = [PackedElementField(name=n, offset=4 * i, type=_F32) for i, n in enumerate(CLOUD_FIELDS)]
-    return PointCloud(timestamp=stamp(t_ns), frame_id=frame_id, pose=identity_pose(), point_stride=CLOUD_STRIDE,
-                      fields=fields, data=out.tobytes())
 
 
 def points_from_cloud(msg: dict) -> np.ndarray:
@@ -127,36 +25,6 @@ def points_from_cloud(msg: dict) -> np.ndarray:
                          "layout (16-byte x, y, z, range)")
     m = np.frombuffer(raw, "<f4").reshape(-1, 4)
     return (m[:, _CAM_FROM_MOUNT] * _CAM_SIGN).astype(np.float32, copy=False)
-
-
-def raw_image_msg(t_ns: int, rgba: np.ndarray, frame_id: str) -> RawImage:
-    """RawImage ``rgba8`` of an (H, W, 4) uint8 image block, its bytes unchanged."""
-    h, w, c = rgba.shape
-    if c != 4 or rgba.dtype != np.uint8:
-        raise ValueError(f"rgba8 needs an (H, W, 4) uint8 image, got {rgba.shape} {rgba.dtype}")
-    return RawImage(timestamp=stamp(t_ns), frame_id=frame_id, width=w, height=h, encoding="rgba8", step=4 * w,
-                    data=np.ascontiguousarray(rgba).tobytes())
-
-
-def compressed_image_msg(t_ns: int, rgba: np.ndarray, frame_id: str, fmt: str = "jpeg",
-                         quality: int = 90) -> CompressedImage:
-    """CompressedImage (``png`` or ``jpeg``) of the RGB channels of an (H, W, 4) uint8 image block.
-
-    Never for depth-encoded images: lossy compression decodes to wrong depths, and even PNG drops the alpha
-    (validity) channel (DESIGN.md 4); those go through :func:`raw_image_msg`.
-    """
-    import cv2  # lazily: only RGB camera images need it
-
-    bgr = cv2.cvtColor(rgba, cv2.COLOR_RGBA2BGR) if rgba.shape[-1] == 4 else np.ascontiguousarray(rgba[..., ::-1])
-    if fmt == "png":
-        ok, buf = cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL])
-    elif fmt == "jpeg":
-        ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, quality])
-    else:
-        raise ValueError(f"image format {fmt!r} is not 'png' or 'jpeg'")
-    if not ok:
-        raise ValueError(f"{fmt} encoding failed for an image of shape {bgr.shape}")
-    return CompressedImage(timestamp=stamp(t_ns), frame_id=frame_id, format=fmt, data=buf.tobytes())
 
 
 def image_from_msg(msg: dict) -> np.ndarray:
@@ -180,15 +48,6 @@ def image_from_msg(msg: dict) -> np.ndarray:
     return bgr[..., ::-1].copy()
 
 
-def grid_msg(t_ns: int, heights: np.ndarray, cell_x_m: float, cell_y_m: float, frame_id: str = "cart_grid") -> Grid:
-    """Grid of an (nx, ny) float32 height map (m, NaN unknown) in the cart grid frame (field ``height``)."""
-    h = np.asarray(heights, dtype="<f4")
-    nx = h.shape[0]
-    return Grid(timestamp=stamp(t_ns), frame_id=frame_id, pose=identity_pose(), column_count=nx,
-                cell_size=Vector2(x=float(cell_x_m), y=float(cell_y_m)), row_stride=4 * nx, cell_stride=4,
-                fields=[PackedElementField(name="height", offset=0, type=_F32)], data=np.ascontiguousarray(h.T).tobytes())
-
-
 def heights_from_grid(msg: dict) -> np.ndarray:
     """(nx, ny) float32 height map of a Grid written by :func:`grid_msg`."""
     raw = np.frombuffer(msg["data"], "<f4")
@@ -196,18 +55,3 @@ def heights_from_grid(msg: dict) -> np.ndarray:
     if nx <= 0 or raw.size % nx:
         raise ValueError(f"grid of {raw.size} cells does not split into rows of {nx} columns")
     return raw.reshape(-1, nx).T.copy()
-
-
-#: a non-finite float where JSON has a value (after ``:`` or ``,`` or ``[``, before ``,`` ``}`` or ``]``)
-_NON_FINITE = re.compile(rb"(?<=[:,\[])(?:-?Infinity|NaN)(?=[,}\]])")
-
-
-def scalars_json(t_ns: int, frame: int, values: dict) -> bytes:
-    """A ``cosim.struct.<block>`` JSON message: ``{timestamp: {sec, nsec}, frame, **values}`` with non-finite
-    floats as ``null`` (JSON has no NaN; ``values`` keys are struct field names, so no key holds a NaN token)."""
-    sec, nsec = divmod(max(0, int(t_ns)), NS_PER_S)
-    out = json.dumps({"timestamp": {"sec": sec, "nsec": nsec}, "frame": int(frame), **values},
-                     separators=(",", ":"), allow_nan=True).encode()
-    if b"NaN" in out or b"Infinity" in out:
-        out = _NON_FINITE.sub(b"null", out)
-    return out

@@ -1,8 +1,8 @@
-"""The MCAP writer: a :class:`~cosim.recording.publish.FramePublisher` whose context's sink is an MCAP file.
+"""The MCAP writer: a :class:`~cosim.foxglove.publish.FramePublisher` whose context's sink is an MCAP file.
 
 The file is written by foxglove-sdk's MCAP writer (``foxglove.open_mcap`` on a context of its own) with
 Foxglove's schemas in protobuf encoding and our own JSON channels; the topics are those of
-:mod:`cosim.recording.publish`. Camera images are recorded every ``image_every``-th frame (the sink passes them
+:mod:`cosim.foxglove.publish`. Camera images are recorded every ``image_every``-th frame (the sink passes them
 on their beat), everything else every frame. Chunks are compressed (zstd by default) and have no size limit:
 the writer closes its chunk and flushes the file every ``flush_s`` seconds (1 s; 0: after each frame), so zstd
 finds each frame's repeats of the one before, and a file cut off at any point reads up to its last whole frame
@@ -24,7 +24,7 @@ from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
 from shm_schema import Schema, Segment, StructBlock
 
-from .publish import FRAME_TOPIC, VEHICLES, FramePublisher, Recorded, RunInfo
+from cosim.foxglove.publish import FRAME_TOPIC, VEHICLES, FramePublisher, Recorded, RunInfo
 
 __all__ = ["RecordOptions", "RunInfo", "McapWriter", "Recorded", "FrameData", "frame_data", "DEFAULT_NAME", "PROFILE",
            "VEHICLES", "FRAME_TOPIC"]

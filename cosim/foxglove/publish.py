@@ -15,6 +15,8 @@ not sent again. Topics, per block stamp:
   foxglove.CompressedImage JPEG (or PNG, or RawImage: ``rgb_format``), when the caller passes them.
 * ``/lidar/points`` foxglove.PointCloud (valid beams), ``/heightmap/<kind>`` foxglove.Grid.
 * ``/cosim/frame`` ``cosim.Frame`` (JSON), last: everything before it is in a file once its marker is.
+
+The recording (:class:`cosim.recording.writer.McapWriter`) is this publisher with an MCAP file as its sink.
 """
 from __future__ import annotations
 
@@ -34,14 +36,16 @@ from foxglove.channels import (
 
 from shm_schema import Schema, StructBlock
 
-from . import schemas as S
-from .encode import (
+from .messages import (
+    FRAME_MARKER,
     compressed_image_msg,
     grid_msg,
+    marker_json,
     planar_transform_msg,
     point_cloud_msg,
     raw_image_msg,
     scalars_json,
+    struct_schema,
     transform_msg,
 )
 
@@ -126,7 +130,7 @@ class FramePublisher:
         rec = self.recorded = Recorded.of(schema)
         ctx = self._ctx
         fields = {b.name: b.fields for b in schema.blocks if isinstance(b, StructBlock)}
-        self._structs = {n: foxglove.Channel(f"/{n}", schema=S.struct_schema(n, [(f.name, f.unit) for f in fields[n]]),
+        self._structs = {n: foxglove.Channel(f"/{n}", schema=struct_schema(n, [(f.name, f.unit) for f in fields[n]]),
                                              context=ctx) for n in rec.structs}
         self._vehicles = []
         for v in VEHICLES:
@@ -152,7 +156,7 @@ class FramePublisher:
             kind = name[len("heightmap"):].lstrip("_") or "map"
             self._grids[name] = ((length_m / shape[0], width_m / shape[1]),
                                  GridChannel(f"/heightmap/{kind}", context=ctx))
-        self._marker = foxglove.Channel(FRAME_TOPIC, schema=S.FRAME_MARKER, context=ctx)
+        self._marker = foxglove.Channel(FRAME_TOPIC, schema=FRAME_MARKER, context=ctx)
 
     @property
     def topics(self) -> dict[str, str]:
@@ -225,4 +229,4 @@ class FramePublisher:
             else:
                 self._lidar.log(point_cloud_msg(t_ns, arrays[name]), log_time=t_ns)
         t_ns = self._t_ns(frame)
-        self._marker.log(S.marker_json(t_ns, frame, frame * self.period_s), log_time=t_ns)
+        self._marker.log(marker_json(t_ns, frame, frame * self.period_s), log_time=t_ns)
