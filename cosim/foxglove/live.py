@@ -152,7 +152,11 @@ class LiveFoxglove:
             height = (stamps["heightmap_truth"], arrays["heightmap_truth"]) if "heightmap_truth" in arrays \
                 else self._copy("heightmap_truth")
             if stream is not None and height is not None:
-                self._send_scene(stamps["dyn_state"], structs["dyn_state"], height[1], stream[1])
+                try:
+                    self._send_scene(stamps["dyn_state"], structs["dyn_state"], height[1], stream[1])
+                except Exception:  # noqa: BLE001 - the other topics go on without the scene
+                    log.exception("foxglove: the scene of frame %d failed; %s is no longer sent", frame, SCENE_TOPIC)
+                    self._scene = None
         self.updates += 1
         return True
 
