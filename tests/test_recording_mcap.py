@@ -1,6 +1,6 @@
 """MCAP recording of a run: channels, point counts, image sizes, time stamps; killed runs; reading back.
 
-Foxglove's channels are protobuf, checked against the protobuf package in tests/test_recording_proto.py.
+Foxglove's channels are protobuf written by foxglove-sdk; tests/test_foxglove_messages.py checks the builders and decoders.
 """
 from __future__ import annotations
 
