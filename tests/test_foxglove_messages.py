@@ -96,3 +96,10 @@ def test_scalars_json_writes_non_finite_as_null():
 
     out = json.loads(scalars_json(1_500_000_000, 15, {"a": 1.5, "b": float("nan"), "c": float("-inf"), "n": 3}))
     assert out == {"timestamp": {"sec": 1, "nsec": 500_000_000}, "frame": 15, "a": 1.5, "b": None, "c": None, "n": 3}
+
+
+def test_scalars_json_takes_numpy_scalars():
+    import json
+
+    out = json.loads(scalars_json(0, 1, {"a": np.float64(0.1), "b": np.int64(7), "c": np.float32("nan")}))
+    assert (out["a"], out["b"], out["c"]) == (0.1, 7, None)

@@ -19,12 +19,11 @@ that makes a killed run's file readable up to its last completed frame). Timesta
 """
 from __future__ import annotations
 
-import json
 import math
-import re
 from typing import Iterable
 
 import numpy as np
+import orjson
 from foxglove.messages import (
     CompressedImage,
     FrameTransform,
@@ -41,7 +40,7 @@ from foxglove.messages import (
 )
 
 __all__ = ["CLOUD_FIELDS", "CLOUD_STRIDE", "NS_PER_S", "FRAME_MARKER", "stamp", "quaternion_from_matrix",
-           "transform_msg", "planar_transform_msg", "point_cloud_msg", "raw_image_msg", "compressed_image_msg",
+           "frame_transform", "transform_msg", "planar_transform_msg", "point_cloud_msg", "raw_image_msg", "compressed_image_msg",
            "grid_msg", "scalars_json", "marker_json", "struct_schema", "identity_pose"]
 
 NS_PER_S = 1_000_000_000
@@ -74,20 +73,23 @@ def quaternion_from_matrix(r) -> tuple[float, float, float, float]:
     return x, y, z, w
 
 
+def frame_transform(t_ns: int, parent: str, child: str, xyz, q) -> FrameTransform:
+    """FrameTransform of translation ``xyz`` (m) and unit quaternion ``q`` (x, y, z, w)."""
+    return FrameTransform(timestamp=stamp(t_ns), parent_frame_id=parent, child_frame_id=child,
+                          translation=Vector3(x=xyz[0], y=xyz[1], z=xyz[2]),
+                          rotation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3]))
+
+
 def transform_msg(t_ns: int, parent: str, child: str, parent_from_child: np.ndarray) -> FrameTransform:
     """FrameTransform from a 4 x 4 rigid transform ``parent_from_child`` (translation in m)."""
     t = np.asarray(parent_from_child, dtype=np.float64)
-    x, y, z = t[:3, 3].tolist()
-    qx, qy, qz, qw = quaternion_from_matrix(t[:3, :3])
-    return FrameTransform(timestamp=stamp(t_ns), parent_frame_id=parent, child_frame_id=child,
-                          translation=Vector3(x=x, y=y, z=z), rotation=Quaternion(x=qx, y=qy, z=qz, w=qw))
+    return frame_transform(t_ns, parent, child, t[:3, 3].tolist(), quaternion_from_matrix(t))
 
 
 def planar_transform_msg(t_ns: int, parent: str, child: str, x_m: float, y_m: float, yaw_rad: float) -> FrameTransform:
     """FrameTransform of a pose in the plane: translation (x_m, y_m, 0), rotation yaw_rad about z."""
-    return FrameTransform(timestamp=stamp(t_ns), parent_frame_id=parent, child_frame_id=child,
-                          translation=Vector3(x=float(x_m), y=float(y_m), z=0.0),
-                          rotation=Quaternion(x=0.0, y=0.0, z=math.sin(0.5 * yaw_rad), w=math.cos(0.5 * yaw_rad)))
+    return frame_transform(t_ns, parent, child, (float(x_m), float(y_m), 0.0),
+                           (0.0, 0.0, math.sin(0.5 * yaw_rad), math.cos(0.5 * yaw_rad)))
 
 
 def point_cloud_msg(t_ns: int, points_cam: np.ndarray, frame_id: str = "lidar") -> PointCloud:
@@ -147,19 +149,13 @@ def grid_msg(t_ns: int, heights: np.ndarray, cell_x_m: float, cell_y_m: float, f
                 fields=[PackedElementField(name="height", offset=0, type=_F32)], data=np.ascontiguousarray(h.T).tobytes())
 
 
-#: a non-finite float where JSON has a value (after ``:`` or ``,`` or ``[``, before ``,`` ``}`` or ``]``)
-_NON_FINITE = re.compile(rb"(?<=[:,\[])(?:-?Infinity|NaN)(?=[,}\]])")
-
-
 def scalars_json(t_ns: int, frame: int, values: dict) -> bytes:
-    """A ``cosim.struct.<block>`` JSON message: ``{timestamp: {sec, nsec}, frame, **values}`` with non-finite
-    floats as ``null`` (JSON has no NaN; ``values`` keys are struct field names, so no key holds a NaN token)."""
+    """A ``cosim.struct.<block>`` JSON message: ``{timestamp: {sec, nsec}, frame, **values}``; orjson writes
+    non-finite floats as ``null`` (JSON has no NaN). orjson, not :func:`json.dumps`: a 60-field dyn_state row
+    costs ~10x less (bench/README.md, 2026-11-25), most of a ground-truth frame's recording cost."""
     sec, nsec = divmod(max(0, int(t_ns)), NS_PER_S)
-    out = json.dumps({"timestamp": {"sec": sec, "nsec": nsec}, "frame": int(frame), **values},
-                     separators=(",", ":"), allow_nan=True).encode()
-    if b"NaN" in out or b"Infinity" in out:
-        out = _NON_FINITE.sub(b"null", out)
-    return out
+    return orjson.dumps({"timestamp": {"sec": sec, "nsec": nsec}, "frame": int(frame), **values},
+                        option=orjson.OPT_SERIALIZE_NUMPY)
 
 
 # -- our own JSON channels ----------------------------------------------------------------------------
@@ -194,6 +190,5 @@ def struct_schema(block: str, fields: Iterable[tuple[str, str]]) -> dict:
 
 def marker_json(t_ns: int, frame: int, t_s: float) -> bytes:
     """A ``cosim.Frame`` end-of-frame marker message."""
-    sec, nsec = divmod(max(0, int(t_ns)), 1_000_000_000)
-    return json.dumps({"timestamp": {"sec": sec, "nsec": nsec}, "frame": int(frame), "t_s": float(t_s)},
-                      separators=(",", ":")).encode()
+    sec, nsec = divmod(max(0, int(t_ns)), NS_PER_S)
+    return orjson.dumps({"timestamp": {"sec": sec, "nsec": nsec}, "frame": int(frame), "t_s": float(t_s)})

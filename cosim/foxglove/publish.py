@@ -39,14 +39,15 @@ from shm_schema import Schema, StructBlock
 from .messages import (
     FRAME_MARKER,
     compressed_image_msg,
+    frame_transform,
     grid_msg,
     marker_json,
     planar_transform_msg,
     point_cloud_msg,
     raw_image_msg,
     scalars_json,
+    quaternion_from_matrix,
     struct_schema,
-    transform_msg,
 )
 
 __all__ = ["FramePublisher", "Recorded", "RunInfo", "VEHICLES", "FRAME_TOPIC"]
@@ -124,6 +125,8 @@ class FramePublisher:
         self._last: dict[str, int] = {}
         #: the last time (frame) the constant transforms were sent at
         self._static_frame = -1
+        #: the constant transforms as (parent, child, translation, quaternion), converted once
+        self._static = [(parent, child, tf[:3, 3].tolist(), quaternion_from_matrix(tf)) for parent, child, tf in run.static]
         self._plan(schema)
 
     def _plan(self, schema: Schema) -> None:
@@ -206,8 +209,8 @@ class FramePublisher:
         if newest > self._static_frame:
             self._static_frame = newest
             t_ns = self._t_ns(newest)
-            for parent, child, tf in self._run.static:
-                self._tf.log(transform_msg(t_ns, parent, child, tf), log_time=t_ns)
+            for parent, child, xyz, q in self._static:
+                self._tf.log(frame_transform(t_ns, parent, child, xyz, q), log_time=t_ns)
         for name, s in sent:
             t_ns = self._t_ns(s)
             if name in self._structs:
