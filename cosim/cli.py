@@ -85,6 +85,8 @@ def run_extras(args: argparse.Namespace, scenario=None) -> tuple[list, list]:
         from cosim.runtime.launcher import ObserverSpec
         from .foxglove.live import DEFAULT_HOST, port_in_use
 
+        if scenario is None:
+            raise TypeError("run_extras: --foxglove needs the loaded scenario")
         if getattr(args, "viewer", False) and args.viewer_port == args.foxglove_port != 0:
             raise ValueError(f"--foxglove-port {args.foxglove_port} is the dashboard's port too (--viewer-port); "
                              "choose another (nothing was started)")
