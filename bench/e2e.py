@@ -5,6 +5,8 @@ Run from the repository root::
 
     python bench/e2e.py --rounds 3 --duration 120                    # this tree: where the time goes
     python bench/e2e.py --tree main=/work/main --tree new=. --rounds 6 --duration 30    # A/B, interleaved
+    python bench/e2e.py --variant rig=sensor.method=camera_rig --variant beams=sensor.method=beam_native
+                                                                     # A/B of settings, this tree, interleaved
 
 Each round launches ``python launch.py run SCENARIO --duration D --out TMP --quiet`` once per tree, the order
 alternating every round (A B, B A, ...) so that a noisy host's load falls on both alike. While a run goes, its
@@ -98,6 +100,7 @@ def one_run(tree: Path, scenario: str, duration: float, extra: list[str]) -> dic
     res = {"wall_s": wall, "rtf_process": summary["sim_time_s"] / wall, "rtf": summary["real_time_factor"],
            "frames": summary["frames"], "period_s": summary["sim_time_s"] / max(summary["frames"] - 1, 1),
            "timing_ms": summary.get("timing_ms", {}),
+           "range_error": summary.get("perception", {}).get("range_error", {}),
            "cpu_ms": {m: 1e3 * (last[m][1] - first[m][1]) / max(last[m][0] - first[m][0], 1) for m in last}}
     m = _PHASES.search(log)
     if m:
@@ -121,6 +124,15 @@ def report(label: str, runs: list[dict]) -> None:
     print("| " + " | ".join(c for c, _ in cols) + " |")
     print("|" + "---:|" * len(cols))
     print("| " + " | ".join(_cell([v for r in runs if (v := get(r)) is not None]) for _, get in cols) + " |")
+    errs = [r["range_error"] for r in runs if r.get("range_error")]
+    if errs:
+        keys = ("mean_m", "p99_m", "max_m", "working_p99_m")
+        print("\n| range error (mm) | " + " | ".join(k[:-2] for k in keys) + " | working share above 5 cm (%) |")
+        print("|---|" + "---:|" * (len(keys) + 1))
+        cells = [_cell([1e3 * e[k] for e in errs if e.get(k) is not None]) for k in keys]
+        cells.append(_cell([100.0 * e["working_frac_above_5cm"] for e in errs
+                            if e.get("working_frac_above_5cm") is not None]))
+        print("| median over runs | " + " | ".join(cells) + " |")
     print("\n| process | CPU ms per frame (steady state) |")
     print("|---|---:|")
     total = []
@@ -146,20 +158,26 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--duration", type=float, default=120.0, help="simulated seconds per run")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", help="passed to launch.py")
+    ap.add_argument("--variant", action="append", default=[], metavar="LABEL=PATH=VALUE",
+                    help="this tree with one more --set PATH=VALUE, as one arm of the A/B (repeatable)")
     a = ap.parse_args(argv)
-    trees = [(lab, Path(p).resolve()) for lab, _, p in (t.partition("=") for t in (a.tree or [f"this={ROOT}"]))]
+    trees = [(lab, Path(p).resolve(), []) for lab, _, p in (t.partition("=") for t in (a.tree or []))]
+    trees += [(lab, ROOT, ["--set", setting]) for lab, _, setting in (v.partition("=") for v in a.variant)]
+    trees = trees or [("this", ROOT, [])]
     extra = [x for s in a.set for x in ("--set", s)]
-    runs: dict[str, list[dict]] = {lab: [] for lab, _ in trees}
+    runs: dict[str, list[dict]] = {lab: [] for lab, _, _ in trees}
     for r in range(a.rounds):
-        for lab, path in (trees if r % 2 == 0 else trees[::-1]):
-            res = one_run(path, a.scenario, a.duration, extra)
+        for lab, path, own in (trees if r % 2 == 0 else trees[::-1]):
+            res = one_run(path, a.scenario, a.duration, extra + own)
             runs[lab].append(res)
             print(f"round {r + 1} {lab}: {res['rtf_process']:.2f}x real time (whole process), load "
                   f"{os.getloadavg()[0]:.2f}", file=sys.stderr, flush=True)
     print(f"Scenario `{a.scenario}` {' '.join('--set ' + s for s in a.set)}, {a.duration:g} s simulated, "
           f"{a.rounds} interleaved rounds, {os.cpu_count()} cores, {datetime.now():%Y-%m-%d %H:%M}: median "
           "(min-max)\n")
-    for lab, _ in trees:
+    for lab, _, own in trees:
+        if own:
+            print(f"**{lab}**: {' '.join(own)}\n")
         report(lab, runs[lab])
 
 

@@ -2,23 +2,28 @@
 
 Verbs: ``run [SCENARIO]`` (the default verb; no scenario runs the packaged default), ``validate SCENARIO``,
 ``schema`` (write the scenario JSON Schema), ``view RUN`` (attach the live viewer to a running run) and
-``replay FILE.mcap`` (serve a recording to the viewer's dashboard). Exit codes: 0 success, 1 run failure,
+``replay FILE.mcap`` (serve a recording to the viewer's dashboard, with play / pause / step / seek), ``list``
+(the packaged scenarios with their descriptions), ``compare`` and ``study``. Exit codes: 0 success, 1 run failure,
 2 invalid scenario or usage, 130 interrupted.
 """
 from __future__ import annotations
 
 import argparse
+import functools
+import signal
 import sys
+import threading
 from pathlib import Path
 from typing import Sequence
 
-from .errors import ScenarioError
+from .errors import RunRefused, ScenarioError
 from cosim.runtime.threadpools import default_to_single_threaded_pools
 
 __all__ = ["main", "build_parser", "run_extras", "VERBS"]
 
-VERBS = ("run", "validate", "schema", "compare", "study")
+VERBS = ("run", "validate", "schema", "compare", "study", "view", "replay", "list")
 EXIT_SCENARIO = 2
+EXIT_INTERRUPTED = 130
 
 
 def _scenario_options(p: argparse.ArgumentParser) -> None:
@@ -30,6 +35,8 @@ def _scenario_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--feedback", choices=("ground_truth", "perception"), help="controller feedback source")
     p.add_argument("--seed", type=int, help="random seed (overrides the scenario)")
     p.add_argument("--duration", type=float, metavar="SECONDS", help="simulated duration (overrides the scenario)")
+    p.add_argument("--no-plugins", dest="allow_plugins", action="store_false",
+                   help="refuse any plug-in that is not built in (a scenario that names a plug-in runs its code)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -41,7 +48,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--viewer", action="store_true",
                      help="render the RGB image and serve the live dashboard on 127.0.0.1 (see --viewer-port)")
     run.add_argument("--viewer-port", type=int, default=8765, metavar="PORT",
-                     help="port of the --viewer dashboard (default %(default)s)")
+                     help="port of the --viewer dashboard (default %(default)s; 0: any free port)")
+    run.add_argument("--viewer-host", default="127.0.0.1", metavar="HOST",
+                     help="address the --viewer dashboard listens on (default %(default)s, local only)")
     run.add_argument("--record", nargs="?", const=True, default=None, type=Path, metavar="FILE",
                      help="write an MCAP recording (Foxglove schemas) to FILE (default <run dir>/recording.mcap)")
     run.add_argument("--record-image-every", type=int, default=None, metavar="N",
@@ -64,41 +73,56 @@ def build_parser() -> argparse.ArgumentParser:
                     "beams, perception_grid (default: %(default)s)")
     st.add_argument("--sim-seconds", type=float, default=20.0, help="simulated seconds per setting")
     st.add_argument("--out", type=Path, help="output directory (default runs/study-<scenario>-<timestamp>)")
+    st.add_argument("--quiet", action="store_true", help="no progress output")
     sch = sub.add_parser("schema", help="write the scenario JSON Schema")
     sch.add_argument("--out", type=Path, help="output file (default: stdout)")
     view = sub.add_parser("view", help="attach the live viewer to a running run (python -m cosim.viewer --attach)")
     view.add_argument("run", help="run directory (with run.json) or shared-memory segment name")
-    view.add_argument("--port", type=int, default=8765, help="dashboard port on 127.0.0.1 (default %(default)s)")
-    rep = sub.add_parser("replay", help="serve an MCAP recording to the viewer's dashboard")
+    _server_options(view)
+    rep = sub.add_parser("replay", help="serve an MCAP recording to the viewer's dashboard (play, pause, step, seek)")
     rep.add_argument("file", type=Path, help="recording written by run --record")
-    rep.add_argument("--port", type=int, default=8765, help="dashboard port on 127.0.0.1 (default %(default)s)")
+    _server_options(rep)
     rep.add_argument("--speed", type=float, default=1.0, help="x simulated time (default %(default)s)")
     rep.add_argument("--loop", action="store_true", help="start over at the end")
+    sub.add_parser("list", help="list the packaged scenarios (run them by name) with their descriptions")
     return parser
 
 
+def _server_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--port", type=int, default=8765, help="dashboard port (default %(default)s; 0: any free port)")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default %(default)s, local only)")
+
+
 def run_extras(args: argparse.Namespace, scenario=None) -> tuple[list, list]:
-    """(observers, sinks) that ``run``'s --viewer, --foxglove and --record ask for (``scenario``: the loaded
-    scenario, which --foxglove needs). ValueError (exit 2, nothing started) for a --foxglove-port in use."""
+    """(observers, sinks) that ``run``'s --viewer, --foxglove and --record ask for (``scenario``: the cart's size
+    for the dashboard's metre axes; the scenario --foxglove serves). ValueError (exit 2, nothing started) for a
+    --foxglove-port in use."""
     observers, sinks = [], []
     if getattr(args, "foxglove", False):
         from cosim.runtime.launcher import ObserverSpec
-        from .foxglove.live import DEFAULT_HOST, port_in_use
+        from .foxglove.live import DEFAULT_HOST
+        from .viewer.address import PortBusy, check_port
 
         if scenario is None:
             raise TypeError("run_extras: --foxglove needs the loaded scenario")
         if getattr(args, "viewer", False) and args.viewer_port == args.foxglove_port != 0:
             raise ValueError(f"--foxglove-port {args.foxglove_port} is the dashboard's port too (--viewer-port); "
                              "choose another (nothing was started)")
-        if port_in_use(DEFAULT_HOST, args.foxglove_port):
+        try:
+            check_port(DEFAULT_HOST, args.foxglove_port)
+        except PortBusy:
             raise ValueError(f"--foxglove-port {args.foxglove_port}: {DEFAULT_HOST}:{args.foxglove_port} is already "
-                             "in use; choose another port (nothing was started)")
+                             "in use; choose another port (nothing was started)") from None
         observers.append(ObserverSpec("foxglove", "cosim.foxglove.live:observe",
                                       {"port": args.foxglove_port, "scenario_json": scenario.model_dump_json()}))
     if getattr(args, "viewer", False):
         from cosim.runtime.launcher import ObserverSpec
 
-        observers.append(ObserverSpec("viewer", "cosim.viewer.server:observe", {"port": args.viewer_port}))
+        observers.append(ObserverSpec("viewer", "cosim.viewer.server:observe",
+                                      {"port": args.viewer_port, "host": args.viewer_host,
+                                       "announce": getattr(args, "viewer_announce", None),
+                                       "size_m": None if scenario is None else
+                                       (scenario.cart.interior_length_m, scenario.cart.interior_width_m)}))
     if getattr(args, "record", None) is not None:
         from .recording import RecordOptions, mcap_sink
 
@@ -127,7 +151,7 @@ def _load(args: argparse.Namespace):
     from cosim.scenario.loader import load_scenario, resolve_scenario_arg
 
     path = resolve_scenario_arg(args.scenario)
-    return load_scenario(path, args.overrides, extra=_extra(args))
+    return load_scenario(path, args.overrides, extra=_extra(args), allow_plugins=args.allow_plugins)
 
 
 def _print_summary(result, stream) -> None:
@@ -150,6 +174,38 @@ def _print_summary(result, stream) -> None:
     stream.write("\n".join(lines) + "\n")
 
 
+def _interruptible(fn):
+    """``main`` ends with exit 130 and one line, no traceback, on Ctrl-C or SIGTERM at any moment (a run handles
+    them itself: cosim.runtime.signals; this covers the start-up before it and the printing after it), and with
+    exit 2 and the reason when a run is refused before it starts (cosim.errors.RunRefused)."""
+
+    def term(signum, frame):
+        raise KeyboardInterrupt
+
+    @functools.wraps(fn)
+    def wrapper(argv: Sequence[str] | None = None) -> int:
+        main_thread = threading.current_thread() is threading.main_thread()
+        old = signal.signal(signal.SIGTERM, term) if main_thread else None
+        code = EXIT_INTERRUPTED
+        try:
+            code = fn(argv)
+        except RunRefused as exc:  # --out unusable or locked, the segment would not fit: before anything started
+            sys.stderr.write(f"{exc}\nnothing was started.\n")
+            code = EXIT_SCENARIO
+        except KeyboardInterrupt:
+            sys.stderr.write("interrupted\n")
+        finally:
+            if main_thread and code == EXIT_INTERRUPTED:  # ending on a stop: more signals change nothing
+                signal.signal(signal.SIGINT, signal.SIG_IGN)
+                signal.signal(signal.SIGTERM, signal.SIG_IGN)
+            elif main_thread:
+                signal.signal(signal.SIGTERM, old)
+        return code
+
+    return wrapper
+
+
+@_interruptible
 def main(argv: Sequence[str] | None = None) -> int:
     default_to_single_threaded_pools()  # before numpy loads: in-process runs (study, compare) and children
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -159,10 +215,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.verb in ("view", "replay"):
         from .viewer.__main__ import main as viewer_main
 
+        where = ["--port", str(args.port), "--host", args.host]
         if args.verb == "view":
-            return viewer_main(["--attach", args.run, "--port", str(args.port)])
-        return viewer_main(["--replay", str(args.file), "--port", str(args.port), "--speed", str(args.speed)]
+            return viewer_main(["--attach", args.run, *where])
+        return viewer_main(["--replay", str(args.file), *where, "--speed", str(args.speed)]
                            + (["--loop"] if args.loop else []))
+    if args.verb == "list":
+        from cosim.scenario.loader import describe_packaged
+
+        rows = describe_packaged()
+        width = max(len(n) for n in rows)
+        sys.stdout.write("".join(f"{n:<{width}}  {d}\n" for n, d in rows.items()))
+        return 0
     if args.verb == "schema":
         from cosim.scenario.jsonschema import schema_text
 
@@ -186,10 +250,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             sys.stdout.write(dump_resolved(scenario))
         else:
+            from cosim.scenario.trust import format_inventory, inspect_scenario
+
             sys.stdout.write(f"{args.scenario}: valid ({scenario.frames + 1} frames, ring "
-                             f"{' -> '.join(scenario.participants)})\n")
+                             f"{' -> '.join(scenario.participants)})\nloads (a plug-in runs its code):\n"
+                             f"{format_inventory(inspect_scenario(scenario, versions=True)[0])}\n")
         return 0
-    from cosim.runtime.progress import ProgressPrinter
+    from cosim.runtime.progress import run_progress
 
     if args.verb == "study":
         from cosim.runtime.outputs import default_run_dir
@@ -201,7 +268,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             sys.stderr.write(f"unknown knobs {unknown}; choose from {sorted(KNOBS)}\n")
             return EXIT_SCENARIO
         out = args.out or default_run_dir(scenario.model_copy(update={"name": f"study-{scenario.name}"}))
-        md = run_study(scenario, knobs, out, args.sim_seconds)
+        md = run_study(scenario, knobs, out, args.sim_seconds, quiet=args.quiet)
         sys.stdout.write(md.read_text() + f"\nstudy written to {out}\n")
         return 0
     if args.verb == "compare":
@@ -209,19 +276,34 @@ def main(argv: Sequence[str] | None = None) -> int:
         from cosim.runtime.outputs import default_run_dir
 
         out = args.out or default_run_dir(scenario.model_copy(update={"name": f"compare-{scenario.name}"}))
-        report = compare(scenario, out, None if args.quiet else ProgressPrinter())
+        report = compare(scenario, out, quiet=args.quiet)
         sys.stdout.write(f"report: {report}\n")
         return 0
     from cosim.runtime.launcher import launch
 
-    progress = None if args.quiet else ProgressPrinter()
+    progress = run_progress(scenario.name, args.quiet)
+    announcer = None
+    if args.viewer:
+        from cosim.viewer.address import PortBusy, ViewerAnnouncer, check_port
+
+        try:
+            check_port(args.viewer_host, args.viewer_port)
+        except PortBusy as exc:
+            sys.stderr.write(f"{exc}; nothing was started (choose another with --viewer-port, or 0 for any)\n")
+            return EXIT_SCENARIO
+        announcer = ViewerAnnouncer(sys.stderr)
+        args.viewer_announce = str(announcer.path)
     try:
         observers, sinks = run_extras(args, scenario)
     except ValueError as exc:
         sys.stderr.write(f"{exc}\n")
         return EXIT_SCENARIO
-    if args.viewer:
-        sys.stderr.write(f"viewer: http://127.0.0.1:{args.viewer_port}/ (while the run lasts)\n")
-    result = launch(scenario, args.out, progress=progress, observers=observers, sinks=sinks)
+    try:
+        result = launch(scenario, args.out, progress=progress, observers=observers, sinks=sinks)
+    finally:
+        if announcer is not None:
+            announcer.close()
+        if progress is not None:
+            progress.close()
     _print_summary(result, sys.stdout)
     return result.exit_code

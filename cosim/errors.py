@@ -2,7 +2,10 @@
 
 * before the run: :class:`ScenarioError` (with every problem found, each ``file:line:col: path: message``);
 * at attach: :class:`shm_schema.SchemaMismatch` (lives in shm_schema, which does not import cosim);
-* during the run: :class:`RunError` and its subclasses, whose messages name the process, the frame and the cause.
+* during the run: :class:`RunError` and its subclasses, whose messages name the process, the frame and the cause;
+* driving a run from Python (``cosim.Simulation``): :class:`SimulationError` and its subclasses, for calls that do
+  not fit the run's state (closed, done) and for :class:`InputError` (``set`` of an unknown, fixed or out-of-range
+  input).
 """
 from __future__ import annotations
 
@@ -10,7 +13,9 @@ from dataclasses import dataclass
 
 __all__ = [
     "CosimError", "Problem", "ScenarioError", "RunError", "HandoffTimeout", "FrameMismatch",
-    "ParticipantCrashed", "ParticipantDied", "RunInterrupted", "RendererUnavailable",
+    "ParticipantCrashed", "ParticipantDied", "ParticipantHung", "RunInterrupted", "OutputError", "RunRefused",
+    "RendererUnavailable", "PluginFault", "SimulationError", "SimulationClosed", "SimulationDone", "InputError",
+    "UnknownInput", "InputNotSettable", "InputOutOfRange",
 ]
 
 
@@ -40,6 +45,11 @@ class ScenarioError(CosimError):
         super().__init__("\n".join(str(p) for p in self.problems) or "invalid scenario")
 
 
+class RunRefused(CosimError):
+    """A run cannot start (its ``--out`` is not a writable directory or another run holds it, its shared memory
+    would not fit): nothing was started. The CLI exits 2."""
+
+
 class RunError(CosimError):
     """A run stopped before its last frame. ``process`` and ``frame`` say where."""
 
@@ -66,9 +76,63 @@ class ParticipantDied(RunError):
     """A participant process ended without reporting (killed by a signal, os._exit, ...)."""
 
 
+class ParticipantHung(RunError):
+    """A participant process stopped running (SIGSTOP, a deadlock): its liveness heartbeat stopped."""
+
+
+class OutputError(RunError):
+    """Writing the run's outputs failed (no space left on the device, permission): names the path."""
+
+
 class RunInterrupted(RunError):
     """The run was stopped by SIGINT or SIGTERM."""
 
 
+class PluginFault(RunError):
+    """A plug-in raised or returned a bad value during the run. ``ref`` is the plug-in as the scenario names it,
+    ``point`` its scenario key (``controller.strategy``, ...), ``cause`` what went wrong, ``frame`` where (-1:
+    not known yet; :meth:`at_frame` adds it)."""
+
+    def __init__(self, ref: str, point: str, cause: str, frame: int = -1):
+        self.ref, self.point, self.cause = ref, point, cause
+        where = f" at frame {frame}" if frame >= 0 else ""
+        super().__init__(f"plug-in {point} = {ref!r}{where}: {cause}", process=point, frame=frame)
+
+    def at_frame(self, frame: int) -> "PluginFault":
+        """The same fault at ``frame`` (self when it already names one)."""
+        return self if self.frame >= 0 else PluginFault(self.ref, self.point, self.cause, frame)
+
+    def __reduce__(self):
+        return PluginFault, (self.ref, self.point, self.cause, self.frame)
+
+
 class RendererUnavailable(CosimError):
     """No OpenGL context can be made here; the message suggests ``--renderer mock``."""
+
+
+class SimulationError(CosimError):
+    """A call on a :class:`cosim.Simulation` that its state does not allow."""
+
+
+class SimulationClosed(SimulationError):
+    """The simulation was closed; make a new one."""
+
+
+class SimulationDone(SimulationError):
+    """The run has reached its last frame (or stopped on an error); ``reset()`` starts it again."""
+
+
+class InputError(SimulationError):
+    """``Simulation.set(path, value)`` refused: see the subclasses."""
+
+
+class UnknownInput(InputError, LookupError):
+    """No scenario field has that path."""
+
+
+class InputNotSettable(InputError):
+    """The path is a scenario field, but not one that may change during a run (use ``overrides=`` before it)."""
+
+
+class InputOutOfRange(InputError, ValueError):
+    """The value is not allowed for that input (the scenario's own limits)."""

@@ -65,6 +65,7 @@ STATE_FIELDS: tuple[tuple[str, str, str, str], ...] = (
     ("all_full", "", "i8", "controller: every section reached its target"),
     ("measurement_seen", "", "i8", "controller: a height-map measurement has arrived"),
     ("control_bias_m", "m", "f8", "controller: learnt steady-state auger offset"),
+    ("target_fill_m", "m", "f8", "controller: target grain height (a run-time input, dynamics_proc.inputs)"),
     ("delivered_m3", "m^3", "f8", "cumulative volume delivered by the auger"),
     ("in_cart_m3", "m^3", "f8", "grain in the cart minus the initial grain (height-map sum)"),
     ("spilled_m3", "m^3", "f8", "cumulative spill (outside the cart or over a wall top)"),

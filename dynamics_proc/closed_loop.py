@@ -15,6 +15,7 @@ import numpy as np
 
 from cosim.scenario.config import Scenario
 
+from .fmus import open_fmus
 from .model import ModelParams, World, initial_world, signals, step_frame, truth_measurement
 
 __all__ = ["SimResult", "simulate", "Measure", "noisy_measurement", "occluded_measurement", "DONE_GRACE_FRAMES"]
@@ -73,8 +74,20 @@ def simulate(scenario: Scenario, frames: int | None = None, measure: Measure | N
     """Run frames 0..``frames`` (default ``scenario.frames``) with height-map feedback.
 
     ``stop_when_done``: end early, DONE_GRACE_FRAMES after the cart is declared full and the flow stopped.
+    The scenario's FMUs (dynamics_proc.fmus) are opened for the run and freed after it (unless ``params``
+    are given: then they hold them).
     """
-    p = params or ModelParams.from_scenario(scenario)
+    fmus = open_fmus(scenario) if params is None else None
+    try:
+        return _simulate(scenario, params or ModelParams.from_scenario(scenario, fmus), frames, measure,
+                         stop_when_done)
+    finally:
+        if fmus is not None:
+            fmus.close()
+
+
+def _simulate(scenario: Scenario, p: ModelParams, frames: int | None, measure: Measure | None,
+              stop_when_done: bool) -> SimResult:
     n = scenario.frames if frames is None else frames
     lat = scenario.timing.latency_frames
     t0 = time.perf_counter()
@@ -88,7 +101,7 @@ def simulate(scenario: Scenario, frames: int | None = None, measure: Measure | N
         history[m] = _measure(w, p, measure)
         rows.append(signals(w, p))
         if stop_when_done:
-            if done_at < 0 and w.ctrl.all_full and w.flow_level == 0.0:
+            if done_at < 0 and w.out.all_full and w.flow_level == 0.0:
                 done_at = m
             if done_at >= 0 and m - done_at >= DONE_GRACE_FRAMES:
                 break

@@ -24,19 +24,27 @@ travels farther with the auger off), the predicted impact is safely inside the c
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 
+from cosim.errors import PluginFault
 from cosim.scenario.config import Scenario
+from cosim.scenario.plugins import load_plugin
 
+from .control_protocol import ControllerCommand, ControllerInput, Delivery
 from .estimator import FillEstimate, FusionParams, initial_estimate, landing_on, predict, update
 from .grainfill import GrainGrid, section_rows
-from .strategies import get_strategy
+from .strategies import Strategy
 
-__all__ = ["BIAS_TAU_S", "SETTLE_S", "ControllerParams", "ControllerState", "ControllerOutput", "Delivery",
-           "min2x2", "section_heights", "section_valid", "initial_controller", "controller_step"]
+__all__ = ["BIAS_TAU_S", "SETTLE_S", "STRATEGY_POINT", "ControllerParams", "ControllerState", "Delivery",
+           "min2x2", "section_heights", "section_valid", "initial_controller", "controller_step",
+           "SectionFillController", "plugin_dir"]
+
+#: the scenario key of the fill strategy plug-in (named in faults)
+STRATEGY_POINT = "controller.strategy"
 
 #: time constant of the steady-state bias filter, s
 BIAS_TAU_S = 5.0
@@ -71,12 +79,15 @@ class ControllerParams:
     nudge_interval_s: float
     stale_timeout_s: float
     estimator: str
-    strategy: str
+    strategy: Strategy               # the fill strategy (controller.strategy, loaded: a built-in or a plug-in)
     frame_dt_s: float
     fusion: FusionParams | None      # the fused estimator's constants (estimator "fused"), else None
+    strategy_ref: str = ""           # controller.strategy as the scenario names it
 
     @classmethod
-    def from_scenario(cls, s: Scenario) -> "ControllerParams":
+    def from_scenario(cls, s: Scenario, strategy: Strategy | None = None) -> "ControllerParams":
+        """The constants of ``s``; ``strategy``: the fill strategy when it is not loaded by its name (an FMU's,
+        dynamics_proc.fmus)."""
         c, k = s.controller, s.cart
         cell = c.grid_cell_m
         nx, ny = max(1, round(k.interior_length_m / cell)), max(1, round(k.interior_width_m / cell))
@@ -85,15 +96,21 @@ class ControllerParams:
         if np.any(counts == 0):
             raise ValueError(f"controller grid ({nx} cells of {cell} m along x) leaves sections without a cell; "
                              f"use fewer than {c.sections} sections or a finer controller.grid_cell_m")
-        get_strategy(c.strategy)
+        if strategy is None:
+            strategy = load_plugin("strategies", c.strategy, base_dir=plugin_dir(s))
         sl = k.interior_length_m / c.sections
         return cls(c.target_fill_m, c.full_fraction * c.target_fill_m, c.sections, k.interior_length_m,
                    k.interior_width_m, cell, nx, ny, tuple(int(np.searchsorted(rows, i)) for i in range(c.sections)),
                    _edge_cells(c.edge_margin_m, cell, nx, ny), c.min_section_cells,
                    tuple((i + 0.5) * sl for i in range(c.sections)), c.safe_margin_m,
                    max(c.safe_margin_m - c.safety_hysteresis_m, 0.0), s.machine_sync.nudge_m,
-                   s.machine_sync.nudge_min_interval_s, c.stale_timeout_s, c.estimator, c.strategy,
-                   s.timing.sensor_period_s, _fusion(s, nx, ny) if c.estimator == "fused" else None)
+                   s.machine_sync.nudge_min_interval_s, c.stale_timeout_s, c.estimator, strategy,
+                   s.timing.sensor_period_s, _fusion(s, nx, ny) if c.estimator == "fused" else None, c.strategy)
+
+
+def plugin_dir(s: Scenario) -> Path | None:
+    """The folder the scenario's plug-ins are looked for first (``Scenario.plugin_dir``), None for none."""
+    return Path(s.plugin_dir) if s.plugin_dir else None
 
 
 def _fusion(s: Scenario, nx: int, ny: int) -> FusionParams:
@@ -127,28 +144,6 @@ class ControllerState:
     seen: bool                   # a measurement has arrived
     all_full: bool
     nudges: int
-
-
-@dataclass(frozen=True)
-class ControllerOutput:
-    """What one controller step decides. ``nudge`` is -1, 0 or +1 (steps of nudge_m along grid x)."""
-
-    nudge: int
-    auger_cmd: bool
-    desired_m: float
-    effort_m: float
-    fullness: np.ndarray         # (N,) estimated height / target, NaN unknown
-
-
-@dataclass(frozen=True)
-class Delivery:
-    """What the machine knows of the grain it has delivered, for the fused estimator: the flow signal
-    integrated since the start (m^3), and the spout position and exit velocity in the cart grid frame (m, m/s),
-    from which the impact is predicted."""
-
-    delivered_m3: float
-    spout: np.ndarray            # (3,) m
-    velocity: np.ndarray         # (3,) m/s
 
 
 def min2x2(m: np.ndarray, next_row: np.ndarray | None = None) -> np.ndarray:
@@ -221,7 +216,7 @@ def _inside(x: float, y: float, margin: float, p: ControllerParams) -> bool:
 
 def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np.ndarray | None,
                     actual_x: float, impacts: tuple[tuple[float, float], ...], drift_x: float,
-                    nudge_signal: float, delivery: Delivery | None = None) -> tuple[ControllerState, ControllerOutput]:
+                    nudge_signal: float, delivery: Delivery | None = None) -> tuple[ControllerState, ControllerCommand]:
     """One controller decision at time ``t`` s.
 
     ``meas`` (nx, ny) m or None; ``actual_x`` spout grid x m; ``impacts`` predicted impact points (grid
@@ -262,7 +257,7 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
     with np.errstate(invalid="ignore"):
         full = (heights >= p.full_level_m) | forced      # NaN (unknown) is not full
     full |= st.full                                       # latched: grain does not leave the cart
-    target = get_strategy(p.strategy)(full, heights, st.target) if seen else -1
+    target = _pick(p, full, heights, st.target) if seen else -1
     all_full = seen and target < 0
     lo, hi = p.safe_margin_m, p.length_m - p.safe_margin_m
     if target >= 0:
@@ -291,4 +286,40 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
     new_state = ControllerState(heights=heights, last_valid_t=last_valid, forced_full=forced, full=full, estimate=est,
                                 delivered_m3=delivered, target=target, last_nudge_t=last_nudge, bias_m=bias,
                                 auger_cmd=auger, seen=seen, all_full=all_full, nudges=count)
-    return new_state, ControllerOutput(nudge, auger, desired, effort, fullness)
+    return new_state, ControllerCommand(nudge, auger, desired, effort, target, fullness, all_full, seen, bias)
+
+
+def _pick(p: ControllerParams, full: np.ndarray, heights: np.ndarray, current: int) -> int:
+    """The strategy's choice, checked: a section index in -1..N-1 (PluginFault naming the strategy otherwise)."""
+    try:
+        target = p.strategy(full, heights, current)
+    except Exception as e:  # noqa: BLE001 - a strategy's failure ends the run with its name and cause
+        raise PluginFault(p.strategy_ref, STRATEGY_POINT, f"raised {type(e).__name__}: {e}") from e
+    if isinstance(target, (int, np.integer)) and not isinstance(target, bool) and -1 <= target < p.sections:
+        return int(target)
+    raise PluginFault(p.strategy_ref, STRATEGY_POINT, f"returned {target!r}; a strategy returns a section index "
+                      f"in 0..{p.sections - 1}, or -1 when every section is full")
+
+
+class SectionFillController:
+    """The built-in offloading controller (``controller.model: section_fill``, the module docstring): the
+    :mod:`dynamics_proc.control_protocol` adapter of the pure :func:`controller_step`, whose memory is the
+    frozen :class:`ControllerState`."""
+
+    def __init__(self, params: ControllerParams, scenario: Scenario | None = None):
+        self.params = params
+        #: "full" level as a fraction of the target (``controller.full_fraction``), for a target changed mid-run
+        self.full_fraction = (scenario.controller.full_fraction if scenario is not None
+                              else params.full_level_m / params.target_m)
+
+    def initial_state(self) -> ControllerState:
+        """Nothing known, auger off."""
+        return initial_controller(self.params)
+
+    def step(self, state: ControllerState, inp: ControllerInput) -> tuple[ControllerState, ControllerCommand]:
+        """:func:`controller_step` on the protocol's input (at the input's target fill: the operator may change it)."""
+        if inp.target_fill_m != self.params.target_m:
+            self.params = replace(self.params, target_m=inp.target_fill_m,
+                                  full_level_m=self.full_fraction * inp.target_fill_m)
+        return controller_step(state, self.params, inp.t_s, inp.heights, inp.spout_x_m, inp.impacts, inp.drift_x_m,
+                               inp.nudge_signal_m, inp.delivery)

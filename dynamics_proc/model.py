@@ -2,7 +2,9 @@
 
 ``World`` is the whole ground truth after a frame; :func:`step_frame` maps (world, measurement) to the next
 world over one sensor period (``steps_per_frame`` held-input steps of ``dynamics_dt_s``), and
-:func:`signals` flattens a world into the ``dyn_state`` fields. Pure: no segment, no I/O, deterministic.
+:func:`signals` flattens a world into the ``dyn_state`` fields. Pure: no segment, no I/O, deterministic (with
+the built-in controller; a ``controller.model`` plug-in may keep memory of its own, see
+dynamics_proc.control_protocol).
 """
 from __future__ import annotations
 
@@ -12,13 +14,17 @@ from functools import lru_cache
 
 import numpy as np
 
-from cosim.scenario.config import Scenario
+from cosim.errors import PluginFault
+from cosim.scenario.config import FMU_REF, Scenario
+from cosim.scenario.plugins import load_plugin
 from cosim.world.geometry import cart_grid_from_body, invert, vehicle_pose
 
 from . import auger as ag
 from .blocks import SECTION_FIELD
-from .controller import (ControllerOutput, ControllerParams, ControllerState, Delivery, controller_step,
-                         initial_controller)
+from .control_protocol import (CONTROLLER_POINT, ControllerCommand, ControllerInput, Delivery, OffloadingController,
+                               check_command)
+from .controller import ControllerParams, plugin_dir
+from .fmus import Fmus
 from .grainfill import GrainGrid, deposit, initial_heights, resample, volume
 from .integrators import integrate, step_exponential_values
 from .machine_sync import SyncGains, cart_offset, sync_command
@@ -52,16 +58,45 @@ class ModelParams:
     signal_offset_m: float           # nudge signal = setpoint long + this (spout grid x at the setpoint)
     density_kgpm3: float
     flow_meter_bias: float           # relative error of the flow signal the fused estimator is given
+    controller: OffloadingController  # controller.model, made by its factory
+    controller_ref: str              # controller.model as the scenario names it
+    fmus: Fmus | None = None         # FMUs in place of built-in models (dynamics_proc.fmus)
 
     @classmethod
-    def from_scenario(cls, s: Scenario) -> "ModelParams":
+    def from_scenario(cls, s: Scenario, fmus: Fmus | None = None) -> "ModelParams":
+        """The parameters of ``s``; ``fmus``: the run's open FMUs (:func:`dynamics_proc.fmus.open_fmus`) where the
+        scenario names any (without them, a scenario that does builds parameters that fail when first used)."""
         a = ag.AugerParams.from_scenario(s)
         spout_x = a.pivot[0] + a.arm[0]
+        fmus = fmus or Fmus()
+        control = ControllerParams.from_scenario(s, fmus.strategy_for(s))
+        if s.controller.model == FMU_REF:
+            controller = fmus.controller_for(s)
+        else:
+            factory = load_plugin("controllers", s.controller.model, base_dir=plugin_dir(s))
+            controller = _make_controller(factory, control, s)
         return cls(VehicleParams.from_scenario(s), SyncGains.from_scenario(s), a, GrainGrid.from_scenario(s),
-                   ControllerParams.from_scenario(s), GrainGrid.from_scenario(s).cap(), cart_grid_from_body(s.cart),
+                   control, GrainGrid.from_scenario(s).cap(), cart_grid_from_body(s.cart),
                    s.integrator.method, s.integrator.rtol, s.integrator.atol, s.timing.dynamics_dt_s,
                    s.timing.steps_per_frame, s.timing.sensor_period_s, s.machine_sync.lateral_offset_m,
-                   s.cart.interior_length_m / 2.0 - spout_x, s.crop.density, s.controller.fusion.flow_meter_bias)
+                   s.cart.interior_length_m / 2.0 - spout_x, s.crop.density, s.controller.fusion.flow_meter_bias,
+                   controller, s.controller.model, fmus if fmus.vehicle or fmus.strategy else None)
+
+
+def _make_controller(factory, control: ControllerParams, s: Scenario) -> OffloadingController:
+    """``factory(control, s)``, checked to have the protocol's methods (PluginFault naming the plug-in)."""
+    ref = s.controller.model
+    try:
+        c = factory(control, s)
+    except PluginFault:
+        raise
+    except Exception as e:  # noqa: BLE001 - a plug-in's failure is reported with its name
+        raise PluginFault(ref, CONTROLLER_POINT, f"making the controller raised {type(e).__name__}: {e}") from e
+    missing = [m for m in ("initial_state", "step") if not callable(getattr(c, m, None))]
+    if missing:
+        raise PluginFault(ref, CONTROLLER_POINT, f"the controller made by the factory has no method "
+                          f"{' or '.join(missing)} (dynamics_proc.control_protocol)")
+    return c
 
 
 @dataclass(frozen=True)
@@ -78,12 +113,13 @@ class World:
     spilled_m3: float
     spilled_outside_m3: float         # part of the spill that never reached the interior
     setpoint: tuple[float, float]    # Machine Sync cart offset (long, lat), m
-    ctrl: ControllerState
-    out: ControllerOutput
+    ctrl: object                     # the controller's state (ControllerState for the built-in)
+    out: ControllerCommand           # its last command (fullness always (N,))
     impact: ag.Impact
     stream: np.ndarray               # (64, 4) float32 world rows [x, y, z, radius]
     stream_points: int
     spout: SpoutGeometry             # spout_grid(x), derived from x once per frame (the next frame starts from it)
+    nudges: int = 0                  # nudges made so far
 
 
 def _grid_from_world(x: np.ndarray, p: ModelParams) -> np.ndarray:
@@ -115,9 +151,14 @@ def initial_world(s: Scenario, p: ModelParams | None = None) -> World:
     spout = spout_grid(x, p)
     imp, rows, n = _stream(spout, h, 0.0, False, p)
     spg = spout[2]
-    out = ControllerOutput(0, False, float(spg[0]), float(spg[0]), np.full(p.control.sections, np.nan))
-    return World(0, 0.0, x, 0.0, h, volume(h, p.grid), 0.0, 0.0, 0.0, setpoint, initial_controller(p.control), out,
-                 imp, rows, n, spout)
+    out = ControllerCommand(0, False, float(spg[0]), float(spg[0]), -1, np.full(p.control.sections, np.nan), False,
+                            False, 0.0)
+    try:
+        state = p.controller.initial_state()
+    except Exception as e:  # noqa: BLE001 - a plug-in's failure is reported with its name
+        raise PluginFault(p.controller_ref, CONTROLLER_POINT, f"initial_state raised {type(e).__name__}: {e}",
+                          0) from e
+    return World(0, 0.0, x, 0.0, h, volume(h, p.grid), 0.0, 0.0, 0.0, setpoint, state, out, imp, rows, n, spout)
 
 
 def truth_measurement(h: np.ndarray, p: ModelParams) -> np.ndarray:
@@ -138,21 +179,22 @@ def _predicted_impacts(spg: np.ndarray, vg: np.ndarray,
 def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
     """Advance the world by one sensor frame acting on ``meas`` (controller grid heights m, NaN holes) or None."""
     x = w.x
+    if p.fmus is not None:
+        p.fmus.begin_frame(w.frame + 1)
     _, vel, spg, g = w.spout
     vg = g[:3, :3] @ vel
     drift, top, floor = _predicted_impacts(spg, vg, p)
     signal = w.setpoint[0] + p.signal_offset_m
-    delivery = None
-    if p.control.fusion is not None:
-        delivery = Delivery(w.delivered_m3 * (1.0 + p.flow_meter_bias), spg, vg)
+    delivery = Delivery(w.delivered_m3 * (1.0 + p.flow_meter_bias), spg, vg)
     # the stream lands between these two points: both must be safely inside
-    ctrl, out = controller_step(w.ctrl, p.control, w.t_s, meas, float(spg[0]), (top, floor), drift, signal,
-                                delivery)
+    inp = ControllerInput(w.t_s, w.frame, meas, float(spg[0]), (top, floor), drift, signal, delivery,
+                          p.control.target_m)
+    ctrl, out = _decide(w, inp, p)
     setpoint = (w.setpoint[0] + out.nudge * p.control.nudge_m, w.setpoint[1])
-    x = _advance_vehicles(x, setpoint, p)
+    x = _advance_vehicles(x, setpoint, p, w.frame + 1)
     level, vol = w.flow_level, 0.0
     for _ in range(p.steps):
-        level, dv = ag.flow_advance(level, out.auger_cmd, p.dt_s, p.auger)
+        level, dv = ag.flow_advance(level, out.auger_on, p.dt_s, p.auger)
         vol += dv
     spout = spout_grid(x, p)
     imp, rows, n = _stream(spout, w.heights, level, vol > 0.0 or level > 0.0, p)
@@ -164,12 +206,34 @@ def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
             spill_outside = vol
     return World(w.frame + 1, (w.frame + 1) * p.frame_dt_s, x, level, h, w.initial_m3, w.delivered_m3 + vol,
                  w.spilled_m3 + spill + spill_outside, w.spilled_outside_m3 + spill_outside, setpoint, ctrl, out, imp,
-                 rows, n, spout)
+                 rows, n, spout, w.nudges + (out.nudge != 0))
 
 
-def _advance_vehicles(x: np.ndarray, setpoint: tuple[float, float], p: ModelParams) -> np.ndarray:
-    """The vehicle state (9,) after one frame: ``p.steps`` steps of ``p.dt_s``, each with the Machine Sync input
-    held. The exponential method keeps the state as Python floats between the steps (same bits)."""
+def _decide(w: World, inp: ControllerInput, p: ModelParams) -> tuple[object, ControllerCommand]:
+    """The controller's (state, checked command) at ``w``; a plug-in that raises or returns a bad value ends the
+    run with a PluginFault naming it and the frame being stepped to."""
+    frame = w.frame + 1
+    try:
+        result = p.controller.step(w.ctrl, inp)
+    except PluginFault as e:
+        raise e.at_frame(frame) from e.__cause__
+    except Exception as e:  # noqa: BLE001 - a plug-in's failure is reported with its name
+        raise PluginFault(p.controller_ref, CONTROLLER_POINT, f"step raised {type(e).__name__}: {e}", frame) from e
+    if not isinstance(result, tuple) or len(result) != 2:
+        raise PluginFault(p.controller_ref, CONTROLLER_POINT, f"step returned {type(result).__name__}, expected "
+                          "(state, ControllerCommand)", frame)
+    try:
+        return result[0], check_command(result[1], p.control.sections, p.controller_ref)
+    except PluginFault as e:
+        raise e.at_frame(frame) from None
+
+
+def _advance_vehicles(x: np.ndarray, setpoint: tuple[float, float], p: ModelParams, frame: int) -> np.ndarray:
+    """The vehicle state (9,) at the end of frame ``frame``: ``p.steps`` steps of ``p.dt_s``, each with the Machine
+    Sync input held (or the FMU vehicle's steps). The exponential method keeps the state as Python floats between
+    the steps (same bits)."""
+    if p.fmus is not None and p.fmus.vehicle is not None:
+        return p.fmus.vehicle.advance(x, setpoint, frame, p.vehicles, p.gains)
     if p.method == "exponential":
         xs = x.tolist()
         for _ in range(p.steps):
@@ -197,7 +261,7 @@ def signals(w: World, p: ModelParams) -> dict[str, float]:
         "tractor_steer_rad": float(x[DELTA]),
         "cart_x_m": px, "cart_y_m": py, "cart_yaw_rad": pyaw,
         "spout_x_m": float(sp[0]), "spout_y_m": float(sp[1]), "spout_z_m": float(sp[2]),
-        "auger_on": int(w.out.auger_cmd), "flow_level": w.flow_level,
+        "auger_on": int(w.out.auger_on), "flow_level": w.flow_level,
         "flow_m3ps": w.flow_level * p.auger.flow_m3ps,
         "impact_x_m": float(w.impact.world[0]), "impact_y_m": float(w.impact.world[1]),
         "impact_z_m": float(w.impact.world[2]), "impact_valid": int(w.stream_points > 0),
@@ -206,11 +270,11 @@ def signals(w: World, p: ModelParams) -> dict[str, float]:
         "stream_points": w.stream_points,
         "desired_auger_x_m": w.out.desired_m, "control_effort_m": w.out.effort_m,
         "nudge_m": w.setpoint[0] + p.signal_offset_m, "actual_auger_x_m": float(spg[0]),
-        "actual_auger_y_m": float(spg[1]), "nudge_cmd": w.out.nudge, "nudge_count": w.ctrl.nudges,
+        "actual_auger_y_m": float(spg[1]), "nudge_cmd": w.out.nudge, "nudge_count": w.nudges,
         "setpoint_long_m": w.setpoint[0], "setpoint_lat_m": w.setpoint[1],
         "offset_long_err_m": long_m - w.setpoint[0], "offset_lat_err_m": lat_m - w.setpoint[1],
-        "target_section": w.ctrl.target + 1, "all_full": int(w.ctrl.all_full),
-        "measurement_seen": int(w.ctrl.seen), "control_bias_m": w.ctrl.bias_m,
+        "target_section": w.out.target + 1, "all_full": int(w.out.all_full),
+        "measurement_seen": int(w.out.seen), "control_bias_m": w.out.bias_m, "target_fill_m": p.control.target_m,
         "delivered_m3": w.delivered_m3, "in_cart_m3": in_cart, "spilled_m3": w.spilled_m3,
         "spilled_outside_m3": w.spilled_outside_m3, "cart_grain_m3": w.initial_m3 + in_cart,
         "peak_height_m": float(w.heights.max()),

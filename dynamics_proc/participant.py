@@ -7,7 +7,8 @@
 soon as published, which is one frame later when perception overlaps; a missing or stale
 output, or ``perc_state.cart_valid == 0``, is "no measurement"). With ``ground_truth`` it acts on the truth
 height map of frame m - 1 - L resampled to the controller grid. The participant also keeps its own record
-(``rows``, ``heights``) for in-process use.
+(``rows``, ``heights``) for in-process use. In-process, :meth:`DynamicsParticipant.set_input` changes a run-time
+input (:mod:`dynamics_proc.inputs`) from the next integrated frame on.
 """
 from __future__ import annotations
 
@@ -20,6 +21,8 @@ from cosim.errors import FrameMismatch
 from cosim.runtime.participant import perception_overlaps
 
 from .blocks import WRITER, state_fields
+from .fmus import Fmus, open_fmus
+from .inputs import INPUTS, apply_input
 from .model import ModelParams, World, initial_world, signals, step_frame, truth_measurement
 
 if TYPE_CHECKING:
@@ -32,6 +35,8 @@ class DynamicsParticipant:
     """Ground truth of the run: vehicles, auger, grain, controller."""
 
     name = WRITER
+    #: run-time inputs :meth:`set_input` takes (cosim.Simulation.set)
+    settable: tuple[str, ...] = tuple(INPUTS)
 
     def __init__(self, scenario: Scenario):
         self.scenario = scenario
@@ -45,11 +50,18 @@ class DynamicsParticipant:
         self._names = tuple(f.name for f in state_fields(scenario.controller.sections))
         self._history: dict[int, np.ndarray | None] = {}
         self._seg: Segment | None = None
+        self._fmus: Fmus | None = None
         self._next = 0
+        #: inputs set since the last frame (path -> value), applied before the next integration
+        self._pending: dict[str, float] = {}
 
     # -- contract ----------------------------------------------------------------------------------------
     def start(self, segment: "Segment") -> None:
-        """Bind the views this participant writes and, with perception feedback, reads."""
+        """Bind the views this participant writes and, with perception feedback, reads; open the scenario's
+        FMUs (dynamics_proc.fmus)."""
+        self._fmus = open_fmus(self.scenario)
+        if self._fmus is not None:
+            self.params = ModelParams.from_scenario(self.scenario, self._fmus)
         self._seg = segment
         self._state = segment.view("dyn_state")
         self._stream = segment.view("stream")
@@ -87,6 +99,8 @@ class DynamicsParticipant:
             meas = self._history.pop(frame - 1 - self.latency, None)
             for k in [k for k in self._history if k < frame - 1 - self.latency]:
                 del self._history[k]
+            if self._pending:
+                self._apply_pending()
             self.world = step_frame(self.world, meas, self.params)
         self._publish(frame)
         if not self.perception:
@@ -94,10 +108,19 @@ class DynamicsParticipant:
         self._next = frame + 1
 
     def close(self) -> None:
-        """Drop the views (the segment belongs to the runtime)."""
+        """Drop the views (the segment belongs to the runtime) and free the FMUs."""
+        if self._fmus is not None:
+            self._fmus.close()
+            self._fmus = None
         self._seg = None
         self._perceived = self._cart_valid = None
         self._history.clear()
+
+    def set_input(self, path: str, value: float) -> None:
+        """Set run-time input ``path`` (:data:`dynamics_proc.inputs.INPUTS`) from the next integrated frame on."""
+        if path not in INPUTS:
+            raise KeyError(f"{path!r} is not a run-time input; inputs: {', '.join(INPUTS)}")
+        self._pending[path] = float(value)
 
     # -- records -----------------------------------------------------------------------------------------
     @property
@@ -118,6 +141,13 @@ class DynamicsParticipant:
                                              or not self._cart_valid.cart_valid):
             return None
         return np.array(self._perceived, dtype=np.float64)
+
+    def _apply_pending(self) -> None:
+        w, p = self.world, self.params
+        for path, value in self._pending.items():
+            w, p = apply_input(w, p, self.scenario, path, value)
+        self.world, self.params = w, p
+        self._pending.clear()
 
     def _publish(self, frame: int) -> None:
         w, seg = self.world, self._seg

@@ -14,6 +14,10 @@ section being filled (-1 at the start).
   time with ideal feedback.
 
 front_to_back and back_to_front keep filling the current section until it is full.
+
+``controller.strategy`` is a plug-in point (docs/plugins.md): these three are the built-ins, registered as entry
+points of the group ``graincosim.strategies`` and resolved by cosim.scenario.plugins like a user's function with
+the same signature. :data:`STRATEGIES` / :func:`get_strategy` look up the built-ins alone.
 """
 from __future__ import annotations
 

@@ -35,7 +35,7 @@ from cosim.scenario.config import Scenario
 __all__ = [
     "N_STATES", "CX", "CY", "CYAW", "TX", "TY", "TYAW", "V", "DELTA", "PYAW", "VehicleParams",
     "derivative", "kinematic_derivative", "towing_rates", "lag_exact", "lag_exact_pair", "lag_integral",
-    "cart_pose", "tractor_pose", "hitch_point", "initial_state",
+    "cart_pose", "tractor_pose", "hitch_point", "initial_state", "combine_advance",
 ]
 
 N_STATES = 9
@@ -86,6 +86,17 @@ def towing_rates(v: float, r: float, tyaw: float, pyaw: float, hitch_m: float, t
     ``integrators.step_exponential_values``)."""
     rel = tyaw - pyaw
     return ((v * math.sin(rel) - hitch_m * r * math.cos(rel)) / tow_m, v * math.cos(tyaw), v * math.sin(tyaw))
+
+
+def combine_advance(cx: float, cy: float, cyaw: float, p: VehicleParams, dt: float) -> tuple[float, float, float]:
+    """The combine's pose (x m, y m, yaw rad, world) ``dt`` s on: exact for its constant speed and yaw rate (a
+    straight line, or an arc of radius speed / yaw rate). Used where the tractor-cart is not integrated with it
+    (an FMU vehicle); the built-in integrators take the combine rows of :func:`kinematic_derivative`."""
+    vc, wc = p.combine_speed_mps, p.combine_yaw_rate_radps
+    if wc == 0.0:
+        return cx + vc * dt * math.cos(cyaw), cy + vc * dt * math.sin(cyaw), cyaw
+    r, yaw = vc / wc, cyaw + wc * dt
+    return cx + r * (math.sin(yaw) - math.sin(cyaw)), cy - r * (math.cos(yaw) - math.cos(cyaw)), yaw
 
 
 def kinematic_derivative(k: list[float], v: float, delta: float, p: VehicleParams) -> tuple[float, ...]:

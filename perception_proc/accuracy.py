@@ -81,7 +81,9 @@ def range_error_stats(ranges: np.ndarray, exact: np.ndarray, range_min_m: float,
     out["range_err_p99_m"] = percentile_sorted(s, P99)
     out["range_err_max_m"] = float(s[-1]) if s.size else nan
     lo, hi = WORKING_RANGE_M
-    out["range_err_mean_2_15_m"], out["frac_above_5cm_2_15"] = mean_above(err[(dist >= lo) & (dist < hi)])
+    working = err[(dist >= lo) & (dist < hi)]
+    out["range_err_mean_2_15_m"], out["frac_above_5cm_2_15"] = mean_above(working)
+    out["range_err_p99_2_15_m"] = percentile_sorted(np.sort(working), P99)
     for lo, hi in RANGE_BANDS_M:
         e = err[(dist >= lo) & (dist < hi)]
         b = band_name(lo, hi)

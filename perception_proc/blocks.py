@@ -68,6 +68,7 @@ ACCURACY_FIELDS: tuple[tuple[str, str, str, str], ...] = (
     ("frac_above_5cm", "", "f8", "share of beams with |range error| > 5 cm"),
     ("range_err_mean_2_15_m", "m", "f8", "mean |range error| inside the 2-15 m working range"),
     ("frac_above_5cm_2_15", "", "f8", "share above 5 cm inside the 2-15 m working range"),
+    ("range_err_p99_2_15_m", "m", "f8", "99th percentile |range error| inside the 2-15 m working range"),
     ("beam_missing_frac", "", "f8", "share of beams with an exact hit in range but no LiDAR return"),
     ("beam_spurious_frac", "", "f8", "share of LiDAR returns where the exact cast has none in range"),
     *(item for lo, hi in RANGE_BANDS_M for item in (

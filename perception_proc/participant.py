@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from cosim.world.beamtarget import BEAMS_DEPTH_BLOCK
 from cosim.world.camera import Rig
 from cosim.scenario.config import Scenario
 from cosim.errors import FrameMismatch
@@ -67,18 +68,16 @@ class PerceptionParticipant:
     def start(self, segment: "Segment") -> None:
         """Bind views and precompute the beam-to-pixel tables."""
         rig = self._rig
-        if rig is None:
+        if rig is None and self.scenario.sensor.method == "camera_rig":
             from cosim.world.rig import plan_rig
 
             rig = plan_rig(self.scenario)
         self.pipeline = Perception(self.scenario, rig)
         self._images = []
-        for cam in rig.cameras:
-            name = f"{cam.name}_depth"
+        for name, want in _image_blocks(self.pipeline, rig):
             if not segment.has(name):
                 raise KeyError(f"perception needs block {name!r} (written by the renderer), absent from this run")
             img = segment.view(name)
-            want = (cam.intrinsics.height, cam.intrinsics.width, 4)
             if img.shape != want:
                 raise ValueError(f"block {name!r} has shape {img.shape}, the rig expects {want}")
             self._images.append((name, img))
@@ -152,7 +151,7 @@ class PerceptionParticipant:
         t1 = time.perf_counter()
         wfp = acc.world_from_parent(self.scenario, state) if state else np.eye(4)
         heading = self._heading(state, wfp)
-        res = pipe.perceive(ranges, heading, with_points=False)
+        res = pipe.perceive(ranges, heading, with_points=False, frame=frame)
         self.last = res
         pipe.points(ranges, out=out.points)
         t2 = time.perf_counter()
@@ -239,6 +238,14 @@ class PerceptionParticipant:
         out["corner_error_m"] = acc.corner_error(est, truth_corners)
         out["impact_error_m"] = acc.impact_error(res.impact.xyz, state)
         return out
+
+
+def _image_blocks(pipe: Perception, rig: Rig | None) -> list[tuple[str, tuple[int, int, int]]]:
+    """(block name, (H, W, 4)) of every image perception reads: the beams target (beam_native) or each camera's
+    depth image."""
+    if pipe.beams is not None:
+        return [(BEAMS_DEPTH_BLOCK, pipe.beams.layout.shape + (4,))]
+    return [(f"{c.name}_depth", (c.intrinsics.height, c.intrinsics.width, 4)) for c in rig.cameras]
 
 
 @dataclass

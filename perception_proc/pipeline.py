@@ -2,8 +2,9 @@
 
 ``Perception(scenario, rig)`` precomputes everything that depends only on the rig and the pattern (beam table,
 beam-to-pixel tables, the sensor mount). ``lidar(images, frame)`` makes the frame's ranges (decode, resample,
-noise, limits); ``perceive(ranges, heading_xy)`` runs the three offloading algorithms. The participant is a thin
-shell around these two calls; tests and benchmarks call them directly.
+noise, limits); ``perceive(ranges, heading_xy)`` runs the scenario's perception algorithm (``perception.algorithm``,
+a plug-in point: perception_proc.protocol; the built-in ``staged`` runs the rim, height map and impact stages).
+The participant is a thin shell around these two calls; tests and benchmarks call them directly.
 
 Frames: ranges and ``lidar_points`` are in the sensor frame (X right, Y up, Z forward). The algorithms work in
 the *level frame*, the sensor's parent body frame (x forward, y left, z up from flat ground):
@@ -12,22 +13,27 @@ the *level frame*, the sensor's parent body frame (x forward, y left, z up from 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
 
+from cosim.errors import PluginFault
 from cosim.world.camera import Rig, beam_directions
 from cosim.scenario.config import Scenario
+from cosim.scenario.plugins import load_plugin
 from cosim.world.geometry import body_from_camera_axes, mount_transform
 
-from .heightmap import HeightMap, grid_shape, height_map
-from .impact import Impact, blank_under_stream, find_impact
+from .beam_decode import BeamDecoder
+from .heightmap import HeightMap, grid_shape
+from .impact import Impact
 from .lidar import apply_noise_and_limits, frame_generator, point_basis, to_points
+from cosim.world.beamtarget import beam_layout
 from cosim.world.patterns import beam_table, pattern_shape
 from .resample import beam_words, build_table, resample, resample_words
 from .resample_offset import build_offset_table, is_offset, resample_offset
-from .rim import CartEstimate, border_beams, find_cart
+from .protocol import ALGORITHM_POINT, PerceptionContext, PerceptionInput, StageSet, check_output
+from .rim import CartEstimate, border_beams
 
 __all__ = ["Perception", "FrameResult", "own_vehicle_box", "OWN_BOX_MARGIN_M"]
 
@@ -86,17 +92,22 @@ class FrameResult:
 
 
 class Perception:
-    """Per-rig precomputation and the per-frame pure pipeline."""
+    """Per-rig precomputation and the per-frame pure pipeline. ``rig``: the camera rig (None, and unused, with
+    ``sensor.method: beam_native``, whose one image is the beams target)."""
 
-    def __init__(self, scenario: Scenario, rig: Rig):
+    def __init__(self, scenario: Scenario, rig: Rig | None):
         self.scenario = scenario
         self.rig = rig
         sensor = scenario.sensor
         self.elevation, self.azimuth = beam_table(sensor.pattern)
         self.directions = beam_directions(self.elevation, self.azimuth)
         self.shape = pattern_shape(sensor.pattern)
-        self.offset = is_offset(rig)
-        if self.offset:
+        #: ``sensor.method: beam_native``: ranges decoded per beam (perception_proc.beam_decode), no rig
+        self.beams = BeamDecoder(beam_layout(sensor.pattern), sensor.codec) if sensor.method == "beam_native" else None
+        self.offset = self.beams is None and is_offset(rig)
+        if self.beams is not None:
+            self.table = None
+        elif self.offset:
             self.table = build_offset_table(rig, self.elevation, self.azimuth, self.shape)
         else:
             self.table = build_table(rig, self.directions)
@@ -111,6 +122,8 @@ class Perception:
         self.grid = grid_shape(scenario.cart, scenario.controller.grid_cell_m)
         self.cell_xy = (scenario.cart.interior_length_m / self.grid[0],
                         scenario.cart.interior_width_m / self.grid[1])
+        self.algorithm, self.context = _algorithm(scenario), PerceptionContext(
+            scenario, self.grid, self.cell_xy, self.level_from_sensor, self.shape, _stages(scenario))
 
     @property
     def n_beams(self) -> int:
@@ -120,6 +133,8 @@ class Perception:
         """Noise-free ranges (N,) float32 m, NaN where no return, from one depth image per rig camera (rig
         order): decode and resample only, no range limits."""
         codec = self.scenario.sensor.codec
+        if self.beams is not None:
+            return self.beams.ranges(images, out=out)
         if self.offset:
             r = resample_offset(images, self.table, codec)
             if out is not None:
@@ -131,6 +146,8 @@ class Perception:
     def gather(self, images: Sequence[np.ndarray]) -> list[np.ndarray]:
         """The part of :meth:`resample` that reads the images, as copies (cheap: the beams' raw words; with an
         offset mount, the whole resampling); :meth:`resample_gathered` finishes it without the images."""
+        if self.beams is not None:
+            return self.beams.gather(images)
         if self.offset:
             return [self.resample(images)]
         sampler = self.scenario.perception.sampler
@@ -138,6 +155,8 @@ class Perception:
 
     def resample_gathered(self, gathered: list[np.ndarray], out: np.ndarray | None = None) -> np.ndarray:
         """:meth:`resample` from :meth:`gather`'s copies: the same ranges (N,) float32 m."""
+        if self.beams is not None:
+            return self.beams.decode(gathered, out=out)
         if self.offset:
             if out is None:
                 return gathered[0]
@@ -186,37 +205,39 @@ class Perception:
         return to_points(self.point_basis, ranges, out=out)
 
     def perceive(self, ranges: np.ndarray, heading_xy=(1.0, 0.0), points_out: np.ndarray | None = None,
-                 heights_out: np.ndarray | None = None, with_points: bool = True) -> FrameResult:
+                 heights_out: np.ndarray | None = None, with_points: bool = True, frame: int = -1) -> FrameResult:
         """Cart, height map and impact from the frame's ranges (N,) float32. ``heading_xy``: the towing
         direction in the level frame. ``points_out`` (N, 4) / ``heights_out`` (nx, ny): optional destinations.
         ``with_points`` False leaves the ``lidar_points`` record out (``FrameResult.points`` is None): a caller
-        that writes it straight into shared memory uses :meth:`points`."""
-        sc = self.scenario
-        sigma = sc.sensor.noise.range_sigma_m
-        tm: dict[str, float] = {}
+        that writes it straight into shared memory uses :meth:`points`. ``frame``: named in a plug-in's fault."""
         t0 = time.perf_counter()
         pts = self.points(ranges, out=points_out) if with_points or points_out is not None else None
         lvl = self.level_points(ranges)
         border = border_beams(ranges, self.shape)
         t1 = time.perf_counter()
-        cart = find_cart(lvl, border, sc.cart, heading_xy, sigma)
-        t2 = time.perf_counter()
-        tm["points"], tm["cart"] = 1e3 * (t1 - t0), 1e3 * (t2 - t1)
-        if not cart.valid:
-            if heights_out is not None:
-                heights_out.fill(np.nan)
-            tm["heightmap"] = tm["impact"] = 0.0
-            return FrameResult(pts, cart, None, Impact(False, np.full(3, np.nan), 0, "no cart"), tm)
-        hm = height_map(lvl, cart.level_from_grid, sc.cart, sc.controller.grid_cell_m,
-                        sc.perception.min_points_per_cell, sigma, out=heights_out)
-        t3 = time.perf_counter()
-        lfg = cart.level_from_grid
-        sensor_grid = (self.level_from_sensor[:3, 3] - lfg[:3, 3]) @ lfg[:3, :3]
-        imp = find_impact(hm.grid_points, hm.stream, hm.heights, self.cell_xy, sc.perception.impact_search_radius_m,
-                          (float(sensor_grid[0]), float(sensor_grid[1])))
-        if blank_under_stream(hm.heights, imp, self.cell_xy):
-            hm = replace(hm, coverage=float(np.count_nonzero(np.isfinite(hm.heights)) / hm.heights.size))
-        t4 = time.perf_counter()
-        tm["heightmap"], tm["impact"] = 1e3 * (t3 - t2), 1e3 * (t4 - t3)
-        return FrameResult(pts, cart, hm, imp, tm)
+        inp = PerceptionInput(frame, ranges, lvl, border, heading_xy, heights_out)
+        ref = self.scenario.perception.algorithm
+        try:
+            out = check_output(self.algorithm(self.context, inp), self.grid, ref)
+        except PluginFault as e:
+            raise e.at_frame(frame) from e.__cause__
+        except Exception as e:  # noqa: BLE001 - the algorithm's failure ends the run with its name and cause
+            raise PluginFault(ref, ALGORITHM_POINT, f"raised {type(e).__name__}: {e}", frame) from e
+        hm = out.heightmap
+        if heights_out is not None and (hm is None or hm.heights is not heights_out):
+            heights_out[...] = np.nan if hm is None else hm.heights
+        return FrameResult(pts, out.cart, hm, out.impact, {"points": 1e3 * (t1 - t0), **out.timing_ms})
+
+
+def _algorithm(s: Scenario):
+    """The scenario's perception algorithm (``perception.algorithm``), loaded."""
+    return load_plugin("perception", s.perception.algorithm, base_dir=s.plugin_dir or None)
+
+
+def _stages(s: Scenario) -> StageSet:
+    """The scenario's perception stages (``perception.stages``), loaded."""
+    st = s.perception.stages
+    refs = {"rim": st.rim, "heightmap": st.heightmap, "impact": st.impact}
+    return StageSet(*(load_plugin(f"perception.{k}", r, base_dir=s.plugin_dir or None) for k, r in refs.items()),
+                    refs)
 

@@ -92,6 +92,7 @@ def summarize(scenario: Scenario, series: Mapping[str, np.ndarray], heightmap_tr
         "working_range_m": list(acc.WORKING_RANGE_M),
         "working_mean_m": _weighted(_col(series, "range_err_mean_2_15_m"), wr) if n.size else math.nan,
         "working_frac_above_5cm": _weighted(_col(series, "frac_above_5cm_2_15"), wr) if n.size else math.nan,
+        "working_p99_m": _weighted(_col(series, "range_err_p99_2_15_m"), wr) if n.size else math.nan,
         "beam_missing_frac": _weighted(_col(series, "beam_missing_frac"), n),
         "bands": bands,
     }

@@ -3,6 +3,9 @@
 * ``<cam>_depth`` image (H, W, 4) uint8: depth-encoded RGBA8 (Eqs 1-2, linear bytes), A = 255 valid;
 * ``<cam>_rgb`` image (H, W, 4) uint8: shaded image, only when something consumes it;
 * ``<cam>_zf`` array (H, W) float32: planar depth m, NaN invalid, only with ``render.float_depth``;
+* with ``sensor.method: beam_native`` instead of the cameras' blocks: ``beams_depth`` (rows, cols, 4) uint8, the
+  encoded range along each beam (one pixel per beam, ``cosim.world.beamtarget``), and ``beams_rgb`` when
+  something consumes it;
 * ``render_state`` struct: the frame's simulation time, render wall time and valid-pixel fraction.
 
 Sizes follow the renderer actually used (``plan_rig`` applies ``render.mock_scale`` for the mock).
@@ -12,6 +15,7 @@ from __future__ import annotations
 from cosim.scenario.config.scenario import Scenario
 from shm_schema import ArrayBlock, Block, Field, StructBlock, image_block
 
+from cosim.world.beamtarget import BEAMS_DEPTH_BLOCK, BEAMS_RGB_BLOCK, beam_layout
 from cosim.world.rig import plan_rig
 
 __all__ = ["STATE_BLOCK", "WRITER", "declare_blocks", "wants_rgb"]
@@ -37,6 +41,12 @@ def declare_blocks(scenario: Scenario) -> list[Block]:
         Field("valid_fraction", "", doc="fraction of depth pixels with a valid hit, all cameras"),
     ), doc="renderer status per frame")]
     rgb = wants_rgb(scenario)
+    if scenario.sensor.method == "beam_native":
+        h, w = beam_layout(scenario.sensor.pattern).shape
+        blocks.append(image_block(BEAMS_DEPTH_BLOCK, WRITER, h, w, doc="range along each beam, RGBA8, Eqs 1-2"))
+        if rgb:
+            blocks.append(image_block(BEAMS_RGB_BLOCK, WRITER, h, w, doc="shaded RGBA8 per beam"))
+        return blocks
     for cam in plan_rig(scenario).cameras:
         h, w = cam.intrinsics.height, cam.intrinsics.width
         blocks.append(image_block(f"{cam.name}_depth", WRITER, h, w, doc="depth-encoded RGBA8, Eqs 1-2"))

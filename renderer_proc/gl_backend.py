@@ -81,7 +81,7 @@ def _fragment_source(rgb: bool, float_depth: bool, mishandled: bool) -> str:
         loc += 1
     if float_depth:
         defines.append(f"#define OUT_ZF {loc}")
-    return "\n".join([head, *defines, body])
+    return "\n".join([head, *defines, _source("codec.glsl"), body])
 
 
 def _mat(m: np.ndarray) -> bytes:

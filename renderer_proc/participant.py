@@ -16,7 +16,8 @@ from cosim.scenario.config.scenario import Scenario
 from cosim.errors import FrameMismatch
 
 from .blocks import STATE_BLOCK, WRITER, wants_rgb
-from .projection import camera_poses
+from .projection import camera_poses, world_from_sensor
+from cosim.world.beamtarget import BEAMS_DEPTH_BLOCK, BEAMS_RGB_BLOCK, beam_layout
 from cosim.world.rig import plan_rig
 from cosim.world.scene import scene_from_state
 
@@ -37,6 +38,8 @@ _MS_PER_S = 1000.0
 def make_backend(scenario: Scenario, rig, context: Any = None):
     """The backend ``scenario.renderer`` names: ``GLRenderer`` ("gl", imports moderngl now) or ``MockRenderer``
     ("mock", no GL). Raises RendererUnavailable when no GL context can be made."""
+    if scenario.sensor.method == "beam_native":
+        return _beam_backend(scenario, context)
     opts = dict(rgb=wants_rgb(scenario), float_depth=scenario.render.float_depth)
     if scenario.renderer == "gl":
         from .gl_backend import GLRenderer
@@ -49,6 +52,21 @@ def make_backend(scenario: Scenario, rig, context: Any = None):
     raise ValueError(f"scenario.renderer is {scenario.renderer!r}: this scenario runs no renderer")
 
 
+def _beam_backend(scenario: Scenario, context: Any = None):
+    """The beam-native backend (``sensor.method: beam_native``): ``GLBeamRenderer`` (gl, grid and honeycomb
+    patterns) or ``MockBeamRenderer`` (mock; gl with a CSV pattern)."""
+    layout, codec, rgb = beam_layout(scenario.sensor.pattern), scenario.sensor.codec, wants_rgb(scenario)
+    if scenario.renderer == "gl" and layout.gridded:
+        from .beam_gl import GLBeamRenderer
+
+        return GLBeamRenderer(layout, codec, rgb=rgb, context=context)
+    if scenario.renderer in ("gl", "mock"):       # a CSV table has no angle grid: its exact ray cast under gl too
+        from .beam_mock import MockBeamRenderer
+
+        return MockBeamRenderer(layout, codec, rgb=rgb)
+    raise ValueError(f"scenario.renderer is {scenario.renderer!r}: this scenario runs no renderer")
+
+
 class RendererParticipant:
     """Ring member ``renderer``. Create with :func:`create`; the ring calls start, step, close."""
 
@@ -56,7 +74,8 @@ class RendererParticipant:
 
     def __init__(self, scenario: Scenario):
         self.scenario = scenario
-        self.rig = plan_rig(scenario)
+        self.beam_native = scenario.sensor.method == "beam_native"
+        self.rig = None if self.beam_native else plan_rig(scenario)
         self.backend = None
         self.segment: Segment | None = None
         self.rgb = wants_rgb(scenario)
@@ -72,7 +91,9 @@ class RendererParticipant:
         self._heights = segment.view("heightmap_truth")
         self._stream = segment.view("stream")
         self._outputs = []
-        for cam in self.rig.cameras:
+        if self.beam_native:
+            self._outputs.append({"depth": BEAMS_DEPTH_BLOCK, **({"rgb": BEAMS_RGB_BLOCK} if self.rgb else {})})
+        for cam in (() if self.beam_native else self.rig.cameras):
             outs = {"depth": f"{cam.name}_depth"}
             if self.rgb:
                 outs["rgb"] = f"{cam.name}_rgb"
@@ -97,7 +118,9 @@ class RendererParticipant:
         scene = scene_from_state(self.scenario, state, self._heights, self._stream)
         self.backend.set_scene(scene)
         valid = total = 0
-        for k, pose in enumerate(camera_poses(self.scenario, state, self.rig)):
+        poses = ([world_from_sensor(self.scenario, state)] if self.beam_native
+                 else camera_poses(self.scenario, state, self.rig))
+        for k, pose in enumerate(poses):
             self.backend.draw(k, pose)
             outs = self._outputs[k]
             with seg.write(outs["depth"], frame) as img:

@@ -26,7 +26,8 @@ __all__ = [
 
 ALIGN = 64
 MAGIC = b"COSIMSHM"
-LAYOUT_VERSION = 1
+#: 2: process slots gained ``alive_ns`` (the liveness heartbeat, beside the per-step ``heartbeat_ns``)
+LAYOUT_VERSION = 2
 #: process slots in the header: the ring participants plus the supervisor and spares for stand-ins
 MAX_PROCS = 6
 #: bytes reserved per process for a msgpack-encoded error report (type, message, traceback)
@@ -41,6 +42,9 @@ PROC_DTYPE = np.dtype(
         ("heartbeat_ns", "<i8"),
         ("token", "<i8"),
         ("step_ns", "<i8"),
+        #: CLOCK_MONOTONIC ns of the process's last liveness beat (a thread beside its frame work,
+        #: cosim.runtime.liveness); ``heartbeat_ns`` is the time of its last step boundary
+        ("alive_ns", "<i8"),
         ("error_len", "<i8"),
         ("error", f"S{ERROR_BYTES}"),
     ],

@@ -39,3 +39,13 @@ def shm_clean():
 def shm_name(request):
     """A unique segment name for one test."""
     return f"cosimtest-{os.getpid()}-{abs(hash(request.node.nodeid)) % 10**8}"
+
+
+@pytest.fixture(scope="session")
+def built_fmus(tmp_path_factory):
+    """The test FMUs (tests/fmu_builds.py), built once per session with pythonfmu: name -> .fmu path."""
+    import fmu_builds
+
+    if fmu_builds.MISSING:
+        pytest.skip(f"FMU tests need {' and '.join(fmu_builds.MISSING)} (pip install -e \".[test]\")")
+    return fmu_builds.build_all(tmp_path_factory.mktemp("fmus"))

@@ -2,11 +2,14 @@
 
 Each role writes a struct, a trace array (frame, monotonic ns) and, for the renderer, an image. Faults are
 chosen per role with keyword arguments: ``crash_at`` (raise), ``kill_at`` (SIGKILL itself), ``exit_at``
-(os._exit without report), ``hang_at`` (block far longer than any timeout); ``stamp_file`` receives the
-monotonic time of a ``kill_at`` kill.
+(os._exit without report), ``hang_at`` (block far longer than any timeout, still beating), ``stop_at`` (SIGSTOP
+itself; ``stop_at=-2``: in ``start``, before frame 0), ``deadlock_at`` (sleep in C holding the GIL, so its
+heartbeat thread stops too), ``busy_at`` (``busy_s`` of CPU in one C call that keeps the GIL: slow, not hung);
+``stamp_file`` receives the monotonic time of a ``kill_at``/``stop_at``/``deadlock_at`` fault.
 """
 from __future__ import annotations
 
+import ctypes
 import os
 import signal
 import threading
@@ -42,21 +45,31 @@ class Fake:
     """One stand-in role; the fault keywords pick the frame at which it misbehaves (-1: never)."""
 
     def __init__(self, scenario, role, crash_at=-1, kill_at=-1, exit_at=-1, hang_at=-1, start_delay_s=0.0,
-                 stamp_file="", defer=False, rest_s=0.0):
+                 stamp_file="", defer=False, rest_s=0.0, stop_at=-1, deadlock_at=-1, busy_at=-1, busy_s=0.0):
         self.name = role
         #: perception only: publish one turn late and return the rest of the step (cosim.runtime.participant);
         #: ``rest_s``: how long that rest takes (a sleep: lets a test see it overlap the next frame)
         self.defer, self.rest_s, self.pending = defer, rest_s, None
         self.scenario = scenario
-        self.faults = dict(crash_at=crash_at, kill_at=kill_at, exit_at=exit_at, hang_at=hang_at)
+        self.faults = dict(crash_at=crash_at, kill_at=kill_at, exit_at=exit_at, hang_at=hang_at, stop_at=stop_at,
+                           deadlock_at=deadlock_at, busy_at=busy_at)
+        self.busy_s = busy_s
         self.start_delay_s = start_delay_s
         self.stamp_file = stamp_file
         self.seg = None
 
     def start(self, segment):
         self.seg = segment
+        if self.faults["stop_at"] == -2:
+            self._stamp()
+            os.kill(os.getpid(), signal.SIGSTOP)
         if self.start_delay_s:
             time.sleep(self.start_delay_s)
+
+    def _stamp(self):
+        if self.stamp_file:  # CLOCK_MONOTONIC is system-wide: the test compares it with its own clock
+            with open(self.stamp_file, "w") as f:
+                f.write(repr(time.monotonic()))
 
     def _faults(self, frame):
         if frame == self.faults["crash_at"]:
@@ -70,6 +83,14 @@ class Fake:
             os._exit(3)
         if frame == self.faults["hang_at"]:
             threading.Event().wait(3600.0)
+        if frame == self.faults["stop_at"]:
+            self._stamp()
+            os.kill(os.getpid(), signal.SIGSTOP)
+        if frame == self.faults["busy_at"]:
+            _busy_holding_the_gil(self.busy_s)
+        if frame == self.faults["deadlock_at"]:
+            self._stamp()
+            ctypes.PyDLL(None).sleep(3600)  # a PyDLL call keeps the GIL: no Python thread runs meanwhile
 
     def step(self, frame):
         self._faults(frame)
@@ -118,6 +139,20 @@ class Fake:
         self.seg = None
 
 
+def _busy_holding_the_gil(seconds: float) -> None:
+    """Burn CPU for about ``seconds`` in one C call that keeps the GIL (regex backtracking, ~1.85x per extra
+    character, sized from a short timed call), like one long draw call."""
+    import math
+    import re
+
+    pattern, n0 = re.compile(r"(a+)+$"), 20
+    t0 = time.perf_counter()
+    pattern.match("a" * n0 + "b")
+    small = max(time.perf_counter() - t0, 1e-4)
+    n = n0 + max(0, round(math.log(seconds / small) / math.log(1.85)))
+    pattern.match("a" * n + "b")
+
+
 def make(scenario, role="dynamics", **faults):
     return Fake(scenario, role, **faults)
 
@@ -135,3 +170,11 @@ def specs(**faults_by_role):
         out[role] = ParticipantSpec(role, "fakes:make", f"fakes:blocks_{role}", kwargs={"role": role, **kw},
                                     defers="fakes:always" if kw.get("defer") else None)
     return out
+
+
+def observe(segment, stop_self=False):
+    """A stand-in observer (cosim.runtime.launcher.ObserverSpec target): idles until it is ended; with
+    ``stop_self`` it SIGSTOPs itself first (a hung viewer)."""
+    if stop_self:
+        os.kill(os.getpid(), signal.SIGSTOP)
+    threading.Event().wait(3600.0)

@@ -146,15 +146,15 @@ def test_deterministic():
 def test_forced_auger_spill_is_accounted(monkeypatch, where, surface):
     """With the controller's safety bypassed (auger forced on), grain on the ground or the rim, and grain that
     slides over a wall top, is spill, and delivered = in cart + spilled still holds."""
-    import dynamics_proc.model as model
     from dataclasses import replace
+    from dynamics_proc.controller import SectionFillController
 
-    real = model.controller_step
+    real = SectionFillController.step
 
     def forced(*a, **k):
         st, out = real(*a, **k)
-        return st, replace(out, auger_cmd=True, nudge=0)
-    monkeypatch.setattr(model, "controller_step", forced)
+        return st, replace(out, auger_on=True, nudge=0)
+    monkeypatch.setattr(SectionFillController, "step", forced)
     lat = {"ground": 3.0, "rim": None, "near_wall": 6.75}[where]
     if where == "rim":
         # put the left rim band under the stream's landing point at rim height (closed-form parabola)

@@ -91,9 +91,9 @@ def test_no_measurement_keeps_auger_off_and_holds():
     p = cparams()
     s0 = initial_controller(p)
     s1, out = _step(s0, p, 0.0, None)
-    assert not out.auger_cmd and out.nudge == 0 and not s1.seen
+    assert not out.auger_on and out.nudge == 0 and not s1.seen
     s2, out = _step(s1, p, 0.1, np.full((p.nx, p.ny), 1.0))
-    assert out.auger_cmd and s2.target == 0
+    assert out.auger_on and s2.target == 0
 
 
 def test_auger_off_when_unsafe_or_all_full():
@@ -101,9 +101,9 @@ def test_auger_off_when_unsafe_or_all_full():
     s = initial_controller(p)
     meas = np.full((p.nx, p.ny), 1.0)
     _, out = _step(s, p, 0.0, meas, impacts=((0.35, 1.5), (0.35, 2.9)))     # floor landing near the far wall
-    assert not out.auger_cmd
+    assert not out.auger_on
     s, out = _step(s, p, 0.0, np.full((p.nx, p.ny), 1.95))
-    assert not out.auger_cmd and s.all_full and s.target == -1
+    assert not out.auger_on and s.all_full and s.target == -1
 
 
 def test_nudges_respect_size_interval_and_safe_range():
@@ -131,7 +131,7 @@ def test_stale_target_section_is_given_up():
     s = initial_controller(p)
     m = np.full((p.nx, p.ny), 1.0)
     s, out = _step(s, p, 0.0, m)
-    assert s.target == 0 and out.auger_cmd
+    assert s.target == 0 and out.auger_on
     blind = m.copy()
     blind[: p.section_start_rows[1], :] = np.nan                # section 1 never seen again
     t = 0.0

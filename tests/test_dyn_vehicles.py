@@ -1,6 +1,7 @@
 """Vehicles, lags, integrators and Machine Sync against closed forms and independent references."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -13,7 +14,8 @@ from scipy.linalg import expm
 from cosim.scenario.config import Scenario
 from dynamics_proc.integrators import integrate, step_exponential, step_exponential_values, step_ivp
 from dynamics_proc.machine_sync import cart_offset, sync_command, tractor_offset
-from dynamics_proc.vehicles import (CX, CY, DELTA, PYAW, TX, TY, TYAW, V, VehicleParams, cart_pose, initial_state,
+from dynamics_proc.vehicles import (CX, CY, DELTA, PYAW, TX, TY, TYAW, V, VehicleParams, cart_pose, combine_advance,
+                                    initial_state,
                                     kinematic_derivative, lag_exact, lag_integral)
 
 
@@ -223,3 +225,19 @@ def test_zero_speed_stays_put():
     assert np.all(np.isfinite(states))
     assert abs(states[-1][V]) < 1e-6 and np.abs(states[:, DELTA]).max() <= p.steer_max_rad + 1e-12
     assert np.abs(states[:, PYAW]).max() < 0.2
+
+
+def test_combine_advance_is_the_exact_arc_and_line():
+    """combine_advance (the FMU vehicle's combine): 1000 steps of 10 ms land on the closed-form circle / line."""
+    p = VehicleParams.from_scenario(Scenario.model_validate({"format_version": 1, "combine": {"path": "arc",
+                                                             "path_radius_m": 50.0, "speed_mps": 2.5}}))
+    x, y, yaw = 3.0, -1.0, 0.4
+    for _ in range(1000):
+        x, y, yaw = combine_advance(x, y, yaw, p, 0.01)
+    r, w = 50.0, 2.5 / 50.0
+    cx, cy = 3.0 - r * math.sin(0.4), -1.0 + r * math.cos(0.4)      # centre, to the left
+    assert yaw == pytest.approx(0.4 + 10.0 * w, abs=1e-12)
+    assert (x, y) == pytest.approx((cx + r * math.sin(yaw), cy - r * math.cos(yaw)), abs=1e-9)
+    line = dataclasses.replace(p, combine_yaw_rate_radps=0.0)
+    assert combine_advance(3.0, -1.0, 0.4, line, 2.0) == pytest.approx(
+        (3.0 + 5.0 * math.cos(0.4), -1.0 + 5.0 * math.sin(0.4), 0.4), abs=1e-12)

@@ -175,7 +175,7 @@ def test_same_scenario_and_seed_give_identical_timeseries(tmp_path, shm_clean):
 
 SIGNAL_SCRIPT = textwrap.dedent("""
     import sys
-    sys.path.insert(0, {tests!r})
+    sys.path[:0] = [{repo!r}, {tests!r}]  # this checkout's code, not an installed copy
     import fakes
     from cosim.scenario.config import Scenario
     from cosim.runtime.launcher import launch
@@ -190,7 +190,8 @@ SIGNAL_SCRIPT = textwrap.dedent("""
 def test_signal_stops_cleanly(sig, tmp_path, shm_clean):
     out = tmp_path / "run"
     script = tmp_path / "run_it.py"
-    script.write_text(SIGNAL_SCRIPT.format(tests=str(Path(__file__).parent), out=str(out)))
+    script.write_text(SIGNAL_SCRIPT.format(repo=str(Path(__file__).parent.parent), tests=str(Path(__file__).parent),
+                                           out=str(out)))
     proc = subprocess.Popen([sys.executable, str(script)], cwd=Path(__file__).parent.parent)
     # wait until the ring has turned a few frames, reading the run's own segment (self-describing)
     deadline = time.monotonic() + 60

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 import yaml
@@ -24,8 +25,9 @@ def test_schema_header_and_shape():
     assert schema["additionalProperties"] is False
     assert schema["properties"]["format_version"]["const"] == 1
     assert schema["$defs"]["Timing"]["additionalProperties"] is False
-    assert schema["$defs"]["Controller"]["properties"]["strategy"]["enum"] == [
-        "front_to_back", "back_to_front", "lowest_first"]
+    strategy = schema["$defs"]["Controller"]["properties"]["strategy"]
+    assert strategy["default"] == "front_to_back" and strategy["type"] == "string"
+    assert re.fullmatch(strategy["pattern"], "my_pkg.fill:middle_out") and not re.fullmatch(strategy["pattern"], "a b")
 
 
 def test_write_json_schema(tmp_path):
@@ -45,7 +47,8 @@ def test_packaged_scenarios_validate_against_the_schema():
 @pytest.mark.parametrize("doc, path, fragment", [
     ({"format_version": 1, "timing": {"sensor_rate_hz": 10}}, ["timing"], "'sensor_rate_hz' was unexpected"),
     ({"format_version": 2}, ["format_version"], "1 was expected"),
-    ({"format_version": 1, "controller": {"strategy": "random"}}, ["controller", "strategy"], "is not one of"),
+    ({"format_version": 1, "controller": {"estimator": "random"}}, ["controller", "estimator"], "is not one of"),
+    ({"format_version": 1, "controller": {"strategy": "my mod"}}, ["controller", "strategy"], "does not match"),
     ({"format_version": 1, "duration_s": "10"}, ["duration_s"], "is not of type 'number'"),
     ({"format_version": 1, "sensor": {"mount": {"xyz_m": [1, 2]}}}, ["sensor", "mount", "xyz_m"], "too short"),
     ({"duration_s": 10.0}, [], "'format_version' is a required property"),

@@ -30,7 +30,7 @@ pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="chromium is not instal
 
 RUN_SCRIPT = textwrap.dedent("""
     import sys
-    sys.path.insert(0, {tests!r})
+    sys.path[:0] = [{root!r}, {tests!r}]  # this checkout's code, not another installed copy
     import test_viewer_standins as standins
     from cosim.runtime.launcher import ObserverSpec, launch
     if __name__ == "__main__":
@@ -66,7 +66,8 @@ def panels_in(dom: str) -> dict[str, list[int]]:
 def test_dashboard_updates_with_the_runs_frames(tmp_path):
     out, announce = tmp_path / "run", tmp_path / "viewer.json"
     script = tmp_path / "run_it.py"
-    script.write_text(RUN_SCRIPT.format(tests=str(Path(__file__).parent), out=str(out), announce=str(announce)))
+    script.write_text(RUN_SCRIPT.format(root=str(Path(__file__).parent.parent), tests=str(Path(__file__).parent),
+                                         out=str(out), announce=str(announce)))
     proc = subprocess.Popen([sys.executable, str(script)], cwd=Path(__file__).parent.parent)
     try:
         deadline = time.monotonic() + 60

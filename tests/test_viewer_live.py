@@ -226,7 +226,8 @@ def test_run_flags_wire_the_viewer_and_the_recorder(tmp_path):
 
     args = build_parser().parse_args(["run", "default", "--viewer", "--viewer-port", "9001", "--record"])
     observers, sinks = run_extras(args)
-    assert observers == [ObserverSpec("viewer", "cosim.viewer.server:observe", {"port": 9001})]
+    assert observers == [ObserverSpec("viewer", "cosim.viewer.server:observe",
+                                      {"port": 9001, "host": "127.0.0.1", "announce": None, "size_m": None})]
     assert len(sinks) == 1 and args.record is True
     args = build_parser().parse_args(["run", "--record", str(tmp_path / "x.mcap"), "--record-image-every", "0"])
     with pytest.raises(ValueError, match="image_every must be >= 1"):

@@ -13,7 +13,9 @@ import test_viewer_standins as standins
 from cosim.runtime.launcher import launch
 from cosim.recording import ReplaySource, mcap_sink
 from cosim.viewer.page import page_html
-from cosim.viewer.panels import IMAGE_PANELS, PANELS, PLOT_H, PLOT_W, panel_info, render_panel
+from cosim.viewer.panels import (BACKGROUND, IMAGE_PANELS, MAP_MARGIN_BOTTOM, MAP_MARGIN_LEFT, MAP_MARGIN_TOP,
+                                  MAP_W, PANELS, PLOT_BOX, PLOT_H, PLOT_W, UNKNOWN, lidar_frame, panel_info,
+                                  render_panel)
 from cosim.viewer.server import DashboardServer
 from cosim.viewer.snapshot import Snapshot, auger_now, fullness
 
@@ -73,25 +75,44 @@ def test_camera_images_side_by_side_in_rgb_order():
     assert tuple(img[5, 5]) == (0, 0, 255), "RGBA red must come out red (BGR 0, 0, 255)"
 
 
-def test_lidar_drawings_put_points_where_they_are():
+def _dots(img: np.ndarray) -> list[tuple[float, float]]:
+    """(row, column) centres of the drawn points inside the LiDAR plot box, left to right."""
+    x0, y0, x1, y1 = PLOT_BOX
+    inner = img[y0 + 1:y1, x0 + 1:x1]
+    lit = (inner != BACKGROUND).any(axis=2).astype(np.uint8)
+    n, _, _, centres = cv2.connectedComponentsWithStats(lit)
+    return sorted(((c[1] + y0 + 1, c[0] + x0 + 1) for c in centres[1:]), key=lambda rc: rc[1])
+
+
+def test_lidar_drawings_are_in_the_lidar_frame_x_forward_y_left_z_up():
     pts = np.full((3, 4), np.nan, np.float32)
-    pts[0] = (0.0, 0.0, 5.0, 5.0)
-    pts[1] = (1.0, 0.0, 6.0, 6.1)
+    pts[0] = (0.0, 0.0, 5.0, 5.0)   # camera axes X right, Y up, Z forward: 5 m ahead
+    pts[1] = (1.0, 0.0, 6.0, 6.1)   # 6 m ahead, 1 m to the right (lidar y = -1)
+    np.testing.assert_array_equal(lidar_frame(pts[:2, :3]), [[5, 0, 0], [6, -1, 0]])
     top = decode(render_panel(Snapshot(arrays={"lidar_points": pts}), "lidar_top"))
     assert top.shape == (PLOT_H, PLOT_W, 3)
-    lit = np.argwhere((top != top[PLOT_H // 2, 3]).any(axis=2) & (np.arange(PLOT_H)[:, None] > 24)
-                      & (np.arange(PLOT_H)[:, None] < PLOT_H - 24))
-    # two points: X 0 -> 1 to the right, Z 5 -> 6 upwards, same scale on both axes
-    (r0, c0), (r1, c1) = sorted(map(tuple, lit), key=lambda rc: rc[1])[0], sorted(map(tuple, lit),
-                                                                            key=lambda rc: rc[1])[-1]
+    (r0, c0), (r1, c1) = _dots(top)
+    # from above: x forward up the picture, y left to the left; one scale on both axes
     assert c1 > c0 and r1 < r0 and abs((c1 - c0) - (r0 - r1)) <= 1
+    side = decode(render_panel(Snapshot(arrays={"lidar_points": pts}), "lidar_side"))
+    (r0, c0), (r1, c1) = _dots(side)
+    assert c1 > c0 and abs(r1 - r0) <= 0.5, "from the side: x forward to the right, both at z = 0"
 
 
-def test_heightmaps_share_a_scale_and_grey_unknown():
-    img = decode(render_panel(full_snapshot(), "heightmaps"))
-    assert img.shape[0] == 220
-    right = img[40:200, 460:500]
-    assert (right == (90, 90, 90)).all(axis=2).mean() > 0.9, "unknown cells of the perceived map are grey"
+def test_heightmaps_share_a_scale_with_metre_axes_and_grey_unknown():
+    snap = full_snapshot()
+    img = decode(render_panel(snap, "heightmaps", (6.0, 3.0)))
+    w, top, left = MAP_W, MAP_MARGIN_TOP, MAP_MARGIN_LEFT
+    h = round(w * 3.0 / 6.0)
+    assert img.shape[0] == h + MAP_MARGIN_TOP + MAP_MARGIN_BOTTOM and w >= 500, "large enough to read"
+    right = img[top + 2:top + h - 2, 2 * left + w + 2:2 * (left + w) - 2]
+    assert (right == UNKNOWN).all(axis=2).mean() > 0.99, "unknown cells of the perceived map are grey"
+    # the truth map's peak cell is drawn in the top colour of the shared scale (viridis at 255)
+    truth = standins.truth(10)
+    i, j = np.unravel_index(np.nanargmax(truth), truth.shape)
+    px = img[top + int((j + 0.5) * h / truth.shape[1]), left + int((i + 0.5) * w / truth.shape[0])]
+    top_colour = cv2.applyColorMap(np.array([[255]], np.uint8), cv2.COLORMAP_VIRIDIS)[0, 0]
+    np.testing.assert_array_equal(px, top_colour)
 
 
 def test_page_is_self_contained():

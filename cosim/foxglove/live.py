@@ -30,7 +30,7 @@ from shm_schema import Segment, SnapshotTimeout, StructBlock
 from .publish import FramePublisher, Recorded, RunInfo
 from .scene import scene_update
 
-__all__ = ["observe", "LiveFoxglove", "port_in_use", "DEFAULT_PORT", "DEFAULT_HOST", "INTERVAL_S", "NICE", "SCENE_TOPIC"]
+__all__ = ["observe", "LiveFoxglove", "DEFAULT_PORT", "DEFAULT_HOST", "INTERVAL_S", "NICE", "SCENE_TOPIC"]
 
 log = logging.getLogger("cosim.foxglove")
 
@@ -50,19 +50,6 @@ ANSWER_TIMEOUT_S = 5.0
 SCENE_FIELDS = ("spout_x_m", "spout_y_m", "spout_z_m", "stream_points")
 SCENE_BLOCKS = ("dyn_state", "heightmap_truth", "stream")
 SHM_DIR = Path("/dev/shm")
-
-
-def port_in_use(host: str, port: int) -> bool:
-    """Whether a TCP server could not bind ``host:port`` now (port 0, any free port, is never in use)."""
-    if port == 0:
-        return False
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the server's bind does: TIME_WAIT is free
-        try:
-            s.bind((host, port))
-        except OSError:
-            return True
-    return False
 
 
 class _Listener:

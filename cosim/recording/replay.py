@@ -2,7 +2,9 @@
 
 :class:`ReplaySource` has the viewer source interface (``name``, ``frames_planned``, ``history``,
 ``snapshot()``, ``check_end()``, ``close()``) and plays the recorded frames back at ``speed`` times the
-simulation's pace, holding the last frame at the end (or looping). Topics map back to block names: ``/<block>``
+simulation's pace, holding the last frame at the end (or looping). :meth:`ReplaySource.control` pauses, plays,
+steps and seeks (the dashboard's replay bar; ``POST /api/replay``), :meth:`ReplaySource.position` says where
+the replay is. Topics map back to block names: ``/<block>``
 (cosim.struct) -> struct block, ``/<cam>/rgb`` -> ``<cam>_rgb`` ((H, W, 3) from a CompressedImage, (H, W, 4)
 from a RawImage), ``/<cam>/depth_encoded`` -> ``<cam>_depth`` ((H, W, 4) uint8, the block's bytes),
 ``/lidar/points`` -> ``lidar_points`` (camera axes again), ``/heightmap/<kind>`` -> ``heightmap_<kind>``.
@@ -17,7 +19,10 @@ from pathlib import Path
 from .encode import heights_from_grid, image_from_msg, points_from_cloud
 from .reader import RecordingError, read_recording
 
-__all__ = ["ReplaySource", "block_of_topic"]
+__all__ = ["ReplaySource", "block_of_topic", "REPLAY_ACTIONS"]
+
+#: what :meth:`ReplaySource.control` accepts
+REPLAY_ACTIONS = ("play", "pause", "step", "seek")
 
 #: how many auger samples the replayed chart shows
 HISTORY_LEN = 600
@@ -78,7 +83,10 @@ class ReplaySource:
             self._topics[topic] = (hit[0], hit[1], frames, [m for _, m in msgs])
         self._decoded: dict[str, tuple[int, object]] = {}
         self._lock = threading.Lock()
+        #: the replay clock: frame index ``_base`` at monotonic time ``_t0``, advancing while ``_playing``
         self._t0 = time.monotonic()
+        self._base = 0.0
+        self._playing = True
         self._index = 0
         self._auger = []
         for k in range(len(self.frames)):
@@ -88,6 +96,23 @@ class ReplaySource:
                 t = structs.get(hit[0], {}).get("t_s", self.frames[k] * self.period_s)
                 self._auger.append((t, hit[1], hit[2]))
         self.history = _ReplayHistory(self)
+        self.size_m = self._grid_size_m()
+
+    def _grid_size_m(self) -> tuple[float, float] | None:
+        """(length, width) the recorded truth height map covers, m (its cell size times its cells), or None."""
+        for topic in ("/heightmap/truth", "/heightmap/perceived"):
+            msgs = self.rec.messages.get(topic)
+            if not msgs:
+                continue
+            msg = msgs[0][1]
+            try:
+                nx = int(msg["column_count"])
+                ny = len(msg["data"]) // 4 // nx
+                cell = msg["cell_size"]
+                return nx * float(cell["x"]), ny * float(cell["y"])
+            except (KeyError, TypeError, ValueError, ZeroDivisionError):
+                return None
+        return None
 
     def _latest(self, topic: str, frame: int) -> tuple[int, dict] | None:
         _, _, frames, msgs = self._topics[topic]
@@ -119,10 +144,47 @@ class ReplaySource:
         self._decoded[topic] = (frame, data)
         return data
 
-    def _current_index(self) -> int:
-        step = (time.monotonic() - self._t0) * self.speed / self.period_s
+    def _position(self, now: float) -> float:
+        """Frame index (fractional) of the replay clock at monotonic time ``now``."""
+        pos = self._base + ((now - self._t0) * self.speed / self.period_s if self._playing else 0.0)
         n = len(self.frames)
-        return int(step) % n if self.loop else min(int(step), n - 1)
+        return pos % n if self.loop else min(pos, n - 1)
+
+    def _current_index(self) -> int:
+        return int(self._position(time.monotonic()))
+
+    def control(self, action: str, value: float | None = None) -> dict:
+        """Drive the replay: ``play``, ``pause``, ``step`` (``value`` frames, default 1, negative back; pauses)
+        or ``seek`` (to recorded frame number ``value``, the nearest recorded one at or before it; keeps playing
+        or paused). Returns :meth:`position`. Raises ValueError for another action or a missing seek target."""
+        with self._lock:
+            now = time.monotonic()
+            pos = self._position(now)
+            n = len(self.frames)
+            if action == "play":
+                if not self.loop and int(pos) >= n - 1:
+                    pos = 0.0  # play at the end starts over
+                self._playing = True
+            elif action == "pause":
+                self._playing = False
+            elif action == "step":
+                self._playing = False
+                pos = min(max(int(pos) + int(1 if value is None else value), 0), n - 1)
+            elif action == "seek":
+                if value is None:
+                    raise ValueError("seek needs a frame number")
+                pos = float(max(bisect.bisect_right(self.frames, int(value)) - 1, 0))
+            else:
+                raise ValueError(f"unknown replay action {action!r}; one of {REPLAY_ACTIONS}")
+            self._base, self._t0 = float(int(pos)) if action != "play" else pos, now
+            self._index = int(self._position(now))
+        return self.position()
+
+    def position(self) -> dict:
+        """{playing, frame (recorded frame number shown), index, first, last, count, speed} of the replay."""
+        i = self._current_index()
+        return {"playing": self._playing, "frame": self.frames[i], "index": i, "first": self.frames[0],
+                "last": self.frames[-1], "count": len(self.frames), "speed": self.speed}
 
     def snapshot(self, big: bool = True):
         """The snapshot of the frame the replay clock has reached (``big`` is accepted for the source interface:
@@ -144,8 +206,8 @@ class ReplaySource:
                 (snap.images if kind == "image" else snap.arrays)[block] = data
                 snap.frames[block] = hit[0]
             at_end = not self.loop and self._index == len(self.frames) - 1
-            snap.status = "replay ended" if at_end else "replay"
-            snap.rtf = None if at_end else self.speed
+            snap.status = "replay ended" if at_end else ("replay" if self._playing else "replay paused")
+            snap.rtf = None if at_end or not self._playing else self.speed
             return snap
 
     def check_end(self) -> bool:

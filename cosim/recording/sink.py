@@ -15,8 +15,11 @@ writes synchronously inside the sink, with no process.
 
 Ends: ``close`` (end of run, failure, stop) sends the count and the end mark and waits for the recorder to write
 every frame put and finish the file. If the launcher itself is killed, the recorder sees the pipe close, takes
-every frame counted in the slots' shared count (its mapping outlives their name) and finishes the file. A
-recording failure (disk full, a dead recorder) is logged once and recording stops; the run goes on.
+every frame counted in the slots' shared count (told of or not: the batching loses nothing; its mapping of the
+slots outlives their name) and finishes the file. A recording failure (disk full, a dead, stopped or stalled
+recorder) is logged once, in one line, the recorder is ended (SIGTERM, then SIGKILL) and recording stops; the
+run goes on. ``close`` never waits on a recorder that is stopped (STALL_S) or makes no progress
+(STALL_TIMEOUT_S): an observer can never hold the run.
 """
 from __future__ import annotations
 
@@ -29,6 +32,8 @@ from pathlib import Path
 
 from shm_schema import Schema, Segment
 
+from cosim.runtime.files import write_error
+from cosim.runtime.liveness import STALL_S, cpu_ticks, end_process, is_stopped
 from cosim.runtime.threadpools import single_threaded_pools
 from .slots import FrameSlots
 from .writer import (
@@ -49,6 +54,12 @@ log = logging.getLogger("cosim.recording")
 CREDIT_POLL_S = 0.5
 #: how long ``close`` waits for the recorder to write what it was sent and finish the file, s
 CLOSE_TIMEOUT_S = 120.0
+#: a recorder that gives no slot back and writes nothing for this long is ended (by the sink or ``close``), s
+STALL_TIMEOUT_S = 10.0
+#: grace between SIGTERM and SIGKILL when ending the recorder, s
+END_GRACE_S = 1.0
+#: exit status of a recorder that stopped on a write error (it printed the error in one line)
+EXIT_WRITE_FAILED = 3
 #: shared memory for frame slots when ``queue_frames`` is None, bytes: many slots absorb the recorder's
 #: scheduling delays (it runs at a lower priority than the ring) without holding up the ring
 QUEUE_BYTES = 64 * 2**20
@@ -75,12 +86,25 @@ def slot_count(options: RecordOptions, frame_bytes: int) -> int:
 
 def _recorder_main(conn, credits, run: RunInfo, schema_bytes: bytes, slots_name: str, n_slots: int, path: str,
                    options: RecordOptions, run_id: str, fingerprint: str) -> None:
-    """Recorder process: encode and write each frame put, in order, from its slot, and give the slot back; flush
-    whenever ``flush_s`` has passed since the last flush (busy or idle), so a frame is on disk at most that late
-    after the recorder heard of it."""
+    """Recorder process: :func:`_record`; a write error (a full disk) ends it with one line on stderr, no
+    traceback, and exit status EXIT_WRITE_FAILED."""
     import signal
+    import sys
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the launcher handles Ctrl-C and then closes us
+    try:
+        _record(conn, credits, run, schema_bytes, slots_name, n_slots, path, options, run_id, fingerprint)
+    except OSError as exc:
+        sys.stderr.write(f"recording stopped: {write_error(exc, path)}\n")
+        sys.stderr.flush()
+        os._exit(EXIT_WRITE_FAILED)
+
+
+def _record(conn, credits, run: RunInfo, schema_bytes: bytes, slots_name: str, n_slots: int, path: str,
+            options: RecordOptions, run_id: str, fingerprint: str) -> None:
+    """Encode and write each frame put, in order, from its slot, and give the slot back; flush whenever
+    ``flush_s`` has passed since the last flush (busy or idle), so a frame is on disk at most that late after the
+    recorder heard of it."""
     schema = Schema.decode(schema_bytes)
     writer = McapWriter(run, schema, Path(path), options, run_id, fingerprint, flush_s=options.flush_s)
     slots = FrameSlots.attach(slots_name, schema, Recorded.of(schema).names, n_slots)
@@ -122,6 +146,10 @@ def _give_back(credits, n: int) -> int:
     for _ in range(n):
         credits.release()
     return 0
+
+
+class RecorderGone(RuntimeError):
+    """The recorder process cannot take more frames (ended, stopped, stalled)."""
 
 
 class McapRecorder:
@@ -193,8 +221,7 @@ class McapRecorder:
                 t0 = time.perf_counter()
                 self.waits += 1
                 while not self._credits.acquire(timeout=CREDIT_POLL_S):
-                    if not self._proc.is_alive():
-                        raise RuntimeError(f"the recorder process died (exit {self._proc.exitcode})")
+                    self._check_recorder(time.perf_counter() - t0)
                 self.wait_s += time.perf_counter() - t0
             slot = self._sent % self._slots.slots  # credits come back in order: this slot is free
             self._slots.put(seg, slot, frame, names)
@@ -202,9 +229,65 @@ class McapRecorder:
             self._slots.count = self._sent
             if self._sent - self._told >= self._notify_frames or time.monotonic() - self._t_told >= NOTIFY_S:
                 self._tell()
+        except (OSError, RecorderGone) as exc:  # a dead, stopped or stalled recorder, a full disk: no traceback
+            self._failed = True
+            log.error("recording to %s stopped at frame %d: %s; the run goes on without recording", self.path,
+                      frame, self._why(exc))
+            self._end_recorder()
         except Exception:  # noqa: BLE001 - a recording failure must not end the run
             self._failed = True
             log.exception("recording to %s failed at frame %d; the run goes on without recording", self.path, frame)
+
+    def _check_recorder(self, waited_s: float) -> None:
+        """Raise :class:`RecorderGone` if the recorder died, is stopped, or has given nothing back for
+        STALL_TIMEOUT_S (called while the sink waits for a free slot)."""
+        p = self._proc
+        if not p.is_alive():
+            how = "a write error" if p.exitcode == EXIT_WRITE_FAILED else f"exit {p.exitcode}"
+            raise RecorderGone(f"the recorder process ended ({how})")
+        if is_stopped(p.pid) and waited_s > STALL_S:
+            raise RecorderGone(f"the recorder process (pid {p.pid}) is stopped (SIGSTOP)")
+        if waited_s > STALL_TIMEOUT_S:
+            raise RecorderGone(f"the recorder process (pid {p.pid}) gave no frame slot back in {waited_s:.0f} s")
+
+    def _why(self, exc: Exception) -> str:
+        if isinstance(exc, ConnectionError) and self._proc is not None:  # the pipe to a recorder that ended
+            self._proc.join(CREDIT_POLL_S)
+            code = self._proc.exitcode
+            return "the recorder process ended (" + ("a write error" if code == EXIT_WRITE_FAILED else
+                                                     f"exit {code}") + ")"
+        return str(write_error(exc, self.path)) if isinstance(exc, OSError) else str(exc)
+
+    def _end_recorder(self) -> None:
+        if self._proc is not None and self._proc.exitcode is None:
+            end_process(self._proc, END_GRACE_S)
+
+    def _wait_recorder(self) -> str:
+        """Wait for the recorder to end; "" when it did, else why it was given up on: stopped for STALL_S, no
+        progress (slots given back, file growth, CPU time) for STALL_TIMEOUT_S, or CLOSE_TIMEOUT_S in all."""
+        p, t0 = self._proc, time.monotonic()
+        progress, t_progress, t_stopped = None, t0, None
+        while True:
+            p.join(CREDIT_POLL_S / 5)
+            if p.exitcode is not None:
+                return ""
+            now = time.monotonic()
+            if is_stopped(p.pid):
+                t_stopped = t_stopped or now
+                if now - t_stopped > STALL_S:
+                    return "is stopped (SIGSTOP)"
+            else:
+                t_stopped = None
+            try:
+                mark = (self._credits.get_value(), self.path.stat().st_size, cpu_ticks(p.pid))
+            except (OSError, NotImplementedError):
+                mark = None
+            if mark != progress:
+                progress, t_progress = mark, now
+            elif now - t_progress > STALL_TIMEOUT_S:
+                return f"made no progress in {STALL_TIMEOUT_S:.0f} s"
+            if now - t0 > CLOSE_TIMEOUT_S:
+                return f"did not finish in {CLOSE_TIMEOUT_S:.0f} s"
 
     def _tell(self) -> None:
         """Tell the recorder how many frames have been put (one small message; a no-op when it knows)."""
@@ -225,7 +308,10 @@ class McapRecorder:
             return
         self._closed = True
         if self._writer is not None:
-            self._writer.close()
+            try:
+                self._writer.close()
+            except OSError as exc:
+                log.error("recording to %s could not be finished: %s", self.path, write_error(exc, self.path))
             return
         try:
             self._tell()
@@ -233,11 +319,12 @@ class McapRecorder:
         except OSError:
             pass
         self._conn.close()
-        self._proc.join(CLOSE_TIMEOUT_S)
-        if self._proc.is_alive():
-            log.error("the recorder of %s did not finish in %.0f s; terminating it", self.path, CLOSE_TIMEOUT_S)
-            self._proc.terminate()
-            self._proc.join(5)
+        why = self._wait_recorder()
+        if why:
+            log.error("the recorder of %s %s; ending it (the file keeps the frames flushed so far)", self.path, why)
+            self._end_recorder()
+        elif self._proc.exitcode == EXIT_WRITE_FAILED:
+            log.error("the recorder of %s stopped on a write error (see above)", self.path)
         elif self._proc.exitcode != 0:
             log.error("the recorder of %s ended with exit %s", self.path, self._proc.exitcode)
         if self.waits:

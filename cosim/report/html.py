@@ -5,10 +5,10 @@ import html
 from pathlib import Path
 from typing import Sequence
 
-from .figures import DPI, fig_auger, fig_fullness, fig_heightmaps, fig_profile
+from .figures import DPI, fig_auger, fig_fullness, fig_heightmaps, fig_profile, renderer_label
 from .rundata import RunData
 
-__all__ = ["METRICS", "metrics_row", "write_comparison_report"]
+__all__ = ["METRICS", "metrics_row", "write_comparison_report", "comparison_figures", "renderers_used"]
 
 #: (label, function of a summary dict -> value or None, format)
 METRICS = (
@@ -53,9 +53,15 @@ def _section_table(runs: Sequence[RunData]) -> str:
     return f"<table><tr><th>section peak (m)</th>{head}</tr>{''.join(rows)}</table>"
 
 
-def write_comparison_report(runs: Sequence[RunData], out: Path, notes: str = "") -> Path:
-    """Write figures and report.html for ``runs`` into ``out``; returns the report path."""
-    out.mkdir(parents=True, exist_ok=True)
+def renderers_used(runs: Sequence[RunData]) -> str:
+    """The renderers the perception runs actually used (from their resolved scenarios), e.g. "mock renderer
+    (numpy ray cast)"; "no renderer" when no run perceived."""
+    used = sorted({renderer_label(r) for r in runs if r.scenario.feedback == "perception"})
+    return ", ".join(used) or "no renderer"
+
+
+def comparison_figures(runs: Sequence[RunData]) -> list[tuple[str, str, object]]:
+    """(file name, caption, Figure) of the comparison report."""
     figs = [("fig9_auger.png", "Fig 9: auger location against the desired location, control effort and nudges",
              fig_auger(runs)),
             ("fig10_profile.png", "Fig 10: final longitudinal fill profile against the target and the cart top",
@@ -64,7 +70,16 @@ def write_comparison_report(runs: Sequence[RunData], out: Path, notes: str = "")
     for r in runs:
         if r.heightmap_perceived is not None:
             figs.append((f"fig8_heightmaps_{r.path.name}.png",
-                         f"Fig 8: ground-truth against perceived height map ({r.path.name})", fig_heightmaps(r)))
+                         f"Fig 8: ground-truth against perceived height map ({r.path.name}, "
+                         f"{renderer_label(r)})", fig_heightmaps(r)))
+    return figs
+
+
+def write_comparison_report(runs: Sequence[RunData], out: Path, notes: str = "") -> Path:
+    """Write figures and report.html for ``runs`` into ``out``; returns the report path. The title names the
+    renderer the perception runs used (not the scenario's description, which may name another)."""
+    out.mkdir(parents=True, exist_ok=True)
+    figs = comparison_figures(runs)
     for name, _, fig in figs:
         fig.savefig(out / name, dpi=DPI)
     head = "".join(f"<th>{html.escape(r.path.name)}</th>" for r in runs)
@@ -76,12 +91,13 @@ def write_comparison_report(runs: Sequence[RunData], out: Path, notes: str = "")
                        f"</figure>" for n, c, _ in figs)
     scen = runs[0].scenario
     page = f"""<!doctype html>
-<html lang="en"><head><meta charset="utf-8"><title>Comparison: {html.escape(scen.name)}</title>
+<html lang="en"><head><meta charset="utf-8"><title>Comparison: {html.escape(scen.name)} ({html.escape(renderers_used(runs))})</title>
 <style>body{{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}}
 table{{border-collapse:collapse;margin:1em 0}}td,th{{border:1px solid #ccc;padding:4px 8px;text-align:right}}
 th{{background:#f4f4f4}}figure{{margin:1.5em 0}}img{{max-width:100%}}figcaption{{color:#555}}</style></head>
-<body><h1>Ground truth against perception feedback: {html.escape(scen.name)}</h1>
-<p>{html.escape(scen.description)}</p>
+<body><h1>Ground truth against perception feedback: {html.escape(scen.name)}, {html.escape(renderers_used(runs))}</h1>
+<p>Renderer used for the perception runs: <b id="renderer">{html.escape(renderers_used(runs))}</b>.
+Scenario description: {html.escape(scen.description)}</p>
 <h2>Metrics</h2><table><tr><th></th>{head}</tr>{''.join(body)}</table>
 {_section_table(runs)}
 <h2>Notes</h2><p>{html.escape(notes)}</p>

@@ -1,4 +1,4 @@
-"""Read a run directory back: resolved scenario, summary, timeseries columns and final height maps."""
+"""Read a run directory back: resolved scenario, summary, timeseries (and timing) columns and final height maps."""
 from __future__ import annotations
 
 import csv
@@ -41,20 +41,27 @@ class RunData:
         return t
 
 
+def _csv_columns(path: Path) -> dict[str, np.ndarray]:
+    """Column name -> (rows,) float64 of a CSV file written by the recorder; {} when it does not exist."""
+    if not path.exists():
+        return {}
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows:
+        return {}
+    header, body = rows[0], rows[1:]
+    data = np.array(body, dtype=np.float64) if body else np.zeros((0, len(header)))
+    return {h: data[:, i] for i, h in enumerate(header)}
+
+
 def load_run(path: str | Path) -> RunData:
     """Load a run directory written by :func:`cosim.runtime.launcher.launch`."""
     path = Path(path)
     scenario = Scenario.model_validate_json(json.dumps(yaml.safe_load((path / "scenario.yaml").read_text())))
     summary = json.loads((path / "summary.json").read_text())
-    series: dict[str, np.ndarray] = {}
-    ts = path / "timeseries.csv"
-    if ts.exists():
-        with open(ts, newline="") as f:
-            rows = list(csv.reader(f))
-        if rows:
-            header, body = rows[0], rows[1:]
-            data = np.array(body, dtype=np.float64) if body else np.zeros((0, len(header)))
-            series = {h: data[:, i] for i, h in enumerate(header)}
+    series = _csv_columns(path / "timeseries.csv")
+    timing = _csv_columns(path / "timing.csv")  # the wall-clock columns, same frames (cosim.runtime.recorder)
+    series.update({k: v for k, v in timing.items() if k != "frame" and len(v) == len(series.get("frame", v))})
 
     def npy(name: str) -> np.ndarray | None:
         p = path / f"{name}.npy"

@@ -2,8 +2,10 @@
 
 The child ignores SIGINT (the launcher coordinates a clean stop), turns SIGTERM into SystemExit so that
 ``close`` runs, asks the kernel to SIGTERM it if the launcher dies (PR_SET_PDEATHSIG), and appends its logs and
-stray stdout/stderr to the run's log.txt. Any exception is written with its traceback into the process's
-error slot in the segment header before the process exits with status 1. A clean child exits with status 0
+stray stdout/stderr to the run's log.txt. From its attach on, a thread beats in its header slot
+(cosim.runtime.liveness.Heartbeat), so the launcher tells a stopped or deadlocked child from a slow one. Any
+exception is written with its traceback into the process's error slot in the segment header before the process
+exits with status 1. A clean child exits with status 0
 right after closing, without the interpreter's module teardown.
 """
 from __future__ import annotations
@@ -22,6 +24,7 @@ from shm_schema import Phase, Segment
 
 from cosim.scenario.config import Scenario
 from cosim.errors import RunError
+from .liveness import Heartbeat
 from .lockstep import RingPlan, Token, member_loop
 from .logs import configure_logging
 from .specs import ParticipantSpec
@@ -78,6 +81,7 @@ def child_main(args: ChildArgs) -> None:
     slot = seg.slot(name)
     slot["pid"] = os.getpid()
     slot["phase"] = Phase.STARTING
+    heartbeat = Heartbeat(seg.slot_words(name)).start()
     participant = None
     code = 0
 
@@ -113,6 +117,7 @@ def child_main(args: ChildArgs) -> None:
                 log.exception("close failed")
         if code == 0:
             slot["phase"] = Phase.CLOSED
+        heartbeat.stop()
         seg.close()
         logging.shutdown()
         sys.stdout.flush()

@@ -1,10 +1,17 @@
-"""Launcher and supervisor of one run (issue 2, DESIGN.md sections 1, 2, 6, 7).
+"""Launcher and supervisor of one run (issue 2, DESIGN.md sections 1, 2, 6, 7): set-up, supervision, teardown.
 
-It creates the run's segment, spawns one named process per ring member (spawn context), closes the ring itself
-as the supervisor (recording each completed frame), and ends the run cleanly whatever happens: a child's
-exception comes back with its traceback, a dead child or a hand-off timeout stops the run well within 2 s
-naming the process, the frame and the cause, SIGINT/SIGTERM stop it the same way. Afterwards no child is left
-running and the segment is unlinked; the run directory holds everything up to the last completed frame.
+:func:`launch` reads as the run's lifecycle. :func:`_set_up` locks the run directory, writes scenario.yaml and a
+"running" summary, creates the segment and starts the observers, the sinks and one named process per ring
+member (spawn context). :func:`_supervise` closes the ring as the supervisor, recording each completed frame and
+appending the rows to disk in blocks (cosim.runtime.stream). :func:`_tear_down` ends every process in bounded
+time, writes the last rows, the maps and the final summary, and unlinks the segment.
+
+Whatever happens the run ends cleanly: a child's exception comes back with its traceback; a dead child, or one
+that stops beating (SIGSTOP, a deadlock: cosim.runtime.liveness), stops the run within 2 s naming the process,
+the frame and the cause; a child that beats but does not finish its frame meets the hand-off timeout; any number
+of SIGINT/SIGTERM at any moment stop it the same way (cosim.runtime.signals); a write error (a full disk) is
+named with its path. Afterwards no child is left running and the segment is unlinked; the run directory holds
+everything up to the last completed frame.
 """
 from __future__ import annotations
 
@@ -14,7 +21,6 @@ import multiprocessing as mp
 import os
 import secrets
 import signal
-import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,14 +29,19 @@ from typing import Callable, Mapping, Sequence
 from shm_schema import Phase, Segment
 from shm_schema.layout import SLOT_WORD
 
+from .capacity import check_segment_fits
 from .child import ChildArgs, child_main
 from cosim.scenario.config import Scenario
-from cosim.errors import ParticipantCrashed, ParticipantDied, RunError, RunInterrupted
+from cosim.errors import OutputError, RunError, RunInterrupted
+from .files import RunDirLock, atomic_write, open_run_dir
+from .liveness import Watch, child_failure, stop_processes
 from .lockstep import RingPlan, Token
 from .logs import configure_logging
-from .outputs import default_run_dir, run_data, write_outputs, write_scenario
+from .outputs import default_run_dir, finish_outputs, write_figures, write_scenario
 from .recorder import Recorder
+from .signals import StopSignals, no_sigint_in_children
 from .specs import SUPERVISOR, ParticipantSpec, build_schema, ring_specs
+from .stream import RunFiles, write_running_summary
 from .threadpools import single_threaded_pools
 
 __all__ = ["RunResult", "ObserverSpec", "launch", "EXIT_OK", "EXIT_RUN_ERROR", "EXIT_INTERRUPTED", "JOIN_TIMEOUT_S"]
@@ -87,35 +98,35 @@ class RunResult:
         return bool(self.summary.get("completed"))
 
 
-class _StopFlag:
-    """Set by SIGINT/SIGTERM handlers; checked between wait slices."""
+@dataclass
+class _Run:
+    """One run's state: what set-up made, what supervision and teardown use. Teardown copes with any prefix of
+    set-up having happened (a stop or a failure can come at any step)."""
 
-    def __init__(self) -> None:
-        self.signum: int | None = None
+    scenario: Scenario
+    run_dir: Path
+    lock: RunDirLock
+    stop: StopSignals
+    t_enter: float
+    log_path: Path = Path()
+    ring: list = field(default_factory=list)
+    schema: object = None
+    plan: RingPlan | None = None
+    name: str = ""
+    sems: dict = field(default_factory=dict)
+    seg: Segment | None = None
+    procs: dict[str, mp.process.BaseProcess] = field(default_factory=dict)
+    watchers: dict[str, mp.process.BaseProcess] = field(default_factory=dict)
+    frame_sinks: list = field(default_factory=list)
+    recorder: Recorder | None = None
+    files: RunFiles | None = None
+    t_start: float = 0.0
+    t_first: float = 0.0
 
-    def __call__(self, signum, frame) -> None:
-        self.signum = signum
-
-
-def _install_signals(flag: _StopFlag) -> dict:
-    if threading.current_thread() is not threading.main_thread():
-        return {}
-    return {s: signal.signal(s, flag) for s in (signal.SIGINT, signal.SIGTERM)}
-
-
-def _child_failure(name: str, proc, seg: Segment) -> RunError:
-    err = seg.read_error(name)
-    slot = seg.slot(name)
-    frame = int(slot["frame"])
-    if err:
-        return ParticipantCrashed(
-            f"{name} raised {err['type']} at frame {err['frame']}: {err['message']}",
-            process=name, frame=int(err["frame"]), detail=err.get("traceback", ""))
-    code = proc.exitcode
-    how = f"signal {signal.Signals(-code).name}" if code is not None and code < 0 else f"exit status {code}"
-    phase = Phase.NAMES[int(slot["phase"])] if 0 <= int(slot["phase"]) < len(Phase.NAMES) else "?"
-    return ParticipantDied(f"{name} (pid {proc.pid}) died with {how} during frame {frame} (phase {phase})",
-                           process=name, frame=frame)
+    @property
+    def frame(self) -> int:
+        """The supervisor's last completed frame (-1 before frame 0)."""
+        return int(self.seg.slot(SUPERVISOR)["frame"]) if self.seg is not None else -1
 
 
 def launch(scenario: Scenario, out_dir: Path | None = None, *,
@@ -126,164 +137,227 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
 
     ``observers`` are started after the segment exists and stopped at the end; ``sinks`` are called with each
     completed frame (see :data:`SinkFactory`). The run directory's ``run.json`` names the segment while the run
-    lives, so that ``python -m cosim.viewer --attach RUN_DIR`` can find it.
+    lives, so that ``python -m cosim.viewer --attach RUN_DIR`` can find it. Raises
+    :class:`cosim.runtime.files.RunDirError` before anything starts when the run directory cannot be used (not a
+    directory, not writable, another run writing there), and :class:`cosim.errors.RunRefused` when its shared
+    memory would not fit (cosim.runtime.capacity).
     """
     t_enter = time.perf_counter()
-    run_dir = Path(out_dir) if out_dir is not None else default_run_dir(scenario)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    log_path = run_dir / "log.txt"
-    configure_logging(str(log_path), console=console_log)
-    write_scenario(run_dir, scenario)
-    ring = ring_specs(scenario, specs)
-    schema = build_schema(scenario, ring)
-    plan = RingPlan(tuple(s.name for s in ring), scenario.frames, SUPERVISOR,
-                    tuple(s.name for s in ring if s.defers_outputs(scenario)))
-    name = f"cosim-{os.getpid()}-{secrets.token_hex(3)}"
-    ctx = mp.get_context("spawn")
-    sems = {n: ctx.Semaphore(0) for n in (*plan.members, SUPERVISOR)}
-    flag = _StopFlag()
-    old_handlers = _install_signals(flag)
-    seg = Segment.create(name, schema, run_id=run_dir.name, frames=scenario.frames)
-    procs: dict[str, mp.process.BaseProcess] = {}
-    recorder: Recorder | None = None
-    error: RunError | None = None
-    t_start = t_first = time.perf_counter()
-    log.info("run %s: segment %s (%d bytes, fingerprint %s), ring %s, %d frames", run_dir.name, name,
-             schema.total_nbytes, schema.fingerprint[:12], " -> ".join(plan.members), scenario.frames + 1)
-    (run_dir / "run.json").write_text(json.dumps({"segment": name, "launcher_pid": os.getpid(),
-                                                   "fingerprint": schema.fingerprint,
-                                                   "participants": list(plan.members), "ended": False},
-                                                  indent=2) + "\n")
-    watchers: dict[str, mp.process.BaseProcess] = {}
-    warned: set[str] = set()
-    frame_sinks: list = []
+    stop = StopSignals().install()
     try:
-        sup = seg.slot(SUPERVISOR)
-        sup["pid"] = os.getpid()
-        for obs in observers:
-            w = ctx.Process(target=_observer_main, args=(obs, name, str(log_path)), name=f"cosim-{obs.name}",
-                            daemon=True)
-            with single_threaded_pools():
-                w.start()
-            watchers[obs.name] = w
-        for make_sink in sinks:
-            frame_sinks.append(make_sink(scenario, run_dir, seg))
-        scenario_json = scenario.model_dump_json()
-        for spec in ring:
-            args = ChildArgs(spec, scenario_json, name, schema.fingerprint, plan, sems, str(log_path), os.getpid(),
-                             scenario.timing.startup_timeout_s, scenario.timing.handoff_timeout_s + 5.0, time.time())
-            p = ctx.Process(target=child_main, args=(args,), name=f"cosim-{spec.name}", daemon=True)
-            with single_threaded_pools():
-                p.start()
-            procs[spec.name] = p
-        recorder = Recorder(seg, plan.members, deferred=bool(plan.deferred))
-        finished: set[str] = set()
-
-        def check_stop() -> None:
-            if flag.signum is not None:
-                raise RunInterrupted(f"stopped by {signal.Signals(flag.signum).name} at frame {int(sup['frame'])}",
-                                     process=SUPERVISOR, frame=int(sup["frame"]))
-
-        def check() -> None:
-            check_stop()
-            for n, p in procs.items():
-                if p.exitcode is None or n in finished:
-                    continue
-                if p.exitcode == 0 and int(seg.slot(n)["phase"]) in (Phase.DONE, Phase.CLOSED):
-                    finished.add(n)
-                    continue
-                raise _child_failure(n, p, seg)
-
-        token = Token(seg, sems)
-        first = plan.members[0]
-        t_turn = time.monotonic_ns()
-        token.give(first, 0)
-        sw = seg.slot_words(SUPERVISOR)
-        phase, frame_word, heartbeat = SLOT_WORD["phase"], SLOT_WORD["frame"], SLOT_WORD["heartbeat_ns"]
-        for frame in range(plan.frames + 1):
-            sw[phase] = Phase.WAITING
-            timeout = scenario.timing.handoff_timeout_s
-            if frame == 0:
-                timeout += scenario.timing.startup_timeout_s
-            token.take(SUPERVISOR, frame, timeout, check)
-            turn = time.monotonic_ns() - t_turn
-            if frame == 0:
-                t_first = time.perf_counter()
-            sw[frame_word] = frame
-            sw[phase] = Phase.STEPPING
-            recorder.record(frame, turn if frame > 0 else None)
-            for sink in frame_sinks:
-                sink(seg, frame)
-            check_stop()
-            sw[heartbeat] = time.monotonic_ns()
-            if frame < plan.frames:
-                t_turn = time.monotonic_ns()
-                token.give(first, frame + 1)
-            # what does not read the blocks runs while the next frame does
-            _warn_dead_observers(watchers, warned)
-            if progress is not None:
-                progress(frame, plan.frames, frame * scenario.timing.sensor_period_s, time.perf_counter() - t_start)
-        if plan.flush_frame is not None:
-            # the deferred members publish their last frame's outputs
-            sw[phase] = Phase.WAITING
-            token.give(plan.flush_next_of(SUPERVISOR), plan.flush_frame)
-            token.take(SUPERVISOR, plan.flush_frame, scenario.timing.handoff_timeout_s, check)
-            sw[phase] = Phase.STEPPING
-            recorder.record_flush()
-            for sink in frame_sinks:
-                sink(seg, plan.flush_frame)
-        sup["phase"] = Phase.DONE
-    except RunError as exc:
-        error = exc
-    except BaseException as exc:  # noqa: BLE001 - a supervisor bug still ends the run cleanly
-        error = RunError(f"supervisor failed: {type(exc).__name__}: {exc}", process=SUPERVISOR,
-                         frame=int(seg.slot(SUPERVISOR)["frame"]))
-        log.exception("supervisor failure")
+        ring = ring_specs(scenario, specs)
+        schema = build_schema(scenario, ring)
+        check_segment_fits(schema)
+        run_dir = Path(out_dir) if out_dir is not None else default_run_dir(scenario)
+        run = _Run(scenario, run_dir, open_run_dir(run_dir), stop, t_enter, ring=ring, schema=schema)
+        try:
+            error: RunError | None = None
+            try:
+                _set_up(run, console_log, observers, sinks)
+                _supervise(run, progress)
+            except RunError as exc:
+                error = exc
+            except BaseException as exc:  # noqa: BLE001 - a supervisor bug still ends the run cleanly
+                error = RunError(f"supervisor failed: {type(exc).__name__}: {exc}", process=SUPERVISOR,
+                                 frame=run.frame)
+                log.exception("supervisor failure")
+            return _tear_down(run, error)
+        finally:
+            run.lock.release()
     finally:
-        wall = time.perf_counter() - t_start
-        for sink in frame_sinks:
-            close = getattr(sink, "close", None)
-            if close is not None:
-                try:
-                    close()
-                except Exception:  # noqa: BLE001 - a sink's close must not hide the run's outcome
-                    log.exception("closing a frame sink failed")
-        _stop_children(procs, graceful=error is None)
-        _stop_children(watchers, graceful=False)
-        if recorder is not None:
-            recorder.finish()
-        for s, h in old_handlers.items():
-            signal.signal(s, h)
-        t_stopped = time.perf_counter()
+        stop.restore()
+
+
+def _set_up(run: _Run, console_log: bool, observers: Sequence[ObserverSpec],
+            sinks: Sequence[SinkFactory]) -> None:
+    """Logging, scenario.yaml, the "running" summary, the segment, then observers, sinks and ring children.
+    A stop signal is honoured between any two steps."""
+    scenario, stop = run.scenario, run.stop
+    run.log_path = run.run_dir / "log.txt"
+    configure_logging(str(run.log_path), console=console_log)
+    write_scenario(run.run_dir, scenario)
+    schema = run.schema
+    run.plan = plan = RingPlan(tuple(s.name for s in run.ring), scenario.frames, SUPERVISOR,
+                               tuple(s.name for s in run.ring if s.defers_outputs(scenario)))
+    run.name = name = f"cosim-{os.getpid()}-{secrets.token_hex(3)}"
+    write_running_summary(run.run_dir, {"scenario": scenario.name, "participants": list(plan.members),
+                                        "seed": scenario.seed, "frames_planned": scenario.frames + 1,
+                                        "launcher_pid": os.getpid()})
+    stop.check(-1)
+    ctx = mp.get_context("spawn")
+    run.sems = {n: ctx.Semaphore(0) for n in (*plan.members, SUPERVISOR)}
+    run.seg = seg = Segment.create(name, schema, run_id=run.run_dir.name, frames=scenario.frames)
+    run.t_start = run.t_first = time.perf_counter()
+    log.info("run %s: segment %s (%d bytes, fingerprint %s), ring %s, %d frames", run.run_dir.name, name,
+             schema.total_nbytes, schema.fingerprint[:12], " -> ".join(plan.members), scenario.frames + 1)
+    _write_run_json(run.run_dir, {"segment": name, "launcher_pid": os.getpid(), "fingerprint": schema.fingerprint,
+                                  "participants": list(plan.members), "ended": False})
+    seg.slot(SUPERVISOR)["pid"] = os.getpid()
+    for obs in observers:
+        stop.check(-1)
+        w = ctx.Process(target=_observer_main, args=(obs, name, str(run.log_path)), name=f"cosim-{obs.name}",
+                        daemon=True)
+        with single_threaded_pools(), no_sigint_in_children():
+            w.start()
+        run.watchers[obs.name] = w
+    for make_sink in sinks:
+        stop.check(-1)
+        with no_sigint_in_children():
+            run.frame_sinks.append(make_sink(scenario, run.run_dir, seg))
+    scenario_json = scenario.model_dump_json()
+    for spec in run.ring:
+        stop.check(-1)
+        args = ChildArgs(spec, scenario_json, name, schema.fingerprint, plan, run.sems, str(run.log_path),
+                         os.getpid(), scenario.timing.startup_timeout_s, scenario.timing.handoff_timeout_s + 5.0,
+                         time.time())
+        p = ctx.Process(target=child_main, args=(args,), name=f"cosim-{spec.name}", daemon=True)
+        with single_threaded_pools(), no_sigint_in_children():
+            p.start()
+        run.procs[spec.name] = p
+    run.recorder = Recorder(seg, plan.members, deferred=bool(plan.deferred))
+    run.files = RunFiles(run.run_dir, run.recorder, lag=1 if plan.deferred else 0)
+
+
+def _supervise(run: _Run, progress: Progress | None) -> None:
+    """Close the ring for every frame (and the flush turn): record, feed the sinks, append rows, report progress.
+
+    Between wait slices it checks, in this order: a stop signal, a child that stopped beating or is stopped
+    (named within ~1.5 s, cosim.runtime.liveness), a child that exited. Raises the RunError that ends the run."""
+    scenario, seg, plan, recorder, stop = run.scenario, run.seg, run.plan, run.recorder, run.stop
+    sup = seg.slot(SUPERVISOR)
+    watch = Watch(seg, run.procs)
+    finished: set[str] = set()
+    warned: set[str] = set()
+
+    def check() -> None:
+        stop.check(int(sup["frame"]))
+        watch.check()
+        for n, p in run.procs.items():
+            if p.exitcode is None or n in finished:
+                continue
+            if p.exitcode == 0 and int(seg.slot(n)["phase"]) in (Phase.DONE, Phase.CLOSED):
+                finished.add(n)
+                continue
+            raise child_failure(n, p, seg)
+
+    token = Token(seg, run.sems)
+    first = plan.members[0]
+    t_turn = time.monotonic_ns()
+    token.give(first, 0)
+    sw = seg.slot_words(SUPERVISOR)
+    phase, frame_word, heartbeat = SLOT_WORD["phase"], SLOT_WORD["frame"], SLOT_WORD["heartbeat_ns"]
+    for frame in range(plan.frames + 1):
+        sw[phase] = Phase.WAITING
+        timeout = scenario.timing.handoff_timeout_s
+        if frame == 0:
+            timeout += scenario.timing.startup_timeout_s
+        token.take(SUPERVISOR, frame, timeout, check)
+        turn = time.monotonic_ns() - t_turn
+        if frame == 0:
+            run.t_first = time.perf_counter()
+        sw[frame_word] = frame
+        sw[phase] = Phase.STEPPING
+        recorder.record(frame, turn if frame > 0 else None)
+        for sink in run.frame_sinks:
+            sink(seg, frame)
+        stop.check(frame)
+        sw[heartbeat] = time.monotonic_ns()
+        if frame < plan.frames:
+            t_turn = time.monotonic_ns()
+            token.give(first, frame + 1)
+        # what does not read the blocks runs while the next frame does
+        run.files.maybe_append()
+        _warn_dead_observers(run.watchers, warned)
+        if progress is not None:
+            progress(frame, plan.frames, frame * scenario.timing.sensor_period_s, time.perf_counter() - run.t_start)
+    if plan.flush_frame is not None:
+        # the deferred members publish their last frame's outputs
+        sw[phase] = Phase.WAITING
+        token.give(plan.flush_next_of(SUPERVISOR), plan.flush_frame)
+        token.take(SUPERVISOR, plan.flush_frame, scenario.timing.handoff_timeout_s, check)
+        sw[phase] = Phase.STEPPING
+        recorder.record_flush()
+        for sink in run.frame_sinks:
+            sink(seg, plan.flush_frame)
+    sup["phase"] = Phase.DONE
+
+
+def _tear_down(run: _Run, error: RunError | None) -> RunResult:
+    """End every process (bounded), write the last rows, maps and the final summary, unlink the segment, draw the
+    figures. Signals meanwhile are only counted (a first one cuts the figures short); the exit status is 130
+    whenever a stop signal came."""
+    t_down = time.perf_counter()
+    wall = t_down - run.t_start if run.t_start else 0.0
+    for sink in run.frame_sinks:
+        close = getattr(sink, "close", None)
+        if close is not None:
+            try:
+                close()
+            except Exception:  # noqa: BLE001 - a sink's close must not hide the run's outcome
+                log.exception("closing a frame sink failed")
+    stop_processes(run.procs, graceful=error is None, join_timeout_s=JOIN_TIMEOUT_S, grace_s=TERMINATE_GRACE_S)
+    stop_processes(run.watchers, graceful=False, join_timeout_s=JOIN_TIMEOUT_S, grace_s=TERMINATE_GRACE_S)
+    if run.recorder is not None:
+        run.recorder.finish()
+    t_stopped = time.perf_counter()
+    if error is None and run.stop.signum is not None:
+        error = run.stop.error(run.frame)
     if error is not None:
         log.error("run failed: %s", error)
         if error.detail:
             log.error("traceback of %s:\n%s", error.process, error.detail)
     try:
-        summary = write_outputs(run_dir, scenario, recorder, ring, wall_time_s=wall, error=error)
+        summary, failure = finish_outputs(run.run_dir, run.scenario, run.recorder, run.ring, wall_time_s=wall,
+                                          error=error, files=run.files)
     finally:
-        seg.close()
-        seg.unlink()
-        info = json.loads((run_dir / "run.json").read_text())
-        info["ended"] = True
-        (run_dir / "run.json").write_text(json.dumps(info, indent=2) + "\n")
+        if run.seg is not None:
+            run.seg.close()
+            run.seg.unlink()
+            _end_run_json(run.run_dir)
+    if failure is not None:
+        log.error("%s", failure)
+        error = error or failure
     t_outputs = time.perf_counter()
-    if scenario.outputs.figures and "dyn_state" in schema and recorder is not None and recorder.frames:
-        try:
-            from cosim.report import write_run_figures
-
-            write_run_figures(run_data(run_dir, scenario, summary, recorder))
-        except Exception:  # noqa: BLE001 - figures are a convenience; the run's data is already written
-            log.exception("writing the run's figures failed")
-    code = EXIT_OK if error is None else EXIT_INTERRUPTED if isinstance(error, RunInterrupted) else EXIT_RUN_ERROR
+    if run.schema is not None and run.stop.signum is None and failure is None:
+        _write_figures(run, summary)
+    code = _exit_code(error, run.stop)
     t_end = time.perf_counter()
     log.info("run %s %s in %.2f s (exit %d); start-up %.2f s to the first frame (set-up before spawning %.2f s), "
-             "shut-down %.2f s (children %.2f s, outputs %.2f s, figures %.2f s); launcher cpu %.2f s", run_dir.name,
-             "completed" if error is None else "stopped", wall, code, t_first - t_enter, t_start - t_enter,
-             t_end - t_start - wall, t_stopped - t_start - wall, t_outputs - t_stopped, t_end - t_outputs,
-             time.process_time())
-    return RunResult(run_dir, summary, error, name, code, {n: p.exitcode for n, p in procs.items()},
-                     dict(recorder.arrays) if recorder is not None else {})
+             "shut-down %.2f s (children %.2f s, outputs %.2f s, figures %.2f s); launcher cpu %.2f s",
+             run.run_dir.name, "completed" if error is None else "stopped", wall, code, run.t_first - run.t_enter,
+             run.t_start - run.t_enter if run.t_start else 0.0, t_end - t_down, t_stopped - t_down,
+             t_outputs - t_stopped, t_end - t_outputs, time.process_time())
+    return RunResult(run.run_dir, summary, error, run.name, code, {n: p.exitcode for n, p in run.procs.items()},
+                     dict(run.recorder.arrays) if run.recorder is not None else {})
+
+
+def _write_figures(run: _Run, summary: dict) -> None:
+    """The run's figures; a stop signal cuts them short (the run's data is already written)."""
+    try:
+        with run.stop.raising():
+            write_figures(run.run_dir, run.scenario, summary, run.recorder)
+    except RunInterrupted:
+        log.warning("figures not written: stopped by %s", run.stop.name)
+
+
+def _exit_code(error: RunError | None, stop: StopSignals) -> int:
+    if stop.signum is not None or isinstance(error, RunInterrupted):
+        return EXIT_INTERRUPTED
+    return EXIT_OK if error is None else EXIT_RUN_ERROR
+
+
+def _write_run_json(run_dir: Path, info: dict) -> None:
+    atomic_write(run_dir / "run.json", json.dumps(info, indent=2) + "\n")
+
+
+def _end_run_json(run_dir: Path) -> None:
+    """Mark run.json ended (the segment is gone); a write error here is only logged."""
+    try:
+        info = json.loads((run_dir / "run.json").read_text())
+        info["ended"] = True
+        _write_run_json(run_dir, info)
+    except (OSError, ValueError, OutputError) as exc:
+        log.warning("could not mark run.json ended: %s", exc)
 
 
 def _observer_main(obs: ObserverSpec, segment: str, log_path: str) -> None:
@@ -301,22 +375,3 @@ def _warn_dead_observers(watchers: Mapping[str, mp.process.BaseProcess], warned:
         if w.exitcode is not None and n not in warned:
             warned.add(n)
             log.warning("observer %s ended (exit %s); the run goes on without it", n, w.exitcode)
-
-
-def _stop_children(procs: Mapping[str, mp.process.BaseProcess], *, graceful: bool) -> None:
-    """Join children after a clean finish; otherwise terminate, then kill whatever is left. Never leaves one."""
-    if graceful:
-        deadline = time.monotonic() + JOIN_TIMEOUT_S
-        for p in procs.values():
-            p.join(max(0.0, deadline - time.monotonic()))
-    alive = [p for p in procs.values() if p.is_alive()]
-    for p in alive:
-        p.terminate()
-    deadline = time.monotonic() + TERMINATE_GRACE_S
-    for p in alive:
-        p.join(max(0.0, deadline - time.monotonic()))
-    for p in procs.values():
-        if p.is_alive():
-            log.warning("%s (pid %s) ignored SIGTERM; killing it", p.name, p.pid)
-            p.kill()
-            p.join(1.0)

@@ -8,7 +8,7 @@ check liveness between slices; nothing spins and nothing sleeps to synchronise. 
 overlaps the next members' turns; a flush turn after the last frame lets it publish its final outputs.
 
 The same member code runs over OS processes (:class:`Token` over multiprocessing semaphores) or in one process
-(:func:`run_inprocess`, the ring unrolled into a loop).
+(:class:`InProcessRing`, the ring unrolled into a loop stepped a frame at a time).
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ from cosim.errors import FrameMismatch, HandoffTimeout
 _TOKEN, _PHASE, _FRAME = SLOT_WORD["token"], SLOT_WORD["phase"], SLOT_WORD["frame"]
 _HEARTBEAT, _STEP = SLOT_WORD["heartbeat_ns"], SLOT_WORD["step_ns"]
 
-__all__ = ["POLL_S", "RingPlan", "Token", "member_loop", "describe_stall", "run_inprocess"]
+__all__ = ["POLL_S", "RingPlan", "Token", "member_loop", "describe_stall", "InProcessRing", "run_inprocess"]
 
 #: slice of every blocking wait, s: bounds how late a dead peer or a stop request is noticed
 POLL_S = 0.05
@@ -168,35 +168,74 @@ def _check_deferred(name: str, deferred: bool) -> None:
                            "outputs (ParticipantSpec.defers)")
 
 
+class InProcessRing:
+    """The ring unrolled in one process and stepped a frame at a time (``simulate`` and ``cosim.Simulation``).
+
+    :meth:`step` does one turn: every participant in order (a deferred member's rest right after its step),
+    then ``on_frame(frame)``; the turn of the last frame also runs the flush turn of the ``deferred`` members
+    and ``on_flush``. Every block is read and written at the same point of the token order as in the process
+    ring, so both give the same results. Participants must already be started. Header slots are kept as in
+    the OS-process ring so that recorders and diagnostics read the same fields. ``current`` names the member
+    stepping (or that raised), ``None`` between turns.
+    """
+
+    def __init__(self, seg: Segment, participants: Sequence, frames: int,
+                 on_frame: Callable[[int], None] | None = None, *, deferred: Sequence[str] = (),
+                 on_flush: Callable[[], None] | None = None):
+        self.participants = tuple(participants)
+        self.frames = frames
+        self.deferred = tuple(deferred)
+        self._slots = [seg.slot(p.name) for p in self.participants]
+        self._on_frame, self._on_flush = on_frame, on_flush
+        #: the frame the next :meth:`step` runs (``frames + 1`` once the ring is done)
+        self.next_frame = 0
+        self.current: str | None = None
+        self.turn_ns = 0
+
+    @property
+    def done(self) -> bool:
+        """Whether the last frame (and the flush turn) has run."""
+        return self.next_frame > self.frames
+
+    def step(self) -> int:
+        """Run the next frame's turn (and, after the last frame, the flush turn); return the frame id."""
+        frame = self.next_frame
+        if frame > self.frames:
+            raise RuntimeError(f"the ring has run all its {self.frames + 1} frames")
+        clock = time.monotonic_ns
+        t_turn = clock()
+        for p, slot in zip(self.participants, self._slots):
+            self.current = p.name
+            slot["frame"] = frame
+            slot["phase"] = Phase.STEPPING
+            t0 = clock()
+            rest = p.step(frame)
+            if rest is not None:
+                _check_deferred(p.name, p.name in self.deferred)
+                rest()
+            slot["step_ns"] = clock() - t0
+            slot["phase"] = Phase.WAITING
+        self.current = None
+        self.turn_ns = clock() - t_turn
+        if self._on_frame is not None:
+            self._on_frame(frame)
+        if frame == self.frames and self.deferred:
+            for p, slot in zip(self.participants, self._slots):
+                if p.name in self.deferred:
+                    self.current = p.name
+                    slot["frame"] = frame + 1
+                    p.flush()
+            self.current = None
+            if self._on_flush is not None:
+                self._on_flush()
+        self.next_frame = frame + 1
+        return frame
+
+
 def run_inprocess(seg: Segment, participants: Sequence, frames: int,
                   on_frame: Callable[[int], None] | None = None, *, deferred: Sequence[str] = (),
                   on_flush: Callable[[], None] | None = None) -> None:
-    """The ring unrolled in one process: for each frame, step every participant in order (a deferred member's
-    rest right after its step), then ``on_frame``; then the flush turn of the ``deferred`` members and
-    ``on_flush``. Every block is read and written at the same point of the token order as in the process
-    ring, so both give the same results.
-
-    Participants must already be started. Header slots are kept as in the OS-process ring so that recorders
-    and diagnostics read the same fields.
-    """
-    slots = [seg.slot(p.name) for p in participants]
-    for frame in range(frames + 1):
-        for p, slot in zip(participants, slots):
-            slot["frame"] = frame
-            slot["phase"] = Phase.STEPPING
-            t0 = time.monotonic_ns()
-            rest = p.step(frame)
-            if rest is not None:
-                _check_deferred(p.name, p.name in deferred)
-                rest()
-            slot["step_ns"] = time.monotonic_ns() - t0
-            slot["phase"] = Phase.WAITING
-        if on_frame is not None:
-            on_frame(frame)
-    if deferred:
-        for p, slot in zip(participants, slots):
-            if p.name in deferred:
-                slot["frame"] = frames + 1
-                p.flush()
-        if on_flush is not None:
-            on_flush()
+    """Run every frame of an :class:`InProcessRing` (frames 0..``frames``, then the flush turn)."""
+    ring = InProcessRing(seg, participants, frames, on_frame, deferred=deferred, on_flush=on_flush)
+    while not ring.done:
+        ring.step()

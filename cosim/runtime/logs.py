@@ -4,9 +4,27 @@ from __future__ import annotations
 import logging
 import sys
 
-__all__ = ["configure_logging", "LOG_FORMAT"]
+__all__ = ["configure_logging", "LOG_FORMAT", "QuietFileHandler"]
 
 LOG_FORMAT = "%(asctime)s.%(msecs)03d %(processName)-18s %(levelname)-7s %(name)s: %(message)s"
+
+
+class QuietFileHandler(logging.FileHandler):
+    """A FileHandler that stops writing at its first OSError (a full disk) instead of printing a traceback for
+    every record (logging's default); the run names the write error itself (cosim.runtime.files)."""
+
+    failed: OSError | None = None
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if self.failed is None:
+            super().emit(record)
+
+    def handleError(self, record: logging.LogRecord) -> None:
+        exc = sys.exc_info()[1]
+        if isinstance(exc, OSError):
+            self.failed = exc
+            return
+        super().handleError(record)
 
 
 def configure_logging(log_path: str | None, *, console: bool, level: int = logging.INFO) -> None:
@@ -17,7 +35,7 @@ def configure_logging(log_path: str | None, *, console: bool, level: int = loggi
         h.close()
     fmt = logging.Formatter(LOG_FORMAT, datefmt="%H:%M:%S")
     if log_path:
-        fh = logging.FileHandler(log_path, mode="a", encoding="utf-8")
+        fh = QuietFileHandler(log_path, mode="a", encoding="utf-8")
         fh.setFormatter(fmt)
         root.addHandler(fh)
     if console:

@@ -1,11 +1,15 @@
-"""The run directory (DESIGN.md section 6): scenario.yaml, log.txt, summary.json, timeseries.csv, final maps.
+"""The run directory (DESIGN.md section 6): scenario.yaml, log.txt, summary.json, timeseries.csv, timing.csv,
+final maps.
 
 Written by the launcher from what the recorder holds, so a failed or stopped run still writes everything up to
-its last completed frame, with ``completed: false`` and the error.
+its last completed frame, with ``completed: false`` and the error; during the run the summary says ``status:
+running`` and the rows are appended as frames complete (cosim.runtime.stream). Every file that replaces another
+is written atomically (cosim.runtime.files); a write error (a full disk) is named with its path and kept in the
+summary, which was reserved at the start so that it can always be written.
 """
 from __future__ import annotations
 
-import json
+import io
 import logging
 import math
 import time
@@ -16,12 +20,13 @@ from typing import Sequence
 import numpy as np
 
 from cosim.scenario.config import Scenario
-from cosim.errors import RunError
+from cosim.errors import OutputError, RunError, RunInterrupted
+from .files import atomic_write
 from .recorder import Recorder
 from .specs import ParticipantSpec, load_callable
 
-__all__ = ["default_run_dir", "write_scenario", "compose_summary", "write_outputs", "saved_maps", "run_data",
-           "clean_json", "STAGE_KEYS", "SAVED_MAPS"]
+__all__ = ["default_run_dir", "write_scenario", "compose_summary", "write_outputs", "finish_outputs", "write_figures",
+           "saved_maps", "run_data", "clean_json", "run_status", "STAGE_KEYS", "SAVED_MAPS"]
 
 log = logging.getLogger("cosim.runtime.outputs")
 
@@ -46,7 +51,7 @@ def write_scenario(run_dir: Path, scenario: Scenario) -> None:
     """scenario.yaml: the fully resolved scenario (every field, defaults included)."""
     from cosim.scenario.loader import dump_resolved
 
-    (run_dir / "scenario.yaml").write_text(dump_resolved(scenario))
+    atomic_write(run_dir / "scenario.yaml", dump_resolved(scenario))
 
 
 def clean_json(obj):
@@ -86,6 +91,7 @@ def compose_summary(scenario: Scenario, recorder: Recorder | None, ring: Sequenc
         "frames": completed_frames,
         "frames_planned": scenario.frames + 1,
         "completed": error is None and last == scenario.frames,
+        "status": run_status(error),
         "written_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
     }
     if error is not None:
@@ -120,6 +126,11 @@ def compose_summary(scenario: Scenario, recorder: Recorder | None, ring: Sequenc
     return summary
 
 
+def run_status(error: RunError | None) -> str:
+    """summary.json's ``status``: completed, interrupted (SIGINT/SIGTERM), failed (``running`` while it runs)."""
+    return "completed" if error is None else "interrupted" if isinstance(error, RunInterrupted) else "failed"
+
+
 def saved_maps(recorder: Recorder) -> dict[str, np.ndarray]:
     """The final height maps a run directory keeps (``<name>.npy``): those of SAVED_MAPS the run wrote."""
     return {n: recorder.arrays[n] for n in SAVED_MAPS if n in recorder.arrays and recorder.array_frames.get(n, -1) >= 0}
@@ -136,15 +147,75 @@ def run_data(run_dir: Path, scenario: Scenario, summary: dict, recorder: Recorde
 
 
 def write_outputs(run_dir: Path, scenario: Scenario, recorder: Recorder | None, ring: Sequence[ParticipantSpec],
-                  *, wall_time_s: float, error: RunError | None) -> dict:
-    """Write timeseries.csv, the final arrays and summary.json; return the summary."""
-    if recorder is not None:
-        recorder.write_csv(run_dir / "timeseries.csv")
-        for name, a in saved_maps(recorder).items():
-            np.save(run_dir / f"{name}.npy", a)
-    summary = compose_summary(scenario, recorder, ring, wall_time_s=wall_time_s, error=error)
-    (run_dir / "summary.json").write_text(json.dumps(clean_json(summary), indent=2) + "\n")
+                  *, wall_time_s: float, error: RunError | None, extra: dict | None = None) -> dict:
+    """Write timeseries.csv, timing.csv, the final arrays and summary.json whole (with ``extra``'s keys added);
+    return the summary. Raises
+    :class:`OutputError` after writing what it could (the summary names the failure)."""
+    summary, failure = finish_outputs(run_dir, scenario, recorder, ring, wall_time_s=wall_time_s, error=error,
+                                      extra=extra)
+    if failure is not None:
+        raise failure
     return summary
+
+
+def finish_outputs(run_dir: Path, scenario: Scenario, recorder: Recorder | None, ring: Sequence[ParticipantSpec],
+                   *, wall_time_s: float, error: RunError | None, files=None,
+                   extra: dict | None = None) -> tuple[dict, OutputError | None]:
+    """The run's last writes: the rows not yet appended (``files``, a :class:`cosim.runtime.stream.RunFiles`; None:
+    write both CSV files whole), the final maps, then summary.json (atomically; over the reserved one on a full
+    disk). Returns (summary, the first write error or None); a write error becomes the run's error when it had
+    none, and the files after it are still tried."""
+    from .stream import write_final_summary
+
+    failure: OutputError | None = None
+    if recorder is not None:
+        try:
+            if files is not None:
+                files.finish()
+            else:
+                series, timing = recorder.csv_rows(0, len(recorder.frames), {})
+                atomic_write(run_dir / "timeseries.csv", recorder.csv_header(recorder.series_columns) + series)
+                if len(recorder.timing_columns) > 1:
+                    atomic_write(run_dir / "timing.csv", recorder.csv_header(recorder.timing_columns) + timing)
+        except OutputError as exc:
+            failure = exc
+        for name, a in saved_maps(recorder).items():
+            try:
+                atomic_write(run_dir / f"{name}.npy", _npy_bytes(a))
+            except OutputError as exc:
+                failure = failure or exc
+    if files is not None and files.failed is not None:
+        failure = failure or files.failed
+    if error is None and failure is not None:
+        error = failure
+    summary = compose_summary(scenario, recorder, ring, wall_time_s=wall_time_s, error=error)
+    summary.update(extra or {})
+    try:
+        write_final_summary(run_dir, clean_json(summary))
+    except OutputError as exc:
+        failure = failure or exc
+    return summary, failure
+
+
+def _npy_bytes(a: np.ndarray) -> bytes:
+    buf = io.BytesIO()
+    np.save(buf, a)
+    return buf.getvalue()
+
+
+def write_figures(run_dir: Path, scenario: Scenario, summary: dict, recorder: Recorder | None) -> None:
+    """The run's figures (``outputs.figures``; needs dynamics' record). A failure is logged, never raised: the
+    run's data is already written."""
+    if not scenario.outputs.figures or recorder is None or not recorder.frames or "dyn_state" not in recorder.blocks:
+        return
+    try:
+        from cosim.report import write_run_figures
+
+        write_run_figures(run_data(run_dir, scenario, summary, recorder))
+    except RunInterrupted:
+        raise
+    except Exception:  # noqa: BLE001 - figures are a convenience
+        log.exception("writing the run's figures failed")
 
 
 def _summarize(spec: ParticipantSpec, scenario: Scenario, series: dict, recorder: Recorder) -> dict:

@@ -6,7 +6,10 @@ final arrays are those of the last *completed* frame, whatever happens to a writ
 ``ARRAY_COPY_LIMIT``: the LiDAR points) are copied once, by :meth:`Recorder.finish`, and only if their seqlock
 counter shows no write since the last completed frame (a writer that failed in the next frame leaves them out),
 which spares the supervisor a 0.6 MB copy per frame on the ring's critical path. Wall-clock figures are kept
-apart from the timeseries, so two runs of the same scenario and seed write byte-identical CSV files.
+apart from the timeseries: struct fields in ``WALL_CLOCK_UNIT`` (ms; simulated times are in s) go to timing.csv,
+the rest to timeseries.csv, so two runs of the same scenario and seed write byte-identical timeseries.csv files.
+:meth:`Recorder.csv_rows` formats any range of recorded frames, so the files can be written as the run goes
+(cosim.runtime.stream).
 
 A struct row goes to the frame of its block's stamp (``Segment.frame_of``), not to the frame being recorded: a
 deferred member (cosim.runtime.participant) publishes frame m's outputs at the next turn, and the flush turn's
@@ -17,19 +20,20 @@ from __future__ import annotations
 
 import csv
 import io
-from pathlib import Path
 
 import numpy as np
 
 from shm_schema import Segment, StructBlock
 from shm_schema.layout import SLOT_WORD
 
-__all__ = ["Recorder", "ARRAY_COPY_LIMIT", "FRAME_COPY_LIMIT"]
+__all__ = ["Recorder", "ARRAY_COPY_LIMIT", "FRAME_COPY_LIMIT", "WALL_CLOCK_UNIT"]
 
 #: largest array block (bytes) kept for the final outputs
 ARRAY_COPY_LIMIT = 4 << 20
 #: largest array block (bytes) copied at every completed frame; larger ones are copied once, at the end
 FRAME_COPY_LIMIT = 64 << 10
+#: unit of the struct fields that hold wall-clock times (never reproducible): they go to timing.csv
+WALL_CLOCK_UNIT = "ms"
 
 
 class Recorder:
@@ -37,6 +41,8 @@ class Recorder:
 
     def __init__(self, seg: Segment, members: tuple[str, ...], *, deferred: bool = False):
         self._seg = seg
+        #: names of the segment's blocks
+        self.blocks = frozenset(b.name for b in seg.schema.blocks)
         self.members = members
         #: whether a member publishes one turn late: the hand-off time is then not turn minus steps
         self.deferred = deferred
@@ -45,6 +51,9 @@ class Recorder:
         self._structs = [(b.name, seg.view(b.name).array.reshape(1).view(np.uint8), b) for b in seg.schema.blocks
                          if isinstance(b, StructBlock)]
         self.columns: list[str] = ["frame"] + [f"{name}.{f.name}" for name, _, b in self._structs for f in b.fields]
+        #: the wall-clock columns (timing.csv) and the others (timeseries.csv), "frame" first in both
+        self.timing_columns = ["frame"] + [c for c in self.columns[1:] if self._unit(c) == WALL_CLOCK_UNIT]
+        self.series_columns = [c for c in self.columns if c not in self.timing_columns[1:]]
         self._rows: dict[str, dict[int, bytes]] = {name: {} for name, _, _ in self._structs}
         self.frames: list[int] = []
         self.arrays: dict[str, np.ndarray] = {}
@@ -98,24 +107,33 @@ class Recorder:
         for name in self._late:
             self._late[name] = (seg.seq_of(name), seg.frame_of(name))
 
-    def _aligned(self, name: str, dtype: np.dtype) -> np.ndarray:
-        """Block ``name``'s row for each recorded frame: its own, else the latest earlier one (zeros before the
-        first), (completed frames,) of the block's structured dtype."""
+    def _unit(self, column: str) -> str:
+        block, field = column.split(".", 1)
+        return next(f.unit for name, _, b in self._structs if name == block for f in b.fields if f.name == field)
+
+    def _aligned(self, name: str, dtype: np.dtype, start: int = 0, stop: int | None = None,
+                 carry: dict | None = None) -> np.ndarray:
+        """Block ``name``'s row for recorded frames [start, stop): its own, else the latest earlier one (zeros
+        before the first), (stop - start,) of the block's structured dtype. ``carry`` (name -> row bytes) holds
+        the row in force before ``start`` and is updated, so that consecutive ranges join up."""
         rows, out = self._rows[name], []
-        last = bytes(dtype.itemsize)
-        for f in self.frames:
+        last = (carry or {}).get(name, bytes(dtype.itemsize))
+        for f in self.frames[start:stop]:
             last = rows.get(f, last)
             out.append(last)
+        if carry is not None:
+            carry[name] = last
         return np.frombuffer(b"".join(out), dtype=dtype)
 
     def series(self) -> dict[str, np.ndarray]:
-        """Column name -> (completed frames,) float64 array (the ``frame`` column included)."""
+        """Column name -> (completed frames,) float64 array (the ``frame`` column included), in the order of
+        timeseries.csv then timing.csv (as ``cosim.report.load_run`` reads them back)."""
         out = {"frame": np.asarray(self.frames, dtype=np.float64)}
         for name, _, b in self._structs:
             rows = self._aligned(name, b.dtype)
             for f in b.fields:
                 out[f"{name}.{f.name}"] = rows[f.name].astype(np.float64)
-        return out
+        return {c: out[c] for c in self.series_columns + self.timing_columns[1:]}
 
     def timing_medians_ms(self) -> dict[str, float]:
         """Median per-frame time of each member's step, of the whole turn (``frame``) and of the hand-offs
@@ -129,16 +147,25 @@ class Recorder:
             out["handoff"] = float(np.median(np.asarray(self.turn_ms) - steps))
         return out
 
-    def write_csv(self, path: Path) -> None:
-        """timeseries.csv: one row per completed frame; floats as shortest round-trip repr (deterministic)."""
-        buf = io.StringIO()
-        w = csv.writer(buf, lineterminator="\n")
-        w.writerow(self.columns)
-        cols = []
+    def csv_rows(self, start: int, stop: int, carry: dict) -> tuple[str, str]:
+        """(timeseries rows, timing rows) of recorded frames [start, stop) as CSV text; floats as the shortest
+        round-trip repr (deterministic). ``carry`` joins consecutive ranges (see :meth:`_aligned`): pass the
+        same dict for ranges that follow each other, from 0."""
+        cols = {"frame": self.frames[start:stop]}
         for name, _, b in self._structs:
-            rows = self._aligned(name, b.dtype)
+            rows = self._aligned(name, b.dtype, start, stop, carry)
             for f in b.fields:
-                cols.append(rows[f.name].tolist())
-        for i, frame in enumerate(self.frames):
-            w.writerow([frame] + [repr(c[i]) for c in cols])
-        Path(path).write_text(buf.getvalue())
+                cols[f"{name}.{f.name}"] = rows[f.name].tolist()
+        out = []
+        for names in (self.series_columns, self.timing_columns):
+            buf = io.StringIO()
+            w = csv.writer(buf, lineterminator="\n")
+            picked = [cols[c] for c in names[1:]]
+            for i, frame in enumerate(cols["frame"]):
+                w.writerow([frame] + [repr(c[i]) for c in picked])
+            out.append(buf.getvalue())
+        return out[0], out[1]
+
+    @staticmethod
+    def csv_header(names: list[str]) -> str:
+        return ",".join(names) + "\n"

@@ -29,13 +29,15 @@ import yaml
 from pydantic import BaseModel, ValidationError
 
 from .config import FORMAT_VERSION, Scenario
+from .plausibility import implausible
 from cosim.errors import Problem, ScenarioError
+from .trust import CHECKS, PLUGIN_POINTS, check_plugin_refs
 from .yamlmarks import (Doc as _Doc, Dumper as _Dumper, Loc, Mark as _Mark,
                         dotted as _dotted, parse as _parse, show as _show)
 
 __all__ = [
     "SCENARIO_DIR", "SET_FILE", "OPTIONS_FILE", "load_scenario", "load_scenario_text", "packaged_scenarios",
-    "resolve_scenario_arg", "dump_resolved", "path_fields",
+    "resolve_scenario_arg", "dump_resolved", "path_fields", "MAX_SCENARIO_BYTES", "describe_packaged",
 ]
 
 #: directory of the scenarios shipped with the package
@@ -44,6 +46,9 @@ SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
 SET_FILE = "<--set>"
 #: pseudo file name of problems in options passed as ``extra``
 OPTIONS_FILE = "<options>"
+
+#: largest scenario file (or text) read, bytes: a scenario is a few KiB; a larger one is refused before parsing
+MAX_SCENARIO_BYTES = 1 << 20
 
 _KEY = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -219,6 +224,36 @@ def _resolve_paths(doc: _Doc, base_dir: Path) -> None:
             doc.problem(mark, loc, f"file {str(path)!r} {what} (relative paths are resolved against {str(base)!r})")
 
 
+def _set_plugin_dir(doc: _Doc, base_dir: Path) -> None:
+    """``plugin_dir``: the scenario's folder unless given (a relative one is resolved against it)."""
+    given = doc.data.get("plugin_dir")
+    if isinstance(given, str):
+        mark = doc.values.get(("plugin_dir",), doc.values[()])
+        base = Path.cwd() if mark.file in (SET_FILE, OPTIONS_FILE) else base_dir
+        doc.data["plugin_dir"] = str((base / Path(given).expanduser()).resolve()) if given else ""
+    elif "plugin_dir" not in doc.data:
+        doc.data["plugin_dir"] = str(base_dir)
+
+
+def _check_external(doc: _Doc, scenario: Scenario | None, allow_plugins: bool) -> None:
+    """Import and check every plug-in the document names (its raw values, so that they are checked even when
+    other keys are invalid; keys already reported are skipped), then, on a valid scenario, every other external
+    model (cosim.scenario.trust.CHECKS)."""
+    reported = {p.path for p in doc.problems}
+    refs = []
+    for loc, group in PLUGIN_POINTS:
+        if _existing(doc.data, loc) == loc and isinstance(_at(doc.data, loc), str) and _dotted(loc) not in reported:
+            refs.append((loc, group, _at(doc.data, loc)))
+    plugin_dir = doc.data.get("plugin_dir") if isinstance(doc.data.get("plugin_dir"), str) else ""
+    _, issues = check_plugin_refs(refs, plugin_dir, allow_plugins=allow_plugins)
+    for check in CHECKS if scenario is not None else ():
+        issues += check(scenario, allow_plugins=allow_plugins, versions=False)[1]
+    for issue in issues:
+        found = _existing(doc.data, issue.loc)
+        mark = doc.values.get(found, doc.values[()])
+        doc.problem(mark, issue.loc, issue.message)
+
+
 # ------------------------------------------------------------------------------------------- validation
 def _existing(data, loc: Loc) -> Loc:
     """The longest prefix of ``loc`` that names a node present in ``data``."""
@@ -306,15 +341,26 @@ def load_scenario_text(
     *,
     extra: Mapping | None = None,
     base_dir: str | os.PathLike | None = None,
+    check_world: bool = False,
+    allow_plugins: bool = True,
 ) -> Scenario:
     """Parse, override, resolve and validate scenario ``text``; raise ScenarioError with every problem.
+
+    Every plug-in the scenario names is imported and checked (cosim.scenario.trust: importing runs its code);
+    ``allow_plugins`` False refuses any that is not built in (``--no-plugins``). ``plugin_dir`` (the folder
+    plug-in modules are looked for first) defaults to ``base_dir``.
 
     ``overrides``: ``"PATH=VALUE"`` strings (``--set``); ``extra``: ``{"dotted.path": value}`` from other options,
     entries whose value is None are skipped. ``base_dir``: directory that relative paths in the text are resolved
     against (default: the directory of ``filename`` if it names a file, else the working directory).
+    ``check_world``: also refuse an implausible world at frame 0 (cosim.scenario.plausibility; on by default in
+    :func:`load_scenario`, which the CLI uses, off here where a text is only parsed and validated). Texts over
+    MAX_SCENARIO_BYTES and alias bombs (cosim.scenario.yamlmarks.MAX_VALUES) are refused before validation.
     """
     if isinstance(overrides, str):
         raise TypeError("overrides must be a sequence of 'PATH=VALUE' strings, not one string")
+    if len(text) > MAX_SCENARIO_BYTES:
+        raise ScenarioError([_too_large(filename, len(text))])
     doc = _parse(text, filename)
     if doc.problems and not doc.values:  # YAML syntax error: nothing to go on
         _finish(doc, filename)
@@ -335,22 +381,45 @@ def load_scenario_text(
     if base_dir is None:
         base_dir = Path(filename).parent if Path(filename).is_file() else Path.cwd()
     _resolve_paths(doc, Path(base_dir).resolve())
+    _set_plugin_dir(doc, Path(base_dir).resolve())
     try:
         scenario = Scenario.model_validate_json(json.dumps(doc.data))
     except ValidationError as e:
         doc.problems += [_error_problem(err, doc) for err in e.errors(include_url=False)]
         scenario = None
+    _check_external(doc, scenario, allow_plugins)
     _finish(doc, filename)
+    if check_world:
+        _check_world(doc, scenario, filename)
     return scenario
 
 
-def load_scenario(path: str | os.PathLike, overrides: Sequence[str] = (), *, extra: Mapping | None = None) -> Scenario:
-    """Load and validate the scenario file ``path`` (see :func:`load_scenario_text`)."""
+def _too_large(filename: str, size: int) -> Problem:
+    return Problem(filename, 1, 1, "", f"the scenario is {size / 2**20:.1f} MiB; scenarios are limited to "
+                   f"{MAX_SCENARIO_BYTES / 2**20:g} MiB (put large tables in files, e.g. sensor.pattern.csv_file)")
+
+
+def _check_world(doc: _Doc, scenario: Scenario, filename: str) -> None:
+    """Raise the plausibility problems of the frame-0 world (cosim.scenario.plausibility) at their keys."""
+    for loc, message in implausible(scenario):
+        found = _existing(doc.data, loc)  # a section's problem at its key, a value's at the value
+        marks = doc.keys if isinstance(_at(doc.data, found), dict) and found else doc.values
+        doc.problem(marks.get(found, doc.values[()]), loc, message)
+    _finish(doc, filename)
+
+
+def load_scenario(path: str | os.PathLike, overrides: Sequence[str] = (), *, extra: Mapping | None = None,
+                  check_world: bool = True, allow_plugins: bool = True) -> Scenario:
+    """Load and validate the scenario file ``path``, and check its frame-0 world (see :func:`load_scenario_text`)."""
     try:
+        size = os.stat(path).st_size
+        if size > MAX_SCENARIO_BYTES:
+            raise ScenarioError([_too_large(str(path), size)])
         text = Path(path).read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:
         raise ScenarioError([Problem(str(path), 0, 0, "", f"cannot read scenario file: {e}")]) from None
-    return load_scenario_text(text, str(path), overrides, extra=extra, base_dir=Path(path).resolve().parent)
+    return load_scenario_text(text, str(path), overrides, extra=extra, base_dir=Path(path).resolve().parent,
+                              check_world=check_world, allow_plugins=allow_plugins)
 
 
 # -------------------------------------------------------------------------------------- packaged, dump
@@ -367,8 +436,20 @@ def resolve_scenario_arg(arg: str | os.PathLike) -> Path:
     packaged = packaged_scenarios()
     if str(arg) in packaged:
         return packaged[str(arg)]
-    raise ScenarioError([Problem(str(arg), 0, 0, "", "no such scenario file or packaged scenario (packaged: "
-                                 f"{', '.join(packaged) or 'none'})")])
+    close = difflib.get_close_matches(str(arg), list(packaged), n=1, cutoff=0.6)
+    hint = f"; did you mean '{close[0]}'?" if close else ""
+    raise ScenarioError([Problem(str(arg), 0, 0, "", f"no such scenario file or packaged scenario (packaged: "
+                                 f"{', '.join(packaged) or 'none'}; `launch.py list` describes them){hint}")])
+
+
+def describe_packaged() -> dict[str, str]:
+    """Packaged scenario name -> its ``description`` (first sentence, whitespace collapsed; "" when none)."""
+    out = {}
+    for name, path in packaged_scenarios().items():
+        doc = yaml.safe_load(path.read_text()) or {}
+        text = " ".join(str(doc.get("description") or "").split())
+        out[name] = text.split(". ")[0].rstrip(".") + "." if text else ""
+    return out
 
 
 def dump_resolved(scenario: Scenario) -> str:

@@ -15,10 +15,13 @@ import yaml
 
 from cosim.errors import Problem
 
-__all__ = ["Loader", "Dumper", "Mark", "Doc", "Loc", "INVALID", "parse", "build", "dotted", "show",
+__all__ = ["Loader", "Dumper", "Mark", "Doc", "Loc", "INVALID", "MAX_VALUES", "parse", "build", "dotted", "show",
            "INT_12", "FLOAT_12", "BOOL_12"]
 
 MAX_SHOWN = 60  # characters of an offending input value quoted in a message
+#: most values (scalars, lists, mappings) a document may expand to, aliases counted each time they are used: a
+#: scenario has a few hundred; an alias bomb ("billion laughs") is refused after this many, in milliseconds
+MAX_VALUES = 20_000
 
 BOOL_12 = re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$")
 INT_12 = re.compile(r"^(?:[-+]?(?:0|[1-9][0-9]*)|0x[0-9a-fA-F]+|0o[0-7]+)$")
@@ -64,6 +67,14 @@ Loc = tuple  # path into the data: str keys and int list indices
 INVALID = object()  # a node already reported as a problem: left out of the data (its field keeps its default)
 
 
+class _AliasBomb(Exception):
+    """Raised by :func:`build` when a document exceeds MAX_VALUES; carries the one problem to report."""
+
+    def __init__(self, problem: Problem):
+        super().__init__(str(problem))
+        self.problem = problem
+
+
 @dataclass(frozen=True)
 class Mark:
     file: str
@@ -79,6 +90,8 @@ class Doc:
     keys: dict[Loc, Mark] = field(default_factory=dict)
     values: dict[Loc, Mark] = field(default_factory=dict)
     problems: list[Problem] = field(default_factory=list)
+    #: values still allowed before the document counts as an alias bomb (see MAX_VALUES)
+    budget: int = MAX_VALUES
 
     def problem(self, mark: Mark, loc: Loc, message: str) -> None:
         self.problems.append(Problem(mark.file, mark.line, mark.col, dotted(loc), message))
@@ -116,7 +129,10 @@ def parse(text: str, file: str, line0: int = 0, col0: int = 0) -> Doc:
                                         f"YAML syntax error: {what}"))
             return doc
         doc.values[()] = doc.keys[()] = mark(node.start_mark) if node else Mark(file, max(line0, 1), 1)
-        doc.data = build(node, (), doc, loader, mark, set()) if node is not None else None
+        try:
+            doc.data = build(node, (), doc, loader, mark, set()) if node is not None else None
+        except _AliasBomb as bomb:  # nothing to go on: report it alone, as a syntax error is
+            return Doc(problems=[bomb.problem])
         doc.data = None if doc.data is INVALID else doc.data
     finally:
         loader.dispose()
@@ -124,6 +140,12 @@ def parse(text: str, file: str, line0: int = 0, col0: int = 0) -> Doc:
 
 
 def build(node, loc: Loc, doc: Doc, loader: Loader, mark, stack: set[int]):
+    doc.budget -= 1
+    if doc.budget < 0:
+        at = mark(node.start_mark)
+        raise _AliasBomb(Problem(at.file, at.line, at.col, dotted(loc),
+                                 f"the document expands to more than {MAX_VALUES:,} values (YAML aliases used over "
+                                 "and over?); nothing else was checked"))
     here = mark(node.start_mark)
     if isinstance(node, yaml.ScalarNode):
         try:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from cosim.scenario.config import Scenario
 from cosim.runtime.launcher import launch
+from cosim.runtime.progress import run_progress
 from cosim.report.html import write_comparison_report
 from cosim.report.rundata import load_run
 
@@ -14,11 +15,12 @@ __all__ = ["VARIANTS", "variants", "compare"]
 
 log = logging.getLogger("cosim.studies.compare")
 
-#: run name -> (feedback, estimator)
+#: run name -> (feedback, estimator, sensor.method or None for the scenario's own): the paper-style run keeps the
+#: paper's LiDAR pipeline (camera rig, Eqs 1-7) whatever the scenario uses, so the paper's method is reproduced
 VARIANTS = {
-    "ground_truth": ("ground_truth", "paper"),
-    "perception_paper": ("perception", "paper"),
-    "perception_fused": ("perception", "fused"),
+    "ground_truth": ("ground_truth", "paper", None),
+    "perception_paper": ("perception", "paper", "camera_rig"),
+    "perception_fused": ("perception", "fused", None),
 }
 
 NOTES = ("Ground truth feeds the controller the exact height map. Perception feedback sees the pile through the "
@@ -37,19 +39,27 @@ NOTES = ("Ground truth feeds the controller the exact height map. Perception fee
 def variants(scenario: Scenario) -> dict[str, Scenario]:
     """The scenarios compared, keyed by run name."""
     out = {}
-    for name, (feedback, estimator) in VARIANTS.items():
+    for name, (feedback, estimator, method) in VARIANTS.items():
         ctrl = scenario.controller.model_copy(update={"estimator": estimator})
+        sensor = scenario.sensor.model_copy(update={"method": method or scenario.sensor.method})
         renderer = scenario.renderer if scenario.renderer != "none" else "mock"
-        out[name] = scenario.model_copy(update={"feedback": feedback, "controller": ctrl, "renderer": renderer})
+        out[name] = scenario.model_copy(update={"feedback": feedback, "controller": ctrl, "renderer": renderer,
+                                                "sensor": sensor})
     return out
 
 
-def compare(scenario: Scenario, out: Path, progress=None) -> Path:
-    """Run every variant into ``out/<variant>`` and write ``out/report.html``; returns the report path."""
+def compare(scenario: Scenario, out: Path, quiet: bool = True) -> Path:
+    """Run every variant into ``out/<variant>`` and write ``out/report.html``; returns the report path. Each run
+    shows its own progress bar labelled with its name (none when ``quiet``)."""
     out.mkdir(parents=True, exist_ok=True)
     runs = []
-    for name, sc in variants(scenario).items():
+    for k, (name, sc) in enumerate(variants(scenario).items(), start=1):
         log.info("compare: running %s", name)
-        res = launch(sc, out / name, progress=progress)
+        progress = run_progress(f"[{k}/{len(VARIANTS)}] {name}", quiet)
+        try:
+            res = launch(sc, out / name, progress=progress)
+        finally:
+            if progress is not None:
+                progress.close()
         runs.append(load_run(res.run_dir))
     return write_comparison_report(runs, out, NOTES)

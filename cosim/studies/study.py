@@ -19,7 +19,9 @@ from typing import Callable, Sequence
 import numpy as np
 
 from cosim.scenario.config import Scenario
+from cosim.report.figures import DPI, fig_study
 from cosim.runtime.inprocess import simulate
+from cosim.runtime.progress import run_progress
 from cosim.runtime.outputs import clean_json, compose_summary
 
 __all__ = ["Setting", "Knob", "KNOBS", "apply_overrides", "run_setting", "run_study"]
@@ -75,10 +77,11 @@ def apply_overrides(scenario: Scenario, overrides: dict) -> Scenario:
     return Scenario.model_validate_json(json.dumps(data))
 
 
-def run_setting(scenario: Scenario) -> tuple[dict, dict, dict, float]:
-    """Run in process; return (summary, series, final arrays, wall time per simulated second)."""
+def run_setting(scenario: Scenario, progress=None) -> tuple[dict, dict, dict, float]:
+    """Run in process; return (summary, series, final arrays, wall time per simulated second). ``progress``: a
+    per-frame callable (cosim.runtime.progress.run_progress)."""
     t0 = time.perf_counter()
-    run = simulate(scenario)
+    run = simulate(scenario, progress=progress)
     wall = time.perf_counter() - t0
     summary = compose_summary(scenario, run.recorder, run.ring, wall_time_s=wall, error=None)
     sim = max(scenario.frames * scenario.timing.sensor_period_s, 1e-9)
@@ -125,12 +128,14 @@ KNOBS: dict[str, Knob] = {
         "cell=0.1", _section_error, "cell=0.05", _GT),
     "render": Knob(
         "render", "mean LiDAR range error vs exact ray cast (m)",
-        tuple(Setting(f"{n} cam {w}x{h}", {"render.rig": "fixed", "render.cameras": n, "render.width_px": w,
-                                            "render.height_px": h, "render.hfov_deg": 100.0 / n})
+        tuple(Setting(f"{n} cam {w}x{h}", {"sensor.method": "camera_rig", "render.rig": "fixed", "render.cameras": n,
+                                            "render.width_px": w, "render.height_px": h, "render.hfov_deg": 100.0 / n})
               for n in (1, 2) for (w, h) in ((320, 240), (640, 480), (1024, 768)))
-        + tuple(Setting(f"auto rig {b:g} deg", {"render.rig": "auto", "sensor.max_angular_error_deg": b})
-                for b in (0.05, 0.1, 0.2, 0.4)),
-        "auto rig 0.1 deg", _range_error, None, {"feedback": "perception"}),
+        + tuple(Setting(f"auto rig {b:g} deg", {"sensor.method": "camera_rig", "render.rig": "auto",
+                                                 "sensor.max_angular_error_deg": b})
+                for b in (0.05, 0.1, 0.2, 0.4))
+        + (Setting("beam native", {"sensor.method": "beam_native"}),),
+        "beam native", _range_error, None, {"feedback": "perception"}),
     "beams": Knob(
         "beams", "perceived height map RMSE (m)",
         tuple(Setting(f"{a}x{e} beams", {"sensor.pattern.azimuth_count": a, "sensor.pattern.elevation_count": e})
@@ -143,17 +148,14 @@ KNOBS: dict[str, Knob] = {
 }
 
 
-def run_study(scenario: Scenario, knobs: Sequence[str], out: Path, duration_s: float = 20.0) -> Path:
-    """Run the named knobs, write results.csv, study.md and study.png into ``out``; returns study.md."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+def run_study(scenario: Scenario, knobs: Sequence[str], out: Path, duration_s: float = 20.0,
+              quiet: bool = True) -> Path:
+    """Run the named knobs, write results.csv, study.md and study.png into ``out``; returns study.md. Each
+    setting shows its own progress bar ("knob: setting") unless ``quiet``."""
     out.mkdir(parents=True, exist_ok=True)
     rows = []
-    fig, axes = plt.subplots(1, len(knobs), figsize=(5 * len(knobs), 4), squeeze=False)
-    for ax, name in zip(axes[0], knobs):
+    panels = []
+    for name in knobs:
         knob = KNOBS[name]
         base = apply_overrides(scenario, {**knob.base, "duration_s": duration_s})
         if name == "render" and base.renderer == "none":
@@ -161,7 +163,12 @@ def run_study(scenario: Scenario, knobs: Sequence[str], out: Path, duration_s: f
         results = {}
         for st in knob.settings:
             log.info("study %s: %s", name, st.label)
-            summary, series, arrays, cost = run_setting(apply_overrides(base, st.overrides))
+            progress = run_progress(f"{name}: {st.label}", quiet)
+            try:
+                summary, series, arrays, cost = run_setting(apply_overrides(base, st.overrides), progress)
+            finally:
+                if progress is not None:
+                    progress.close()
             results[st.label] = Result(st, summary, series, arrays, cost)
         pts = []
         for label, res in results.items():
@@ -171,21 +178,8 @@ def run_study(scenario: Scenario, knobs: Sequence[str], out: Path, duration_s: f
             rows.append({"knob": name, "setting": label, "wall_s_per_sim_s": res.wall_per_sim_s, "error": err,
                          "error_label": knob.error_label, "default": label == knob.default,
                          "reference": label == ref_label})
-        xs = np.array([p[1] for p in pts])
-        ys = np.array([p[2] for p in pts])
-        ax.loglog(xs, np.maximum(ys, 1e-12), "o")
-        for label, x, y in pts:
-            ax.annotate(label, (x, max(y, 1e-12)), fontsize=7, xytext=(3, 3), textcoords="offset points")
-            if label == knob.default:
-                ax.plot([x], [max(y, 1e-12)], "*", ms=16, color="tab:red", label="default")
-        ax.set_xlabel("wall time per simulated second (s)")
-        ax.set_ylabel(knob.error_label)
-        ax.set_title(name)
-        ax.legend(fontsize=8)
-        ax.grid(alpha=0.3, which="both")
-    fig.tight_layout()
-    fig.savefig(out / "study.png", dpi=110)
-    plt.close(fig)
+        panels.append((name, knob.error_label, pts, knob.default))
+    fig_study(panels).savefig(out / "study.png", dpi=DPI)
     with open(out / "results.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()

@@ -1,7 +1,8 @@
 """The dashboard's HTTP server (``http.server.ThreadingHTTPServer``, 127.0.0.1 by default) and the observer entry.
 
 Routes: ``/`` the page, ``/api/state`` the numbers (JSON), ``/panel/<id>.png`` an image panel (404 when absent),
-``/healthz``. A *source* supplies snapshots: :class:`~cosim.viewer.live.LiveSource` (a running segment) or
+``/healthz``; for a replay, ``POST /api/replay?action=play|pause|step|seek[&value=N]`` drives it (step: N frames,
+default 1; seek: to recorded frame N) and answers its position (404 for a live run, 400 for a bad action). A *source* supplies snapshots: :class:`~cosim.viewer.live.LiveSource` (a running segment) or
 :class:`~cosim.recording.replay.ReplaySource` (a recording); both have ``name``, ``frames_planned``,
 ``history``, ``snapshot(big=False)``, ``check_end()`` and ``close()``.
 
@@ -28,8 +29,9 @@ import time
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
-from urllib.parse import urlsplit
+from urllib.parse import parse_qs, urlsplit
 
+from .address import wait_until_answers
 from .page import page_html
 from .panels import IMAGE_PANELS, PanelRenderer, panel_info
 from .snapshot import fullness
@@ -77,6 +79,7 @@ def state_json(source, dropped_total: int = 0) -> dict:
         "auger": source.history.as_json(),
         "fullness": {"block": full[0], "values": full[1]} if full else None,
         "frames": snap.frames,
+        "replay": source.position() if hasattr(source, "position") else None,
     })
 
 
@@ -136,6 +139,24 @@ class _Handler(BaseHTTPRequestHandler):
 
     do_HEAD = do_GET
 
+    def do_POST(self) -> None:  # noqa: N802
+        with self.server.answering():
+            url = urlsplit(self.path)
+            if int(self.headers.get("Content-Length") or 0):
+                self.rfile.read(int(self.headers["Content-Length"]))
+            source = self.server.source
+            if url.path != "/api/replay" or not hasattr(source, "control"):
+                self._send(404, b"not found (replay control exists in a replay only)", "text/plain")
+                return
+            q = parse_qs(url.query)
+            try:
+                raw = q.get("value", [None])[0]
+                doc = source.control(q.get("action", [""])[0], None if raw in (None, "") else float(raw))
+            except ValueError as exc:
+                self._send(400, str(exc).encode(), "text/plain")
+                return
+            self._send(200, json.dumps(doc).encode(), "application/json")
+
 
 class DashboardServer(ThreadingHTTPServer):
     """Serves one source's dashboard. ``port=0`` picks a free port (``server_port`` tells which)."""
@@ -144,10 +165,16 @@ class DashboardServer(ThreadingHTTPServer):
     allow_reuse_address = True
 
     def __init__(self, source, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT):
+        # everything server_close touches exists before the socket is bound: socketserver calls server_close
+        # itself when bind fails (a busy port), and the caller still owns (and closes) the source then
+        self._stop = threading.Event()
+        self.renderer = None
+        self.source = None
         super().__init__((host, port), _Handler)
         self.source = source
-        self.renderer = PanelRenderer()
-        self.page = page_html(f"graincosim viewer: {source.name}").encode()
+        self.renderer = PanelRenderer(getattr(source, "size_m", None))
+        self.page = page_html(f"graincosim viewer: {source.name}",
+                              replay=hasattr(source, "control")).encode()
         self._dropped = 0
         self._last_frame = -1
         self._lock = threading.Lock()
@@ -155,7 +182,6 @@ class DashboardServer(ThreadingHTTPServer):
         self._answering = 0
         self._idle = threading.Condition()
         self.stopping = False
-        self._stop = threading.Event()
         self._keeper = threading.Thread(target=self._housekeeping, name="viewer-housekeeping", daemon=True)
         self._keeper.start()
 
@@ -214,8 +240,15 @@ class DashboardServer(ThreadingHTTPServer):
     def server_close(self) -> None:
         self._stop.set()
         super().server_close()
-        self.renderer.close()
-        self.source.close()
+        if self.renderer is not None:
+            self.renderer.close()
+        if self.source is not None:
+            self.source.close()
+
+
+def _tell_when_answering(name: str, url: str) -> None:
+    if wait_until_answers(url):
+        log.info("viewer of %s at %s", name, url)
 
 
 def _raise_stop(signum, frame) -> None:
@@ -225,8 +258,14 @@ def _raise_stop(signum, frame) -> None:
 def serve(source, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, announce: str | None = None) -> None:
     """Serve ``source`` until SIGTERM or Ctrl-C, then stop gracefully (module docstring). ``announce``: a file to
     write ``{"url": ...}`` to once listening."""
-    srv = DashboardServer(source, host, port)
-    log.info("viewer of %s at %s", source.name, srv.url)
+    try:
+        srv = DashboardServer(source, host, port)
+    except BaseException:
+        source.close()  # unmapped here: a source left to the garbage collector raised BufferError at exit
+        raise
+    # the address is told once it answers, not when the socket is bound (the page took ~1.5 s more then)
+    threading.Thread(target=_tell_when_answering, args=(source.name, srv.url), name="viewer-address",
+                     daemon=True).start()
     previous = None
     if threading.current_thread() is threading.main_thread():
         previous = signal.signal(signal.SIGTERM, _raise_stop)
@@ -246,8 +285,9 @@ def serve(source, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, announce: 
 
 
 def observe(segment_name: str, port: int = DEFAULT_PORT, host: str = DEFAULT_HOST, announce: str | None = None,
-            min_interval_s: float | None = None) -> None:
-    """Observer entry (spawned by the launcher): attach to ``segment_name`` read-only and serve the dashboard."""
+            min_interval_s: float | None = None, size_m: tuple[float, float] | None = None) -> None:
+    """Observer entry (spawned by the launcher): attach to ``segment_name`` read-only and serve the dashboard.
+    ``size_m``: the cart interior's (length, width), m, for the height maps' metre axes."""
     from .live import MIN_INTERVAL_S, LiveSource
 
     try:
@@ -255,4 +295,6 @@ def observe(segment_name: str, port: int = DEFAULT_PORT, host: str = DEFAULT_HOS
     except OSError:
         pass
     source = LiveSource(segment_name, MIN_INTERVAL_S if min_interval_s is None else min_interval_s)
+    if size_m is not None:
+        source.size_m = (float(size_m[0]), float(size_m[1]))
     serve(source, host, port, announce)

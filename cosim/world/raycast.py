@@ -168,7 +168,7 @@ def ray_cylinders(o: np.ndarray, d: np.ndarray, cyl: Cylinders, t_max: np.ndarra
         offsets = np.zeros((len(cyl), CYLINDER_SIDES + 2))
         offsets[:, :CYLINDER_SIDES] = (cyl.radius * np.cos(np.pi / CYLINDER_SIDES))[:, None]
         offsets[:, CYLINDER_SIDES] = length
-        _prisms_shared(origin, d, frames, cyl.p0, centre, rad, normals, offsets, best)
+        _prisms_shared(origin, d, frames, cyl.p0, centre, rad, cyl.radius, normals, offsets, best)
         return best
     for g0 in range(0, len(cyl), _GROUP):
         sl = slice(g0, min(g0 + _GROUP, len(cyl)))
@@ -186,19 +186,26 @@ def ray_cylinders(o: np.ndarray, d: np.ndarray, cyl: Cylinders, t_max: np.ndarra
     return best
 
 
-def _prisms_shared(origin, d, frames, p0, centre, rad, normals, offsets, best) -> None:
+def _prisms_shared(origin, d, frames, p0, centre, rad, radius, normals, offsets, best) -> None:
     """Prisms (local ``frames`` (K, 3, 3), base centres ``p0`` (K, 3), bounding spheres ``centre``, ``rad``,
-    facet ``normals`` (F, 3) and ``offsets`` (K, F)) against rays from one ``origin``: ``best`` (N,) lowered in
-    place, vectorised over (ray, prism) pairs. The local origin and n . o are per prism, computed once."""
+    circumradii ``radius`` (K,), facet ``normals`` (F, 3) and ``offsets`` (K, F)) against rays from one
+    ``origin``: ``best`` (N,) lowered in place, vectorised over (ray, prism) pairs. The local origin and n . o are
+    per prism, computed once."""
     ks, rs = _cone_pairs(origin, d, centre, rad, best)
     if ks.size == 0:
         return
     ol = np.einsum("ki,kij->kj", origin - p0, frames)                  # (K, 3) the origin in each prism frame
     num_k = offsets - ol @ normals.T                                    # (K, F)
     step = max(1, _PAIR_WORK // normals.shape[0])
+    # every point of a prism lies within its circumradius of its axis (local z), so a ray whose line passes
+    # farther from the axis line misses it: |o_xy x d_xy| > R |d_xy| (checked with slack, a cull only)
+    reach = (radius * (1.0 + _CULL_SLACK) + _CULL_SLACK)
     for s0 in range(0, ks.size, step):
         k, r = ks[s0:s0 + step], rs[s0:s0 + step]
         dl = np.einsum("pi,pij->pj", d[r], frames[k])
+        o = ol[k]
+        near = np.abs(o[:, 0] * dl[:, 1] - o[:, 1] * dl[:, 0]) <= reach[k] * np.hypot(dl[:, 0], dl[:, 1])
+        k, r, dl = k[near], r[near], dl[near]
         np.minimum.at(best, r, _convex_t(num_k[k], dl @ normals.T))
 
 
@@ -313,7 +320,7 @@ def ray_mesh(o: np.ndarray, d: np.ndarray, mesh: MeshInstance) -> np.ndarray:
             qv = np.cross(tv, e1[None])
             vv = np.einsum("nti,nti->nt", np.broadcast_to(dr, qv.shape), qv) * inv
             t = np.einsum("ti,nti->nt", e2, qv) * inv
-        ok = (np.abs(det) > 1e-14) & (u >= 0) & (vv >= 0) & (u + vv <= 1) & (t > T_MIN_M)
+            ok = (np.abs(det) > 1e-14) & (u >= 0) & (vv >= 0) & (u + vv <= 1) & (t > T_MIN_M)   # NaN: False
         best[rays] = np.minimum(best[rays], np.where(ok, t, np.inf).min(axis=1))
     return best
 

@@ -1,6 +1,7 @@
 """Typed, frozen scenario records (pydantic v2). ``Scenario`` is the root."""
 from .base import Model, Mount
 from .control import Controller, Fusion, Grain, Integrator
+from .fmu import FMU_REF, Fmu, TractorCart, Vehicles
 from .machines import CROP_PRESETS, Auger, Cart, Combine, Crop, MachineSync, Tractor
 from .rendering import Render
 from .scenario import FORMAT_VERSION, Outputs, Scenario, Timing
@@ -8,6 +9,6 @@ from .sensing import Codec, Noise, Pattern, Perception, Sensor
 
 __all__ = [
     "Model", "Mount", "Controller", "Fusion", "Grain", "Integrator", "CROP_PRESETS", "Auger", "Cart", "Combine", "Crop",
-    "MachineSync", "Tractor", "Render", "FORMAT_VERSION", "Outputs", "Scenario", "Timing", "Codec", "Noise",
+    "MachineSync", "Tractor", "FMU_REF", "Fmu", "TractorCart", "Vehicles", "Render", "FORMAT_VERSION", "Outputs", "Scenario", "Timing", "Codec", "Noise",
     "Pattern", "Perception", "Sensor",
 ]

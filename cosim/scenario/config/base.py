@@ -10,7 +10,7 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-__all__ = ["Model", "Vec3", "Mount", "Entity", "PosFloat", "NonNegFloat", "Fraction", "Angle"]
+__all__ = ["Model", "Vec3", "Mount", "Entity", "PosFloat", "NonNegFloat", "Fraction", "Angle", "PluginRef"]
 
 
 class Model(BaseModel):
@@ -24,6 +24,9 @@ NonNegFloat = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
 Fraction = Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)]
 Angle = Annotated[float, Field(ge=-360.0, le=360.0, allow_inf_nan=False)]
 Vec3 = tuple[float, float, float]
+#: a plug-in reference: a short name (built in or an entry point) or an import path ``package.module:name``;
+#: the loader imports and checks it (cosim.scenario.plugins)
+PluginRef = Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_.-]*(:[A-Za-z_][A-Za-z0-9_.]*)?$")]
 
 Entity = Literal["world", "combine", "tractor", "cart"]
 

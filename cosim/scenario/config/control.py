@@ -7,9 +7,10 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
-from .base import Fraction, Model, NonNegFloat, PosFloat
+from .base import Fraction, Model, NonNegFloat, PluginRef, PosFloat
+from .fmu import FMU_REF, Fmu
 
 __all__ = ["Grain", "Fusion", "Controller", "Integrator"]
 
@@ -58,11 +59,17 @@ class Controller(Model):
     robust peak (highest 2 x 2 block minimum) from the fused estimate of :class:`Fusion` (perceived heights
     fused with the volume delivered at the predicted impact); ``paper`` takes it from the perceived map alone,
     as the paper does.
-    Strategies: dynamics_proc.strategies.
+
+    Plug-ins (docs/plugins.md; a scenario that names one runs its code): ``strategy`` picks the next section,
+    ``front_to_back`` / ``back_to_front`` / ``lowest_first`` (dynamics_proc.strategies), an entry point name or
+    an import path ``package.module:name``; ``model`` is the whole controller, ``section_fill`` (this one,
+    dynamics_proc.controller) or a plug-in implementing dynamics_proc.control_protocol. ``fmu`` (for either)
+    names the FMU ``fmu`` (docs/fmu.md).
     """
 
     target_fill_m: PosFloat = 1.9
-    strategy: Literal["front_to_back", "back_to_front", "lowest_first"] = "front_to_back"
+    strategy: PluginRef = "front_to_back"
+    model: PluginRef = "section_fill"
     sections: int = Field(default=9, ge=1, le=64)
     grid_cell_m: PosFloat = 0.1
     full_fraction: Fraction = 0.995
@@ -73,6 +80,20 @@ class Controller(Model):
     edge_margin_m: NonNegFloat = 0.2
     min_section_cells: int = Field(default=4, ge=1)
     fusion: Fusion = Fusion()
+    fmu: Fmu | None = None
+
+    @model_validator(mode="after")
+    def _fmu_named(self) -> "Controller":
+        users = [k for k in ("strategy", "model") if getattr(self, k) == FMU_REF]
+        if users and self.fmu is None:
+            raise ValueError(f"{users[0]} '{FMU_REF}' needs the FMU: give controller.fmu (path, inputs, outputs)")
+        if len(users) > 1:
+            raise ValueError(f"strategy and model are both '{FMU_REF}': one controller FMU plays one role (an FMU "
+                             "controller picks its own sections)")
+        if self.fmu is not None and not users:
+            raise ValueError(f"controller.fmu is given but nothing uses it: set controller.model: {FMU_REF} (the "
+                             f"whole controller) or controller.strategy: {FMU_REF} (the fill strategy)")
+        return self
 
 
 class Integrator(Model):

@@ -8,6 +8,7 @@ from pydantic import Field, ValidationInfo, field_validator
 
 from .base import Model, PosFloat
 from .control import Controller, Grain, Integrator
+from .fmu import Vehicles
 from .machines import Auger, Cart, Combine, Crop, MachineSync, Tractor
 from .rendering import Render
 from .sensing import Perception, Sensor
@@ -84,6 +85,7 @@ class Scenario(Model):
     tractor: Tractor = Tractor()
     cart: Cart = Cart()
     machine_sync: MachineSync = MachineSync()
+    vehicles: Vehicles = Vehicles()
     grain: Grain = Grain()
     controller: Controller = Controller()
     integrator: Integrator = Integrator()
@@ -91,6 +93,9 @@ class Scenario(Model):
     render: Render = Render()
     perception: Perception = Perception()
     outputs: Outputs = Outputs()
+    #: folder searched first for plug-in modules named by import path (the loader sets it to the scenario
+    #: file's folder; '' only sys.path); carried to the run's processes so that they import the same code
+    plugin_dir: str = ""
 
     @field_validator("renderer")
     @classmethod

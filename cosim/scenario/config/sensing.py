@@ -10,9 +10,9 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from .base import Fraction, Model, Mount, NonNegFloat, PosFloat
+from .base import Fraction, Model, Mount, NonNegFloat, PluginRef, PosFloat
 
-__all__ = ["Codec", "Pattern", "Noise", "Sensor", "Perception"]
+__all__ = ["Codec", "Pattern", "Noise", "Sensor", "Stages", "Perception"]
 
 
 #: largest alpha / beta for which |d' - d| <= beta / 510 holds with Eqs 1-3 as written
@@ -107,12 +107,25 @@ class Sensor(Model):
     noise: Noise = Noise()
     codec: Codec = Codec()
     max_angular_error_deg: PosFloat = 0.1
+    #: how images become ranges: ``camera_rig`` is the paper's pipeline (camera images, Eqs 5-7 resample);
+    #: ``beam_native`` draws from the LiDAR origin into one pixel per beam and decodes per beam (docs/lidar.md)
+    method: Literal["camera_rig", "beam_native"] = "camera_rig"
 
     @model_validator(mode="after")
     def _limits(self) -> "Sensor":
         if self.range_max_m <= self.range_min_m:
             raise ValueError("range_max_m must be larger than range_min_m")
         return self
+
+
+class Stages(Model):
+    """The stages of the ``staged`` perception algorithm, each replaceable on its own (perception_proc.protocol):
+    ``rim`` finds the cart, ``heightmap`` grids the grain surface, ``impact`` finds where the stream lands.
+    ``builtin``, an entry point name or an import path ``package.module:name``."""
+
+    rim: PluginRef = "builtin"
+    heightmap: PluginRef = "builtin"
+    impact: PluginRef = "builtin"
 
 
 class Perception(Model):
@@ -123,6 +136,8 @@ class Perception(Model):
     an exact ray cast of the same scene every that many frames (0: never); truth never feeds the estimates.
     ``accuracy_beams``: how many beams each evaluation casts, one drawn per stratum of equal runs of the beam
     table, seeded by (seed, frame) (0: every beam; see perception_proc.accuracy.sample_beams).
+    ``algorithm``: the per-frame algorithm (points -> cart, height map, impact): ``staged`` runs ``stages``;
+    an entry point name or an import path ``package.module:name`` replaces it whole (docs/plugins.md).
     """
 
     min_points_per_cell: int = Field(default=1, ge=1)
@@ -130,3 +145,5 @@ class Perception(Model):
     sampler: Literal["planar", "nearest"] = "planar"
     accuracy_every_frames: int = Field(default=10, ge=0, le=1_000_000)
     accuracy_beams: int = Field(default=4096, ge=0, le=10_000_000)
+    algorithm: PluginRef = "staged"
+    stages: Stages = Stages()

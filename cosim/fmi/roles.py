@@ -1,0 +1,206 @@
+"""The roles an FMU can play and the signals of each (our names, units, frames), and the mapping check.
+
+Each role lists our signals: inputs we set before each ``doStep``, outputs we read after it, and initial
+values we set before initialisation. A scenario maps each of our names to an FMU variable
+(``cosim.scenario.config.Fmu``); :func:`mapping_problems` checks that mapping against the FMU's description:
+our name known, required ones present, FMU variable present, causality and type right, parameters settable
+with a value of their type, step mode allowed.
+
+Per-section signals (``per_section``) map to one FMU variable per section: the FMU name holds ``{k}``,
+replaced by the section number 1..N (``full_{k}`` -> ``full_1`` ... ``full_9``; ``full[{k}]`` for Simulink's
+vector naming).
+"""
+from __future__ import annotations
+
+import difflib
+from dataclasses import dataclass
+
+from cosim.scenario.config import Fmu
+
+from .describe import FmuDescription, Variable
+
+__all__ = ["Signal", "Role", "VEHICLE", "STRATEGY", "CONTROLLER", "ROLES", "expand", "step_mode", "mapping_problems"]
+
+#: FMU variable types that carry a number we can set or read
+NUMERIC = ("Real", "Integer", "Boolean", "Enumeration")
+#: causalities we may set before initialisation (``initial``)
+SETTABLE_AT_START = ("parameter", "input")
+
+
+@dataclass(frozen=True)
+class Signal:
+    """One of our signals: ``name`` (units in it), FMU types it may map to, whether a mapping must give it,
+    whether it is one variable per section (``{k}`` in the FMU name), whether NaN is a valid value (an output
+    that is NaN otherwise ends the run)."""
+
+    name: str
+    types: tuple[str, ...]
+    required: bool = True
+    per_section: bool = False
+    doc: str = ""
+    nan_ok: bool = False
+
+
+@dataclass(frozen=True)
+class Role:
+    """What an FMU stands in for: its signals and the step modes it allows (the first is the default)."""
+
+    name: str
+    label: str
+    inputs: tuple[Signal, ...]
+    outputs: tuple[Signal, ...]
+    initial: tuple[Signal, ...]
+    steps: tuple[str, ...]
+
+    def signals(self, kind: str) -> tuple[Signal, ...]:
+        """The role's ``inputs``, ``outputs`` or ``initial`` signals."""
+        return getattr(self, kind)
+
+
+_VEHICLE_STATE = (
+    Signal("tractor_axle_x_m", ("Real",), doc="tractor rear-axle centre x, world, m"),
+    Signal("tractor_axle_y_m", ("Real",), doc="tractor rear-axle centre y, world, m"),
+    Signal("tractor_yaw_rad", ("Real",), doc="tractor heading, world, rad (0 along world x, left positive)"),
+    Signal("tractor_speed_mps", ("Real",), doc="tractor speed along its heading, m/s"),
+    Signal("tractor_steer_rad", ("Real",), doc="front steering angle, rad (left positive)"),
+    Signal("cart_yaw_rad", ("Real",), doc="cart heading, world, rad"),
+)
+
+#: the tractor and its cart, driven by Machine Sync (dynamics_proc.vehicles, dynamics_proc.machine_sync)
+VEHICLE = Role(
+    "tractor_cart", "vehicles.tractor_cart",
+    inputs=(Signal("speed_cmd_mps", ("Real",), doc="Machine Sync's speed command, m/s (>= 0)"),
+            Signal("steer_cmd_rad", ("Real",), doc="Machine Sync's steering command, rad (left positive)")),
+    outputs=_VEHICLE_STATE,
+    initial=tuple(Signal(s.name, ("Real",), required=False, doc=s.doc) for s in _VEHICLE_STATE),
+    steps=("dynamics_step", "frame"),
+)
+
+#: the fill strategy (dynamics_proc.strategies): which section to fill next, sections numbered 1..N
+STRATEGY = Role(
+    "strategy", "controller (strategy)",
+    inputs=(Signal("full", ("Boolean", "Integer", "Real"), per_section=True,
+                   doc="section k declared full (latched), 1 / true when full"),
+            Signal("height_m", ("Real",), required=False, per_section=True,
+                   doc="estimated peak height of section k above the cart floor, m; NaN unknown"),
+            Signal("current_section", ("Integer", "Real"), required=False,
+                   doc="section being filled, 1..N; 0 none yet")),
+    outputs=(Signal("section", ("Integer", "Real", "Enumeration"),
+                    doc="section to fill, 1..N; 0 when every section is full"),),
+    initial=(),
+    steps=("frame",),
+)
+
+#: the whole offloading controller (dynamics_proc.control_protocol), positions along the cart grid x axis (m from
+#: the front inner wall), sections numbered 1..N
+CONTROLLER = Role(
+    "controller", "controller (model)",
+    inputs=(Signal("height_m", ("Real",), per_section=True,
+                   doc="robust peak height of section k in this frame's measurement, m; NaN: no valid cells or "
+                       "no measurement"),
+            Signal("spout_x_m", ("Real",), required=False, doc="actual auger (spout) location, grid x, m"),
+            Signal("drift_x_m", ("Real",), required=False, doc="predicted impact x minus spout x, m"),
+            Signal("nudge_signal_m", ("Real",), required=False,
+                   doc="spout grid x the current Machine Sync setpoint implies, m"),
+            Signal("impact_top_x_m", ("Real",), required=False, doc="predicted impact at the target fill, grid x, m"),
+            Signal("impact_top_y_m", ("Real",), required=False, doc="predicted impact at the target fill, grid y, m"),
+            Signal("impact_floor_x_m", ("Real",), required=False, doc="predicted impact on the floor, grid x, m"),
+            Signal("impact_floor_y_m", ("Real",), required=False, doc="predicted impact on the floor, grid y, m"),
+            Signal("delivered_m3", ("Real",), required=False, doc="flow signal integrated since the start, m^3")),
+    outputs=(Signal("nudge", ("Integer", "Real", "Enumeration"),
+                    doc="-1, 0 or +1: move the Machine Sync setpoint by that many nudge_m along grid x"),
+             Signal("auger_on", ("Boolean", "Integer", "Real"), doc="run the auger (non-zero: on)"),
+             Signal("desired_x_m", ("Real",), required=False, doc="desired auger location, grid x, m (reported)"),
+             Signal("effort_m", ("Real",), required=False, nan_ok=True,
+                    doc="control effort, grid x, m (reported; NaN: none)"),
+             Signal("target_section", ("Integer", "Real", "Enumeration"), required=False,
+                    doc="section being filled 1..N, 0 none (reported)"),
+             Signal("all_full", ("Boolean", "Integer", "Real"), required=False,
+                    doc="the controller considers the cart full (reported)"),
+             Signal("bias_m", ("Real",), required=False, doc="learnt steady-state offset, m (reported)"),
+             Signal("fullness", ("Real",), required=False, per_section=True, nan_ok=True,
+                    doc="estimated height / target fill of section k, NaN unknown (reported)")),
+    initial=(),
+    steps=("frame",),
+)
+
+ROLES = {r.name: r for r in (VEHICLE, STRATEGY, CONTROLLER)}
+
+
+def expand(signal: Signal, fmu_name: str, sections: int) -> list[str]:
+    """The FMU variable names a mapping entry stands for: one per section for a per-section signal."""
+    if signal.per_section:
+        return [fmu_name.replace("{k}", str(k)) for k in range(1, sections + 1)]
+    return [fmu_name]
+
+
+def step_mode(fmu: Fmu, role: Role) -> str:
+    """The step mode the FMU runs with: the record's, else the role's default."""
+    return fmu.step or role.steps[0]
+
+
+def _unknown(name: str, known, what: str, where: str = "") -> str:
+    close = difflib.get_close_matches(name, list(known), n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    return f"no {what} {name!r}{where}{hint}"
+
+
+def _check_variable(var: Variable | None, fmu_name: str, desc: FmuDescription, causalities: tuple[str, ...],
+                    types: tuple[str, ...]) -> str | None:
+    if var is None:
+        return _unknown(fmu_name, desc.variables, "variable", f" in the FMU {desc.path.name}")
+    if var.causality not in causalities:
+        return (f"FMU variable {fmu_name!r} has causality {var.causality!r}; it must be "
+                f"{' or '.join(map(repr, causalities))} here")
+    if var.type not in types:
+        return f"FMU variable {fmu_name!r} is {var.type}; it must be {' or '.join(types)} here"
+    return None
+
+
+def _value_problem(var: Variable, value) -> str | None:
+    ok = {"Real": isinstance(value, (int, float)) and not isinstance(value, bool),
+          "Integer": isinstance(value, int) and not isinstance(value, bool),
+          "Enumeration": isinstance(value, int) and not isinstance(value, bool),
+          "Boolean": isinstance(value, bool), "String": isinstance(value, str)}.get(var.type, False)
+    return None if ok else f"FMU parameter {var.name!r} is {var.type}, got {value!r}"
+
+
+def mapping_problems(fmu: Fmu, desc: FmuDescription, role: Role, sections: int) -> list[tuple[tuple, str]]:
+    """Every problem of ``fmu``'s mapping for ``role`` against ``desc``, as (location inside the record,
+    message). ``sections``: the controller's section count N."""
+    out: list[tuple[tuple, str]] = []
+    causality = {"inputs": ("input",), "outputs": ("output",), "initial": SETTABLE_AT_START}
+    for kind in ("inputs", "outputs", "initial"):
+        signals = {s.name: s for s in role.signals(kind)}
+        mapping = getattr(fmu, kind)
+        for ours, theirs in mapping.items():
+            sig = signals.get(ours)
+            if sig is None:
+                known = ", ".join(signals) or "none"
+                what = {"inputs": "input", "outputs": "output", "initial": "initial value"}[kind]
+                out.append(((kind, ours), _unknown(ours, signals, f"{what} signal") +
+                            f" for the {role.label} FMU; known: {known}"))
+                continue
+            if sig.per_section and "{k}" not in theirs:
+                out.append(((kind, ours), f"{ours!r} is one value per section: the FMU name must hold {{k}} (the "
+                                          f"section number 1..{sections}), e.g. '{theirs}_{{k}}'"))
+                continue
+            for name in expand(sig, theirs, sections):
+                msg = _check_variable(desc.variables.get(name), name, desc, causality[kind], sig.types)
+                if msg:
+                    out.append(((kind, ours), msg))
+                    break
+        missing = [s.name for s in role.signals(kind) if s.required and s.name not in mapping]
+        if missing:
+            out.append(((kind,) if mapping else (), f"the {role.label} FMU needs {kind} "
+                        f"{', '.join(map(repr, missing))} mapped (our name: FMU variable name)"))
+    for name, value in fmu.parameters.items():
+        var = desc.variables.get(name)
+        msg = _check_variable(var, name, desc, ("parameter",), NUMERIC + ("String",))
+        if msg:
+            out.append((("parameters", name), msg))
+        elif (msg := _value_problem(var, value)) is not None:
+            out.append((("parameters", name), msg))
+    if fmu.step is not None and fmu.step not in role.steps:
+        out.append((("step",), f"the {role.label} FMU can only be stepped per {' or '.join(role.steps)}"))
+    return out

@@ -1,0 +1,74 @@
+"""Scenario records for FMUs (FMI co-simulation units) standing in for a built-in model (docs/fmu.md).
+
+An :class:`Fmu` names the file and maps *our* names (the signals of the role it plays, listed in
+``cosim.fmi.roles``) to the FMU's variable names; ``parameters`` sets the FMU's own parameters by their names.
+Where it is used:
+
+* ``vehicles.tractor_cart.fmu``: the tractor-and-cart dynamics, driven by Machine Sync's commands;
+* ``controller.fmu`` with ``controller.model: fmu``: the offloading controller; with ``controller.strategy:
+  fmu``: the fill strategy.
+
+Whether the file is an FMI 2.0 co-simulation FMU and whether every mapped variable exists with the right
+causality is checked when the scenario is loaded (``cosim.fmi.check``), each problem at its YAML line.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal, Union
+
+from pydantic import Field
+
+from .base import Model
+
+__all__ = ["FMU_REF", "Fmu", "TractorCart", "Vehicles", "FmuStep", "ParameterValue"]
+
+#: the plug-in reference (``controller.strategy`` / ``controller.model``) that names ``controller.fmu``
+FMU_REF = "fmu"
+
+#: what one ``doStep`` covers: one dynamics step (``timing.dynamics_dt_s``) or one sensor frame
+FmuStep = Literal["dynamics_step", "frame"]
+#: a parameter value: Real (float or int), Integer (int), Boolean (bool) or String (str), by the variable's type
+ParameterValue = Union[bool, int, float, str]
+
+_NAME = r"^\S(.*\S)?$"
+
+
+class Fmu(Model):
+    """One FMU in the loop.
+
+    * ``path``: the ``.fmu`` file, relative to the scenario file;
+    * ``inputs`` / ``outputs``: our signal name -> FMU variable name (causality ``input`` / ``output``); for
+      per-section signals the FMU name holds ``{k}``, replaced by the section number 1..N;
+    * ``initial``: our initial value -> FMU variable (causality ``parameter`` or ``input``) set before the
+      FMU is initialised, so that it starts where the built-in model starts;
+    * ``parameters``: FMU variable (causality ``parameter``) -> value, set before initialisation;
+    * ``step``: ``dynamics_step`` (one ``doStep`` of ``timing.dynamics_dt_s`` per dynamics step, inputs
+      updated before each) or ``frame`` (one ``doStep`` of ``timing.sensor_period_s`` per frame, inputs held);
+      unset: the role's own (the vehicle ``dynamics_step``; a controller or strategy only per ``frame``).
+    """
+
+    path: Path
+    inputs: dict[str, str] = {}
+    outputs: dict[str, str] = {}
+    initial: dict[str, str] = {}
+    parameters: dict[str, ParameterValue] = {}
+    step: FmuStep | None = None
+    instance_name: str = Field(default="graincosim", pattern=_NAME, max_length=64)
+
+    def __hash__(self) -> int:
+        # frozen records are hashable (the scenario is a cache key); the mappings hash as their items
+        return hash((self.path, *(tuple(getattr(self, k).items()) for k in ("inputs", "outputs", "initial",
+                                                                              "parameters")),
+                     self.step, self.instance_name))
+
+
+class TractorCart(Model):
+    """The tractor towing the cart: the built-in model (``dynamics_proc.vehicles``) unless ``fmu`` is given."""
+
+    fmu: Fmu | None = None
+
+
+class Vehicles(Model):
+    """Replaceable vehicle dynamics. The combine always follows its path (``combine``)."""
+
+    tractor_cart: TractorCart = TractorCart()

@@ -1,0 +1,185 @@
+"""One resolver for every plug-in point: a scenario names a plug-in, this finds, imports and checks it.
+
+A reference (``ref``) is one of
+
+* a **short name**: a built-in (the table :data:`BUILTINS`, which mirrors the entry points this package declares
+  in pyproject.toml, so that an uninstalled checkout works the same) or a name registered by an installed
+  distribution under the group's entry point group (:data:`ENTRY_POINT_GROUPS`, e.g.
+  ``[project.entry-points."graincosim.strategies"] middle_out = "mypkg.fill:middle_out"``);
+* an **import path** ``package.module:name`` (dotted attributes allowed after the colon), imported from the
+  scenario file's folder (``base_dir``, searched first) or sys.path.
+
+Built-ins win over entry points of the same name (an installed package cannot replace a built-in silently).
+Groups (plug-in points; the scenario key each one is named by):
+
+========================  =========================  ==========================================
+group                     scenario key               protocol
+========================  =========================  ==========================================
+``strategies``            controller.strategy        dynamics_proc.strategies (a function)
+``controllers``           controller.model           dynamics_proc.control_protocol (a factory)
+``perception``            perception.algorithm       perception_proc.protocol (a function)
+``perception.rim``        perception.stages.rim      perception_proc.protocol
+``perception.heightmap``  perception.stages.heightmap  perception_proc.protocol
+``perception.impact``     perception.stages.impact   perception_proc.protocol
+========================  =========================  ==========================================
+
+Trust: loading a plug-in runs its module's code. ``allow_external=False`` refuses anything that is not built in.
+"""
+from __future__ import annotations
+
+import importlib
+import importlib.metadata as metadata
+import inspect
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = ["BUILTINS", "ENTRY_POINT_GROUPS", "ARITY", "PluginError", "PluginInfo", "load_plugin", "resolve_plugin",
+           "is_import_path", "distribution_of"]
+
+#: plug-in group -> built-in short name -> import path (the same as the package's entry points)
+BUILTINS: dict[str, dict[str, str]] = {
+    "strategies": {
+        "front_to_back": "dynamics_proc.strategies:front_to_back",
+        "back_to_front": "dynamics_proc.strategies:back_to_front",
+        "lowest_first": "dynamics_proc.strategies:lowest_first",
+    },
+    "controllers": {"section_fill": "dynamics_proc.controller:SectionFillController"},
+    "perception": {"staged": "perception_proc.staged:staged"},
+    "perception.rim": {"builtin": "perception_proc.staged:rim_stage"},
+    "perception.heightmap": {"builtin": "perception_proc.staged:heightmap_stage"},
+    "perception.impact": {"builtin": "perception_proc.staged:impact_stage"},
+}
+
+#: plug-in group -> entry point group
+ENTRY_POINT_GROUPS: dict[str, str] = {g: "graincosim." + g for g in BUILTINS}
+
+#: plug-in group -> positional arguments its callable must accept (the protocol's signature)
+ARITY: dict[str, tuple[str, ...]] = {
+    "strategies": ("full", "height", "current"),
+    "controllers": ("params", "scenario"),
+    "perception": ("ctx", "inp"),
+    "perception.rim": ("ctx", "inp"),
+    "perception.heightmap": ("ctx", "inp", "cart"),
+    "perception.impact": ("ctx", "inp", "cart", "heightmap"),
+}
+
+
+class PluginError(ValueError):
+    """A plug-in reference cannot be used: unknown name, import failure, missing attribute, not callable, wrong
+    signature, or refused (``allow_external=False``). The message names the reference."""
+
+
+@dataclass(frozen=True)
+class PluginInfo:
+    """A resolved plug-in: ``obj`` the loaded object; ``builtin`` whether it ships with graincosim; ``target``
+    the import path it was loaded from; ``file`` its module's file ('' unknown). Which distribution provides it:
+    :func:`distribution_of` (a scan of the installed packages, so only on demand)."""
+
+    group: str
+    ref: str
+    target: str
+    builtin: bool
+    file: str
+    obj: object
+
+
+def is_import_path(ref: str) -> bool:
+    """Whether ``ref`` is an import path ``module:name`` rather than a short name."""
+    return ":" in ref
+
+
+def _entry_point(group: str, name: str):
+    eps = metadata.entry_points(group=ENTRY_POINT_GROUPS[group])
+    found = [ep for ep in eps if ep.name == name]
+    return found[0] if found else None
+
+
+def _import(target: str, ref: str, base_dir: Path | None):
+    module_name, _, attr = target.partition(":")
+    if not module_name or not attr:
+        raise PluginError(f"plug-in {ref!r}: an import path is 'package.module:name'")
+    if base_dir is not None:
+        folder = str(Path(base_dir).resolve())
+        if folder not in sys.path:
+            sys.path.insert(0, folder)      # the scenario's folder, searched first (and by the plug-in's imports)
+    try:
+        obj = importlib.import_module(module_name)
+    except ModuleNotFoundError as e:
+        if e.name is not None and module_name.startswith(e.name):
+            where = f" (looked in {str(base_dir)!r} and on sys.path)" if base_dir is not None else " (on sys.path)"
+            raise PluginError(f"plug-in {ref!r}: no module named {e.name!r}{where}") from None
+        raise PluginError(f"plug-in {ref!r}: importing {module_name!r} failed: {type(e).__name__}: {e}") from None
+    except Exception as e:  # noqa: BLE001 - any error in the user's module is a problem of this reference
+        raise PluginError(f"plug-in {ref!r}: importing {module_name!r} failed: {type(e).__name__}: {e}") from None
+    for part in attr.split("."):
+        if not hasattr(obj, part):
+            raise PluginError(f"plug-in {ref!r}: module {module_name!r} has no attribute {attr!r}")
+        obj = getattr(obj, part)
+    return obj
+
+
+def _check_signature(group: str, ref: str, obj: object) -> None:
+    if not callable(obj):
+        raise PluginError(f"plug-in {ref!r} is not callable (a {type(obj).__name__!r} object); the {group} protocol takes "
+                          f"({', '.join(ARITY[group])})")
+    try:
+        sig = inspect.signature(obj)
+    except (TypeError, ValueError):
+        return                          # a builtin or extension callable without a signature: trust it
+    try:
+        sig.bind(*ARITY[group])
+    except TypeError as e:
+        raise PluginError(f"plug-in {ref!r} has signature {sig}, which cannot be called as "
+                          f"({', '.join(ARITY[group])}): {e}") from None
+
+
+def _module_file(obj: object) -> str:
+    module = sys.modules.get(getattr(obj, "__module__", "") or "")
+    return str(getattr(module, "__file__", "") or "")
+
+
+def distribution_of(info: PluginInfo) -> tuple[str, str]:
+    """(name, version) of the installed distribution providing the plug-in's top-level package, ('', '') when
+    none does (a loose module, an uninstalled checkout). Scans the installed packages: slow, for listings only."""
+    top = (getattr(info.obj, "__module__", "") or info.target).split(".")[0].split(":")[0]
+    for dist in metadata.packages_distributions().get(top, []):
+        try:
+            return dist, metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            continue
+    return "", ""
+
+
+def resolve_plugin(group: str, ref: str, *, base_dir: Path | None = None, allow_external: bool = True,
+                   check: bool = True) -> PluginInfo:
+    """Find, import and (``check``) signature-check plug-in ``ref`` of ``group``; :class:`PluginError` otherwise."""
+    if group not in BUILTINS:
+        raise ValueError(f"unknown plug-in group {group!r}; groups: {', '.join(BUILTINS)}")
+    builtin = BUILTINS[group].get(ref)
+    if builtin is not None:
+        target = builtin
+    elif is_import_path(ref):
+        target = ref
+    else:
+        ep = _entry_point(group, ref)
+        if ep is None:
+            names = sorted(set(BUILTINS[group]) | {e.name for e in metadata.entry_points(
+                group=ENTRY_POINT_GROUPS[group])})
+            raise PluginError(f"unknown {group} plug-in {ref!r}: not built in, not registered under entry point "
+                              f"group {ENTRY_POINT_GROUPS[group]!r} (known: {', '.join(names)}), and not an "
+                              "import path 'package.module:name'")
+        target = ep.value
+    if builtin is None and not allow_external:
+        raise PluginError(f"plug-in {ref!r} is not built in and plug-ins are disabled (--no-plugins / "
+                          "allow_plugins=False): a scenario that names a plug-in runs its code")
+    obj = _import(target, ref, base_dir if builtin is None else None)
+    if check:
+        _check_signature(group, ref, obj)
+    return PluginInfo(group, ref, target, builtin is not None, _module_file(obj), obj)
+
+
+def load_plugin(group: str, ref: str, *, base_dir: Path | None = None, allow_external: bool = True) -> object:
+    """The object plug-in ``ref`` of ``group`` names, imported and signature-checked (see the module docstring);
+    :class:`PluginError` naming ``ref`` otherwise."""
+    return resolve_plugin(group, ref, base_dir=base_dir, allow_external=allow_external).obj

@@ -1,0 +1,153 @@
+"""The perception plug-in points: the whole per-frame algorithm (``perception.algorithm``) and its three stages
+(``perception.stages.rim`` / ``.heightmap`` / ``.impact``), as functions of a per-run context and the frame.
+
+Signatures (all plain callables; built-ins in :mod:`perception_proc.staged`):
+
+* algorithm: ``algorithm(ctx: PerceptionContext, inp: PerceptionInput) -> PerceptionOutput``
+* rim stage: ``rim(ctx, inp) -> CartEstimate`` (perception_proc.rim): the cart's rim corners and pose;
+* height map stage: ``heightmap(ctx, inp, cart) -> HeightMap`` (perception_proc.heightmap): grain heights on
+  the controller grid, in the frame of the cart found;
+* impact stage: ``impact(ctx, inp, cart, heightmap) -> Impact`` (perception_proc.impact): where the stream
+  lands, grid frame.
+
+Frames: ``inp.points`` are in the **level frame** (the sensor's parent body frame: x forward, y left, z up from
+flat ground, m); the cart grid frame has its origin at the cart's front-left inner floor corner, x to the rear
+along the cart, y across, z up (``cart.level_from_grid`` (4, 4) maps grid to level). Heights are m above the
+cart floor on the controller grid ``ctx.grid`` = (nx, ny) cells of ``ctx.cell_xy`` = (dx, dy) m, cell (i, j)
+covering grid x in [i dx, (i + 1) dx); NaN where a cell has no answer (holes are allowed and expected).
+
+What comes back is checked (:func:`check_output`): a wrong type, a height map of the wrong shape or with
+infinite heights, a valid cart or impact with non-finite coordinates ends the run with a
+:class:`cosim.errors.PluginFault` naming the plug-in, the frame and the cause.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from cosim.errors import PluginFault
+from cosim.scenario.config import Scenario
+
+from .heightmap import HeightMap
+from .impact import Impact
+from .rim import CartEstimate
+
+__all__ = ["PerceptionContext", "PerceptionInput", "PerceptionOutput", "StageSet", "ALGORITHM_POINT",
+           "STAGE_POINTS", "check_cart", "check_heightmap", "check_impact", "check_output"]
+
+#: the scenario keys of the plug-in points (named in faults)
+ALGORITHM_POINT = "perception.algorithm"
+STAGE_POINTS = {"rim": "perception.stages.rim", "heightmap": "perception.stages.heightmap",
+                "impact": "perception.stages.impact"}
+
+
+@dataclass(frozen=True)
+class StageSet:
+    """The loaded stages (``perception.stages``) and their references, for algorithms that reuse them."""
+
+    rim: Callable
+    heightmap: Callable
+    impact: Callable
+    refs: dict[str, str]
+
+
+@dataclass(frozen=True)
+class PerceptionContext:
+    """What stays the same over a run: the ``scenario`` (cart dimensions ``scenario.cart``, noise
+    ``scenario.sensor.noise.range_sigma_m``, ``scenario.perception`` knobs); the controller ``grid`` (nx, ny)
+    and its ``cell_xy`` (dx, dy) m; ``level_from_sensor`` (4, 4), the sensor pose in the level frame;
+    ``beam_shape`` (rows, columns) of the beam pattern when it is a grid, else None; the loaded ``stages``."""
+
+    scenario: Scenario
+    grid: tuple[int, int]
+    cell_xy: tuple[float, float]
+    level_from_sensor: np.ndarray
+    beam_shape: tuple[int, int] | None
+    stages: StageSet
+
+    @property
+    def noise_sigma_m(self) -> float:
+        """The range noise 1-sigma, m."""
+        return self.scenario.sensor.noise.range_sigma_m
+
+
+@dataclass(frozen=True)
+class PerceptionInput:
+    """One frame: ``frame``; ``ranges`` (N,) float32 m per beam, NaN no return; ``points`` (N, 3) float64 m, the
+    returns in the level frame, NaN rows invalid (and where the return is on the sensor's own vehicle), stored
+    column-major (``points[:, k]`` contiguous); ``border`` (N,) uint8 beam flags (perception_proc.rim
+    ``FOV_EDGE`` / ``OCCLUDED``); the pose hint ``heading_xy``: the towing direction in the level frame (unit
+    (x, y)); ``heights_out``: an optional (nx, ny) float32 destination a height map stage may fill."""
+
+    frame: int
+    ranges: np.ndarray
+    points: np.ndarray
+    border: np.ndarray
+    heading_xy: tuple[float, float]
+    heights_out: np.ndarray | None = None
+
+
+@dataclass
+class PerceptionOutput:
+    """An algorithm's answer: ``cart``; ``heightmap`` (None: no map this frame, all cells unknown);
+    ``impact``; ``timing_ms`` stage name -> wall ms (optional; 'cart', 'heightmap', 'impact' are reported)."""
+
+    cart: CartEstimate
+    heightmap: HeightMap | None
+    impact: Impact
+    timing_ms: dict[str, float] = field(default_factory=dict)
+
+
+def _finite(a) -> bool:
+    return isinstance(a, np.ndarray) and bool(np.isfinite(a).all())
+
+
+def check_cart(cart: object, ref: str, point: str) -> CartEstimate:
+    """``cart`` if it is a CartEstimate whose corners (4, 3) and pose (4, 4) are finite when valid."""
+    if not isinstance(cart, CartEstimate):
+        raise PluginFault(ref, point, f"returned {type(cart).__name__} as the cart, expected CartEstimate")
+    if cart.valid and not (_finite(cart.corners) and cart.corners.shape == (4, 3)
+                           and _finite(cart.level_from_grid) and cart.level_from_grid.shape == (4, 4)):
+        raise PluginFault(ref, point, "a valid cart needs finite corners (4, 3) and level_from_grid (4, 4)")
+    return cart
+
+
+def check_heightmap(hm: object, grid: tuple[int, int], ref: str, point: str) -> HeightMap:
+    """``hm`` if it is a HeightMap whose heights are (nx, ny) floats, each finite or NaN."""
+    if not isinstance(hm, HeightMap):
+        raise PluginFault(ref, point, f"returned {type(hm).__name__} as the height map, expected HeightMap")
+    h = hm.heights
+    if not isinstance(h, np.ndarray) or h.shape != tuple(grid) or h.dtype.kind != "f":
+        what = f"{h.shape} {h.dtype}" if isinstance(h, np.ndarray) else type(h).__name__
+        raise PluginFault(ref, point, f"height map heights must be a {tuple(grid)} float array (the controller "
+                          f"grid), got {what}")
+    if np.isinf(h).any():
+        raise PluginFault(ref, point, "height map has infinite heights (NaN marks a cell without an answer)")
+    if not (isinstance(hm.coverage, (float, int)) and 0.0 <= hm.coverage <= 1.0):
+        raise PluginFault(ref, point, f"coverage must be a fraction in [0, 1], got {hm.coverage!r}")
+    return hm
+
+
+def check_impact(imp: object, ref: str, point: str) -> Impact:
+    """``imp`` if it is an Impact whose point (3,) is finite when valid."""
+    if not isinstance(imp, Impact):
+        raise PluginFault(ref, point, f"returned {type(imp).__name__} as the impact, expected Impact")
+    if imp.valid and not (_finite(imp.xyz) and imp.xyz.shape == (3,)):
+        raise PluginFault(ref, point, f"a valid impact needs a finite (3,) point, got {imp.xyz!r}")
+    return imp
+
+
+def check_output(out: object, grid: tuple[int, int], ref: str) -> PerceptionOutput:
+    """``out`` if it is a valid PerceptionOutput for the controller ``grid`` (PluginFault otherwise)."""
+    if not isinstance(out, PerceptionOutput):
+        raise PluginFault(ref, ALGORITHM_POINT, f"returned {type(out).__name__}, expected PerceptionOutput")
+    check_cart(out.cart, ref, ALGORITHM_POINT)
+    if out.heightmap is not None:
+        check_heightmap(out.heightmap, grid, ref, ALGORITHM_POINT)
+    check_impact(out.impact, ref, ALGORITHM_POINT)
+    if not all(isinstance(v, (float, int)) and not math.isinf(v) for v in out.timing_ms.values()):
+        raise PluginFault(ref, ALGORITHM_POINT, "timing_ms values must be finite numbers (ms)")
+    return out
