@@ -266,7 +266,7 @@ def test_the_shipped_layout_is_built_from_the_sdk_and_names_the_runs_topics_and_
     sc = load_scenario(resolve_scenario_arg("default"), [])
     schema = build_schema(sc, ring_specs(sc))
     topics = set(FramePublisher(RunInfo.of(sc), schema, foxglove.Context()).topics) | {SCENE_TOPIC}
-    assert {"/lidar/points", "/heightmap/truth", "/cam0/depth_encoded", "/dyn_state"} <= topics
+    assert {"/lidar/points", "/heightmap/truth", "/beams/depth_encoded", "/dyn_state"} <= topics
     named = _layout_topics(layout, set())
     assert named and named <= topics, named - topics
     fields = {f"/{b.name}.{f.name}" for b in schema.blocks if isinstance(b, StructBlock) for f in b.fields}

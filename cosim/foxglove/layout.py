@@ -2,8 +2,8 @@
 
 ``python -m cosim.foxglove.layout [--out FILE]`` writes it; the package ships the result as
 ``cosim/foxglove/layout.json`` (a test keeps the two equal). Left: a 3D panel in the ``world`` frame following
-the cart, with the scene, the LiDAR cloud and the two height maps; right, top to bottom: the first camera's
-depth-encoded image, the auger position (desired and actual, m), the fullness of the cart's sections and the
+the cart, with the scene, the LiDAR cloud and the two height maps; right, top to bottom: the renderer's
+depth-encoded image (:data:`IMAGE_TOPIC`), the auger position (desired and actual, m), the fullness of the cart's sections and the
 perception's coverage and errors. Works live (``run --foxglove``) and on a recording (same topics; the
 recording has no ``/scene``).
 """
@@ -14,10 +14,12 @@ import sys
 
 import foxglove.layouts as fl
 
-__all__ = ["build_layout", "layout_json", "SECTIONS", "main"]
+__all__ = ["build_layout", "layout_json", "SECTIONS", "IMAGE_TOPIC", "main"]
 
 #: cart sections plotted (the default scenario's nine)
 SECTIONS = 9
+#: the image panel's topic: the default scenario renderer's depth-encoded image block ``beams_depth``
+IMAGE_TOPIC = "/beams/depth_encoded"
 
 
 def _plot(title: str, paths: list[tuple[str, str]], y_label: str) -> fl.PlotPanel:
@@ -35,8 +37,8 @@ def build_layout() -> fl.Layout:
             "/heightmap/truth": fl.BaseRendererGridTopicSettings(visible=False),
             "/heightmap/perceived": fl.BaseRendererGridTopicSettings(visible=True),
         }))
-    image = fl.ImagePanel(title="camera 0 (depth-encoded)", config=fl.ImageConfig(
-        image_mode=fl.ImageModeConfig(image_topic="/cam0/depth_encoded")))
+    image = fl.ImagePanel(title="renderer (depth-encoded)", config=fl.ImageConfig(
+        image_mode=fl.ImageModeConfig(image_topic=IMAGE_TOPIC)))
     auger = _plot("auger x (m)", [("/dyn_state.desired_auger_x_m", "desired"),
                                   ("/dyn_state.actual_auger_x_m", "actual")], "m")
     fullness = _plot("section fullness", [(f"/dyn_state.section{k}_fullness", f"section {k}")
