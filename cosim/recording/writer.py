@@ -12,7 +12,9 @@ and :meth:`cosim.recording.slots.FrameSlots.frame` from a frame slot.
 """
 from __future__ import annotations
 
+import errno
 import logging
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -95,6 +97,43 @@ class FrameData(NamedTuple):
     stamps: dict[str, int]
 
 
+#: the SDK's logger of a sink's failed writes (it logs each failed message as a warning instead of raising)
+SDK_SINK_LOGGER = "foxglove.log_sink_set"
+#: causes the SDK's I/O error text names, as errno values (os error N in its text is taken as errno N)
+#: free space below which a write error that names no cause is taken for a full disk, bytes
+FULL_BYTES = 2**20
+_KINDS = {"StorageFull": errno.ENOSPC, "QuotaExceeded": errno.EDQUOT, "PermissionDenied": errno.EACCES,
+          "ReadOnlyFilesystem": errno.EROFS}
+
+
+class _WriteErrors(logging.Handler):
+    """Keeps the first failed-write message the SDK logs (and drops the rest: one per message after a failure)."""
+
+    def __init__(self):
+        super().__init__(logging.WARNING)
+        self.first: str | None = None
+
+    def emit(self, record) -> None:
+        if self.first is None:
+            self.first = record.getMessage()
+
+
+def _os_error(text: str, path: Path) -> OSError:
+    """The OSError an SDK write error's text describes (ENOSPC for a full disk; EIO when it names none)."""
+    code = next((c for kind, c in _KINDS.items() if kind in text), None)
+    if code is None and "code: " in text:
+        digits = text.split("code: ", 1)[1].split(",", 1)[0].strip()
+        code = int(digits) if digits.isdigit() else None
+    if code is None:  # an error inside the SDK's compression stream names no cause: a full disk is the usual one
+        try:
+            st = os.statvfs(Path(path).parent)
+            code = errno.ENOSPC if st.f_bavail * st.f_frsize < FULL_BYTES else None
+        except OSError:
+            pass
+    code = code or errno.EIO
+    return OSError(code, os.strerror(code) if code != errno.EIO else text, str(path))
+
+
 class McapWriter(FramePublisher):
     """Writes one run's frames to an MCAP file (see the module docstring for the channels).
 
@@ -113,6 +152,11 @@ class McapWriter(FramePublisher):
         run = run if isinstance(run, RunInfo) else RunInfo.of(run)
         self.frames_written = 0
         self._closed = False
+        # the SDK logs a failed write instead of raising it: keep the first, raise it as an OSError (_check)
+        self._errors = _WriteErrors()
+        sdk_log = logging.getLogger(SDK_SINK_LOGGER)
+        sdk_log.addHandler(self._errors)
+        sdk_log.propagate = False
         ctx = foxglove.Context()
         self._mcap = foxglove.open_mcap(self.path, allow_overwrite=True, context=ctx, writer_options=MCAPWriteOptions(
             compression=_COMPRESSION[options.compression], profile=PROFILE, chunk_size=None, compression_threads=0,
@@ -126,10 +170,24 @@ class McapWriter(FramePublisher):
               stamps: dict[str, int] | None = None) -> None:
         """Write sink call ``frame`` (:meth:`FramePublisher.publish`), then flush if ``flush_s`` has passed."""
         self.publish(frame, structs, arrays, stamps)
+        self._check()
         self.frames_written += 1
         self._dirty = True
         if time.monotonic() - self._t_flush >= self.flush_s:
             self.flush()
+
+    def _check(self) -> None:
+        """Raise the first write the SDK reported failed, as an OSError naming the file."""
+        if self._errors.first is not None:
+            raise _os_error(self._errors.first, self.path)
+
+    def _sdk(self, call, *args) -> None:
+        """``call(*args)`` on the SDK's writer, its failure raised as an OSError naming the file."""
+        try:
+            call(*args)
+        except RuntimeError as exc:
+            raise _os_error(self._errors.first or str(exc), self.path) from None
+        self._check()
 
     def flush_due_in(self) -> float | None:
         """Seconds until a flush is due (0: now), None when nothing is waiting to be flushed."""
@@ -142,7 +200,7 @@ class McapWriter(FramePublisher):
         if self._dirty:
             self._t_flush = time.monotonic()
             self._dirty = False
-            self._mcap.flush()
+            self._sdk(self._mcap.flush)
 
     def close(self, stats: dict[str, str] | None = None) -> None:
         """Write ``stats`` (if given) as the ``recorder`` metadata record, the summary, and close the file.
@@ -150,9 +208,11 @@ class McapWriter(FramePublisher):
         if self._closed:
             return
         self._closed = True
-        if stats:
-            self._mcap.write_metadata("recorder", {"frames": str(self.frames_written), **stats})
-        self._mcap.close()
+        if self._errors.first is None:
+            if stats:
+                self._sdk(self._mcap.write_metadata, "recorder", {"frames": str(self.frames_written), **stats})
+            self._sdk(self._mcap.close)
+        logging.getLogger(SDK_SINK_LOGGER).removeHandler(self._errors)
         log.info("recording %s: %d frames", self.path, self.frames_written)
 
 
