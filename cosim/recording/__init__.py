@@ -4,8 +4,8 @@
 Foxglove's well-known schemas in protobuf encoding: foxglove.PointCloud (LiDAR), foxglove.RawImage (depth-encoded
 images, lossless) and CompressedImage (RGB), foxglove.Grid (height maps), foxglove.FrameTransform (vehicle and
 sensor poses), plus one JSON scalar topic per struct block, so a run opens in Foxglove or Lichtblick without
-ROS. The sink copies each completed frame into a shared-memory frame slot; a recorder process encodes and
-writes (:mod:`.sink`, :mod:`.slots`, :mod:`.writer`, :mod:`.templates`, :mod:`.proto`). :func:`read_recording`
+ROS, written through foxglove-sdk's MCAP writer. The sink copies each completed frame into a shared-memory frame
+slot; a recorder process encodes and writes (:mod:`.sink`, :mod:`.slots`, :mod:`.writer`; the messages: :mod:`cosim.foxglove.publish`). :func:`read_recording`
 reads it back (also a file cut off by a killed run, up to its last completed frame); :class:`ReplaySource`
 serves it to the viewer's dashboard.
 """
