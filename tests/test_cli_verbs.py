@@ -143,7 +143,7 @@ def test_the_viewer_address_is_printed_only_once_it_answers(recording):
     import threading
     import time
 
-    from cosim.recording import ReplaySource
+    from cosim.viewer.replay import ReplaySource
     from cosim.viewer.address import ViewerAnnouncer
     from cosim.viewer.server import DashboardServer
 
