@@ -195,10 +195,7 @@ def _interruptible(fn):
         except KeyboardInterrupt:
             sys.stderr.write("interrupted\n")
         finally:
-            if main_thread and code == EXIT_INTERRUPTED:  # ending on a stop: more signals change nothing
-                signal.signal(signal.SIGINT, signal.SIG_IGN)
-                signal.signal(signal.SIGTERM, signal.SIG_IGN)
-            elif main_thread:
+            if main_thread:  # main is also called in-process (tests, scripts): leave the handlers as found
                 signal.signal(signal.SIGTERM, old)
         return code
 

@@ -5,6 +5,9 @@ import sys
 
 __all__ = ["run_cli"]
 
+#: exit status of a run stopped by Ctrl-C or SIGTERM (cosim.cli.EXIT_INTERRUPTED, which may not be imported yet)
+EXIT_INTERRUPTED = 130
+
 
 def run_cli() -> int:
     """Run :func:`cosim.cli.main` on ``sys.argv``; the process exit status."""
@@ -12,9 +15,11 @@ def run_cli() -> int:
     try:
         from cosim.cli import main
 
-        return main()
+        code = main()
     except KeyboardInterrupt:
+        sys.stderr.write("interrupted\n")
+        code = EXIT_INTERRUPTED
+    if code == EXIT_INTERRUPTED:  # the process is ending on a stop: more signals change nothing
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        sys.stderr.write("interrupted\n")
-        return 130
+    return code
