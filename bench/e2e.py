@@ -7,6 +7,8 @@ Run from the repository root::
     python bench/e2e.py --tree main=/work/main --tree new=. --rounds 6 --duration 30    # A/B, interleaved
     python bench/e2e.py --variant rig=sensor.method=camera_rig --variant beams=sensor.method=beam_native
                                                                      # A/B of settings, this tree, interleaved
+    python bench/e2e.py --variant perception=feedback=perception --variant gt=feedback=ground_truth \
+        --variant gt=renderer=none                                   # an arm with two settings
 
 Each round launches ``python launch.py run SCENARIO --duration D --out TMP --quiet`` once per tree, the order
 alternating every round (A B, B A, ...) so that a noisy host's load falls on both alike. While a run goes, its
@@ -145,6 +147,8 @@ def report(label: str, runs: list[dict]) -> None:
     cores = os.cpu_count() or 1
     bound = statistics.median(total) / cores
     print(f"| all | {_cell(total)} |\n")
+    if bound <= 0.0:                                         # no member process was sampled (in-process run)
+        return
     print(f"{statistics.median(total):.2f} ms of CPU per frame on {cores} cores: no frame shorter than {bound:.2f} ms "
           f"({1e3 * runs[0]['period_s'] / bound:.1f}x real time at {runs[0]['period_s']:g} s frames) however the "
           "stages overlap.\n")
@@ -159,10 +163,14 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", help="passed to launch.py")
     ap.add_argument("--variant", action="append", default=[], metavar="LABEL=PATH=VALUE",
-                    help="this tree with one more --set PATH=VALUE, as one arm of the A/B (repeatable)")
+                    help="this tree with one more --set PATH=VALUE, as one arm of the A/B (repeatable; a label "
+                         "given again adds its setting to that arm)")
     a = ap.parse_args(argv)
     trees = [(lab, Path(p).resolve(), []) for lab, _, p in (t.partition("=") for t in (a.tree or []))]
-    trees += [(lab, ROOT, ["--set", setting]) for lab, _, setting in (v.partition("=") for v in a.variant)]
+    variants: dict[str, list[str]] = {}                         # a label given again adds its setting
+    for lab, _, setting in (v.partition("=") for v in a.variant):
+        variants.setdefault(lab, []).extend(["--set", setting])
+    trees += [(lab, ROOT, own) for lab, own in variants.items()]
     trees = trees or [("this", ROOT, [])]
     extra = [x for s in a.set for x in ("--set", s)]
     runs: dict[str, list[dict]] = {lab: [] for lab, _, _ in trees}

@@ -14,8 +14,7 @@ A fixed workload for the perception process, independent of the machine's load a
   frames (``--stages``), each after one unmetered warm-up call: lidar (resample + noise), points (the
   lidar_points record), level (level points and border flags), cart, heightmap, impact, accuracy (the
   evaluated frames), and the whole participant step (the harness's copying of the inputs into the segment
-  left out). A frame is evaluated when the scenario's ``accuracy_every_frames`` divides its id: the default
-  recording (frames 20 k and 20 k + 7) evaluates half its frames, a run of consecutive frames one in ten.
+  left out). A frame is evaluated when the scenario's ``accuracy_every_frames`` divides its id.
 * ``--callgrind``: under ``valgrind --tool=callgrind --collect-atstart=no`` each stage's loop is collected alone
   and dumped under its name (a small client-request library is compiled on first use into ``bench/out``);
   ``python bench/perception_replay.py totals callgrind.out.PID.*`` then prints instructions per stage and call;

@@ -3,7 +3,9 @@
 Six configurations, interleaved and repeated (``--configs`` picks some): plain, ``viewer`` (the observer
 process attached, with a client polling the dashboard like the page does: state every 250 ms, each changed
 image panel at most every 500 ms), ``viewer-idle`` (the observer attached, nobody polling it), ``record`` (the
-MCAP sink, images every frame), ``record-img5`` (images every 5th frame) and ``viewer+record``. Viewer runs
+MCAP sink, images every frame), ``record-img5`` (images every 5th frame), ``viewer+record``, ``foxglove`` (the
+live Foxglove server, with a WebSocket client subscribed to every topic and reading everything, like the app)
+and ``foxglove-idle`` (the server, no client). Viewer runs
 report the viewer's (and its client's) CPU time per second of run. Recording runs also report the supervisor's
 time in the recording sink per frame (mean, ms: the copy into a frame slot plus any wait for a free slot), the
 recorder's CPU time per frame (its process CPU time: encode, compress, write; from the file's ``recorder``
@@ -50,7 +52,7 @@ from e2e import process_cpu_s  # noqa: E402  (bench/, this script's folder)
 SETTLE_S = 4.0
 CAMS, H, W = 2, 480, 640
 BEAMS = 32768
-CONFIGS = ("plain", "viewer", "viewer-idle", "record", "record-img5", "viewer+record")
+CONFIGS = ("plain", "viewer", "viewer-idle", "record", "record-img5", "viewer+record", "foxglove", "foxglove-idle")
 
 
 def depth_image() -> np.ndarray:
@@ -190,6 +192,28 @@ while True:
 """
 
 
+#: the Foxglove client: subscribes to every advertised channel and reads every message (like the app's 3D panel)
+FOX_CLIENT = """
+import asyncio, json, sys, websockets
+async def main(url):
+    async with websockets.connect(url, subprotocols=["foxglove.sdk.v1"], max_size=None) as ws:
+        subscribed = set()
+        while True:
+            m = await ws.recv()
+            if isinstance(m, str):
+                m = json.loads(m)
+                if m["op"] == "advertise":
+                    new = [c["id"] for c in m["channels"] if c["id"] not in subscribed]
+                    subscribed.update(new)
+                    await ws.send(json.dumps({"op": "subscribe",
+                                              "subscriptions": [{"id": i, "channelId": i} for i in new]}))
+try:
+    asyncio.run(main(sys.argv[1]))
+except Exception:
+    pass
+"""
+
+
 class TimedSink:
     """Sink factory wrapper recording how long each call of the wrapped sink takes (supervisor time, s)."""
 
@@ -230,8 +254,12 @@ def one_run(scenario: Scenario, specs, config: str, tmp: Path) -> float:
     observers, client = [], None
     announce = tmp / "viewer.json"
     announce.unlink(missing_ok=True)
-    if "viewer" in config:
-        observers = [ObserverSpec("viewer", "cosim.viewer.server:observe", {"port": 0, "announce": str(announce)})]
+    if "viewer" in config or "foxglove" in config:
+        observers = [ObserverSpec("viewer", "cosim.viewer.server:observe", {"port": 0, "announce": str(announce)})
+                     if "viewer" in config else
+                     ObserverSpec("foxglove", "cosim.foxglove.live:observe",
+                                  {"port": 0, "announce": str(announce), "scenario_json": scenario.model_dump_json()})]
+        script = CLIENT if "viewer" in config else FOX_CLIENT
 
         class ViewerCpu:
             """Sink: starts the polling client once the viewer is up; at the run's end (sinks close before the
@@ -247,7 +275,7 @@ def one_run(scenario: Scenario, specs, config: str, tmp: Path) -> float:
                     self.pid, self.t0 = info["pid"], time.perf_counter()
                     self.cpu0 = process_cpu_s(self.pid) or 0.0
                     if not config.endswith("idle"):
-                        client = subprocess.Popen([sys.executable, "-c", CLIENT, info["url"]])
+                        client = subprocess.Popen([sys.executable, "-c", script, info["url"]])
                         self.cpu0 += process_cpu_s(client.pid) or 0.0
 
             def close(self):
@@ -268,8 +296,8 @@ def one_run(scenario: Scenario, specs, config: str, tmp: Path) -> float:
             client.wait(5)
     if not res.completed:
         raise RuntimeError(f"{config} run failed: {res.error}")
-    if "viewer" in config and not config.endswith("idle") and client is None:
-        raise RuntimeError("the viewer never announced itself; no client polled it")
+    if ("viewer" in config or "foxglove" in config) and not config.endswith("idle") and client is None:
+        raise RuntimeError(f"the {config} observer never announced itself; no client polled it")
     size = (out / "recording.mcap").stat().st_size if "record" in config else 0
     one_run.sizes[config] = size / (len(timing.stamps) or 1)
     if record.calls:

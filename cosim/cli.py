@@ -56,6 +56,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="write an MCAP recording (Foxglove schemas) to FILE (default <run dir>/recording.mcap)")
     run.add_argument("--record-image-every", type=int, default=None, metavar="N",
                      help="record camera images every N frames (default 5; LiDAR, maps and scalars every frame)")
+    run.add_argument("--foxglove", action="store_true",
+                     help="serve the run live to Foxglove / Lichtblick over WebSocket on 127.0.0.1 (see --foxglove-port)")
+    run.add_argument("--foxglove-port", type=int, default=8766, metavar="PORT",
+                     help="port of the --foxglove server (default %(default)s)")
     run.add_argument("--quiet", action="store_true", help="no progress output")
     val = sub.add_parser("validate", help="validate a scenario and print the resolved result")
     _scenario_options(val)
@@ -97,9 +101,27 @@ def _server_options(p: argparse.ArgumentParser) -> None:
 
 
 def run_extras(args: argparse.Namespace, scenario=None) -> tuple[list, list]:
-    """(observers, sinks) that ``run``'s --viewer and --record ask for (``scenario``: the cart's size for the
-    dashboard's metre axes)."""
+    """(observers, sinks) that ``run``'s --viewer, --foxglove and --record ask for (``scenario``: the cart's size
+    for the dashboard's metre axes; the scenario --foxglove serves). ValueError (exit 2, nothing started) for a
+    --foxglove-port in use."""
     observers, sinks = [], []
+    if getattr(args, "foxglove", False):
+        from cosim.runtime.launcher import ObserverSpec
+        from .foxglove.live import DEFAULT_HOST
+        from .viewer.address import PortBusy, check_port
+
+        if scenario is None:
+            raise TypeError("run_extras: --foxglove needs the loaded scenario")
+        if getattr(args, "viewer", False) and args.viewer_port == args.foxglove_port != 0:
+            raise ValueError(f"--foxglove-port {args.foxglove_port} is the dashboard's port too (--viewer-port); "
+                             "choose another (nothing was started)")
+        try:
+            check_port(DEFAULT_HOST, args.foxglove_port)
+        except PortBusy:
+            raise ValueError(f"--foxglove-port {args.foxglove_port}: {DEFAULT_HOST}:{args.foxglove_port} is already "
+                             "in use; choose another port (nothing was started)") from None
+        observers.append(ObserverSpec("foxglove", "cosim.foxglove.live:observe",
+                                      {"port": args.foxglove_port, "scenario_json": scenario.model_dump_json()}))
     if getattr(args, "viewer", False):
         from cosim.runtime.launcher import ObserverSpec
 
@@ -180,10 +202,7 @@ def _interruptible(fn):
         except KeyboardInterrupt:
             sys.stderr.write("interrupted\n")
         finally:
-            if main_thread and code == EXIT_INTERRUPTED:  # ending on a stop: more signals change nothing
-                signal.signal(signal.SIGINT, signal.SIG_IGN)
-                signal.signal(signal.SIGTERM, signal.SIG_IGN)
-            elif main_thread:
+            if main_thread:  # main is also called in-process (tests, scripts): leave the handlers as found
                 signal.signal(signal.SIGTERM, old)
         return code
 

@@ -105,14 +105,13 @@ def world_from_parent(scenario: Scenario, state: Mapping[str, float]) -> np.ndar
 def exact_ranges(scenario: Scenario, state: Mapping[str, float], heightmap_truth: np.ndarray,
                  stream: np.ndarray, world_from_sensor: np.ndarray, directions: np.ndarray) -> np.ndarray:
     """Exact range (N,) float64 m (inf on a miss) of every beam, by the renderer's ray caster on the scene
-    the renderer drew. ``directions`` (N, 3) unit beams in the sensor frame."""
-    from cosim.world.raycast import raycast          # lazily: only accuracy frames need the scene
+    the renderer drew (``cosim.world.fastcast``: Embree when installed, else the numpy ray cast).
+    ``directions`` (N, 3) unit beams in the sensor frame."""
+    from cosim.world.fastcast import cast_from       # lazily: only accuracy frames need the scene
     from cosim.world.scene import scene_from_state
 
     scene = scene_from_state(scenario, state, heightmap_truth, stream)
-    d_w = directions @ world_from_sensor[:3, :3].T
-    o = np.broadcast_to(world_from_sensor[:3, 3], d_w.shape)
-    return raycast(scene, o, d_w)
+    return cast_from(scene, world_from_sensor[:3, 3], directions @ world_from_sensor[:3, :3].T)
 
 
 def true_corners_sensor(cart: Cart, state: Mapping[str, float], world_from_sensor: np.ndarray) -> np.ndarray:

@@ -35,7 +35,8 @@ def render_markdown(section: dict, title: str = "Perception accuracy") -> str:
     meets = (wm is not None and wf is not None and wm <= TARGET_MEAN_M and wf <= TARGET_ABOVE_FRAC)
     lines = [
         f"# {title}", "",
-        f"Sampler: `{section.get('sampler', '?')}`; frames evaluated against an exact ray cast: "
+        f"Sampler: `{section.get('sampler', '?')}`; accuracy evaluation: {re.get('evaluation', '?')}; "
+        f"frames evaluated against an exact ray cast: "
         f"{re.get('frames_evaluated', 0)}; beams compared: {re.get('beams', 0):.0f} (per evaluated frame: "
         f"{re.get('beams_per_frame', 'all')}, a stratified random sample of the pattern unless all).", "",
         "## LiDAR range error (noise-free ranges vs exact ray cast of the same beams)", "",

@@ -3,7 +3,8 @@
 ``series`` maps ``"perc_state.<field>"`` to a (frames,) float64 array, one entry per completed frame.
 Accuracy fields are NaN on frames without an evaluation. Range statistics over the run weight each evaluated
 frame by its number of compared beams; percentiles over the run are the beam-weighted mean of the per-frame
-percentiles (the per-beam errors are not kept). NaN becomes ``null`` in the JSON.
+percentiles (the per-beam errors are not kept). NaN becomes ``null`` in the JSON. ``range_error.evaluation``
+says how often the run was evaluated, or that evaluation was off (``perception.accuracy_every_frames: 0``).
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from . import accuracy as acc
 from .blocks import RANGE_BANDS_M, band_name
 from .heightmap import grid_shape
 
-__all__ = ["summarize", "clean_json"]
+__all__ = ["summarize", "clean_json", "evaluation_note"]
 
 _P = "perc_state."
 
@@ -53,6 +54,18 @@ def _median(values: np.ndarray) -> float:
     return float(np.median(v)) if v.size else math.nan
 
 
+def evaluation_note(scenario: Scenario) -> str:
+    """How the run compared perception with the exact ray cast: ``every N frames, K beams`` or, with
+    ``perception.accuracy_every_frames: 0``, a sentence saying that the accuracy fields are off (null)."""
+    p = scenario.perception
+    if p.accuracy_every_frames == 0:
+        return ("off (perception.accuracy_every_frames: 0): no frame was compared with the exact ray cast, so the "
+                "range-error, corner, impact and per-frame height-map errors are null")
+    beams = f"{p.accuracy_beams} sampled beams" if p.accuracy_beams else "every beam"
+    k = p.accuracy_every_frames
+    return f"every {k} frame{'s' if k > 1 else ''}, {beams} each"
+
+
 def summarize(scenario: Scenario, series: Mapping[str, np.ndarray], heightmap_truth: np.ndarray | None,
               heightmap_perceived: np.ndarray | None) -> dict:
     """``{"perception": {...}}``: final height-map RMSE and coverage, median corner and impact errors over the
@@ -81,6 +94,7 @@ def summarize(scenario: Scenario, series: Mapping[str, np.ndarray], heightmap_tr
         if n.size else np.zeros(0)
     maxes = _col(series, "range_err_max_m")
     range_error = {
+        "evaluation": evaluation_note(scenario),
         "frames_evaluated": int(np.nansum(evaluated)) if evaluated.size else 0,
         "beams_per_frame": scenario.perception.accuracy_beams or "all",
         "beams": float(np.nansum(n)) if n.size else 0.0,

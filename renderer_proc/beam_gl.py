@@ -36,7 +36,7 @@ from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
 
 from .beam_mock import check_target
 from .codec import BYTE_MAX, CM_PER_M
-from .gl_backend import SHADER_DIR, create_gl_context
+from .gl_backend import SHADER_DIR, GLResources
 from .hfmesh import SurfaceMesh
 from .projection import far_plane_m
 
@@ -119,7 +119,7 @@ class _Buffers:
     clears: list
 
 
-class GLBeamRenderer:
+class GLBeamRenderer(GLResources):
     """Beam-native GL renderer of a gridded :class:`BeamLayout`: ``set_scene``, ``draw(0, world_from_sensor)``,
     ``read_depth(0, out)``, ``read_rgb(0, out)``, ``close`` (the renderer interface with one target)."""
 
@@ -128,9 +128,7 @@ class GLBeamRenderer:
             raise ValueError("the GL beam-native renderer needs a grid or honeycomb pattern (a CSV table has no "
                              "angle grid); use the exact ray cast (renderer_proc.beam_mock.MockBeamRenderer)")
         self.layout, self.codec, self.rgb = layout, codec, rgb
-        self._own_ctx = context is None
-        self._made: list = []
-        self.ctx = context if context is not None else create_gl_context()
+        super().__init__(context)
         import moderngl  # after create_gl_context, which turns a missing moderngl into RendererUnavailable
 
         ctx = self.ctx
@@ -186,10 +184,6 @@ class GLBeamRenderer:
         self._depth_test = moderngl.DEPTH_TEST
 
     # -- set-up ------------------------------------------------------------------------------------------------
-    def _m(self, obj):
-        self._made.append(obj)
-        return obj
-
     def _solids(self, prog, reserve: int = 64) -> list:
         """[vao, instance buffer, count] of convex solids drawn as one point per instance record."""
         inst = self._m(self.ctx.buffer(reserve=reserve * INSTANCE_FLOATS * 4, dynamic=True))
@@ -339,15 +333,3 @@ class GLBeamRenderer:
             raise ValueError("this renderer was made without the rgb output")
         self._check(out)
         self._frame.draw.read_into(out, components=4, attachment=1, alignment=1, dtype="f1")
-
-    def close(self) -> None:
-        """Release the GL context (when this renderer made it), else every object made in it."""
-        if self.ctx is None:
-            return
-        if self._own_ctx:
-            self.ctx.release()
-        else:
-            for obj in reversed(self._made):
-                obj.release()
-        self._made.clear()
-        self.ctx = None

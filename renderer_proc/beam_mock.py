@@ -2,7 +2,8 @@
 
 With ``sensor.method: beam_native`` and ``renderer: mock`` this is the whole renderer: each frame it casts
 the N beam directions from the LiDAR origin through the :class:`~cosim.world.scene.Scene`
-(``cosim.world.raycast``, exact for every primitive) and writes the range along each beam with Eqs 1-2
+(``cosim.world.fastcast``: Embree when installed, else the numpy ``cosim.world.raycast``; exact for every
+primitive) and writes the range along each beam with Eqs 1-2
 (``renderer_proc.codec.encode_depth``) into the beams target (``cosim.world.beamtarget``). The GL
 beam-native renderer writes the same bytes to the codec's rounding; this is its oracle and the fast path
 without a GPU (one cast per beam instead of one per camera pixel).
@@ -16,7 +17,7 @@ import numpy as np
 
 from cosim.scenario.config.sensing import Codec
 from cosim.world.beamtarget import BeamLayout
-from cosim.world.raycast import raycast
+from cosim.world.fastcast import Backend, cast_from
 from cosim.world.scene import SKY_RGBA, SUN_WORLD, Scene
 
 from .codec import encode_depth
@@ -32,20 +33,23 @@ def check_target(k: int) -> None:
 
 
 
-def beam_ranges(scene: Scene, world_from_sensor: np.ndarray, directions: np.ndarray) -> np.ndarray:
+def beam_ranges(scene: Scene, world_from_sensor: np.ndarray, directions: np.ndarray,
+                backend: Backend = "auto") -> np.ndarray:
     """Exact range along each beam: ``directions`` (N, 3) unit, sensor frame; ``world_from_sensor`` 4 x 4.
-    Returns (N,) float64 m, inf where the beam hits nothing."""
+    Returns (N,) float64 m, inf where the beam hits nothing: Embree when installed, else the numpy ray cast
+    (``cosim.world.fastcast``, ``backend``; the two agree to well under the codec's rounding)."""
     d_world = np.asarray(directions, np.float64) @ world_from_sensor[:3, :3].T
-    return raycast(scene, world_from_sensor[:3, 3], d_world)
+    return cast_from(scene, world_from_sensor[:3, 3], d_world, backend)
 
 
 class MockBeamRenderer:
     """The beam-native renderer interface (as :class:`renderer_proc.beam_gl.GLBeamRenderer`): ``set_scene``,
     ``draw(0, world_from_sensor)``, ``read_depth(0, out)``, ``read_rgb(0, out)``, ``close``: the camera
-    renderers' interface with a single target, number 0."""
+    renderers' interface with a single target, number 0. ``backend``: the ray cast's (``cosim.world.fastcast``;
+    ``auto``: Embree when installed)."""
 
-    def __init__(self, layout: BeamLayout, codec: Codec, *, rgb: bool = False):
-        self.layout, self.codec, self.rgb = layout, codec, rgb
+    def __init__(self, layout: BeamLayout, codec: Codec, *, rgb: bool = False, backend: Backend = "auto"):
+        self.layout, self.codec, self.rgb, self.backend = layout, codec, rgb, backend
         self._scene: Scene | None = None
         self._range: np.ndarray | None = None
         self._pose: np.ndarray | None = None
@@ -59,7 +63,7 @@ class MockBeamRenderer:
         if self._scene is None:
             raise RuntimeError("set_scene must be called before draw")
         check_target(k)
-        self._range = beam_ranges(self._scene, world_from_sensor, self.layout.directions)
+        self._range = beam_ranges(self._scene, world_from_sensor, self.layout.directions, self.backend)
         self._pose = np.array(world_from_sensor, np.float64)
 
     def ranges(self) -> np.ndarray:

@@ -45,7 +45,7 @@ from cosim.world.meshes import (
 from .projection import NEAR_M, far_plane_m, gl_projection, gl_view
 from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
 
-__all__ = ["GL_REQUIRE", "SHADER_DIR", "GLRenderer", "create_gl_context"]
+__all__ = ["GL_REQUIRE", "SHADER_DIR", "GLResources", "GLRenderer", "create_gl_context"]
 
 #: directory of the GLSL sources
 SHADER_DIR = Path(__file__).with_name("shaders")
@@ -126,16 +126,41 @@ class _Surface:
     count: int = 0
 
 
-class GLRenderer:
+class GLResources:
+    """A GL context, made here (``context`` None) or lent, and every GL object made in it through :meth:`_m`:
+    :meth:`close` releases the context when it is ours, else those objects (the renderers' common base)."""
+
+    def __init__(self, context: Any = None):
+        self._own_ctx = context is None
+        self._made: list = []
+        self.ctx = context if context is not None else create_gl_context()
+
+    def _m(self, obj):
+        """Remember a GL object made here, to release it when the context is not ours."""
+        self._made.append(obj)
+        return obj
+
+    def close(self) -> None:
+        """Release the GL context (when this renderer made it), else every object made in it."""
+        if self.ctx is None:
+            return
+        if self._own_ctx:
+            self.ctx.release()
+        else:
+            for obj in reversed(self._made):
+                obj.release()
+        self._made.clear()
+        self.ctx = None
+
+
+class GLRenderer(GLResources):
     """Renders :class:`Scene` frames for every camera of ``rig``. ``set_scene`` uploads a frame (instance
     buffers, grain heights), ``draw(k, world_from_camera)`` renders camera k, ``read_*`` read it out."""
 
     def __init__(self, rig: Rig, codec: Codec, *, rgb: bool = False, float_depth: bool = False,
                  context: Any = None):
         self.rig, self.codec, self.rgb, self.float_depth = rig, codec, rgb, float_depth
-        self._own_ctx = context is None
-        self._made: list = []
-        self.ctx = context if context is not None else create_gl_context()
+        super().__init__(context)
         ctx = self.ctx
         import moderngl  # after create_gl_context, which turns a missing moderngl into RendererUnavailable
 
@@ -167,11 +192,6 @@ class GLRenderer:
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.BLEND)
         self._cull = moderngl.CULL_FACE
-
-    def _m(self, obj):
-        """Remember a GL object made here, to release it when the context is not ours."""
-        self._made.append(obj)
-        return obj
 
     def _instance_format(self, buf) -> tuple:
         """Instance attribute binding; the colour is skipped when the shader has optimised it out (no rgb)."""
@@ -374,14 +394,3 @@ class GLRenderer:
         self._check(out, (t.size[1], t.size[0]), np.float32)
         t.frame.draw.read_into(out, components=1, attachment=t.zf_attachment, alignment=1, dtype="f4")
 
-    def close(self) -> None:
-        """Release the GL context (when this renderer made it), else every object made in it."""
-        if self.ctx is None:
-            return
-        if self._own_ctx:
-            self.ctx.release()
-        else:
-            for obj in reversed(self._made):
-                obj.release()
-        self._made.clear()
-        self.ctx = None

@@ -1,4 +1,5 @@
-"""The mock renderer: the same buffers as the GL renderer, from the exact numpy ray caster. No OpenGL.
+"""The mock renderer: the same buffers as the GL renderer, from the exact ray cast (``cosim.world.fastcast``:
+Embree when installed, else the numpy ray caster). No OpenGL.
 
 For CI smoke runs and as an oracle. Each pixel centre's ray is cast through the :class:`Scene`; planar depth
 is Z = t cos(angle to the optical axis); the bytes come from :func:`renderer_proc.codec.encode_depth`. Like
@@ -15,7 +16,7 @@ from cosim.scenario.config.sensing import Codec
 
 from .codec import encode_depth, valid_depth_mask
 from .projection import NEAR_M, far_plane_m, pixel_rays
-from cosim.world.raycast import raycast
+from cosim.world.fastcast import cast_from
 from cosim.world.scene import SKY_RGBA, SUN_WORLD, Scene
 
 __all__ = ["AMBIENT", "DIFFUSE", "MOCK_GREY", "MockRenderer"]
@@ -46,7 +47,7 @@ class MockRenderer:
             raise RuntimeError("set_scene must be called before draw")
         cam = self.rig.cameras[k].intrinsics
         origin, dirs, cos = pixel_rays(cam, world_from_camera)
-        t = raycast(self._scene, np.broadcast_to(origin, (dirs.size // 3, 3)), dirs.reshape(-1, 3))
+        t = cast_from(self._scene, origin, dirs.reshape(-1, 3))
         z = t.reshape(cos.shape) * cos
         self._z[k] = np.where((z >= NEAR_M) & (z <= self._far), z, np.inf)
         self._pose[k] = world_from_camera

@@ -143,7 +143,7 @@ def test_the_viewer_address_is_printed_only_once_it_answers(recording):
     import threading
     import time
 
-    from cosim.recording import ReplaySource
+    from cosim.viewer.replay import ReplaySource
     from cosim.viewer.address import ViewerAnnouncer
     from cosim.viewer.server import DashboardServer
 
@@ -178,3 +178,21 @@ def test_run_hands_the_viewer_its_host_port_announce_file_and_cart_size():
     assert obs.target == "cosim.viewer.server:observe" and sinks == []
     assert dict(obs.kwargs) == {"port": 0, "host": "127.0.0.2", "announce": "/tmp/x.json",
                                 "size_m": (sc.cart.interior_length_m, sc.cart.interior_width_m)}
+
+
+def test_main_in_process_leaves_the_signal_handlers_as_found(monkeypatch):
+    """``main`` called from a program (a test, a notebook, a pool worker) that ends on a stop must not leave
+    SIGINT/SIGTERM ignored: a process pool's workers inherit ignored signals and then never terminate."""
+    import signal
+
+    import cosim.cli as cli
+
+    def stopped(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "_load", stopped)
+    before = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
+    with redirect_stderr(io.StringIO()) as err:
+        assert main(["validate", "default"]) == 130
+    assert "interrupted" in err.getvalue()
+    assert (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) == before

@@ -212,3 +212,33 @@ def test_full_ring_with_the_mock_renderer():
     out = summarize(sc, {k: v for k, v in s.items() if k.startswith("perc_state.")},
                     run.segment.view("heightmap_truth"), run.segment.view("heightmap_perceived"))
     assert out["perception"]["range_error"]["frames_evaluated"] == 3
+
+
+def test_accuracy_off_never_casts_and_the_summary_says_so(monkeypatch):
+    """perception.accuracy_every_frames: 0 keeps the exact ray cast off the frame (never called), the frame's
+    accuracy fields NaN, and the summary's range_error says evaluation was off, with null statistics; with
+    evaluation on it says how often."""
+    import perception_proc.accuracy as acc_mod
+
+    off = SCENARIO.model_copy(update={"perception": SCENARIO.perception.model_copy(
+        update={"accuracy_every_frames": 0})})
+
+    def no_cast(*_a, **_k):
+        raise AssertionError("the exact ray cast ran with evaluation off")
+
+    monkeypatch.setattr(acc_mod, "exact_ranges", no_cast)
+    seg = _segment()
+    part = PerceptionParticipant(off, rig=RIG)
+    part.start(seg)
+    _publish(seg, 0, part)
+    _step(part, 0)
+    st = seg.view("perc_state").as_dict()
+    assert st["acc_evaluated"] == 0 and math.isnan(st["range_err_mean_m"]) and st["cart_valid"] == 1
+    series = {f"perc_state.{k}": np.array([v], dtype=np.float64) for k, v in st.items()}
+    p = summarize(off, series, None, np.array(seg.view("heightmap_perceived")))["perception"]
+    re = p["range_error"]
+    assert re["evaluation"].startswith("off (perception.accuracy_every_frames: 0)")
+    assert re["frames_evaluated"] == 0 and re["mean_m"] is None and re["working_p99_m"] is None
+    assert "accuracy evaluation: off" in render_markdown(p)
+    on = summarize(SCENARIO, series, None, None)["perception"]["range_error"]["evaluation"]
+    assert on == "every 1 frame, 4096 sampled beams each"

@@ -11,7 +11,8 @@ import pytest
 
 import test_viewer_standins as standins
 from cosim.runtime.launcher import launch
-from cosim.recording import ReplaySource, mcap_sink
+from cosim.recording import mcap_sink
+from cosim.viewer.replay import ReplaySource
 from cosim.viewer.page import page_html
 from cosim.viewer.panels import (BACKGROUND, IMAGE_PANELS, MAP_MARGIN_BOTTOM, MAP_MARGIN_LEFT, MAP_MARGIN_TOP,
                                   MAP_W, PANELS, PLOT_BOX, PLOT_H, PLOT_W, UNKNOWN, lidar_frame, panel_info,

@@ -22,7 +22,8 @@ import numpy as np
 import pytest
 
 import test_viewer_standins as standins
-from cosim.recording import ReplaySource, mcap_sink
+from cosim.recording import mcap_sink
+from cosim.viewer.replay import ReplaySource
 from cosim.runtime.launcher import launch
 from cosim.viewer.server import DashboardServer
 

@@ -1,7 +1,8 @@
 """Reading a recording back: every message of every completed frame, also from a file cut off mid-write.
 
-Messages come back as dicts: JSON channels as parsed, protobuf channels (Foxglove's schemas) through
-:func:`cosim.recording.proto.decode` (``bytes`` fields as bytes, timestamps as ``{sec, nsec}``).
+Messages come back as dicts: JSON channels as parsed, protobuf channels (Foxglove's schemas) parsed with the
+protobuf package from the message types the file's own schema records describe (what Foxglove does), every
+field present (defaults included), ``bytes`` fields as bytes, timestamps as ``{sec, nsec}``.
 
 A finished file has a summary and an index; a file of a run that was killed has neither and may end inside a
 record. :func:`read_recording` therefore reads the data section in file order with mcap's non-seeking reader,
@@ -15,7 +16,6 @@ import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from . import proto
 from .writer import FRAME_TOPIC
 
 __all__ = ["Channel", "Recording", "read_recording", "RecordingError"]
@@ -59,11 +59,38 @@ class Recording:
         return sorted(t for t, c in self.channels.items() if c.schema == schema)
 
 
-def _decode(ch: Channel, data: bytes) -> dict:
+def _message_class(name: str, descriptor_set: bytes):
+    """The protobuf message class ``name`` from a serialized FileDescriptorSet (an MCAP protobuf schema)."""
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    pool = descriptor_pool.DescriptorPool()
+    for fd in descriptor_pb2.FileDescriptorSet.FromString(descriptor_set).file:
+        pool.Add(fd)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(name))
+
+
+def _as_dict(m) -> dict:
+    """Every field of protobuf message ``m`` (defaults included) as plain values; Timestamps as {sec, nsec}."""
+    if m.DESCRIPTOR.full_name == "google.protobuf.Timestamp":
+        return {"sec": m.seconds, "nsec": m.nanos}
+    out = {}
+    for fd in m.DESCRIPTOR.fields:
+        v = getattr(m, fd.name)
+        # protobuf >= 6.31 has is_repeated, older ones only label
+        rep = fd.is_repeated if hasattr(fd, "is_repeated") else fd.label == fd.LABEL_REPEATED
+        if fd.message_type is not None:
+            v = [_as_dict(x) for x in v] if rep else _as_dict(v)
+        elif rep:
+            v = list(v)
+        out[fd.name] = v
+    return out
+
+
+def _decode(ch: Channel, data: bytes, classes: dict) -> dict:
     if ch.encoding == "json":
         return json.loads(data)
-    if ch.encoding == "protobuf" and ch.schema in proto.MESSAGES:
-        return proto.decode(ch.schema, data)
+    if ch.encoding == "protobuf" and ch.schema in classes:
+        return _as_dict(classes[ch.schema].FromString(data))
     raise RecordingError(f"topic {ch.topic}: cannot decode {ch.encoding!r} messages of schema {ch.schema!r}")
 
 
@@ -76,6 +103,7 @@ def read_recording(path: Path | str) -> Recording:
 
     path = Path(path)
     schemas: dict[int, str] = {}
+    classes: dict[str, type] = {}
     channels: dict[int, Channel] = {}
     messages: dict[str, list[tuple[int, dict]]] = {}
     metadata: dict[str, dict] = {}
@@ -86,11 +114,13 @@ def read_recording(path: Path | str) -> Recording:
             for rec in StreamReader(f, skip_magic=False).records:
                 if isinstance(rec, Schema):
                     schemas[rec.id] = rec.name
+                    if rec.encoding == "protobuf" and rec.name not in classes:
+                        classes[rec.name] = _message_class(rec.name, rec.data)
                 elif isinstance(rec, ChannelRecord):
                     channels[rec.id] = Channel(rec.topic, schemas.get(rec.schema_id, ""), rec.message_encoding)
                 elif isinstance(rec, Message):
                     ch = channels[rec.channel_id]
-                    order.append((ch.topic, rec.log_time, _decode(ch, rec.data)))
+                    order.append((ch.topic, rec.log_time, _decode(ch, rec.data, classes)))
                 elif isinstance(rec, Metadata):
                     metadata[rec.name] = dict(rec.metadata)
                 elif isinstance(rec, Footer):

@@ -1,22 +1,17 @@
 """The recording sink of the launcher (``launch(..., sinks=[mcap_sink()])``) and its recorder process.
 
 The supervisor calls the sink after each completed frame while it holds the token, so it sees every frame
-consistently without a seqlock retry. The sink only copies the frame's recorded blocks into a free frame slot
-(:mod:`cosim.recording.slots`, shared memory: one memcpy per block, nothing pickled) and counts it; the
-recorder (spawned, like the ring's children) encodes and writes straight from the slot, then gives the slot
-back. At most ``queue_frames`` frames are in flight (a semaphore of credits, one per slot; by default as many
-slots as fit in QUEUE_BYTES): when encoding cannot keep up, the sink waits, so a recording never loses a frame.
+consistently. The sink only copies the frame's recorded blocks into a free frame slot (:mod:`.slots`, shared
+memory: one memcpy per block, nothing pickled); the recorder (spawned, nice 10) builds the messages and writes
+them from the slot (:class:`~cosim.recording.writer.McapWriter`), then gives the slot back. At most
+``queue_frames`` frames are in flight (a semaphore of credits, one per slot; by default as many slots as fit in
+QUEUE_BYTES): when the recorder cannot keep up the sink waits, so a recording never loses a frame.
 
-Wake-ups are batched. The sink tells the recorder the count of frames put (an 8-byte message) only every
-NOTIFY_FRAMES frames or NOTIFY_S seconds, whichever comes first, and always before it would wait for a credit
-(the recorder must know of every full slot before the ring waits for one). A ground-truth run of ~1 ms frames
-so wakes the recorder ~30 times a second instead of ~1000: each wake-up is scheduler work on both sides, and
-a woken recorder lands on whichever core is idle at that instant, which is the core the next ring member is
-about to be woken on (the sender still occupies the other), where the ring then waits for it. A 100 ms frame
-still wakes it every frame. The recorder runs at nice 10 (``RecordOptions.nice``), like the viewer: it takes the
-CPU the ring leaves, and the slots absorb its delays.
-
-``queue_frames=0`` writes synchronously inside the sink, with no process.
+Wake-ups are batched: the sink tells the recorder the count of frames put (an 8-byte message) only every
+NOTIFY_FRAMES frames or NOTIFY_S seconds, and always before it would wait for a credit. A ground-truth run of
+~1 ms frames so wakes the recorder ~30 times a second instead of ~1000 (each wake-up is scheduler work on both
+sides, and lands the recorder on the core the next ring member is about to be woken on). ``queue_frames=0``
+writes synchronously inside the sink, with no process.
 
 Ends: ``close`` (end of run, failure, stop) sends the count and the end mark and waits for the recorder to write
 every frame put and finish the file. If the launcher itself is killed, the recorder sees the pipe close, takes

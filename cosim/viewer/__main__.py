@@ -52,7 +52,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from .server import NICE, serve
 
     if args.replay:
-        from cosim.recording import RecordingError, ReplaySource
+        from cosim.recording import RecordingError
+        from cosim.viewer.replay import ReplaySource
 
         try:
             source = ReplaySource(args.replay, speed=args.speed, loop=args.loop)

@@ -3,7 +3,7 @@
 Routes: ``/`` the page, ``/api/state`` the numbers (JSON), ``/panel/<id>.png`` an image panel (404 when absent),
 ``/healthz``; for a replay, ``POST /api/replay?action=play|pause|step|seek[&value=N]`` drives it (step: N frames,
 default 1; seek: to recorded frame N) and answers its position (404 for a live run, 400 for a bad action). A *source* supplies snapshots: :class:`~cosim.viewer.live.LiveSource` (a running segment) or
-:class:`~cosim.recording.replay.ReplaySource` (a recording); both have ``name``, ``frames_planned``,
+:class:`~cosim.viewer.replay.ReplaySource` (a recording); both have ``name``, ``frames_planned``,
 ``history``, ``snapshot(big=False)``, ``check_end()`` and ``close()``.
 
 :func:`observe` is what ``launch(..., observers=[ObserverSpec("viewer", "cosim.viewer.server:observe", {...})])``

@@ -57,13 +57,15 @@ def surface_height(padded: np.ndarray, cell_m: float, x: np.ndarray, y: np.ndarr
     return np.where(fx >= fy, lower, upper)
 
 
-def grid_vertices(nx: int, ny: int, cell_m: float, length_m: float, width_m: float) -> np.ndarray:
-    """(nx + 2) * (ny + 2) vertex (x, y) positions, float32 (grid frame, m), row-major in (a, b), clamped to the
-    interior [0, L] x [0, W]. Vertex k = a * (ny + 2) + b takes height ``padded.ravel()[k]``."""
+def grid_vertices(nx: int, ny: int, cell_m: float, length_m: float, width_m: float,
+                  dtype=np.float32) -> np.ndarray:
+    """(nx + 2) * (ny + 2) vertex (x, y) positions of ``dtype`` (float32 for GL; grid frame, m), row-major in
+    (a, b), clamped to the interior [0, L] x [0, W]. Vertex k = a * (ny + 2) + b takes height
+    ``padded.ravel()[k]``."""
     xs = np.clip((np.arange(nx + 2) - 0.5) * cell_m, 0.0, length_m)
     ys = np.clip((np.arange(ny + 2) - 0.5) * cell_m, 0.0, width_m)
     xx, yy = np.meshgrid(xs, ys, indexing="ij")
-    return np.stack([xx.ravel(), yy.ravel()], axis=1).astype(np.float32)
+    return np.stack([xx.ravel(), yy.ravel()], axis=1).astype(dtype)
 
 
 def grid_triangles(nx: int, ny: int) -> np.ndarray:

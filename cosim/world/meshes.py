@@ -40,9 +40,9 @@ def unit_cube(open_top: bool = False) -> tuple[np.ndarray, np.ndarray]:
     return v, np.array(tri, dtype=np.int32)
 
 
-def unit_cylinder(sides: int = CYLINDER_SIDES) -> tuple[np.ndarray, np.ndarray]:
+def unit_cylinder(sides: int = CYLINDER_SIDES, dtype=np.float32) -> tuple[np.ndarray, np.ndarray]:
     """Capped cylinder of radius 1 (inscribed prism: vertices on the circle) along z in [0, 1]:
-    vertices (2 sides + 2, 3) float32, triangles (4 sides, 3) int32."""
+    vertices (2 sides + 2, 3) of ``dtype`` (float32 for GL), triangles (4 sides, 3) int32."""
     a = 2.0 * np.pi * np.arange(sides) / sides
     ring = np.stack([np.cos(a), np.sin(a)], axis=1)
     v = np.concatenate([np.c_[ring, np.zeros(sides)], np.c_[ring, np.ones(sides)], [[0, 0, 0], [0, 0, 1]]])
@@ -50,7 +50,7 @@ def unit_cylinder(sides: int = CYLINDER_SIDES) -> tuple[np.ndarray, np.ndarray]:
     side = np.concatenate([np.stack([k, k1, k1 + sides], 1), np.stack([k, k1 + sides, k + sides], 1)])
     caps = np.concatenate([np.stack([np.full(sides, 2 * sides), k1, k], 1),
                            np.stack([np.full(sides, 2 * sides + 1), k + sides, k1 + sides], 1)])
-    return v.astype(np.float32), np.concatenate([side, caps]).astype(np.int32)
+    return v.astype(dtype), np.concatenate([side, caps]).astype(np.int32)
 
 
 def pack_instances(world_from_unit: np.ndarray, colour: np.ndarray, origin=None) -> np.ndarray:

@@ -16,8 +16,8 @@ import threading
 import time
 from pathlib import Path
 
-from .encode import heights_from_grid, image_from_msg, points_from_cloud
-from .reader import RecordingError, read_recording
+from cosim.recording.encode import heights_from_grid, image_from_msg, points_from_cloud
+from cosim.recording.reader import RecordingError, read_recording
 
 __all__ = ["ReplaySource", "block_of_topic", "REPLAY_ACTIONS"]
 
