@@ -34,13 +34,13 @@ def _report(outcome, out: Path) -> int:
 
 
 def _missing_engine() -> bool:
-    """Whether the sweep extra is missing (then say how to install it)."""
+    """Whether Dask distributed or tqdm is missing from this environment (then say how to install it)."""
     try:
         import distributed  # noqa: F401
         import tqdm  # noqa: F401
     except ImportError as exc:
-        sys.stderr.write(f"sweeps and studies run on Dask: {exc}; install it with pip install -e '.[sweep]' "
-                         "(or pip install 'graincosim[sweep]')\n")
+        sys.stderr.write(f"sweeps and studies run on Dask: {exc}; install it with pip install "
+                         "'distributed>=2024.1' tqdm (dependencies of graincosim)\n")
         return True
     return False
 
