@@ -289,6 +289,9 @@ def test_cli_out_errors_exit_2_with_a_message(tmp_path, capsys):
 def test_process_state_reads_stopped():
     proc = subprocess.Popen(["sleep", "30"])
     try:
+        deadline = time.monotonic() + 5      # a process being exec'd may show D (disk sleep) for a moment
+        while process_state(proc.pid) not in ("S", "R") and time.monotonic() < deadline:
+            time.sleep(0.01)
         assert process_state(proc.pid) in ("S", "R")
         os.kill(proc.pid, signal.SIGSTOP)
         deadline = time.monotonic() + 5
