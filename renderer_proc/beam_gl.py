@@ -30,14 +30,12 @@ import numpy as np
 
 from cosim.scenario.config.sensing import Codec
 from cosim.world.beamtarget import BeamLayout
-from cosim.world.heightfield import padded_heights
 from cosim.world.meshes import CYLINDER_SIDES, INSTANCE_FLOATS, box_instances, cylinder_instances, pack_instances
 from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
 
 from .beam_mock import check_target
 from .codec import BYTE_MAX, CM_PER_M
-from .gl_backend import SHADER_DIR, GLResources
-from .hfmesh import SurfaceMesh
+from .gl_backend import SHADER_DIR, GLResources, _mat
 from .projection import far_plane_m
 
 __all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "ROW_BINS", "GLBeamRenderer", "ground_key", "row_bounds"]
@@ -89,10 +87,6 @@ def _set(prog, name: str, value) -> None:
     """Set a uniform where the program keeps it (the compiler drops unused ones)."""
     if name in prog:
         prog[name].value = value
-
-
-def _mat(m: np.ndarray) -> bytes:
-    return np.asarray(m, dtype=np.float32).T.tobytes()
 
 
 def ground_key(world_from_slab: np.ndarray, half: np.ndarray, world_from_sensor: np.ndarray,
@@ -179,7 +173,6 @@ class GLBeamRenderer(GLResources):
         self._points = moderngl.POINTS
         self._meshes: dict[str, list] = {}
         self._mesh_names: list[str] = []
-        self._hf = None
         self._origin = np.zeros(3)
         self._depth_test = moderngl.DEPTH_TEST
 
@@ -220,30 +213,6 @@ class GLBeamRenderer(GLResources):
         if data.nbytes:
             unit[1].write(data)
         unit[2] = len(data)
-
-    def _heightfield(self, scene: Scene) -> None:
-        hf = scene.heightfield
-        hp = padded_heights(np.asarray(hf.heights, dtype=np.float32))
-        if self._hf is None or self._hf[0].shape != hf.heights.shape:
-            nx, ny = hf.heights.shape
-            mesh = SurfaceMesh(nx, ny, hf.cell_m, hf.length_m, hf.width_m)
-            xy = self._m(self.ctx.buffer(mesh.vertices.tobytes()))
-            hbuf = self._m(self.ctx.buffer(reserve=len(mesh.vertices) * 4, dynamic=True))
-            ibo = self._m(self.ctx.buffer(reserve=2 * (nx + 1) * (ny + 1) * 3 * 4, dynamic=True))
-            vao = self._m(self.ctx.vertex_array(self.prog_hf, [(xy, "2f", "in_xy"), (hbuf, "1f", "in_h")],
-                                                index_buffer=ibo, index_element_size=4))
-            self._hf = [mesh, vao, hbuf, ibo, 0]
-        mesh, _, hbuf, ibo, _ = self._hf
-        hbuf.write(mesh.heights(hp))
-        tri, changed = mesh.triangles(hp)
-        if changed:
-            if tri.nbytes > ibo.size:
-                ibo.orphan(tri.nbytes)
-            ibo.write(tri)
-            self._hf[4] = tri.size
-        local = hf.world_from_grid.copy()
-        local[:3, 3] -= self._origin
-        self.prog_hf["u_model"].write(_mat(local))
 
     def set_scene(self, scene: Scene) -> None:
         """Upload one frame: box (the ground slab among them) and cylinder instances, mesh poses, grain heights."""
@@ -301,8 +270,8 @@ class GLBeamRenderer(GLResources):
                 fbo.clear(*colour, depth=1.0)
         self._frame.draw.use()
         self._render("cyl")
-        if self._hf is not None and self._hf[4]:
-            self._hf[1].render(vertices=self._hf[4])
+        if self._hf is not None and self._hf.count:
+            self._hf.vao.render(vertices=self._hf.count)
         self._render("box")
         if key is None:
             self._render("ground")

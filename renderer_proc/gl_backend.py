@@ -127,18 +127,46 @@ class _Surface:
 
 
 class GLResources:
-    """A GL context, made here (``context`` None) or lent, and every GL object made in it through :meth:`_m`:
-    :meth:`close` releases the context when it is ours, else those objects (the renderers' common base)."""
+    """The renderers' common base: a GL context, made here (``context`` None) or lent, every GL object made in it
+    through :meth:`_m` (:meth:`close` releases the context when it is ours, else those objects), and the grain
+    surface's upload (:meth:`_heightfield`; a subclass provides ``prog_hf`` and ``_origin``)."""
 
     def __init__(self, context: Any = None):
         self._own_ctx = context is None
         self._made: list = []
         self.ctx = context if context is not None else create_gl_context()
+        self._hf: _Surface | None = None             # the grain surface, made at its first upload
 
     def _m(self, obj):
         """Remember a GL object made here, to release it when the context is not ours."""
         self._made.append(obj)
         return obj
+
+    def _heightfield(self, scene: Scene) -> None:
+        """Upload the grain surface for ``self.prog_hf``: vertex heights every frame, the triangle list when the
+        flat blocks change, the model matrix relative to ``self._origin`` (the renderers' camera-relative origin)."""
+        hf = scene.heightfield
+        hp = padded_heights(np.asarray(hf.heights, dtype=np.float32))
+        if self._hf is None or self._hf.mesh.shape != hf.heights.shape:
+            nx, ny = hf.heights.shape
+            mesh = SurfaceMesh(nx, ny, hf.cell_m, hf.length_m, hf.width_m)
+            xy = self._m(self.ctx.buffer(mesh.vertices.tobytes()))
+            hbuf = self._m(self.ctx.buffer(reserve=len(mesh.vertices) * 4, dynamic=True))
+            ibo = self._m(self.ctx.buffer(reserve=2 * (nx + 1) * (ny + 1) * 3 * 4, dynamic=True))
+            vao = self._m(self.ctx.vertex_array(self.prog_hf, [(xy, "2f", "in_xy"), (hbuf, "1f", "in_h")],
+                                                index_buffer=ibo, index_element_size=4))
+            self._hf = _Surface(mesh, vao, hbuf, ibo)
+        surf = self._hf
+        surf.heights.write(surf.mesh.heights(hp))
+        tri, changed = surf.mesh.triangles(hp)
+        if changed:
+            if tri.nbytes > surf.indices.size:
+                surf.indices.orphan(tri.nbytes)
+            surf.indices.write(tri)
+            surf.count = tri.size
+        local = hf.world_from_grid.copy()
+        local[:3, 3] -= self._origin
+        self.prog_hf["u_model"].write(_mat(local))
 
     def close(self) -> None:
         """Release the GL context (when this renderer made it), else every object made in it."""
@@ -185,7 +213,6 @@ class GLRenderer(GLResources):
         self._meshes: dict[str, list] = {}
         self._mesh_names: list[str] = []
         self._origin = np.zeros(3)
-        self._hf = None
         self._ground: tuple[np.ndarray, np.ndarray, tuple] | None = None
         far = far_plane_m(codec.max_depth_m)
         self.targets = [self._target(c.intrinsics, far) for c in rig.cameras]
@@ -231,31 +258,6 @@ class GLRenderer(GLResources):
         if data.nbytes:
             buf.write(data)
         self._unit[key][2] = len(data)
-
-    def _heightfield(self, scene: Scene) -> None:
-        """Upload the grain surface: vertex heights every frame, the triangle list when the flat blocks change."""
-        hf = scene.heightfield
-        hp = padded_heights(np.asarray(hf.heights, dtype=np.float32))
-        if self._hf is None or self._hf.mesh.shape != hf.heights.shape:
-            nx, ny = hf.heights.shape
-            mesh = SurfaceMesh(nx, ny, hf.cell_m, hf.length_m, hf.width_m)
-            xy = self._m(self.ctx.buffer(mesh.vertices.tobytes()))
-            hbuf = self._m(self.ctx.buffer(reserve=len(mesh.vertices) * 4, dynamic=True))
-            ibo = self._m(self.ctx.buffer(reserve=2 * (nx + 1) * (ny + 1) * 3 * 4, dynamic=True))
-            vao = self._m(self.ctx.vertex_array(self.prog_hf, [(xy, "2f", "in_xy"), (hbuf, "1f", "in_h")],
-                                                index_buffer=ibo, index_element_size=4))
-            self._hf = _Surface(mesh, vao, hbuf, ibo)
-        surf = self._hf
-        surf.heights.write(surf.mesh.heights(hp))
-        tri, changed = surf.mesh.triangles(hp)
-        if changed:
-            if tri.nbytes > surf.indices.size:
-                surf.indices.orphan(tri.nbytes)
-            surf.indices.write(tri)
-            surf.count = tri.size
-        local = hf.world_from_grid.copy()
-        local[:3, 3] -= self._origin
-        self.prog_hf["u_model"].write(_mat(local))
 
     def _mesh(self, mesh) -> None:
         if mesh.name not in self._meshes:
