@@ -49,3 +49,17 @@ def built_fmus(tmp_path_factory):
     if fmu_builds.MISSING:
         pytest.skip(f"FMU tests need {' and '.join(fmu_builds.MISSING)} (pip install -e \".[test]\")")
     return fmu_builds.build_all(tmp_path_factory.mktemp("fmus"))
+
+
+@pytest.fixture(scope="module")
+def ctx():
+    """A headless GL context (EGL) for a test module; the module is skipped with the reason where none can be made."""
+    from cosim.errors import RendererUnavailable
+    from renderer_proc.gl_backend import create_gl_context
+
+    try:
+        c = create_gl_context()
+    except RendererUnavailable as exc:
+        pytest.skip(str(exc))
+    yield c
+    c.release()

@@ -8,7 +8,6 @@ import math
 import numpy as np
 import pytest
 
-from cosim.errors import RendererUnavailable
 from cosim.scenario.config import Scenario
 from cosim.scenario.config.sensing import Codec, Pattern
 from cosim.world.beamtarget import BEAMS_DEPTH_BLOCK, TABLE_WIDTH, beam_layout
@@ -25,17 +24,6 @@ from renderer_proc.sample import sample_frame
 CODEC = Codec()
 #: float32 arithmetic of the GL fragment (beam directions, the intersection) beyond the codec bound, m
 GL_F32_M = 1e-4
-
-
-@pytest.fixture(scope="module")
-def ctx():
-    from renderer_proc.gl_backend import create_gl_context
-    try:
-        c = create_gl_context()
-    except RendererUnavailable as exc:
-        pytest.skip(str(exc))
-    yield c
-    c.release()
 
 
 def boxes_scene(poses, halves, as_mesh: bool = False) -> Scene:

@@ -26,17 +26,6 @@ Z_TOL_M = 2e-5
 Z_TOL_REL = 2e-5
 
 
-@pytest.fixture(scope="module")
-def ctx():
-    from renderer_proc.gl_backend import create_gl_context
-    try:
-        c = create_gl_context()
-    except RendererUnavailable as exc:
-        pytest.skip(str(exc))
-    yield c
-    c.release()
-
-
 def renderer(ctx, rig, codec=CODEC, **kw):
     from renderer_proc.gl_backend import GLRenderer
     return GLRenderer(rig, codec, context=ctx, **kw)
