@@ -292,16 +292,19 @@ def test_process_state_reads_stopped():
         deadline = time.monotonic() + 5      # a process being exec'd may show D (disk sleep) for a moment
         while process_state(proc.pid) not in ("S", "R") and time.monotonic() < deadline:
             time.sleep(0.01)
-        assert process_state(proc.pid) in ("S", "R")
+        state = process_state(proc.pid)
+        assert state in ("S", "R"), f"state {state!r} before SIGSTOP"
         os.kill(proc.pid, signal.SIGSTOP)
         deadline = time.monotonic() + 5
         while process_state(proc.pid) != "T" and time.monotonic() < deadline:
             time.sleep(0.01)
-        assert process_state(proc.pid) == "T"
+        state = process_state(proc.pid)
+        assert state == "T", f"state {state!r} after SIGSTOP"
     finally:
         proc.kill()
         proc.wait()
-    assert process_state(proc.pid) == ""
+    state = process_state(proc.pid)
+    assert state == "", f"state {state!r} after the process was reaped"
 
 
 def test_one_seed_twice_gives_byte_identical_outputs(tmp_path, shm_clean):
