@@ -171,9 +171,11 @@ def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart
     j = np.minimum((gy * (ny / W)).astype(np.int64), ny - 1)
     cell = i * ny + j
     low = np.flatnonzero(~high)
-    # one sort by (cell, z): z lies in (-1, top + HEAP_MAX) < Z_SPAN_M, so cell * Z_SPAN_M + z + 1 orders both
+    # one sort by (cell, z): z lies in (-1, top + HEAP_MAX) < Z_SPAN_M, so cell * Z_SPAN_M + z + 1 orders both.
+    # Stable (numpy: timsort, which takes ordered runs as they come): the points arrive scan line by scan
+    # line, so the keys hold ordered runs; about a quarter cheaper than the default quicksort on a run's frames
     key = cell * Z_SPAN_M + (gz + 1.0)
-    order = low[np.argsort(key[low])]
+    order = low[np.argsort(key[low], kind="stable")]
     cs, zs = cell[order], gz[order]
     if cs.size == 0:
         return HeightMap(heights, counts, g, high.copy(), 0.0)

@@ -101,6 +101,8 @@ LINE_FIT_MEMO = 8
 #: a neighbouring beam nearer by this fraction of the range marks an occluder, dimensionless
 OCCLUDER_REL = 0.10
 _KERNEL_3X3 = np.ones((3, 3), np.uint8)
+#: :func:`_has_neighbour` tests every pair up to this many (a (K, M) array), the grid above it
+_DIRECT_PAIRS = 1 << 16
 #: slack of find_cart's first selection under the band's computed lower edge, far above the rounding of
 #: |z - top| <= band (so the selection holds every candidate), m
 _PREFILTER_MARGIN_M = 0.01
@@ -171,9 +173,20 @@ def _has_neighbour(xy: np.ndarray, others: np.ndarray, radius: float) -> np.ndar
     lo, hi = others.min(axis=0) - radius, others.max(axis=0) + radius
     near = np.flatnonzero((xy[:, 0] >= lo[0]) & (xy[:, 0] <= hi[0]) & (xy[:, 1] >= lo[1]) & (xy[:, 1] <= hi[1]))
     out = np.zeros(xy.shape[0], bool)
-    if near.size:
+    if near.size * others.shape[0] <= _DIRECT_PAIRS:       # a run's frames: some 40 x 70 pairs
+        out[near] = _near_direct(xy[near], others, radius)
+    elif near.size:
         out[near] = _near_in_grid(xy[near], others, lo, radius)
     return out
+
+
+def _near_direct(q: np.ndarray, others: np.ndarray, radius: float) -> np.ndarray:
+    """(K,) bool for :func:`_has_neighbour` by testing every pair of ``q`` (K, 2) and ``others`` (M, 2): the
+    plain reference of :func:`_near_in_grid` (the same squared-distance test, the same numbers), and the
+    cheaper one for a few thousand pairs."""
+    d0 = q[:, :1] - others[:, 0]                                # (K, M)
+    d1 = q[:, 1:] - others[:, 1]
+    return (d0 * d0 + d1 * d1 < radius * radius).any(axis=1)
 
 
 def _near_in_grid(q: np.ndarray, others: np.ndarray, origin: np.ndarray, radius: float) -> np.ndarray:
@@ -379,13 +392,14 @@ def find_cart(points: np.ndarray, border: np.ndarray, cart: Cart, heading_xy=(1.
         above = high[over & (z_high > top + band + ABOVE_RIM_M)]
         slab = high[over & (z_high <= top + band + UNDER_SLAB_M)]
     lo_len, lo_wid, _ = _outer(cart)
+    xy = _xy(x, y, cand)
     if slab.size:
         # a rim point has nothing right above it; a falling stream or a cab wall rising from the rim band does
         # (the auger tube passes higher over the rim, above the slab, and does not count)
-        cand = cand[~_has_neighbour(_xy(x, y, cand), _xy(x, y, slab), UNDER_RADIUS_M)]
+        open_above = ~_has_neighbour(xy, _xy(x, y, slab), UNDER_RADIUS_M)
+        cand, xy = cand[open_above], xy[open_above]
         if cand.size < MIN_RIM_POINTS:
             return _none(f"{cand.size} open points at rim height, need {MIN_RIM_POINTS}", int(cand.size))
-    xy = _xy(x, y, cand)
     best = _best_group(xy, np.stack((x[above], y[above])), lo_len, lo_wid)
     if best is None:
         return _none("no rim-sized group of points at rim height", int(cand.size))

@@ -334,3 +334,25 @@ def test_neighbour_grid_matches_a_kd_tree(seed):
             xy, others = np.round(xy * 4) / 4, np.round(others * 4) / 4
         d, _ = cKDTree(others).query(xy, k=1, distance_upper_bound=radius)
         np.testing.assert_array_equal(_has_neighbour(xy, others, radius), np.isfinite(d))
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_neighbour_pairs_and_grid_agree(seed):
+    """The two kernels of the "anything right above" test: every pair (few pairs) and the grid (many) give the
+    same flags, on cell lines and at exactly one radius too."""
+    from perception_proc.rim import _near_direct, _near_in_grid
+
+    rng = np.random.default_rng(seed)
+    flags = []
+    for trial in range(100):
+        others = rng.uniform(-1.0, 2.0, (int(rng.integers(1, 150)), 2))
+        radius = (0.25, 0.1, 0.5)[trial % 3]
+        lo = others.min(axis=0) - radius
+        q = rng.uniform(lo, others.max(axis=0) + radius, (int(rng.integers(1, 300)), 2))
+        if trial % 2:
+            q, others = np.round(q * 4) / 4, np.round(others * 4) / 4
+            lo = others.min(axis=0) - radius
+        want = _near_in_grid(q, others, lo, radius)
+        np.testing.assert_array_equal(_near_direct(q, others, radius), want)
+        flags.append(want)
+    assert 0.1 < np.mean(np.concatenate(flags)) < 0.9          # both answers well represented
