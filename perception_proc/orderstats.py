@@ -26,16 +26,16 @@ def _lerp(a, b, g):
 
 
 def percentiles(x: np.ndarray, q: tuple[float, ...]) -> np.ndarray:
-    """``np.percentile(x, q)`` (q in percent) of unsorted ``x`` (n >= 1,) by one partition; (len(q),) float64."""
+    """``np.percentile(x, q)`` (q in percent) of unsorted ``x`` (n >= 1,) by one partition; (len(q),) float64.
+
+    The index arithmetic on Python scalars (the same IEEE operations as numpy's on arrays): a call on the rim's
+    ~2,000 values costs about half of the array version's."""
     n = x.size
-    v = (n - 1) * (np.asarray(q, np.float64) / 100.0)
-    lo = np.floor(v).astype(np.intp)
-    hi = np.minimum(lo + 1, n - 1)
-    part = np.partition(x, np.unique(np.concatenate([lo, hi])))
-    a, b = part[lo], part[hi]
-    g = v - lo
-    diff = b - a
-    return np.where(g >= 0.5, b - diff * (1 - g), a + diff * g)
+    v = [(n - 1) * (p / 100.0) for p in q]
+    lo = [math.floor(vk) for vk in v]
+    hi = [min(k + 1, n - 1) for k in lo]
+    part = np.partition(x, sorted(set(lo + hi)))
+    return np.array([_lerp(float(part[a]), float(part[b]), vk - a) for vk, a, b in zip(v, lo, hi)])
 
 
 def median_sorted(s: np.ndarray) -> float:
