@@ -319,8 +319,10 @@ def _best_group(xy: np.ndarray, above: np.ndarray, lo_len: float, lo_wid: float)
     hulls = [_hull(xy32[g]) for g in comps]
     best, best_n = None, 0
     turn = math.cos(math.radians(MAX_MERGE_TURN_DEG))
+    total = sum(g.size for g in comps)
     for i, seed in enumerate(comps):
-        if seed.size < MIN_RIM_POINTS // 3 or seed.size <= best_n // 4:
+        # a later seed wins only with more points than the best group: none can once that holds every piece
+        if seed.size < MIN_RIM_POINTS // 3 or seed.size <= best_n // 4 or best_n == total:
             break
         if (first := fits(hulls[i])) is None:
             continue
