@@ -175,10 +175,11 @@ def _has_neighbour(xy: np.ndarray, others: np.ndarray, radius: float) -> np.ndar
     lo, hi = others.min(axis=0) - radius, others.max(axis=0) + radius
     near = np.flatnonzero((xy[:, 0] >= lo[0]) & (xy[:, 0] <= hi[0]) & (xy[:, 1] >= lo[1]) & (xy[:, 1] <= hi[1]))
     out = np.zeros(xy.shape[0], bool)
+    q = np.take(xy, near, axis=0)
     if near.size * others.shape[0] <= _DIRECT_PAIRS:       # a run's frames: some 40 x 70 pairs
-        out[near] = _near_direct(xy[near], others, radius)
+        out[near] = _near_direct(q, others, radius)
     elif near.size:
-        out[near] = _near_in_grid(xy[near], others, lo, radius)
+        out[near] = _near_in_grid(q, others, lo, radius)
     return out
 
 
@@ -316,7 +317,7 @@ def _best_group(xy: np.ndarray, above: np.ndarray, lo_len: float, lo_wid: float)
 
     comps = sorted((g for g in _components(xy) if g.size >= 3), key=lambda g: -g.size)
     xy32 = xy.astype(np.float32)
-    hulls = [_hull(xy32[g]) for g in comps]
+    hulls = [_hull(np.take(xy32, g, axis=0)) for g in comps]
     best, best_n = None, 0
     turn = math.cos(math.radians(MAX_MERGE_TURN_DEG))
     total = sum(g.size for g in comps)
@@ -365,7 +366,8 @@ def _refine_direction(xy: np.ndarray, u_long: np.ndarray) -> np.ndarray:
     for sel in (across <= lo + EDGE_STRIP_M, across >= hi - EDGE_STRIP_M):
         if (n := np.count_nonzero(sel)) < MIN_EDGE_POINTS:
             continue
-        d = np.array(_fit_line(xy[sel].astype(np.float32).tobytes()), dtype=np.float64)
+        edge = np.compress(sel, xy, axis=0).astype(np.float32)
+        d = np.array(_fit_line(edge.tobytes()), dtype=np.float64)
         dirs.append(d if d @ u_long >= 0 else -d)
         weights.append(float(n))
     if not dirs:
@@ -408,19 +410,22 @@ def find_cart(points: np.ndarray, border: np.ndarray, cart: Cart, heading_xy=(1.
         # a rim point has nothing right above it; a falling stream or a cab wall rising from the rim band does
         # (the auger tube passes higher over the rim, above the slab, and does not count)
         open_above = ~_has_neighbour(xy, _xy(x, y, slab), UNDER_RADIUS_M)
-        cand, xy = cand[open_above], xy[open_above]
+        # rows of (K, 2) arrays here and below by np.take / np.compress (the same rows): numpy's fancy
+        # indexing of a 2-D array costs several times more per call at these sizes
+        keep = np.flatnonzero(open_above)
+        cand, xy = cand[keep], np.take(xy, keep, axis=0)
         if cand.size < MIN_RIM_POINTS:
             return _none(f"{cand.size} open points at rim height, need {MIN_RIM_POINTS}", int(cand.size))
     best = _best_group(xy, np.stack((x[above], y[above])), lo_len, lo_wid)
     if best is None:
         return _none("no rim-sized group of points at rim height", int(cand.size))
     g, ux = best
-    ux = _refine_direction(xy[g], ux)
+    pts = np.take(xy, g, axis=0)
+    ux = _refine_direction(pts, ux)
     hx = np.asarray(heading_xy, dtype=np.float64)
     if ux @ hx < 0:
         ux = -ux
     uy = np.array([-ux[1], ux[0]])                              # left of forward
-    pts = xy[g]
     s, t = pts @ ux, pts @ uy
     bd = border[cand[g]]
     centre = []
