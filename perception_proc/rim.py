@@ -101,6 +101,7 @@ LINE_FIT_MEMO = 8
 #: a neighbouring beam nearer by this fraction of the range marks an occluder, dimensionless
 OCCLUDER_REL = 0.10
 _KERNEL_3X3 = np.ones((3, 3), np.uint8)
+_U16_MAX = int(np.iinfo(np.uint16).max)
 #: the dilation that joins raster cells closer than CLOSE_M (odd side, at least 3 cells)
 _CLOSE_KERNEL = np.ones((max(3, int(round(CLOSE_M / RASTER_M)) | 1),) * 2, np.uint8)
 #: :func:`_has_neighbour` tests every pair up to this many (a (K, M) array), the grid above it
@@ -257,7 +258,7 @@ def _components(xy: np.ndarray) -> list[np.ndarray]:
     # than CLOSE_M; labels are read back at the points themselves. Every component holds a point, so 16-bit
     # labels do when there are fewer points than that (the same labelling, at under half the cost)
     img = cv2.dilate(img, _CLOSE_KERNEL)
-    ltype = cv2.CV_16U if xy.shape[0] < np.iinfo(np.uint16).max else cv2.CV_32S
+    ltype = cv2.CV_16U if xy.shape[0] < _U16_MAX else cv2.CV_32S
     n, labels = cv2.connectedComponents(img, connectivity=8, ltype=ltype)
     lab = np.take(labels, cell)
     order = np.argsort(lab, kind="stable")
