@@ -38,6 +38,8 @@ from cosim.scenario.config import Cart
 from cosim.world.geometry import cart_body_from_grid, make_transform, rot_z
 
 from .orderstats import percentiles
+from .neighbours import has_neighbour as _has_neighbour
+from .roof import roof_cells_bound, roofed
 
 __all__ = ["CartEstimate", "find_cart", "border_beams", "RIM_BAND_M", "RASTER_M", "SIZE_TOL_M", "NO_CART",
            "FOV_EDGE", "OCCLUDED", "BAND_NOISE_SIGMAS"]
@@ -82,10 +84,6 @@ ABOVE_RIM_M = 0.20
 UNDER_RADIUS_M = 0.25
 #: height of the slab right above the rim band searched for such structures, m
 UNDER_SLAB_M = 0.30
-#: raster cell of the roof test, m
-ROOF_CELL_M = 0.20
-#: largest share of a candidate rectangle's area covered from above (a tractor cab covers most of its own)
-MAX_ROOF_FRACTION = 0.3
 #: strip along each long edge used for the line fits, m
 EDGE_STRIP_M = 0.25
 #: fewest points on an edge for a line fit
@@ -104,8 +102,6 @@ _KERNEL_3X3 = np.ones((3, 3), np.uint8)
 _U16_MAX = int(np.iinfo(np.uint16).max)
 #: the dilation that joins raster cells closer than CLOSE_M (odd side, at least 3 cells)
 _CLOSE_KERNEL = np.ones((max(3, int(round(CLOSE_M / RASTER_M)) | 1),) * 2, np.uint8)
-#: :func:`_has_neighbour` tests every pair up to this many (a (K, M) array), the grid above it
-_DIRECT_PAIRS = 1 << 16
 #: slack of find_cart's first selection under the band's computed lower edge, far above the rounding of
 #: |z - top| <= band (so the selection holds every candidate), m
 _PREFILTER_MARGIN_M = 0.01
@@ -167,61 +163,6 @@ def _xy(x: np.ndarray, y: np.ndarray, idx: np.ndarray) -> np.ndarray:
     return out
 
 
-def _has_neighbour(xy: np.ndarray, others: np.ndarray, radius: float) -> np.ndarray:
-    """(K,) bool: whether any of ``others`` (M, 2) lies closer than ``radius`` (m, strictly) to each of ``xy``
-    (K, 2). Only points inside the others' bounding box grown by the radius are looked up, each against the
-    others in its own and the 8 surrounding cells of a grid of ``radius`` squares (any point closer than the
-    radius lies in one of them): the same squared-distance test a k-d tree makes, without importing one
-    (scipy.spatial costs a perception process ~0.2 s of start-up)."""
-    lo, hi = others.min(axis=0) - radius, others.max(axis=0) + radius
-    near = np.flatnonzero((xy[:, 0] >= lo[0]) & (xy[:, 0] <= hi[0]) & (xy[:, 1] >= lo[1]) & (xy[:, 1] <= hi[1]))
-    out = np.zeros(xy.shape[0], bool)
-    q = np.take(xy, near, axis=0)
-    if near.size * others.shape[0] <= _DIRECT_PAIRS:       # a run's frames: some 40 x 70 pairs
-        out[near] = _near_direct(q, others, radius)
-    elif near.size:
-        out[near] = _near_in_grid(q, others, lo, radius)
-    return out
-
-
-def _near_direct(q: np.ndarray, others: np.ndarray, radius: float) -> np.ndarray:
-    """(K,) bool for :func:`_has_neighbour` by testing every pair of ``q`` (K, 2) and ``others`` (M, 2): the
-    plain reference of :func:`_near_in_grid` (the same squared-distance test, the same numbers), and the
-    cheaper one for a few thousand pairs."""
-    d0 = q[:, :1] - others[:, 0]                                # (K, M)
-    d1 = q[:, 1:] - others[:, 1]
-    return (d0 * d0 + d1 * d1 < radius * radius).any(axis=1)
-
-
-def _near_in_grid(q: np.ndarray, others: np.ndarray, origin: np.ndarray, radius: float) -> np.ndarray:
-    """(K,) bool for :func:`_has_neighbour`: queries ``q`` (K, 2) inside the box from ``origin`` (the others'
-    minimum less the radius, so every cell index below is >= 0 and the others' are >= 1)."""
-    oc = np.floor((others - origin) / radius).astype(np.int64)
-    qc = np.floor((q - origin) / radius).astype(np.int64)
-    # cells as keys a * ny + b; ny leaves two empty columns above the highest, so a neighbour key one column
-    # outside the grid (b - 1 = -1 or b + 1) never names an occupied cell
-    ny = int(max(oc[:, 1].max(), qc[:, 1].max())) + 3
-    okey = oc[:, 0] * ny + oc[:, 1]
-    order = np.argsort(okey, kind="stable")
-    keys, pts = okey[order], others[order]
-    r2 = radius * radius
-    hit = np.zeros(q.shape[0], bool)
-    rows = np.arange(q.shape[0])
-    for da in (-1, 0, 1):
-        for db in (-1, 0, 1):
-            key = (qc[:, 0] + da) * ny + (qc[:, 1] + db)
-            start = np.searchsorted(keys, key, "left")
-            count = np.searchsorted(keys, key, "right") - start
-            total = int(count.sum())
-            if total == 0:
-                continue
-            iq = np.repeat(rows, count)
-            io = np.repeat(start - (np.cumsum(count) - count), count) + np.arange(total)
-            d = q[iq] - pts[io]
-            hit[iq[d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] < r2]] = True
-    return hit
-
-
 def _end_is_cut(flags: np.ndarray, other: np.ndarray, other_lo: float, other_hi: float) -> bool:
     """Whether one end of the rim is cut off rather than seen: many of its points come from beams at the
     pattern's edge; or many lie next to an occluder *and* they cover little of the cart's extent across that
@@ -266,27 +207,6 @@ def _components(xy: np.ndarray) -> list[np.ndarray]:
     return [g for a, b in zip(bounds[:-1], bounds[1:]) if (g := order[a:b]).size]
 
 
-def _roofed(above: np.ndarray, centre: np.ndarray, u_long: np.ndarray, long_side: float, short_side: float) -> bool:
-    """Whether points well above the rim cover more than :data:`MAX_ROOF_FRACTION` of the rectangle's area
-    (on a :data:`ROOF_CELL_M` raster): a cab or a roof, not the thin auger tube or stream over an open cart.
-    ``above`` (2, K) float64: the points' x and y rows, m, level frame."""
-    d = above - centre[:, None]                                 # (2, K) from the rectangle's centre
-    along = d[0] * u_long[0]
-    along += d[1] * u_long[1]
-    across = d[1] * u_long[0]
-    across -= d[0] * u_long[1]
-    half_long, half_short = long_side / 2, short_side / 2
-    inside = np.flatnonzero((np.abs(along) <= half_long) & (np.abs(across) <= half_short))
-    if inside.size == 0:
-        return False
-    ni, nj = max(1, math.ceil(long_side / ROOF_CELL_M)), max(1, math.ceil(short_side / ROOF_CELL_M))
-    i = np.minimum(((along[inside] + half_long) / ROOF_CELL_M).astype(np.int64), ni - 1)
-    j = np.minimum(((across[inside] + half_short) / ROOF_CELL_M).astype(np.int64), nj - 1)
-    covered = np.zeros(ni * nj, bool)
-    covered[i * nj + j] = True
-    return np.count_nonzero(covered) > MAX_ROOF_FRACTION * ni * nj
-
-
 def _hull(xy32: np.ndarray) -> np.ndarray:
     """Convex hull vertices (H, 2) float32 of points (K, 2) float32: ``cv2.minAreaRect`` of a union of pieces
     only needs the union of their hulls (it takes the hull of its input first)."""
@@ -302,6 +222,7 @@ def _best_group(xy: np.ndarray, above: np.ndarray, lo_len: float, lo_wid: float)
     above the rim, m.
     Rectangles are fitted to the union of the pieces' convex hulls (the same rectangle as of their points)."""
     above_rows = np.ascontiguousarray(np.asarray(above, np.float64).reshape(2, -1))
+    roof_bound = roof_cells_bound(above_rows)
 
     def fits(hull: np.ndarray):
         """(long side direction, long side m, short side m) if cart-sized and not roofed, else None."""
@@ -312,7 +233,7 @@ def _best_group(xy: np.ndarray, above: np.ndarray, lo_len: float, lo_wid: float)
         if long_side > lo_len + SIZE_TOL_M or short_side > lo_wid + SIZE_TOL_M:
             return None
         u_long = (e1 / max(n1, 1e-12)) if n1 >= n2 else (e2 / max(n2, 1e-12))
-        if above_rows.shape[1] and _roofed(above_rows, box.mean(axis=0), u_long, long_side, short_side):
+        if above_rows.shape[1] and roofed(above_rows, box.mean(axis=0), u_long, long_side, short_side, roof_bound):
             return None
         return u_long, long_side, short_side
 

@@ -340,7 +340,7 @@ def test_neighbour_grid_matches_a_kd_tree(seed):
 def test_neighbour_pairs_and_grid_agree(seed):
     """The two kernels of the "anything right above" test: every pair (few pairs) and the grid (many) give the
     same flags, on cell lines and at exactly one radius too."""
-    from perception_proc.rim import _near_direct, _near_in_grid
+    from perception_proc.neighbours import near_in_grid, near_pairs
 
     rng = np.random.default_rng(seed)
     flags = []
@@ -352,7 +352,39 @@ def test_neighbour_pairs_and_grid_agree(seed):
         if trial % 2:
             q, others = np.round(q * 4) / 4, np.round(others * 4) / 4
             lo = others.min(axis=0) - radius
-        want = _near_in_grid(q, others, lo, radius)
-        np.testing.assert_array_equal(_near_direct(q, others, radius), want)
+        want = near_in_grid(q, others, lo, radius)
+        np.testing.assert_array_equal(near_pairs(q, others, radius), want)
         flags.append(want)
     assert 0.1 < np.mean(np.concatenate(flags)) < 0.9          # both answers well represented
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_roof_cell_bound_holds_and_changes_no_answer(seed):
+    """The bound on the roof cells that points above the rim can cover (their bounding box grown by a cell
+    diagonal) is never below the cells they do cover, in any rectangle, so using it changes no answer; dense
+    patches, thin strips and scattered points, roofs and open carts both."""
+    from perception_proc.roof import roof_cells, roof_cells_bound, roofed
+
+    rng = np.random.default_rng(seed)
+    answers = []
+    for trial in range(150):
+        kind = trial % 3
+        if kind == 0:                                           # a dense patch (a cab roof)
+            above = rng.uniform((-1.0, -1.0), rng.uniform(0.5, 4.0, 2), (int(rng.integers(50, 3000)), 2)).T
+        elif kind == 1:                                         # a thin strip (the auger tube)
+            t = rng.uniform(0.0, 4.0, int(rng.integers(10, 3000)))
+            a = rng.uniform(0.0, np.pi)
+            above = np.stack([t * np.cos(a), t * np.sin(a)]) + rng.normal(0.0, 0.1, (2, t.size))
+        else:                                                   # a few scattered points
+            above = rng.uniform(-4.0, 4.0, (2, int(rng.integers(0, 40))))
+        above = np.ascontiguousarray(above)
+        a = rng.uniform(0.0, np.pi)
+        u = np.array([np.cos(a), np.sin(a)])
+        centre, sides = rng.uniform(-1.0, 2.0, 2), np.sort(rng.uniform(0.3, 8.0, 2))[::-1]
+        bound = roof_cells_bound(above)
+        covered, cells = roof_cells(above, centre, u, sides[0], sides[1])
+        assert covered <= bound
+        plain = roofed(above, centre, u, sides[0], sides[1])
+        assert roofed(above, centre, u, sides[0], sides[1], bound) == plain
+        answers.append(plain)
+    assert 0 < sum(answers) < len(answers)
