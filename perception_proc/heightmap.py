@@ -173,9 +173,11 @@ def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart
     low = np.flatnonzero(~high)
     # one sort by (cell, z): z lies in (-1, top + HEAP_MAX) < Z_SPAN_M, so cell * Z_SPAN_M + z + 1 orders both.
     # Stable (numpy: timsort, which takes ordered runs as they come): the points arrive scan line by scan
-    # line, so the keys hold ordered runs; about a quarter cheaper than the default quicksort on a run's frames
+    # line, so the keys hold ordered runs. The keys are positive floats, whose IEEE bit patterns read as
+    # int64 order the same way and compare faster (no NaN rule): the same order at about half the cost of
+    # the default quicksort on the floats
     key = cell * Z_SPAN_M + (gz + 1.0)
-    order = low[np.argsort(key[low], kind="stable")]
+    order = low[np.argsort(key[low].view(np.int64), kind="stable")]
     cs, zs = cell[order], gz[order]
     if cs.size == 0:
         return HeightMap(heights, counts, g, high.copy(), 0.0)
