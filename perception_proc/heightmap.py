@@ -56,6 +56,7 @@ Z_SPAN_M = 16.0
 NEIGHBOUR_PERCENTILE = 25.0
 #: side of the square neighbourhood used for the stream-cell test, cells (odd)
 NEIGHBOURHOOD = 7
+_NEIGHBOURHOOD_KERNEL = np.ones((NEIGHBOURHOOD, NEIGHBOURHOOD), np.uint8)
 #: grain can heap at most this far above the rim top (a 3 m wide cart at 23-25 deg repose heaps ~0.7 m), m
 HEAP_MAX_M = 0.8
 #: stream returns are looked for up to this far above the rim top; the auger tube lies higher, m
@@ -132,8 +133,8 @@ def _stream_cells(heights: np.ndarray) -> np.ndarray:
     The neighbourhood minimum (OpenCV erosion, NaN as +inf) never exceeds the quartile, so only cells more than
     the step above their minimum (a handful: the stream, steep edges) need the sorted window."""
     finite = np.isfinite(heights)
-    h = np.where(finite, heights, np.float32(np.inf)).astype(np.float32)
-    low = cv2.erode(h, np.ones((NEIGHBOURHOOD, NEIGHBOURHOOD), np.uint8))   # border ignored (+inf)
+    h = np.where(finite, heights, np.float32(np.inf))           # float32, as the heights
+    low = cv2.erode(h, _NEIGHBOURHOOD_KERNEL)                   # border ignored (+inf)
     out = np.zeros(heights.shape, bool)
     # (rows, columns) from flat indices: np.nonzero on a 2-D mask costs several times more
     cand = np.divmod(np.flatnonzero(finite & (heights > low + np.float32(STREAM_STEP_M))), heights.shape[1])
@@ -182,7 +183,7 @@ def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart
     if cs.size == 0:
         return HeightMap(heights, counts, g, high.copy(), 0.0)
     start = np.flatnonzero(np.concatenate(([True], cs[1:] != cs[:-1])))
-    cnt = np.diff(np.append(start, cs.size))                    # returns below any heap per occupied cell
+    cnt = np.diff(start, append=cs.size)                        # returns below any heap per occupied cell
     uniq = cs[start]
     zmin = zs[start]
     lower = zs <= np.repeat(zmin, cnt) + (CLUSTER_GAP_M + CLUSTER_NOISE_SIGMAS * noise_sigma_m)
