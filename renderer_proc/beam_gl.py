@@ -34,6 +34,7 @@ from cosim.world.meshes import CYLINDER_SIDES, INSTANCE_FLOATS, box_instances, c
 from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
 
 from .beam_mock import check_target
+from .beam_surface import BeamSurface
 from .codec import BYTE_MAX, CM_PER_M
 from .gl_backend import SHADER_DIR, GLResources, _mat
 from .projection import far_plane_m
@@ -117,7 +118,8 @@ class GLBeamRenderer(GLResources):
     """Beam-native GL renderer of a gridded :class:`BeamLayout`: ``set_scene``, ``draw(0, world_from_sensor)``,
     ``read_depth(0, out)``, ``read_rgb(0, out)``, ``close`` (the renderer interface with one target)."""
 
-    def __init__(self, layout: BeamLayout, codec: Codec, *, rgb: bool = False, context: Any = None):
+    def __init__(self, layout: BeamLayout, codec: Codec, *, rgb: bool = False, context: Any = None,
+                 surface_quads: bool = True):
         if not layout.gridded:
             raise ValueError("the GL beam-native renderer needs a grid or honeycomb pattern (a CSV table has no "
                              "angle grid); use the exact ray cast (renderer_proc.beam_mock.MockBeamRenderer)")
@@ -142,7 +144,12 @@ class GLBeamRenderer(GLResources):
         self.prog_prism = self._m(ctx.program(
             vertex_shader=_src("solid.vert"), geometry_shader=solid_geom,
             fragment_shader=_assemble("solid.frag", CODEC, defines=defines + (f"#define PRISM_SIDES {CYLINDER_SIDES}",))))
-        self._progs = (self.prog_inst, self.prog_hf, self.prog_box, self.prog_prism)
+        # the grain surface's fine grid quads: a quad's two triangles bounded and tested at once (beam_surface.py)
+        self.prog_quad = self._m(ctx.program(vertex_shader=_assemble("beam_heightfield.vert", ANGLES),
+                                             geometry_shader=_assemble("beam_quad.geom", ANGLES, BOUNDS),
+                                             fragment_shader=_assemble("beam_quad.frag", CODEC, defines=defines)))
+        self._surface = BeamSurface(ctx, self._m, self.prog_hf, self.prog_quad, quads=surface_quads)
+        self._progs = (self.prog_inst, self.prog_hf, self.prog_box, self.prog_prism, self.prog_quad)
         rows, cols = layout.shape
         az = layout.azimuth[:cols]
         centre = 0.5 * float(az[0] + az[-1])
@@ -170,7 +177,7 @@ class GLBeamRenderer(GLResources):
         self._ground: tuple[np.ndarray, np.ndarray] | None = None
         self._units = {key: self._solids(prog) for key, prog in
                        (("box", self.prog_box), ("ground", self.prog_box), ("cyl", self.prog_prism))}
-        self._points = moderngl.POINTS
+        self._points, self._lines_adjacency = moderngl.POINTS, moderngl.LINES_ADJACENCY
         self._meshes: dict[str, list] = {}
         self._mesh_names: list[str] = []
         self._origin = np.zeros(3)
@@ -226,7 +233,7 @@ class GLBeamRenderer(GLResources):
         self._upload(self._units["box"], boxes[~ground])        # whole solids: a hidden top costs nothing here
         self._upload(self._units["ground"], boxes[ground])
         self._upload(self._units["cyl"], cylinder_instances(scene.cylinders, self._origin))
-        self._heightfield(scene)
+        self._surface.upload(scene, self._origin)
         for mesh in scene.meshes:
             if mesh.name not in self._meshes:
                 self._meshes[mesh.name] = self._instanced(mesh.vertices, mesh.faces, reserve=1)
@@ -270,8 +277,7 @@ class GLBeamRenderer(GLResources):
                 fbo.clear(*colour, depth=1.0)
         self._frame.draw.use()
         self._render("cyl")
-        if self._hf is not None and self._hf.count:
-            self._hf.vao.render(vertices=self._hf.count)
+        self._surface.render(self._lines_adjacency)
         self._render("box")
         if key is None:
             self._render("ground")
