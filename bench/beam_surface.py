@@ -66,7 +66,8 @@ def renderers(lay, codec, ctx, quads: bool):
     """(renderer, counting twin) for one surface path."""
     real = beam_gl.GLBeamRenderer(lay, codec, context=ctx, surface_quads=quads)
     src = beam_gl._src
-    with mock.patch.object(beam_gl, "_src", lambda n: CONSTANT_FRAG if n in ("beam.frag", "beam_quad.frag") else src(n)):
+    constant = {"beam.frag", "beam_quad.frag"}
+    with mock.patch.object(beam_gl, "_src", lambda n: CONSTANT_FRAG if n in constant else src(n)):
         twin = beam_gl.GLBeamRenderer(lay, codec, context=ctx, surface_quads=quads)
     return real, twin
 
@@ -94,7 +95,8 @@ def measure(real, twin, scene, pose, reps: int, img: np.ndarray) -> tuple[float,
     return cpu, q.samples
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None, context=None) -> None:
+    """Run the benchmark and print its table; ``context``: a GL context to draw in (default: a new one)."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--frames", type=int, default=20)
     ap.add_argument("--span", type=float, default=8.0, help="simulated seconds the sample frames spread over")
@@ -102,7 +104,7 @@ def main(argv: list[str] | None = None) -> None:
     a = ap.parse_args(argv)
     sc = Scenario(format_version=1, sensor={"method": "beam_native"})
     lay, codec = beam_layout(sc.sensor.pattern), sc.sensor.codec
-    ctx = create_gl_context()
+    ctx = context if context is not None else create_gl_context()
     paths = {"triangles": renderers(lay, codec, ctx, False), "quads": renderers(lay, codec, ctx, True)}
     img = {k: np.zeros(lay.shape + (4,), np.uint8) for k in paths}
     rows = []

@@ -11,7 +11,9 @@ both exact per beam:
   elevation, a pole it holds, the back seam), and emits the rectangle of beam pixels inside the bound with the
   triangle as flat outputs; the fragment shader (``shaders/beam.frag``) intersects its own beam (a texture of
   the pattern's directions) with the triangle, Moller-Trumbore from the origin, discards a miss (exact coverage
-  at silhouettes) and writes the range with Eqs 1-2 and depth t / far for the nearest hit;
+  at silhouettes) and writes the range with Eqs 1-2 and depth t / far for the nearest hit; the grain surface's
+  triangles go in pairs (``renderer_proc/beam_surface.py``, ``shaders/beam_quad.*``): a quad's two triangles
+  bounded at once and tested in one fragment, the nearer hit kept;
 * convex solids (boxes; cylinders as the prisms the ray caster uses): one point per instance
   (``shaders/solid.*``), the whole solid bounded at once and each beam clipped against its slabs or planes.
 

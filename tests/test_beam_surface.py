@@ -36,8 +36,9 @@ def rough(shape, seed: int, step_m: float = 0.0, flat_frac: float = 0.5) -> np.n
     h = rng.uniform(0.0, 0.3, shape) + step_m * (rng.random(shape) < 0.2)
     for i in range(shape[0] // MERGE_BLOCK + 1):
         for j in range(shape[1] // MERGE_BLOCK + 1):
-            if rng.random() < flat_frac:
-                h[max(MERGE_BLOCK * i - 1, 0):MERGE_BLOCK * (i + 1), max(MERGE_BLOCK * j - 1, 0):MERGE_BLOCK * (j + 1)] = 0.0
+            if rng.random() < flat_frac:                         # the block's vertices: cells 4 i - 1 .. 4 i + 3
+                a0, b0 = max(MERGE_BLOCK * i - 1, 0), max(MERGE_BLOCK * j - 1, 0)
+                h[a0:MERGE_BLOCK * (i + 1), b0:MERGE_BLOCK * (j + 1)] = 0.0
     h[[0, -1]] = 0.0
     h[:, [0, -1]] = 0.0
     return h.astype(np.float32)
@@ -129,3 +130,20 @@ def test_rough_mid_run_heap_in_the_default_scene(ctx):
     scene = scene_from_state(sc, state, heights, stream)
     got = render(ctx, sc.sensor.pattern, scene, world_from_sensor(sc, state))
     check_exact(got)
+
+
+@pytest.mark.gl
+def test_surface_benchmark_counts_fewer_fragments_for_quads(ctx, capsys):
+    # bench/beam_surface.py on one frame of each kind: the quads shade fewer fragments than the triangles (the
+    # counts are exact, not timings), and the two paths' images agree
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "bench" / "beam_surface.py"
+    spec = importlib.util.spec_from_file_location("beam_surface_bench", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    bench.main(["--frames", "1", "--reps", "1"], context=ctx)
+    rows = [r.split("|") for r in capsys.readouterr().out.splitlines() if r.startswith("| ")]
+    ratio = {r[1].strip(): float(r[4].strip().rstrip("x")) for r in rows if r[2].strip() == "quads / triangles"}
+    assert set(ratio) == {"sample", "rough"} and all(0.0 < v < 0.75 for v in ratio.values())
