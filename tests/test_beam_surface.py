@@ -53,17 +53,18 @@ def surface_scene(heights: np.ndarray, corner_sensor: tuple[float, float, float]
 
 
 def render(ctx, pattern: Pattern, scene: Scene, pose: np.ndarray) -> dict[str, np.ndarray]:
-    """Encoded images of the GL renderer's quad and triangle paths and the exact ranges (N,) m of each beam."""
+    """Encoded and shaded images of the GL renderer's quad and triangle paths, the exact ranges (N,) m."""
     from renderer_proc.beam_gl import GLBeamRenderer
 
     lay = beam_layout(pattern)
     out = {"exact": beam_ranges(scene, pose, lay.directions), "layout": lay}
     for name, quads in (("quads", True), ("triangles", False)):
-        r = GLBeamRenderer(lay, CODEC, context=ctx, surface_quads=quads)
-        out[name] = np.zeros(lay.shape + (4,), np.uint8)
+        r = GLBeamRenderer(lay, CODEC, context=ctx, rgb=True, surface_quads=quads)
+        out[name], out[name + "_rgb"] = (np.zeros(lay.shape + (4,), np.uint8) for _ in range(2))
         r.set_scene(scene)
         r.draw(0, pose)
         r.read_depth(0, out[name])
+        r.read_rgb(0, out[name + "_rgb"])
         r.close()
     return out
 
@@ -78,6 +79,8 @@ def check_exact(got: dict) -> int:
                                                    np.count_nonzero(np.isfinite(gl) & ~hit))
     assert np.abs(gl[hit] - exact[hit]).max() <= CODEC.bound_m + GL_F32_M
     assert np.mean(np.all(got["quads"] == got["triangles"], axis=2)) > 0.999       # the two paths: same bytes
+    shade = np.abs(got["quads_rgb"].astype(int) - got["triangles_rgb"].astype(int)).max(axis=2)
+    assert np.mean(shade <= 1) > 0.999                          # and the same shading (the hit triangle's normal)
     return int(hit.sum())
 
 
