@@ -148,7 +148,7 @@ class GLBeamRenderer(GLResources):
         self.prog_prism = self._m(ctx.program(
             vertex_shader=_src("solid.vert"), geometry_shader=solid_geom,
             fragment_shader=_assemble("solid.frag", CODEC, defines=defines + (f"#define PRISM_SIDES {CYLINDER_SIDES}",))))
-        # the grain surface's fine grid quads: a quad's two triangles bounded and tested at once (beam_surface.py)
+        # the grain surface as quads (SurfaceMesh.quads): two triangles bounded and tested at once (beam_surface.py)
         self.prog_quad = self._m(ctx.program(vertex_shader=_assemble("beam_heightfield.vert", ANGLES),
                                              geometry_shader=_assemble("beam_quad.geom", ANGLES, BOUNDS),
                                              fragment_shader=_assemble("beam_quad.frag", CODEC, defines=defines)))

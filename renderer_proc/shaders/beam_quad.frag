@@ -1,5 +1,5 @@
 #version 330
-// Beam-native pass, grain surface's fine grid quads: this pixel's beam against the quad's two triangles that
+// Beam-native pass, grain surface as quads: this pixel's beam against the quad's two triangles that
 // beam_quad.geom bounded, exactly (float32): per triangle the barycentric weights are the edge planes' dot
 // products over dot(d, n), each at least -u_edge (the same inclusive slack as beam.frag's Moller-Trumbore), and
 // the range along the beam is t = dot(n, p0) / dot(d, n); the nearer hit wins, a miss of both is discarded.
