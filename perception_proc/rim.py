@@ -14,7 +14,8 @@ Works in the *level frame* (the sensor's parent vehicle body frame: x forward, y
    :data:`SIZE_TOL_M`), spans at least :data:`MIN_SPAN_FRACTION` of the cart length and
    :data:`MIN_WIDTH_FRACTION` of its width (a lone line is not a cart), and is not roofed: points
    well above the rim cover little of its area (a tractor cab covers most of its own; the auger tube and the
-   stream over an open cart cover a thin strip). The candidate with most rim points wins.
+   stream over an open cart cover a thin strip; :mod:`perception_proc.roof`). The candidate with most rim
+   points wins.
 4. Orientation from the rectangle's long side, its sign from the heading hint (the cart is towed forward).
    Per axis, a span matching the known outer size fixes the centre; a shorter span means a partly visible cart:
    an end whose points come from beams at the pattern's edge, or which lies next to an occluder and covers
@@ -99,6 +100,7 @@ LINE_FIT_MEMO = 8
 #: a neighbouring beam nearer by this fraction of the range marks an occluder, dimensionless
 OCCLUDER_REL = 0.10
 _KERNEL_3X3 = np.ones((3, 3), np.uint8)
+#: largest 16-bit label (connected components)
 _U16_MAX = int(np.iinfo(np.uint16).max)
 #: the dilation that joins raster cells closer than CLOSE_M (odd side, at least 3 cells)
 _CLOSE_KERNEL = np.ones((max(3, int(round(CLOSE_M / RASTER_M)) | 1),) * 2, np.uint8)
@@ -233,7 +235,7 @@ def _best_group(xy: np.ndarray, above: np.ndarray, lo_len: float, lo_wid: float)
         if long_side > lo_len + SIZE_TOL_M or short_side > lo_wid + SIZE_TOL_M:
             return None
         u_long = (e1 / max(n1, 1e-12)) if n1 >= n2 else (e2 / max(n2, 1e-12))
-        if above_rows.shape[1] and roofed(above_rows, box.mean(axis=0), u_long, long_side, short_side, roof_bound):
+        if roofed(above_rows, box.mean(axis=0), u_long, long_side, short_side, roof_bound):
             return None
         return u_long, long_side, short_side
 
