@@ -38,7 +38,7 @@ from .codec import BYTE_MAX, CM_PER_M
 from .gl_backend import SHADER_DIR, GLResources, _mat
 from .projection import far_plane_m
 
-__all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "ROW_BINS", "GLBeamRenderer", "ground_key", "row_bounds"]
+__all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "ROW_BINS", "GLBeamRenderer", "ground_key", "max_slices", "row_bounds"]
 
 #: slack of every angular bound in the geometry shader, rad (float32 round-off of atan is ~1e-7 rad; a beam
 #: pitch is ~5e-3 rad): only widens the rectangles, the fragment test decides
@@ -50,6 +50,14 @@ BOUNDS = "beam_bounds.glsl"
 CODEC = "codec.glsl"
 #: elevation bins of the geometry shader's row table (row_bounds)
 ROW_BINS = 4096
+#: GL_MAX_GEOMETRY_TOTAL_OUTPUT_COMPONENTS guaranteed by OpenGL 3.3 (llvmpipe's too): max_vertices times the
+#: components of one emitted vertex may not exceed it
+GEOMETRY_OUTPUT_COMPONENTS = 1024
+#: components of one vertex solid.geom emits: gl_Position, unit_from_sensor (mat3), origin (vec3), colour (rgb)
+SOLID_VERTEX_COMPONENTS = 4 + 9 + 3
+SOLID_RGB_COMPONENTS = 3
+#: vertices one slice of a solid can emit: one rectangle (4), two across the back seam
+SLICE_VERTICES = 8
 #: inclusive slack of the fragment's inside-triangle test, barycentric: closes float32 cracks on shared edges
 #: (a beam this close to a silhouette edge, 2e-6 of the triangle's size, is counted as a hit)
 EDGE_SLACK = 2e-6
@@ -71,6 +79,13 @@ def row_bounds(row_el: np.ndarray, bins: int = ROW_BINS) -> tuple[float, float, 
     at_or_above_bottom = len(el) - np.searchsorted(asc, edges[:-1], side="left")
     table = np.stack([above_top, at_or_above_bottom - 1], axis=1).astype(np.float32)
     return base, bins / span, np.ascontiguousarray(table)
+
+
+def max_slices(rgb: bool) -> int:
+    """Slices solid.geom may cut one solid into: as many as fit the geometry shader's output limit
+    (:data:`GEOMETRY_OUTPUT_COMPONENTS`), 8 vertices each; 8 without the shaded output, 6 with it."""
+    components = SOLID_VERTEX_COMPONENTS + (SOLID_RGB_COMPONENTS if rgb else 0)
+    return GEOMETRY_OUTPUT_COMPONENTS // components // SLICE_VERTICES
 
 
 def _src(name: str) -> str:
@@ -136,7 +151,9 @@ class GLBeamRenderer(GLResources):
         self.prog_hf = self._m(ctx.program(vertex_shader=_assemble("beam_heightfield.vert", ANGLES),
                                            geometry_shader=geom, fragment_shader=frag))
         # convex solids (boxes, cylinders as prisms): one point per instance, bounded whole, clipped per beam
-        solid_geom = _assemble("solid.geom", ANGLES, BOUNDS)
+        slices = max_slices(rgb)
+        solid_geom = _assemble("solid.geom", ANGLES, BOUNDS, defines=defines + (
+            f"#define MAX_SLICES {slices}", f"#define MAX_VERTICES {slices * SLICE_VERTICES}"))
         self.prog_box = self._m(ctx.program(vertex_shader=_src("solid.vert"), geometry_shader=solid_geom,
                                             fragment_shader=_assemble("solid.frag", CODEC, defines=defines)))
         self.prog_prism = self._m(ctx.program(
@@ -155,6 +172,8 @@ class GLBeamRenderer(GLResources):
                   "u_rows": 0, "u_dirs": 1, "u_colour": GRAIN_COLOUR}
         base, per_rad, table = row_bounds(layout.elevation[::cols])
         values["u_bins"] = (base, per_rad)
+        el = layout.elevation[::cols]
+        values["u_pitch"] = (values["u_daz"], float(el[0] - el[-1]) / (rows - 1) if rows > 1 else 1.0)
         for prog in self._progs:
             for name, value in values.items():
                 _set(prog, name, value)
@@ -168,8 +187,8 @@ class GLBeamRenderer(GLResources):
         self._ground_img: _Buffers | None = None          # the ground alone, kept while its key holds
         self._ground_key: tuple | None = None
         self._ground: tuple[np.ndarray, np.ndarray] | None = None
-        self._units = {key: self._solids(prog) for key, prog in
-                       (("box", self.prog_box), ("ground", self.prog_box), ("cyl", self.prog_prism))}
+        self._units = {key: self._solids(prog) for key, prog in (("box", self.prog_box), ("box_open", self.prog_box),
+                                                                 ("ground", self.prog_box), ("cyl", self.prog_prism))}
         self._points = moderngl.POINTS
         self._meshes: dict[str, list] = {}
         self._mesh_names: list[str] = []
@@ -223,7 +242,9 @@ class GLBeamRenderer(GLResources):
         if scene.ground_box is not None:
             ground[scene.ground_box] = True
             self._ground = (scene.boxes.world_from_box[scene.ground_box], scene.boxes.half_extents[scene.ground_box])
-        self._upload(self._units["box"], boxes[~ground])        # whole solids: a hidden top costs nothing here
+        hidden = np.zeros(len(boxes), bool) if scene.boxes.hidden_top is None else scene.boxes.hidden_top
+        self._upload(self._units["box"], boxes[~ground & ~hidden])
+        self._upload(self._units["box_open"], boxes[~ground & hidden])    # top covered: bounded by its sides
         self._upload(self._units["ground"], boxes[ground])
         self._upload(self._units["cyl"], cylinder_instances(scene.cylinders, self._origin))
         self._heightfield(scene)
@@ -273,6 +294,7 @@ class GLBeamRenderer(GLResources):
         if self._hf is not None and self._hf.count:
             self._hf.vao.render(vertices=self._hf.count)
         self._render("box")
+        self._render("box_open")
         if key is None:
             self._render("ground")
         _set(self.prog_inst, "u_cull", False)                  # mesh files have unknown winding: two-sided
@@ -282,6 +304,7 @@ class GLBeamRenderer(GLResources):
     def _render(self, name: str) -> None:
         vao, _, n = self._units[name]
         if n:
+            _set(self.prog_box, "u_open_top", name == "box_open")
             vao.render(mode=self._points, vertices=n)
 
     def _check(self, out: np.ndarray) -> None:
