@@ -7,7 +7,8 @@ boxes with a covered top where the tree has them, the cylinders) again alone:
 
 * fragments: with ``solid.frag`` replaced by a constant write (no discard) and the depth test off, an occlusion
   query (``ctx.query(samples=True)``) counts every fragment the geometry shader's rectangles make;
-* CPU: process CPU time (llvmpipe's threads included) of the draw and ``ctx.finish()``, median of ``--reps``.
+* CPU: process CPU time (llvmpipe's threads included) of the draw and ``ctx.finish()``, median of ``--reps``;
+  and of the same draw with ``GL_RASTERIZER_DISCARD`` on (the vertex and geometry shaders alone).
 
 Each tree runs in its own process (``--tree name=path``, its code first on sys.path), the order alternating per
 round (A B, B A, ...); medians over frames and rounds. Prints Markdown. Usage::
@@ -26,6 +27,8 @@ import time
 from datetime import datetime
 from pathlib import Path
 
+#: GL_RASTERIZER_DISCARD: primitives end after the geometry shader (its cost alone)
+RASTERIZER_DISCARD = 0x8C89
 #: a fragment shader that shades every fragment its rectangle makes (no discard)
 COUNT_FRAG = "#version 330\nlayout(location = 0) out uvec4 o_encoded;\nvoid main() { o_encoded = uvec4(1u); }\n"
 
@@ -61,14 +64,20 @@ def measure(frames: int, span: float, reps: int) -> dict[str, list[float]]:
             r.draw(0, pose)
         for draw, units in draws.items():
             real._frame.draw.use()
-            ms = []
-            for _ in range(reps):
-                ctx.finish()
-                c0 = time.process_time()
-                for u in units:
-                    real._render(u)
-                ctx.finish()
-                ms.append(1e3 * (time.process_time() - c0))
+            for key, discard in (("ms", False), ("geom_ms", True)):
+                if discard:
+                    ctx.enable_direct(RASTERIZER_DISCARD)
+                ms = []
+                for _ in range(reps):
+                    ctx.finish()
+                    c0 = time.process_time()
+                    for u in units:
+                        real._render(u)
+                    ctx.finish()
+                    ms.append(1e3 * (time.process_time() - c0))
+                if discard:
+                    ctx.disable_direct(RASTERIZER_DISCARD)
+                out.setdefault(f"{draw}_{key}", []).append(statistics.median(ms))
             count._frame.draw.use()
             ctx.disable(ctx.DEPTH_TEST)
             q = ctx.query(samples=True)
@@ -76,7 +85,6 @@ def measure(frames: int, span: float, reps: int) -> dict[str, list[float]]:
                 for u in units:
                     count._render(u)
             out.setdefault(f"{draw}_frags", []).append(q.samples)
-            out.setdefault(f"{draw}_ms", []).append(statistics.median(ms))
     return out
 
 
@@ -108,13 +116,14 @@ def main(argv: list[str] | None = None) -> None:
     print(f"Default scene, {a.frames} sample frames over {a.span:g} s x {a.rounds} rounds, trees interleaved per "
           f"round; {os.cpu_count()} cores, load {load:.1f}, {datetime.now():%Y-%m-%d %H:%M}, "
           f"LP_NUM_THREADS={os.environ.get('LP_NUM_THREADS', 'unset')}\n")
-    print("| tree | box fragments | box CPU ms | cylinder fragments | cylinder CPU ms |")
-    print("|---|---|---|---|---|")
+    print("| tree | box fragments | box CPU ms | of which geometry ms | cylinder fragments | cylinder CPU ms | "
+          "of which geometry ms |")
+    print("|---|---|---|---|---|---|---|")
     for name in names:
         g = got[name]
         med = {k: statistics.median(v) for k, v in g.items()}
-        print(f"| {name} | {med['boxes_frags']:.0f} | {med['boxes_ms']:.3f} | {med['cylinders_frags']:.0f} | "
-              f"{med['cylinders_ms']:.3f} |")
+        print(f"| {name} | {med['boxes_frags']:.0f} | {med['boxes_ms']:.3f} | {med['boxes_geom_ms']:.3f} | "
+              f"{med['cylinders_frags']:.0f} | {med['cylinders_ms']:.3f} | {med['cylinders_geom_ms']:.3f} |")
 
 
 if __name__ == "__main__":

@@ -38,7 +38,7 @@ from .codec import BYTE_MAX, CM_PER_M
 from .gl_backend import SHADER_DIR, GLResources, _mat
 from .projection import far_plane_m
 
-__all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "ROW_BINS", "GLBeamRenderer", "ground_key", "max_slices", "row_bounds"]
+__all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "ROW_BINS", "GLBeamRenderer", "ground_key", "max_rects", "row_bounds"]
 
 #: slack of every angular bound in the geometry shader, rad (float32 round-off of atan is ~1e-7 rad; a beam
 #: pitch is ~5e-3 rad): only widens the rectangles, the fragment test decides
@@ -56,8 +56,14 @@ GEOMETRY_OUTPUT_COMPONENTS = 1024
 #: components of one vertex solid.geom emits: gl_Position, unit_from_sensor (mat3), origin (vec3), colour (rgb)
 SOLID_VERTEX_COMPONENTS = 4 + 9 + 3
 SOLID_RGB_COMPONENTS = 3
-#: vertices one slice of a solid can emit: one rectangle (4), two across the back seam
-SLICE_VERTICES = 8
+#: cost of bounding one more slice of a solid in solid.geom, in fragments shaded (llvmpipe): a slice pays off
+#: when it saves more
+SLICE_COST_PX = 100.0
+#: rectangles of the prisms' (cylinders') geometry shader: 2, unsliced (see docs/lidar.md: slicing the auger tube
+#: saves fewer fragments than the longer geometry shader costs on the 30 prisms of the default scene)
+PRISM_RECTS = 2
+#: vertices of one rectangle of beam pixels (a triangle strip)
+RECT_VERTICES = 4
 #: inclusive slack of the fragment's inside-triangle test, barycentric: closes float32 cracks on shared edges
 #: (a beam this close to a silhouette edge, 2e-6 of the triangle's size, is counted as a hit)
 EDGE_SLACK = 2e-6
@@ -81,11 +87,19 @@ def row_bounds(row_el: np.ndarray, bins: int = ROW_BINS) -> tuple[float, float, 
     return base, bins / span, np.ascontiguousarray(table)
 
 
-def max_slices(rgb: bool) -> int:
-    """Slices solid.geom may cut one solid into: as many as fit the geometry shader's output limit
-    (:data:`GEOMETRY_OUTPUT_COMPONENTS`), 8 vertices each; 8 without the shaded output, 6 with it."""
+def max_rects(rgb: bool) -> int:
+    """Rectangles solid.geom may emit for one solid (its slices, two for one across the back seam): as many as
+    fit the geometry shader's output limit (:data:`GEOMETRY_OUTPUT_COMPONENTS`); 16 without the shaded output,
+    13 with it."""
     components = SOLID_VERTEX_COMPONENTS + (SOLID_RGB_COMPONENTS if rgb else 0)
-    return GEOMETRY_OUTPUT_COMPONENTS // components // SLICE_VERTICES
+    return GEOMETRY_OUTPUT_COMPONENTS // components // RECT_VERTICES
+
+
+def _solid_geom(defines: tuple[str, ...], rects: int) -> str:
+    """solid.geom emitting at most ``rects`` rectangles per solid (2: unsliced)."""
+    return _assemble("solid.geom", ANGLES, BOUNDS, defines=defines + (
+        f"#define MAX_RECTS {rects}", f"#define MAX_VERTICES {rects * RECT_VERTICES}",
+        f"#define SLICE_COST_PX {SLICE_COST_PX:.1f}"))
 
 
 def _src(name: str) -> str:
@@ -151,13 +165,11 @@ class GLBeamRenderer(GLResources):
         self.prog_hf = self._m(ctx.program(vertex_shader=_assemble("beam_heightfield.vert", ANGLES),
                                            geometry_shader=geom, fragment_shader=frag))
         # convex solids (boxes, cylinders as prisms): one point per instance, bounded whole, clipped per beam
-        slices = max_slices(rgb)
-        solid_geom = _assemble("solid.geom", ANGLES, BOUNDS, defines=defines + (
-            f"#define MAX_SLICES {slices}", f"#define MAX_VERTICES {slices * SLICE_VERTICES}"))
-        self.prog_box = self._m(ctx.program(vertex_shader=_src("solid.vert"), geometry_shader=solid_geom,
+        self.prog_box = self._m(ctx.program(vertex_shader=_src("solid.vert"),
+                                            geometry_shader=_solid_geom(defines, max_rects(rgb)),
                                             fragment_shader=_assemble("solid.frag", CODEC, defines=defines)))
         self.prog_prism = self._m(ctx.program(
-            vertex_shader=_src("solid.vert"), geometry_shader=solid_geom,
+            vertex_shader=_src("solid.vert"), geometry_shader=_solid_geom(defines, PRISM_RECTS),
             fragment_shader=_assemble("solid.frag", CODEC, defines=defines + (f"#define PRISM_SIDES {CYLINDER_SIDES}",))))
         self._progs = (self.prog_inst, self.prog_hf, self.prog_box, self.prog_prism)
         rows, cols = layout.shape

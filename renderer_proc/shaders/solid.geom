@@ -3,14 +3,14 @@
 // pixels it can cover; solid.frag clips each of those beams against the WHOLE solid exactly, so any set of
 // rectangles whose union covers the solid's silhouette gives the same image (a beam covered twice writes the
 // same range). The bound is that of the unit solid's hull box [-1, 1]^2 x [z0, 1] (a superset: exact for boxes),
-// cut into up to MAX_SLICES slices along one axis where that shrinks the rectangles (a long thin box seen
+// cut into slices along one axis where that shrinks the rectangles (a long thin box seen
 // diagonally): per piece, the azimuths of its 8 corners (a piece subtends less than pi unless its XZ projection
 // holds the origin, then every azimuth), the elevations of its corners and of its 12 edges' extreme points, and
 // the pole(s) it holds; the whole target when the hull holds the origin. A box whose top face other parts cover
 // (u_open_top, Boxes.hidden_top) seen from above its top plane is bounded by its front side faces alone: a beam
 // that enters through the top meets the covering part first (or at the same range), one through a side face
-// enters through a front-facing one. The renderer prepends #defines: MAX_SLICES, MAX_VERTICES (8 per slice:
-// each piece is one rectangle, two across the back seam), OUT_RGB.
+// enters through a front-facing one. The renderer prepends #defines: MAX_RECTS (rectangles one solid may emit:
+// one per piece, two across the back seam), MAX_VERTICES (4 per rectangle), OUT_RGB.
 layout(points) in;
 layout(triangle_strip, max_vertices = MAX_VERTICES) out;
 in mat4 v_sensor_from_unit[];
@@ -74,23 +74,40 @@ int slices(vec3 c, vec3 u, vec3 v, vec3 w, vec4 b, int most) {
         vec2 e0 = angles(mid, u_az_centre), e1 = angles(mid + u, u_az_centre);
         float da = abs(wrap(e1.x - e0.x)), de = abs(e1.y - e0.y);
         float wa = max(b.y - b.x - da, 0.0) + u_pitch.x, we = max(b.w - b.z - de, 0.0) + u_pitch.y;
-        n = floor(sqrt(da * de / (wa * we)) + 0.5);
+        n = floor(sqrt(da * de / (wa * we + SLICE_COST_PX * u_pitch.x * u_pitch.y)) + 0.5);
     }
     return int(clamp(n, 1.0, float(most)));
 }
 
-// the piece (c, u, v, w) in n slices along u, each bounded and emitted on its own
-void emit_slices(vec3 c, vec3 u, vec3 v, vec3 w, int most) {
+// rectangles emit_box makes of the bound b: two when it crosses the back seam
+int rects(vec4 b) {
+    return b.y + u_margin > PI || b.x - u_margin < -PI ? 2 : 1;
+}
+
+void emit_bound(vec4 b) {
+    emit_box(b.x, b.y, b.z, b.w);
+}
+
+// the piece (c, u, v, w) in slices along u, each bounded and emitted on its own, in at most `budget` (>= 2)
+// rectangles: when the next slice would leave fewer than 2, the rest goes as one piece
+void emit_slices(vec3 c, vec3 u, vec3 v, vec3 w, int budget) {
     vec4 b = piece_bound(c, u, v, w);
-    int n = slices(c, u, v, w, b, most);
+    int n = slices(c, u, v, w, b, budget - 1);
     if (n == 1) {
-        emit_box(b.x, b.y, b.z, b.w);
+        emit_bound(b);
         return;
     }
     vec3 step = u / float(n);
+    int used = 0;
     for (int i = 0; i < n; ++i) {
-        vec4 s = piece_bound(c + float(i) * step, step, v, w);
-        emit_box(s.x, s.y, s.z, s.w);
+        vec3 start = c + float(i) * step;
+        b = piece_bound(start, step, v, w);
+        if (i < n - 1 && used + rects(b) > budget - 2) {
+            emit_bound(piece_bound(start, float(n - i) * step, v, w));
+            return;
+        }
+        emit_bound(b);
+        used += rects(b);
     }
 }
 
@@ -105,15 +122,15 @@ void main() {
     if (u_open_top && o.z > 1.0) {
         // seen from above the covered top: only the side faces the origin is outside of can be entered
         vec3 ax = m[0].xyz, ay = m[1].xyz, az = m[2].xyz, c = m[3].xyz;
-        if (abs(o.x) > 1.0) {
-            vec3 f = c + sign(o.x) * ax - ay - az;              // the face x = sign(o.x)
-            if (length(ay) >= length(az)) emit_slices(f, 2.0 * ay, 2.0 * az, vec3(0.0), MAX_SLICES / 2);
-            else emit_slices(f, 2.0 * az, 2.0 * ay, vec3(0.0), MAX_SLICES / 2);
+        if (abs(o.x) > 1.0) {                                   // the face x = sign(o.x)
+            vec3 f = c + sign(o.x) * ax - ay - az;
+            if (length(ay) >= length(az)) emit_slices(f, 2.0 * ay, 2.0 * az, vec3(0.0), MAX_RECTS / 2);
+            else emit_slices(f, 2.0 * az, 2.0 * ay, vec3(0.0), MAX_RECTS / 2);
         }
-        if (abs(o.y) > 1.0) {
-            vec3 f = c + sign(o.y) * ay - ax - az;              // the face y = sign(o.y)
-            if (length(ax) >= length(az)) emit_slices(f, 2.0 * ax, 2.0 * az, vec3(0.0), MAX_SLICES / 2);
-            else emit_slices(f, 2.0 * az, 2.0 * ax, vec3(0.0), MAX_SLICES / 2);
+        if (abs(o.y) > 1.0) {                                   // the face y = sign(o.y)
+            vec3 f = c + sign(o.y) * ay - ax - az;
+            if (length(ax) >= length(az)) emit_slices(f, 2.0 * ax, 2.0 * az, vec3(0.0), MAX_RECTS / 2);
+            else emit_slices(f, 2.0 * az, 2.0 * ax, vec3(0.0), MAX_RECTS / 2);
         }
         return;
     }
@@ -126,5 +143,5 @@ void main() {
     vec3 e[3] = vec3[3](2.0 * m[0].xyz, 2.0 * m[1].xyz, (1.0 - u_z0) * m[2].xyz);
     int i = length(e[0]) >= length(e[1]) ? 0 : 1;
     if (length(e[2]) > length(e[i])) i = 2;
-    emit_slices(c, e[i], e[(i + 1) % 3], e[(i + 2) % 3], MAX_SLICES);
+    emit_slices(c, e[i], e[(i + 1) % 3], e[(i + 2) % 3], MAX_RECTS);
 }
