@@ -34,7 +34,7 @@ const ivec4 FACES[6] = ivec4[6](ivec4(0, 2, 6, 4), ivec4(1, 3, 7, 5), ivec4(0, 1
                                 ivec4(0, 1, 3, 2), ivec4(4, 5, 7, 6));
 
 // the (azimuth, elevation) bound [x, y] x [z, w] of the parallelepiped c + s u + t v + r w (s, t, r in [0, 1];
-// sensor frame; an edge vector may be zero: a face), which must not hold the origin
+// sensor frame; w may be zero: a face), which must not hold the origin
 vec4 piece_bound(vec3 c, vec3 u, vec3 v, vec3 w) {
     vec3 p[8];
     float a[8];
@@ -50,7 +50,7 @@ vec4 piece_bound(vec3 c, vec3 u, vec3 v, vec3 w) {
     }
     for (int i = 0; i < 12; ++i) edge_elevation(p[EDGES[i].x], p[EDGES[i].y], e_lo, e_hi);
     bool pole = false;
-    for (int f = 0; f < 6; ++f) {
+    for (int f = w == vec3(0.0) ? 4 : 0; f < 6; ++f) {        // a face (w = 0): its own quad, not the 4 collapsed
         ivec4 q = FACES[f];
         pole = pole || holds_pole(p[q.x], p[q.y], p[q.z]) || holds_pole(p[q.x], p[q.z], p[q.w]);
     }
@@ -66,6 +66,7 @@ vec4 piece_bound(vec3 c, vec3 u, vec3 v, vec3 w) {
 // are da, de apart in angle, its cross-section spans about wa x we (the rest of b, plus a pixel); n slices cover
 // n (da / n + wa)(de / n + we), least at n = sqrt(da de / (wa we)). A piece around a pole: by the length ratio.
 int slices(vec3 c, vec3 u, vec3 v, vec3 w, vec4 b, int most) {
+    if (most <= 1) return 1;
     float n;
     if (b.y - b.x >= TWO_PI) {
         n = ceil(length(u) / max(max(length(v), length(w)), 1e-6));
@@ -119,6 +120,7 @@ void main() {
 #endif
     vec3 o = v_origin[0];
     mat4 m = v_sensor_from_unit[0];
+#if MAX_RECTS >= 4                                          // 2 faces of at least 2 rectangles each
     if (u_open_top && o.z > 1.0) {
         // seen from above the covered top: only the side faces the origin is outside of can be entered
         vec3 ax = m[0].xyz, ay = m[1].xyz, az = m[2].xyz, c = m[3].xyz;
@@ -134,6 +136,7 @@ void main() {
         }
         return;
     }
+#endif
     if (all(lessThanEqual(abs(o.xy), vec2(1.0))) && o.z >= u_z0 && o.z <= 1.0) {
         emit_box(-PI, PI, -0.5 * PI, 0.5 * PI);                 // the LiDAR inside the hull: every beam
         return;
