@@ -13,7 +13,9 @@ both exact per beam:
   the pattern's directions) with the triangle, Moller-Trumbore from the origin, discards a miss (exact coverage
   at silhouettes) and writes the range with Eqs 1-2 and depth t / far for the nearest hit;
 * convex solids (boxes; cylinders as the prisms the ray caster uses): one point per instance
-  (``shaders/solid.*``), the whole solid bounded at once and each beam clipped against its slabs or planes.
+  (``shaders/solid.*``), a box bounded in slices along its longest edge (up to :func:`max_rects` rectangles;
+  one with a covered top, ``Boxes.hidden_top``, seen from above by its front side faces), a prism whole, and
+  each beam clipped against the whole solid's slabs or planes.
 
 There is no projection, so no near plane, no stitching, no parallax and no resample, and a 360 deg field is one
 target (rectangles across the back seam are emitted twice). The ground slab's top face is the ground plane
