@@ -213,3 +213,31 @@ def test_bench_script_reports_the_solid_draws():
     box_frags, box_ms, box_geom, cyl_frags, cyl_ms, cyl_geom = (float(x) for x in row[0].split("|")[2:8])
     assert 1000 < box_frags < 38400 and 1000 < cyl_frags < 38400           # each draw shades some of the target
     assert min(box_ms, box_geom, cyl_ms, cyl_geom) > 0.0
+
+
+def test_empty_cart_floor_stays_exact(ctx):
+    # the default frame with an empty cart: the floor's covered top lies exactly on the grain surface at height
+    # 0, which must still be drawn (the floor is bounded by its side faces only); GL against the exact cast
+    from cosim.scenario.config import Scenario
+    from cosim.world.scene import scene_from_state
+    from renderer_proc.beam_gl import GLBeamRenderer
+    from renderer_proc.projection import world_from_sensor
+    from renderer_proc.sample import sample_frame
+
+    sc = Scenario(format_version=1, sensor={"method": "beam_native"})
+    lay = beam_layout(sc.sensor.pattern)
+    state, heights, stream = sample_frame(sc)
+    scene = scene_from_state(sc, state, np.zeros_like(heights), stream)
+    pose = world_from_sensor(sc, state)
+    assert scene.boxes.hidden_top is not None and scene.boxes.hidden_top.any()
+    r = GLBeamRenderer(lay, CODEC, context=ctx)
+    r.set_scene(scene)
+    r.draw(0, pose)
+    img = np.zeros(lay.shape + (4,), np.uint8)
+    r.read_depth(0, img)
+    r.close()
+    got, exact = lay.beams_of(decode_depth(img, CODEC)), beam_ranges(scene, pose, lay.directions)
+    assert np.array_equal(np.isfinite(got), np.isfinite(exact) & (exact < CODEC.max_depth_m))
+    ok = np.isfinite(got)
+    assert ok.sum() > 0.9 * lay.n_beams
+    assert np.abs(got[ok] - exact[ok]).max() <= CODEC.bound_m + GL_F32_M
