@@ -57,6 +57,7 @@ ROW_BINS = 4096
 GEOMETRY_OUTPUT_COMPONENTS = 1024
 #: components of one vertex solid.geom emits: gl_Position, unit_from_sensor (mat3), origin (vec3), colour (rgb)
 SOLID_VERTEX_COMPONENTS = 4 + 9 + 3
+#: the colour's components, emitted with the shaded output only
 SOLID_RGB_COMPONENTS = 3
 #: cost of bounding one more slice of a solid in solid.geom, in fragments shaded (llvmpipe): a slice pays off
 #: when it saves more
@@ -166,7 +167,8 @@ class GLBeamRenderer(GLResources):
                                              geometry_shader=geom, fragment_shader=frag))
         self.prog_hf = self._m(ctx.program(vertex_shader=_assemble("beam_heightfield.vert", ANGLES),
                                            geometry_shader=geom, fragment_shader=frag))
-        # convex solids (boxes, cylinders as prisms): one point per instance, bounded whole, clipped per beam
+        # convex solids (boxes, cylinders as prisms): one point per instance, boxes bounded in slices, prisms
+        # whole, each beam clipped against the whole solid
         self.prog_box = self._m(ctx.program(vertex_shader=_src("solid.vert"),
                                             geometry_shader=_solid_geom(defines, max_rects(rgb)),
                                             fragment_shader=_assemble("solid.frag", CODEC, defines=defines)))
@@ -184,10 +186,10 @@ class GLBeamRenderer(GLResources):
                   "u_daz": float(az[0] - az[1]) if cols > 1 else 1.0, "u_size": (cols, rows),
                   "u_margin": ANGLE_SLACK_RAD, "u_far": self.far_m, "u_edge": EDGE_SLACK,
                   "u_rows": 0, "u_dirs": 1, "u_colour": GRAIN_COLOUR}
-        base, per_rad, table = row_bounds(layout.elevation[::cols])
+        row_el = layout.elevation[::cols]
+        base, per_rad, table = row_bounds(row_el)
         values["u_bins"] = (base, per_rad)
-        el = layout.elevation[::cols]
-        values["u_pitch"] = (values["u_daz"], float(el[0] - el[-1]) / (rows - 1) if rows > 1 else 1.0)
+        values["u_pitch"] = (values["u_daz"], float(row_el[0] - row_el[-1]) / (rows - 1) if rows > 1 else 1.0)
         for prog in self._progs:
             for name, value in values.items():
                 _set(prog, name, value)

@@ -2,15 +2,16 @@
 // Beam-native pass, convex solids: bound the instance's solid in angle space and emit the rectangle(s) of beam
 // pixels it can cover; solid.frag clips each of those beams against the WHOLE solid exactly, so any set of
 // rectangles whose union covers the solid's silhouette gives the same image (a beam covered twice writes the
-// same range). The bound is that of the unit solid's hull box [-1, 1]^2 x [z0, 1] (a superset: exact for boxes),
-// cut into slices along one axis where that shrinks the rectangles (a long thin box seen
+// same range). The bound is that of the unit solid's hull box [-1, 1]^2 x [z0, 1] (a superset: exact for
+// boxes), cut into slices along its longest edge where that shrinks the rectangles (a long thin box seen
 // diagonally): per piece, the azimuths of its 8 corners (a piece subtends less than pi unless its XZ projection
 // holds the origin, then every azimuth), the elevations of its corners and of its 12 edges' extreme points, and
 // the pole(s) it holds; the whole target when the hull holds the origin. A box whose top face other parts cover
 // (u_open_top, Boxes.hidden_top) seen from above its top plane is bounded by its front side faces alone: a beam
-// that enters through the top meets the covering part first (or at the same range), one through a side face
-// enters through a front-facing one. The renderer prepends #defines: MAX_RECTS (rectangles one solid may emit:
-// one per piece, two across the back seam), MAX_VERTICES (4 per rectangle), OUT_RGB.
+// that enters through the top meets the covering part first (or at the same range), one that enters otherwise
+// enters through a side face the origin is outside of. The renderer prepends #defines: MAX_RECTS (rectangles
+// one solid may emit: one per piece, two across the back seam; 2 = unsliced), MAX_VERTICES (4 per rectangle),
+// SLICE_COST_PX (one more slice's cost in fragments), OUT_RGB.
 layout(points) in;
 layout(triangle_strip, max_vertices = MAX_VERTICES) out;
 in mat4 v_sensor_from_unit[];
