@@ -11,7 +11,9 @@ both exact per beam:
   elevation, a pole it holds, the back seam), and emits the rectangle of beam pixels inside the bound with the
   triangle as flat outputs; the fragment shader (``shaders/beam.frag``) intersects its own beam (a texture of
   the pattern's directions) with the triangle, Moller-Trumbore from the origin, discards a miss (exact coverage
-  at silhouettes) and writes the range with Eqs 1-2 and depth t / far for the nearest hit;
+  at silhouettes) and writes the range with Eqs 1-2 and depth t / far for the nearest hit; the grain surface's
+  triangles go in pairs (``renderer_proc/beam_surface.py``, ``shaders/beam_quad.*``): a quad's two triangles
+  bounded at once and tested in one fragment, the nearer hit kept;
 * convex solids (boxes; cylinders as the prisms the ray caster uses): one point per instance
   (``shaders/solid.*``), a box bounded in slices along its longest edge (up to :func:`max_rects` rectangles;
   one with a covered top, ``Boxes.hidden_top``, seen from above by its front side faces), a prism whole, and
@@ -36,6 +38,7 @@ from cosim.world.meshes import CYLINDER_SIDES, INSTANCE_FLOATS, box_instances, c
 from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
 
 from .beam_mock import check_target
+from .beam_surface import BeamSurface
 from .codec import BYTE_MAX, CM_PER_M
 from .gl_backend import SHADER_DIR, GLResources, _mat
 from .projection import far_plane_m
@@ -147,9 +150,12 @@ class _Buffers:
 
 class GLBeamRenderer(GLResources):
     """Beam-native GL renderer of a gridded :class:`BeamLayout`: ``set_scene``, ``draw(0, world_from_sensor)``,
-    ``read_depth(0, out)``, ``read_rgb(0, out)``, ``close`` (the renderer interface with one target)."""
+    ``read_depth(0, out)``, ``read_rgb(0, out)``, ``close`` (the renderer interface with one target).
+    ``surface_quads`` False draws the grain surface as single triangles, the path before the quads (for
+    side-by-side measurement, ``bench/beam_surface.py``)."""
 
-    def __init__(self, layout: BeamLayout, codec: Codec, *, rgb: bool = False, context: Any = None):
+    def __init__(self, layout: BeamLayout, codec: Codec, *, rgb: bool = False, context: Any = None,
+                 surface_quads: bool = True):
         if not layout.gridded:
             raise ValueError("the GL beam-native renderer needs a grid or honeycomb pattern (a CSV table has no "
                              "angle grid); use the exact ray cast (renderer_proc.beam_mock.MockBeamRenderer)")
@@ -175,7 +181,12 @@ class GLBeamRenderer(GLResources):
         self.prog_prism = self._m(ctx.program(
             vertex_shader=_src("solid.vert"), geometry_shader=_solid_geom(defines, PRISM_RECTS),
             fragment_shader=_assemble("solid.frag", CODEC, defines=defines + (f"#define PRISM_SIDES {CYLINDER_SIDES}",))))
-        self._progs = (self.prog_inst, self.prog_hf, self.prog_box, self.prog_prism)
+        # the grain surface as quads (SurfaceMesh.quads): two triangles bounded and tested at once (beam_surface.py)
+        self.prog_quad = self._m(ctx.program(vertex_shader=_assemble("beam_heightfield.vert", ANGLES),
+                                             geometry_shader=_assemble("beam_quad.geom", ANGLES, BOUNDS),
+                                             fragment_shader=_assemble("beam_quad.frag", CODEC, defines=defines)))
+        self._surface = BeamSurface(ctx, self._m, self.prog_hf, self.prog_quad, quads=surface_quads)
+        self._progs = (self.prog_inst, self.prog_hf, self.prog_box, self.prog_prism, self.prog_quad)
         rows, cols = layout.shape
         az = layout.azimuth[:cols]
         centre = 0.5 * float(az[0] + az[-1])
@@ -205,7 +216,7 @@ class GLBeamRenderer(GLResources):
         self._ground: tuple[np.ndarray, np.ndarray] | None = None
         self._units = {key: self._solids(prog) for key, prog in (("box", self.prog_box), ("box_open", self.prog_box),
                                                                  ("ground", self.prog_box), ("cyl", self.prog_prism))}
-        self._points = moderngl.POINTS
+        self._points, self._lines_adjacency = moderngl.POINTS, moderngl.LINES_ADJACENCY
         self._meshes: dict[str, list] = {}
         self._mesh_names: list[str] = []
         self._origin = np.zeros(3)
@@ -263,7 +274,7 @@ class GLBeamRenderer(GLResources):
         self._upload(self._units["box_open"], boxes[~ground & hidden])    # top covered: bounded by its sides
         self._upload(self._units["ground"], boxes[ground])
         self._upload(self._units["cyl"], cylinder_instances(scene.cylinders, self._origin))
-        self._heightfield(scene)
+        self._surface.upload(scene, self._origin)
         for mesh in scene.meshes:
             if mesh.name not in self._meshes:
                 self._meshes[mesh.name] = self._instanced(mesh.vertices, mesh.faces, reserve=1)
@@ -307,8 +318,7 @@ class GLBeamRenderer(GLResources):
                 fbo.clear(*colour, depth=1.0)
         self._frame.draw.use()
         self._render("cyl")
-        if self._hf is not None and self._hf.count:
-            self._hf.vao.render(vertices=self._hf.count)
+        self._surface.render(self._lines_adjacency)
         self._render("box")
         self._render("box_open")
         if key is None:

@@ -14,6 +14,10 @@ is cut into blocks of ``block`` x ``block`` quads (smaller at the far edges). Ea
 * every other block is drawn with the grid's own triangles, each quad split along its (a, b)-(a+1, b+1)
   diagonal, exactly as the ray caster assumes.
 
+:meth:`SurfaceMesh.triangles` gives it as a triangle list (the camera rig's GL renderer), :meth:`SurfaceMesh.quads`
+as the same triangles in pairs that share an edge, four vertices each (the beam-native renderer bounds and tests a
+pair at once): a fine block's grid quads, a plain block's rectangle, a fan's consecutive triangles.
+
 Vertex buffer: the (nx + 2) (ny + 2) grid vertices (k = a (ny + 2) + b), then one centre per block. Heights
 (:meth:`SurfaceMesh.heights`) follow the same order, so the surface is the same piecewise-linear function as
 :func:`~cosim.world.heightfield.surface_height` (up to float32 interpolation).
@@ -58,9 +62,9 @@ class SurfaceMesh:
         self.vertices = np.concatenate([grid, centres.reshape(-1, 2).astype(np.float32)])
         self._n_grid = len(grid)
         self._quads = np.outer(np.diff(self._ea), np.diff(self._eb))   # quads per block
-        self._pieces: dict[tuple[int, int, int], np.ndarray] = {}
-        self._last_key: bytes | None = None
-        self._last: np.ndarray | None = None
+        self._pieces: dict[tuple[int, int, int, bool], np.ndarray] = {}
+        self._last_key: dict[bool, bytes | None] = {False: None, True: None}     # per list: triangles, quads
+        self._last: dict[bool, np.ndarray | None] = {False: None, True: None}
 
     @property
     def blocks(self) -> tuple[int, int]:
@@ -84,24 +88,38 @@ class SurfaceMesh:
 
     def triangles(self, padded: np.ndarray) -> tuple[np.ndarray, bool]:
         """((T, 3) int32 triangles of this frame, whether they differ from the previous call's)."""
+        return self._list(padded, quads=False)
+
+    def quads(self, padded: np.ndarray) -> tuple[np.ndarray, bool]:
+        """The same surface as :meth:`triangles` as quads: ((Q, 4) int32 corners 0 1 2 3 of this frame, whether
+        they differ from the previous call's). A quad stands for its triangles 0 1 2 and 0 2 3 (the second is
+        degenerate, corner 3 = corner 2, where a fan has an odd count): a fine block's grid quads (a, b) as
+        vertices (a, b), (a+1, b), (a+1, b+1), (a, b+1), counter-clockwise seen from +z (the grid's own
+        diagonal, as :meth:`triangles`), a plain merged block as its rectangle, a fan's triangles in pairs."""
+        return self._list(padded, quads=True)
+
+    def _list(self, padded: np.ndarray, quads: bool) -> tuple[np.ndarray, bool]:
         flat = self.flat_blocks(padded)
         key = np.packbits(flat).tobytes()
-        if key == self._last_key and self._last is not None:
-            return self._last, False
+        if key == self._last_key[quads] and self._last[quads] is not None:
+            return self._last[quads], False
         fine = np.pad(~flat, 1, constant_values=False)      # outside the grid: no neighbour, nothing to meet
         sides = ((fine[1:-1, :-2] * 1) | (fine[2:, 1:-1] * 2) | (fine[1:-1, 2:] * 4) | (fine[:-2, 1:-1] * 8))
-        pieces = [self._piece(i, j, int(sides[i, j]) if flat[i, j] else -1)
+        pieces = [self._piece(i, j, int(sides[i, j]) if flat[i, j] else -1, quads)
                   for i in range(self._na) for j in range(self._nbk)]
-        self._last = np.concatenate(pieces).astype(np.int32, copy=False)
-        self._last_key = key
-        return self._last, True
+        self._last[quads] = np.concatenate(pieces).astype(np.int32, copy=False)
+        self._last_key[quads] = key
+        return self._last[quads], True
 
-    def _piece(self, i: int, j: int, mode: int) -> np.ndarray:
-        """Triangles of block (i, j): mode -1 fine; else merged, bit k set where side k (b0, a1, b1, a0) must
-        carry every grid vertex on it."""
-        got = self._pieces.get((i, j, mode))
+    def _piece(self, i: int, j: int, mode: int, quads: bool) -> np.ndarray:
+        """Triangles (or quads) of block (i, j): mode -1 fine; else merged, bit k set where side k
+        (b0, a1, b1, a0) must carry every grid vertex on it."""
+        got = self._pieces.get((i, j, mode, quads))
         if got is None:
-            got = self._pieces[(i, j, mode)] = self._make_piece(i, j, mode)
+            got = self._make_piece(i, j, mode)
+            if quads:
+                got = _as_quads(got, fine=mode < 0)
+            self._pieces[(i, j, mode, quads)] = got
         return got
 
     def _make_piece(self, i: int, j: int, mode: int) -> np.ndarray:
@@ -132,3 +150,16 @@ class SurfaceMesh:
         ring = np.concatenate(loop)
         centre = self._n_grid + i * self._nbk + j
         return np.stack([np.full(len(ring), centre), ring, np.roll(ring, -1)], axis=1)
+
+
+def _as_quads(tri: np.ndarray, fine: bool) -> np.ndarray:
+    """(T, 3) triangles of one block from :meth:`SurfaceMesh._make_piece` -> (Q, 4) quads whose triangles 0 1 2
+    and 0 2 3 are the same triangles: a fine block's (grid quads' first triangles, then their second), else
+    consecutive pairs sharing corner 0 and an edge (a rectangle's two; a fan's, the last alone when odd)."""
+    if fine:
+        first, second = np.split(tri, 2)
+        return np.concatenate([first, second[:, 2:]], axis=1)           # (v00, v10, v11) + v01
+    if len(tri) % 2:
+        tri = np.concatenate([tri, tri[-1:, [0, 2, 2]]])                  # degenerate partner: corner 3 = corner 2
+    first, second = tri[0::2], tri[1::2]
+    return np.concatenate([first, second[:, 2:]], axis=1)

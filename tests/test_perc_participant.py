@@ -241,4 +241,4 @@ def test_accuracy_off_never_casts_and_the_summary_says_so(monkeypatch):
     assert re["frames_evaluated"] == 0 and re["mean_m"] is None and re["working_p99_m"] is None
     assert "accuracy evaluation: off" in render_markdown(p)
     on = summarize(SCENARIO, series, None, None)["perception"]["range_error"]["evaluation"]
-    assert on == "every 1 frame, 4096 sampled beams each"
+    assert on == f"every 1 frame, {SCENARIO.perception.accuracy_beams} sampled beams each"
