@@ -15,7 +15,9 @@ both exact per beam:
   triangles go in pairs (``renderer_proc/beam_surface.py``, ``shaders/beam_quad.*``): a quad's two triangles
   bounded at once and tested in one fragment, the nearer hit kept;
 * convex solids (boxes; cylinders as the prisms the ray caster uses): one point per instance
-  (``shaders/solid.*``), the whole solid bounded at once and each beam clipped against its slabs or planes.
+  (``shaders/solid.*``), a box bounded in slices along its longest edge (up to :func:`max_rects` rectangles;
+  one with a covered top, ``Boxes.hidden_top``, seen from above by its front side faces), a prism whole, and
+  each beam clipped against the whole solid's slabs or planes.
 
 There is no projection, so no near plane, no stitching, no parallax and no resample, and a 360 deg field is one
 target (rectangles across the back seam are emitted twice). The ground slab's top face is the ground plane
@@ -41,7 +43,7 @@ from .codec import BYTE_MAX, CM_PER_M
 from .gl_backend import SHADER_DIR, GLResources, _mat
 from .projection import far_plane_m
 
-__all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "ROW_BINS", "GLBeamRenderer", "ground_key", "row_bounds"]
+__all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "ROW_BINS", "GLBeamRenderer", "ground_key", "max_rects", "row_bounds"]
 
 #: slack of every angular bound in the geometry shader, rad (float32 round-off of atan is ~1e-7 rad; a beam
 #: pitch is ~5e-3 rad): only widens the rectangles, the fragment test decides
@@ -53,6 +55,21 @@ BOUNDS = "beam_bounds.glsl"
 CODEC = "codec.glsl"
 #: elevation bins of the geometry shader's row table (row_bounds)
 ROW_BINS = 4096
+#: GL_MAX_GEOMETRY_TOTAL_OUTPUT_COMPONENTS guaranteed by OpenGL 3.3 (llvmpipe's too): max_vertices times the
+#: components of one emitted vertex may not exceed it
+GEOMETRY_OUTPUT_COMPONENTS = 1024
+#: components of one vertex solid.geom emits: gl_Position, unit_from_sensor (mat3), origin (vec3), colour (rgb)
+SOLID_VERTEX_COMPONENTS = 4 + 9 + 3
+#: the colour's components, emitted with the shaded output only
+SOLID_RGB_COMPONENTS = 3
+#: cost of bounding one more slice of a solid in solid.geom, in fragments shaded (llvmpipe): a slice pays off
+#: when it saves more
+SLICE_COST_PX = 100.0
+#: rectangles of the prisms' (cylinders') geometry shader: 2, unsliced (see docs/lidar.md: slicing the auger tube
+#: saves fewer fragments than the longer geometry shader costs on the 30 prisms of the default scene)
+PRISM_RECTS = 2
+#: vertices of one rectangle of beam pixels (a triangle strip)
+RECT_VERTICES = 4
 #: inclusive slack of the fragment's inside-triangle test, barycentric: closes float32 cracks on shared edges
 #: (a beam this close to a silhouette edge, 2e-6 of the triangle's size, is counted as a hit)
 EDGE_SLACK = 2e-6
@@ -74,6 +91,21 @@ def row_bounds(row_el: np.ndarray, bins: int = ROW_BINS) -> tuple[float, float, 
     at_or_above_bottom = len(el) - np.searchsorted(asc, edges[:-1], side="left")
     table = np.stack([above_top, at_or_above_bottom - 1], axis=1).astype(np.float32)
     return base, bins / span, np.ascontiguousarray(table)
+
+
+def max_rects(rgb: bool) -> int:
+    """Rectangles solid.geom may emit for one solid (its slices, two for one across the back seam): as many as
+    fit the geometry shader's output limit (:data:`GEOMETRY_OUTPUT_COMPONENTS`); 16 without the shaded output,
+    13 with it."""
+    components = SOLID_VERTEX_COMPONENTS + (SOLID_RGB_COMPONENTS if rgb else 0)
+    return GEOMETRY_OUTPUT_COMPONENTS // components // RECT_VERTICES
+
+
+def _solid_geom(defines: tuple[str, ...], rects: int) -> str:
+    """solid.geom emitting at most ``rects`` rectangles per solid (2: unsliced)."""
+    return _assemble("solid.geom", ANGLES, BOUNDS, defines=defines + (
+        f"#define MAX_RECTS {rects}", f"#define MAX_VERTICES {rects * RECT_VERTICES}",
+        f"#define SLICE_COST_PX {SLICE_COST_PX:.1f}"))
 
 
 def _src(name: str) -> str:
@@ -141,12 +173,13 @@ class GLBeamRenderer(GLResources):
                                              geometry_shader=geom, fragment_shader=frag))
         self.prog_hf = self._m(ctx.program(vertex_shader=_assemble("beam_heightfield.vert", ANGLES),
                                            geometry_shader=geom, fragment_shader=frag))
-        # convex solids (boxes, cylinders as prisms): one point per instance, bounded whole, clipped per beam
-        solid_geom = _assemble("solid.geom", ANGLES, BOUNDS)
-        self.prog_box = self._m(ctx.program(vertex_shader=_src("solid.vert"), geometry_shader=solid_geom,
+        # convex solids (boxes, cylinders as prisms): one point per instance, boxes bounded in slices, prisms
+        # whole, each beam clipped against the whole solid
+        self.prog_box = self._m(ctx.program(vertex_shader=_src("solid.vert"),
+                                            geometry_shader=_solid_geom(defines, max_rects(rgb)),
                                             fragment_shader=_assemble("solid.frag", CODEC, defines=defines)))
         self.prog_prism = self._m(ctx.program(
-            vertex_shader=_src("solid.vert"), geometry_shader=solid_geom,
+            vertex_shader=_src("solid.vert"), geometry_shader=_solid_geom(defines, PRISM_RECTS),
             fragment_shader=_assemble("solid.frag", CODEC, defines=defines + (f"#define PRISM_SIDES {CYLINDER_SIDES}",))))
         # the grain surface as quads (SurfaceMesh.quads): two triangles bounded and tested at once (beam_surface.py)
         self.prog_quad = self._m(ctx.program(vertex_shader=_assemble("beam_heightfield.vert", ANGLES),
@@ -164,8 +197,10 @@ class GLBeamRenderer(GLResources):
                   "u_daz": float(az[0] - az[1]) if cols > 1 else 1.0, "u_size": (cols, rows),
                   "u_margin": ANGLE_SLACK_RAD, "u_far": self.far_m, "u_edge": EDGE_SLACK,
                   "u_rows": 0, "u_dirs": 1, "u_colour": GRAIN_COLOUR}
-        base, per_rad, table = row_bounds(layout.elevation[::cols])
+        row_el = layout.elevation[::cols]
+        base, per_rad, table = row_bounds(row_el)
         values["u_bins"] = (base, per_rad)
+        values["u_pitch"] = (values["u_daz"], float(row_el[0] - row_el[-1]) / (rows - 1) if rows > 1 else 1.0)
         for prog in self._progs:
             for name, value in values.items():
                 _set(prog, name, value)
@@ -179,8 +214,8 @@ class GLBeamRenderer(GLResources):
         self._ground_img: _Buffers | None = None          # the ground alone, kept while its key holds
         self._ground_key: tuple | None = None
         self._ground: tuple[np.ndarray, np.ndarray] | None = None
-        self._units = {key: self._solids(prog) for key, prog in
-                       (("box", self.prog_box), ("ground", self.prog_box), ("cyl", self.prog_prism))}
+        self._units = {key: self._solids(prog) for key, prog in (("box", self.prog_box), ("box_open", self.prog_box),
+                                                                 ("ground", self.prog_box), ("cyl", self.prog_prism))}
         self._points, self._lines_adjacency = moderngl.POINTS, moderngl.LINES_ADJACENCY
         self._meshes: dict[str, list] = {}
         self._mesh_names: list[str] = []
@@ -234,7 +269,9 @@ class GLBeamRenderer(GLResources):
         if scene.ground_box is not None:
             ground[scene.ground_box] = True
             self._ground = (scene.boxes.world_from_box[scene.ground_box], scene.boxes.half_extents[scene.ground_box])
-        self._upload(self._units["box"], boxes[~ground])        # whole solids: a hidden top costs nothing here
+        hidden = np.zeros(len(boxes), bool) if scene.boxes.hidden_top is None else scene.boxes.hidden_top
+        self._upload(self._units["box"], boxes[~ground & ~hidden])
+        self._upload(self._units["box_open"], boxes[~ground & hidden])    # top covered: bounded by its sides
         self._upload(self._units["ground"], boxes[ground])
         self._upload(self._units["cyl"], cylinder_instances(scene.cylinders, self._origin))
         self._surface.upload(scene, self._origin)
@@ -283,6 +320,7 @@ class GLBeamRenderer(GLResources):
         self._render("cyl")
         self._surface.render(self._lines_adjacency)
         self._render("box")
+        self._render("box_open")
         if key is None:
             self._render("ground")
         _set(self.prog_inst, "u_cull", False)                  # mesh files have unknown winding: two-sided
@@ -292,6 +330,7 @@ class GLBeamRenderer(GLResources):
     def _render(self, name: str) -> None:
         vao, _, n = self._units[name]
         if n:
+            _set(self.prog_box, "u_open_top", name == "box_open")
             vao.render(mode=self._points, vertices=n)
 
     def _check(self, out: np.ndarray) -> None:
