@@ -90,7 +90,7 @@ class ControllerParams:
         dynamics_proc.fmus)."""
         c, k = s.controller, s.cart
         cell = c.grid_cell_m
-        nx, ny = max(1, round(k.interior_length_m / cell)), max(1, round(k.interior_width_m / cell))
+        nx, ny = k.grid_shape(cell)
         rows = section_rows(nx, cell, k.interior_length_m, c.sections)
         counts = np.bincount(rows, minlength=c.sections)
         if np.any(counts == 0):

@@ -12,7 +12,6 @@ from __future__ import annotations
 from cosim.scenario.config import Scenario
 from shm_schema import ArrayBlock, Block, Field, StructBlock
 
-from .heightmap import grid_shape
 from cosim.world.patterns import beam_table
 
 __all__ = ["WRITER", "STATE_BLOCK", "HEIGHTS_BLOCK", "POINTS_BLOCK", "RANGE_BANDS_M", "band_name",
@@ -93,7 +92,7 @@ def declare_blocks(scenario: Scenario) -> list[Block]:
     """The perception blocks for ``scenario`` (empty when the scenario runs no perception)."""
     if not scenario.needs_perception:
         return []
-    nxc, nyc = grid_shape(scenario.cart, scenario.controller.grid_cell_m)
+    nxc, nyc = scenario.cart.grid_shape(scenario.controller.grid_cell_m)
     n = beam_table(scenario.sensor.pattern)[0].shape[0]
     return [
         StructBlock(STATE_BLOCK, WRITER, state_fields(), doc="perception outputs and accuracy per frame"),

@@ -144,8 +144,8 @@ def _stream_cells(heights: np.ndarray) -> np.ndarray:
 
 
 def grid_shape(cart: Cart, cell_m: float) -> tuple[int, int]:
-    """(nx, ny) cells of a grid of ``cell_m`` over the cart interior (nx = round(L / cell))."""
-    return max(1, round(cart.interior_length_m / cell_m)), max(1, round(cart.interior_width_m / cell_m))
+    """(nx, ny) cells of a grid of ``cell_m`` over the cart interior (:meth:`Cart.grid_shape`)."""
+    return cart.grid_shape(cell_m)
 
 
 def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart, cell_m: float,

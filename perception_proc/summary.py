@@ -17,7 +17,6 @@ from cosim.scenario.config import Scenario
 
 from . import accuracy as acc
 from .blocks import RANGE_BANDS_M, band_name
-from .heightmap import grid_shape
 
 __all__ = ["summarize", "clean_json", "evaluation_note"]
 
@@ -70,7 +69,7 @@ def summarize(scenario: Scenario, series: Mapping[str, np.ndarray], heightmap_tr
               heightmap_perceived: np.ndarray | None) -> dict:
     """``{"perception": {...}}``: final height-map RMSE and coverage, median corner and impact errors over the
     evaluated frames, range-error statistics overall, in the 2-15 m working range and per distance band."""
-    shape = grid_shape(scenario.cart, scenario.controller.grid_cell_m)
+    shape = scenario.cart.grid_shape(scenario.controller.grid_cell_m)
     rmse = bias = cov = math.nan
     if heightmap_perceived is not None:
         per = np.asarray(heightmap_perceived)

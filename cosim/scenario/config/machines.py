@@ -127,6 +127,11 @@ class Cart(Model):
         """Interior volume to the wall top, m^3."""
         return self.interior_length_m * self.interior_width_m * self.interior_depth_m
 
+    def grid_shape(self, cell_m: float) -> tuple[int, int]:
+        """(nx, ny) cells of a grid of ``cell_m`` over the interior (nx = round(length / cell), at least 1): the
+        controller's and the perceived height map's grid."""
+        return max(1, round(self.interior_length_m / cell_m)), max(1, round(self.interior_width_m / cell_m))
+
 
 class MachineSync(Model):
     """Machine Sync: the combine holds the cart at an offset; the offloading controller nudges the setpoint.

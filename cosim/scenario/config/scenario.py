@@ -126,7 +126,7 @@ class Scenario(Model):
         if controller.target_fill_m > cart.interior_depth_m:
             raise ValueError(f"target_fill_m ({controller.target_fill_m:g}) is above the wall top "
                              f"(cart.interior_depth_m = {cart.interior_depth_m:g}): grain that high spills")
-        cells = max(1, round(cart.interior_length_m / controller.grid_cell_m))  # as the controller grids the cart
+        cells = cart.grid_shape(controller.grid_cell_m)[0]                 # as the controller grids the cart
         if cells < controller.sections:
             raise ValueError(f"{controller.sections} sections need at least one grid cell each, but "
                              f"cart.interior_length_m / grid_cell_m gives {cells}; use fewer sections or a finer "
