@@ -410,3 +410,42 @@ def test_stop_signals_are_idempotent_and_cut_only_optional_work():
     assert stop.count == 3 and stop.name == "SIGTERM"
     with pytest.raises(RunInterrupted, match="stopped by SIGTERM at frame 7"):
         stop.check(7)
+
+
+def test_a_failed_row_block_is_cut_back_even_when_the_close_writes_the_rest(tmp_path, monkeypatch):
+    """ENOSPC midway through a flush, then the close's retry of the buffered rest succeeds (the cut freed space,
+    or another process did): the file still ends at the last whole row, with no gap or half row after it."""
+
+    class HalfThenRest:
+        def __init__(self, f):
+            self._f, self._pending, self.flushes = f, "", 0
+
+        def write(self, text):
+            self._pending += text
+            return len(text)
+
+        def flush(self):
+            self.flushes += 1
+            text, self._pending = self._pending, ""
+            if self.flushes == 2:                      # the first row block: half written, then the disk is full
+                self._f.write(text[: len(text) // 2])
+                self._f.flush()
+                self._pending = text[len(text) // 2:]
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+            self._f.write(text)
+            self._f.flush()
+
+        def close(self):
+            self._f.write(self._pending)           # the retry succeeds
+            self._f.close()
+
+        def tell(self):
+            return self._f.tell()
+
+    real_open = open
+    monkeypatch.setattr(stream, "open", lambda *a, **k: HalfThenRest(real_open(*a, **k)), raising=False)
+    path = tmp_path / "rows.csv"
+    app = stream._Appender(path, "a,b\n")
+    with pytest.raises(OutputError, match="no space left on device writing"):
+        app.append("1,2\n3,4\n5,6\n")
+    assert path.read_text() == "a,b\n"

@@ -82,11 +82,13 @@ class _Appender:
     def _abandon(self) -> None:
         f, self._f = self._f, None
         try:
-            os.truncate(self.path, self._good)  # cutting frees space: works on a full disk
+            f.close()  # may retry the buffered rest: it fails again, or writes part of a row
         except OSError:
             pass
         try:
-            f.close()  # may retry the buffered rest and fail again: already reported
+            # then cut back to the last whole row (after the close, so nothing it wrote survives; cutting frees
+            # space, so it works on a full disk)
+            os.truncate(self.path, self._good)
         except OSError:
             pass
 
