@@ -97,7 +97,7 @@ class ControllerParams:
             raise ValueError(f"controller grid ({nx} cells of {cell} m along x) leaves sections without a cell; "
                              f"use fewer than {c.sections} sections or a finer controller.grid_cell_m")
         if strategy is None:
-            strategy = load_plugin("strategies", c.strategy, base_dir=plugin_dir(s))
+            strategy = load_plugin("strategies", c.strategy, base_dir=plugin_dir(s), options=c.strategy_options)
         sl = k.interior_length_m / c.sections
         return cls(c.target_fill_m, c.full_fraction * c.target_fill_m, c.sections, k.interior_length_m,
                    k.interior_width_m, cell, nx, ny, tuple(int(np.searchsorted(rows, i)) for i in range(c.sections)),

@@ -73,7 +73,8 @@ class ModelParams:
         if s.controller.model == FMU_REF:
             controller = fmus.controller_for(s)
         else:
-            factory = load_plugin("controllers", s.controller.model, base_dir=plugin_dir(s))
+            factory = load_plugin("controllers", s.controller.model, base_dir=plugin_dir(s),
+                                  options=s.controller.model_options)
             controller = _make_controller(factory, control, s)
         return cls(VehicleParams.from_scenario(s), SyncGains.from_scenario(s), a, GrainGrid.from_scenario(s),
                    control, GrainGrid.from_scenario(s).cap(), cart_grid_from_body(s.cart),

@@ -231,13 +231,14 @@ class Perception:
 
 def _algorithm(s: Scenario):
     """The scenario's perception algorithm (``perception.algorithm``), loaded."""
-    return load_plugin("perception", s.perception.algorithm, base_dir=s.plugin_dir or None)
+    return load_plugin("perception", s.perception.algorithm, base_dir=s.plugin_dir or None,
+                       options=s.perception.algorithm_options)
 
 
 def _stages(s: Scenario) -> StageSet:
     """The scenario's perception stages (``perception.stages``), loaded."""
     st = s.perception.stages
     refs = {"rim": st.rim, "heightmap": st.heightmap, "impact": st.impact}
-    return StageSet(*(load_plugin(f"perception.{k}", r, base_dir=s.plugin_dir or None) for k, r in refs.items()),
-                    refs)
+    return StageSet(*(load_plugin(f"perception.{k}", r, base_dir=s.plugin_dir or None,
+                                  options=getattr(st, f"{k}_options")) for k, r in refs.items()), refs)
 

@@ -252,3 +252,67 @@ def test_own_strategy_example_validates_and_is_refused_without_plugins(capsys):
     assert "plug-in controller.strategy = middle_out:middle_out: EXTERNAL (runs its code)" in capsys.readouterr().out
     assert main(["validate", path, "--no-plugins"]) == 2
     assert "plug-ins are disabled" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------------ plug-in options
+#: a strategy with an option: the sections in ``order`` first (0-based), then front to back
+ORDERED = '''
+def ordered(full, height, current, *, order=()):
+    if 0 <= current < full.size and not full[current]:
+        return current
+    for i in [*order, *range(full.size)]:
+        if not full[i]:
+            return i
+    return -1
+'''
+
+
+def test_options_reach_the_plugin_launched_and_in_process(tmp_path, monkeypatch):
+    mod = _module(tmp_path, ORDERED)
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text(f"format_version: 1\ncontroller:\n  strategy: {mod}:ordered\n  strategy_options:\n"
+                        "    order: [6, 2]\n")
+    out = tmp_path / "run"
+    assert main(["run", str(scenario), *QUICK, "--quiet", "--out", str(out)]) == 0
+    launched = _sequence(_csv_column(out / "timeseries.csv", "dyn_state.target_section"))
+    assert len(launched) >= 2 and launched[:2] == [7, 3]
+    extra = {"feedback": "ground_truth", "renderer": "none", "duration_s": 40.0}
+    s = load_scenario(scenario, ["grain.initial_fill_m=1.6", "controller.strategy_options.order=[8, 0]"], extra=extra)
+    assert s.controller.strategy_options == {"order": [8, 0]} and hash(s) == hash(s.model_copy())
+    assert _sequence(simulate(s).recorder.series()["dyn_state.target_section"])[:2] == [9, 1]
+
+
+@pytest.mark.parametrize("yaml_tail, overrides, where, message", [
+    ("  strategy: {mod}:ordered\n  strategy_options:\n    order: [1]\n    width: 2\n", [],
+     "{scenario}:8:12: controller.strategy_options.width: ", r"plug-in '{mod}:ordered' takes no option 'width': .*"
+                                                             r"options: order"),
+    ("  target_fill_m: 1.8\n", ["controller.model_options.gain=2"], "<--set>:1:31: controller.model_options.gain: ",
+     r"plug-in 'section_fill' takes no option 'gain'.*options: none"),
+    ("  strategy: {mod}:ordered\n", ["perception.stages.rim_options.z=1"], "<--set>:1:33: perception.stages.rim_options.z",
+     r"plug-in 'builtin' takes no option 'z'"),
+    ("  strategy: {mod}:ordered\n  strategy_options: [1, 2]\n", [], "{scenario}:6:21: controller.strategy_options: ",
+     r"Input should be a (valid dictionary|mapping)"),
+])
+def test_bad_options_are_reported_at_their_key_and_nothing_starts(tmp_path, capsys, yaml_tail, overrides, where,
+                                                                  message):
+    mod = _module(tmp_path, ORDERED)
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text("format_version: 1\nrenderer: none\nfeedback: ground_truth\ncontroller:\n"
+                        + yaml_tail.format(mod=mod))
+    out = tmp_path / "run"
+    sets = [a for o in overrides for a in ("--set", o)]
+    assert main(["run", str(scenario), *sets, "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert where.format(scenario=scenario) in err, err
+    assert __import__("re").search(message.format(mod=mod), err), err
+    assert not out.exists()
+
+
+def test_load_plugin_binds_options_as_keywords(tmp_path, monkeypatch):
+    mod = _module(tmp_path, ORDERED)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    pick = load_plugin("strategies", f"{mod}:ordered", options={"order": [3]})
+    assert pick(np.zeros(9, bool), np.full(9, np.nan), -1) == 3
+    assert load_plugin("strategies", f"{mod}:ordered")(np.zeros(9, bool), np.full(9, np.nan), -1) == 0
+    with pytest.raises(PluginError, match="takes no option 'size'"):
+        load_plugin("strategies", "front_to_back", options={"size": 1})

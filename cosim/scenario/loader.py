@@ -31,7 +31,7 @@ from pydantic import BaseModel, ValidationError
 from .config import FORMAT_VERSION, Scenario
 from .plausibility import implausible
 from cosim.errors import Problem, ScenarioError
-from .trust import CHECKS, PLUGIN_POINTS, check_plugin_refs
+from .trust import CHECKS, PLUGIN_POINTS, check_plugin_refs, options_key
 from .yamlmarks import (Doc as _Doc, Dumper as _Dumper, Loc, Mark as _Mark,
                         dotted as _dotted, parse as _parse, show as _show)
 
@@ -107,9 +107,18 @@ def _tuple_len(loc: Loc) -> int | None:
     return len(args) if typing.get_origin(ann) is tuple and Ellipsis not in args else None
 
 
+def _free_mapping(loc: Loc) -> bool:
+    """Whether ``loc`` names a field whose keys are free (a plug-in's ``*_options``: any key, checked later)."""
+    model = _model_at(loc[:-1]) if loc else None
+    field = model.model_fields.get(loc[-1]) if model is not None else None
+    return field is not None and typing.get_origin(field.annotation) is dict and loc[-1].endswith("_options")
+
+
 def _check_override_path(loc: Loc) -> str | None:
     """Why ``loc`` names no field of the scenario, or None when it does."""
     for i, part in enumerate(loc):
+        if _free_mapping(loc[:i]):
+            return None
         model = _model_at(loc[:i])
         if model is None:
             return f"'{_dotted(loc[:i])}' is a value, not a section: it has no key '{part}'"
@@ -242,8 +251,18 @@ def _check_external(doc: _Doc, scenario: Scenario | None, allow_plugins: bool) -
     reported = {p.path for p in doc.problems}
     refs = []
     for loc, group in PLUGIN_POINTS:
-        if _existing(doc.data, loc) == loc and isinstance(_at(doc.data, loc), str) and _dotted(loc) not in reported:
-            refs.append((loc, group, _at(doc.data, loc)))
+        okey = options_key(loc)
+        options = _at(doc.data, okey) if _existing(doc.data, okey) == okey else {}
+        if not isinstance(options, dict) or _dotted(okey) in reported:
+            options = {}                    # a bad mapping is the validation's to report
+        if _existing(doc.data, loc) == loc:
+            ref = _at(doc.data, loc)
+        elif options:                       # options for the default plug-in
+            ref = _model_at(loc[:-1]).model_fields[loc[-1]].default
+        else:
+            continue
+        if isinstance(ref, str) and _dotted(loc) not in reported:
+            refs.append((loc, group, ref, options))
     plugin_dir = doc.data.get("plugin_dir") if isinstance(doc.data.get("plugin_dir"), str) else ""
     _, issues = check_plugin_refs(refs, plugin_dir, allow_plugins=allow_plugins)
     for check in CHECKS if scenario is not None else ():

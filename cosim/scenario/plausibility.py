@@ -95,7 +95,8 @@ def _initial_state(s: Scenario) -> tuple[dict, np.ndarray]:
     # the frame-0 poses come from the scenario alone: the built-in controller and vehicle model stand in for any
     # plug-in or FMU (nothing of the user's is opened or stepped to check the geometry)
     geometry = s.model_copy(update={
-        "controller": s.controller.model_copy(update={"model": "section_fill", "strategy": "front_to_back", "fmu": None}),
+        "controller": s.controller.model_copy(update={"model": "section_fill", "model_options": {},
+                                                      "strategy": "front_to_back", "strategy_options": {}, "fmu": None}),
         "vehicles": type(s.vehicles)()})
     p = ModelParams.from_scenario(geometry)
     w = initial_world(geometry, p)

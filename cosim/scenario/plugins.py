@@ -23,19 +23,25 @@ group                     scenario key               protocol
 ``perception.impact``     perception.stages.impact   perception_proc.protocol
 ========================  =========================  ==========================================
 
+Options: the scenario's ``<key>_options`` mapping beside a reference holds keyword arguments; :func:`load_plugin`
+checks them against the plug-in's signature (after the protocol's positional arguments) and binds them
+(``functools.partial``), so the caller calls the protocol as usual.
+
 Trust: loading a plug-in runs its module's code. ``allow_external=False`` refuses anything that is not built in.
 """
 from __future__ import annotations
 
+import functools
 import importlib
 import importlib.metadata as metadata
 import inspect
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Mapping
 
-__all__ = ["BUILTINS", "ENTRY_POINT_GROUPS", "ARITY", "PluginError", "PluginInfo", "load_plugin", "resolve_plugin",
-           "is_import_path", "distribution_of"]
+__all__ = ["BUILTINS", "ENTRY_POINT_GROUPS", "ARITY", "PluginError", "PluginOptionsError", "PluginInfo", "load_plugin", "resolve_plugin",
+           "is_import_path", "distribution_of", "check_options", "with_options"]
 
 #: plug-in group -> built-in short name -> import path (the same as the package's entry points)
 BUILTINS: dict[str, dict[str, str]] = {
@@ -68,6 +74,14 @@ ARITY: dict[str, tuple[str, ...]] = {
 class PluginError(ValueError):
     """A plug-in reference cannot be used: unknown name, import failure, missing attribute, not callable, wrong
     signature, or refused (``allow_external=False``). The message names the reference."""
+
+
+class PluginOptionsError(PluginError):
+    """A plug-in's ``*_options`` do not fit its signature; ``names``: the options it does not take."""
+
+    def __init__(self, message: str, names: tuple[str, ...]):
+        super().__init__(message)
+        self.names = names
 
 
 @dataclass(frozen=True)
@@ -134,6 +148,32 @@ def _check_signature(group: str, ref: str, obj: object) -> None:
                           f"({', '.join(ARITY[group])}): {e}") from None
 
 
+def check_options(group: str, ref: str, obj: object, options: Mapping[str, object]) -> None:
+    """:class:`PluginError` unless ``obj`` can be called with the protocol's arguments and ``options`` as keywords."""
+    if not options:
+        return
+    try:
+        sig = inspect.signature(obj)
+    except (TypeError, ValueError):
+        return                          # no signature to check against: trust it
+    try:
+        sig.bind(*ARITY[group], **options)
+    except TypeError as e:
+        params = sig.parameters
+        takes_any = any(p.kind is p.VAR_KEYWORD for p in params.values())
+        named = [p for p in list(params)[len(ARITY[group]):]
+                 if params[p].kind in (params[p].POSITIONAL_OR_KEYWORD, params[p].KEYWORD_ONLY)]
+        bad = tuple(k for k in options if not takes_any and k not in named) or tuple(options)
+        raise PluginOptionsError(f"plug-in {ref!r} takes no option {', '.join(repr(k) for k in bad)}: its "
+                                 f"signature is {sig} ({e}); options: "
+                                 f"{', '.join(named) if named else 'none'}", bad) from None
+
+
+def with_options(obj: object, options: Mapping[str, object]) -> object:
+    """``obj`` with ``options`` bound as keyword arguments (itself when there are none)."""
+    return functools.partial(obj, **options) if options else obj
+
+
 def _module_file(obj: object) -> str:
     module = sys.modules.get(getattr(obj, "__module__", "") or "")
     return str(getattr(module, "__file__", "") or "")
@@ -179,7 +219,11 @@ def resolve_plugin(group: str, ref: str, *, base_dir: Path | None = None, allow_
     return PluginInfo(group, ref, target, builtin is not None, _module_file(obj), obj)
 
 
-def load_plugin(group: str, ref: str, *, base_dir: Path | None = None, allow_external: bool = True) -> object:
-    """The object plug-in ``ref`` of ``group`` names, imported and signature-checked (see the module docstring);
-    :class:`PluginError` naming ``ref`` otherwise."""
-    return resolve_plugin(group, ref, base_dir=base_dir, allow_external=allow_external).obj
+def load_plugin(group: str, ref: str, *, base_dir: Path | None = None, allow_external: bool = True,
+                options: Mapping[str, object] | None = None) -> object:
+    """The object plug-in ``ref`` of ``group`` names, imported and signature-checked (see the module docstring),
+    with ``options`` (the scenario's ``*_options``) bound as keyword arguments; :class:`PluginError` naming
+    ``ref`` otherwise."""
+    obj = resolve_plugin(group, ref, base_dir=base_dir, allow_external=allow_external).obj
+    check_options(group, ref, obj, options or {})
+    return with_options(obj, options or {})

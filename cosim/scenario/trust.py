@@ -21,9 +21,10 @@ from typing import Callable
 from cosim.fmi import check as fmi_check
 
 from .config import FMU_REF, Scenario
-from .plugins import PluginError, distribution_of, resolve_plugin
+from .plugins import PluginError, PluginOptionsError, check_options, distribution_of, resolve_plugin
 
-__all__ = ["Loaded", "Issue", "Check", "PLUGIN_POINTS", "plugin_points", "check_plugin_refs", "check_plugins",
+__all__ = ["Loaded", "Issue", "Check", "PLUGIN_POINTS", "options_key", "plugin_points", "check_plugin_refs",
+           "check_plugins",
            "check_fmus", "CHECKS", "inspect_scenario", "format_inventory"]
 
 
@@ -64,31 +65,43 @@ PLUGIN_POINTS: tuple[tuple[tuple[str, ...], str], ...] = (
 )
 
 
-def plugin_points(s: Scenario) -> list[tuple[tuple[str, ...], str, str]]:
-    """(scenario key, plug-in group, reference) of every plug-in point of ``s``."""
+def options_key(loc: tuple[str, ...]) -> tuple[str, ...]:
+    """The scenario key of the options beside the plug-in reference at ``loc`` (``controller.strategy_options``)."""
+    return loc[:-1] + (loc[-1] + "_options",)
+
+
+def plugin_points(s: Scenario) -> list[tuple[tuple[str, ...], str, str, dict]]:
+    """(scenario key, plug-in group, reference, options) of every plug-in point of ``s``."""
     out = []
     for loc, group in PLUGIN_POINTS:
-        node = s
+        node, options = s, s
         for part in loc:
             node = getattr(node, part)
-        out.append((loc, group, node))
+        for part in options_key(loc):
+            options = getattr(options, part)
+        out.append((loc, group, node, dict(options)))
     return out
 
 
-def check_plugin_refs(refs: list[tuple[tuple[str, ...], str, str]], plugin_dir: str, *, allow_plugins: bool = True,
-                      versions: bool = False) -> tuple[list[Loaded], list[Issue]]:
-    """Import and signature-check each (scenario key, group, reference), looked for in ``plugin_dir`` first
-    ('' none). The loader runs this on the raw values too, so that a bad plug-in is reported together with the
-    scenario's other problems."""
+def check_plugin_refs(refs: list[tuple[tuple[str, ...], str, str, dict]], plugin_dir: str, *,
+                      allow_plugins: bool = True, versions: bool = False) -> tuple[list[Loaded], list[Issue]]:
+    """Import and signature-check each (scenario key, group, reference, options), looked for in ``plugin_dir``
+    first ('' none); the options are checked against the plug-in's signature at their own key. The loader runs
+    this on the raw values too, so that a bad plug-in is reported together with the scenario's other problems."""
     base = Path(plugin_dir) if plugin_dir else None
     loaded, issues = [], []
-    for loc, group, ref in refs:
+    for loc, group, ref, options in refs:
         if ref == FMU_REF and loc[0] == "controller":
+            if options:
+                issues.append(Issue(options_key(loc), "options are for Python plug-ins; an FMU takes its "
+                                                      "parameters in controller.fmu.parameters"))
             continue                        # names controller.fmu: check_fmus
         try:
             info = resolve_plugin(group, ref, base_dir=base, allow_external=allow_plugins)
+            check_options(group, ref, info.obj, options)
         except PluginError as e:
-            issues.append(Issue(loc, str(e)))
+            where = options_key(loc) + e.names[:1] if isinstance(e, PluginOptionsError) else loc
+            issues.append(Issue(where, str(e)))
             continue
         dist, version = distribution_of(info) if versions else ("", "")
         loaded.append(Loaded("plug-in", ".".join(loc), ref, info.builtin, info.file,

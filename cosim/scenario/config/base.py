@@ -6,11 +6,13 @@ stored defaults.
 """
 from __future__ import annotations
 
+import json
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, JsonValue
 
-__all__ = ["Model", "Vec3", "Mount", "Entity", "PosFloat", "NonNegFloat", "Fraction", "Angle", "PluginRef"]
+__all__ = ["Model", "Vec3", "Mount", "Entity", "PosFloat", "NonNegFloat", "Fraction", "Angle", "PluginRef",
+           "PluginOptions", "Options"]
 
 
 class Model(BaseModel):
@@ -27,6 +29,21 @@ Vec3 = tuple[float, float, float]
 #: a plug-in reference: a short name (built in or an entry point) or an import path ``package.module:name``;
 #: the loader imports and checks it (cosim.scenario.plugins)
 PluginRef = Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_.-]*(:[A-Za-z_][A-Za-z0-9_.]*)?$")]
+
+
+class PluginOptions(dict):
+    """A plug-in's options from the scenario: keyword name -> plain YAML value (the plug-in is called with them,
+    cosim.scenario.plugins). Hashable by value, so that a scenario holding them stays a cache key."""
+
+    def __hash__(self) -> int:  # type: ignore[override]
+        return hash(json.dumps(self, sort_keys=True))
+
+    def __reduce__(self):
+        return PluginOptions, (dict(self),)
+
+
+#: the ``*_options`` mapping beside a plug-in reference: keyword arguments it is called with (docs/plugins.md)
+Options = Annotated[dict[str, JsonValue], AfterValidator(PluginOptions)]
 
 Entity = Literal["world", "combine", "tractor", "cart"]
 

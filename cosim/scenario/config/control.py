@@ -9,7 +9,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from .base import Fraction, Model, NonNegFloat, PluginRef, PosFloat
+from .base import Fraction, Model, NonNegFloat, Options, PluginRef, PosFloat
 from .fmu import FMU_REF, Fmu
 
 __all__ = ["Grain", "Fusion", "Controller", "Integrator"]
@@ -64,12 +64,15 @@ class Controller(Model):
     ``front_to_back`` / ``back_to_front`` / ``lowest_first`` (dynamics_proc.strategies), an entry point name or
     an import path ``package.module:name``; ``model`` is the whole controller, ``section_fill`` (this one,
     dynamics_proc.controller) or a plug-in implementing dynamics_proc.control_protocol. ``fmu`` (for either)
-    names the FMU ``fmu`` (docs/fmu.md).
+    names the FMU ``fmu`` (docs/fmu.md). ``strategy_options`` / ``model_options``: keyword arguments the
+    plug-in is called with (a strategy) or made with (a controller factory), checked against its signature.
     """
 
     target_fill_m: PosFloat = 1.9
     strategy: PluginRef = "front_to_back"
+    strategy_options: Options = {}
     model: PluginRef = "section_fill"
+    model_options: Options = {}
     sections: int = Field(default=9, ge=1, le=64)
     grid_cell_m: PosFloat = 0.1
     full_fraction: Fraction = 0.995

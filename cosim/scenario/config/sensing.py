@@ -10,7 +10,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from .base import Fraction, Model, Mount, NonNegFloat, PluginRef, PosFloat
+from .base import Fraction, Model, Mount, NonNegFloat, Options, PluginRef, PosFloat
 
 __all__ = ["Codec", "Pattern", "Noise", "Sensor", "Stages", "Perception"]
 
@@ -121,11 +121,15 @@ class Sensor(Model):
 class Stages(Model):
     """The stages of the ``staged`` perception algorithm, each replaceable on its own (perception_proc.protocol):
     ``rim`` finds the cart, ``heightmap`` grids the grain surface, ``impact`` finds where the stream lands.
-    ``builtin``, an entry point name or an import path ``package.module:name``."""
+    ``builtin``, an entry point name or an import path ``package.module:name``; ``<stage>_options``: keyword
+    arguments the stage is called with."""
 
     rim: PluginRef = "builtin"
+    rim_options: Options = {}
     heightmap: PluginRef = "builtin"
+    heightmap_options: Options = {}
     impact: PluginRef = "builtin"
+    impact_options: Options = {}
 
 
 class Perception(Model):
@@ -140,7 +144,8 @@ class Perception(Model):
     ``accuracy_beams``: how many beams each evaluation casts, one drawn per stratum of equal runs of the beam
     table, seeded by (seed, frame) (0: every beam; see perception_proc.accuracy.sample_beams).
     ``algorithm``: the per-frame algorithm (points -> cart, height map, impact): ``staged`` runs ``stages``;
-    an entry point name or an import path ``package.module:name`` replaces it whole (docs/plugins.md).
+    an entry point name or an import path ``package.module:name`` replaces it whole (docs/plugins.md);
+    ``algorithm_options``: keyword arguments it is called with.
     """
 
     min_points_per_cell: int = Field(default=1, ge=1)
@@ -149,4 +154,5 @@ class Perception(Model):
     accuracy_every_frames: int = Field(default=120, ge=0, le=1_000_000)
     accuracy_beams: int = Field(default=16384, ge=0, le=10_000_000)
     algorithm: PluginRef = "staged"
+    algorithm_options: Options = {}
     stages: Stages = Stages()
