@@ -1,7 +1,7 @@
 """The grain surface's draw in the GL beam-native renderer: grid quads against triangles (issue 20).
 
 Two GL beam-native renderers in one context, ``quads`` (``SurfaceMesh.quads``: a quad's two triangles bounded and
-tested at once, ``renderer_proc/beam_surface.py``) and ``triangles`` (every triangle of
+tested at once, ``renderer_proc/surface_gl.py``) and ``triangles`` (every triangle of
 ``SurfaceMesh.triangles`` through the triangle path), draw the same frames, interleaved per frame (A B, B A,
 ...). Per frame and renderer:
 
@@ -82,7 +82,7 @@ def measure(real, twin, scene, pose, reps: int, img: np.ndarray) -> tuple[float,
     ctx.finish()
     c0 = time.process_time()
     for _ in range(reps):
-        real._surface.render(real._lines_adjacency)
+        real._surface.render()
         ctx.finish()
     cpu = 1e3 * (time.process_time() - c0) / reps
     twin.set_scene(scene)
@@ -90,7 +90,7 @@ def measure(real, twin, scene, pose, reps: int, img: np.ndarray) -> tuple[float,
     ctx.disable(ctx.DEPTH_TEST)
     q = ctx.query(samples=True)
     with q:
-        twin._surface.render(twin._lines_adjacency)
+        twin._surface.render()
     ctx.enable(ctx.DEPTH_TEST)
     return cpu, q.samples
 

@@ -88,7 +88,7 @@ def _without_grain(backend) -> None:
     draw = backend.draw
 
     def draw_without_grain(k, world_from_camera):
-        surface = backend._hf
+        surface = backend._surface
         count, surface.count = surface.count, 0
         try:
             draw(k, world_from_camera)

@@ -12,7 +12,7 @@ both exact per beam:
   triangle as flat outputs; the fragment shader (``shaders/beam.frag``) intersects its own beam (a texture of
   the pattern's directions) with the triangle, Moller-Trumbore from the origin, discards a miss (exact coverage
   at silhouettes) and writes the range with Eqs 1-2 and depth t / far for the nearest hit; the grain surface's
-  triangles go in pairs (``renderer_proc/beam_surface.py``, ``shaders/beam_quad.*``): a quad's two triangles
+  triangles go in pairs (``renderer_proc/surface_gl.py``, ``shaders/beam_quad.*``): a quad's two triangles
   bounded at once and tested in one fragment, the nearer hit kept;
 * convex solids (boxes; cylinders as the prisms the ray caster uses): one point per instance
   (``shaders/solid.*``), a box bounded in slices along its longest edge (up to :func:`max_rects` rectangles;
@@ -38,7 +38,7 @@ from cosim.world.meshes import CYLINDER_SIDES, INSTANCE_FLOATS, box_instances, c
 from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
 
 from .beam_mock import check_target
-from .beam_surface import BeamSurface
+from .surface_gl import Surface
 from .codec import BYTE_MAX, CM_PER_M
 from .gl_backend import SHADER_DIR, GLResources, _mat
 from .projection import far_plane_m
@@ -181,11 +181,11 @@ class GLBeamRenderer(GLResources):
         self.prog_prism = self._m(ctx.program(
             vertex_shader=_src("solid.vert"), geometry_shader=_solid_geom(defines, PRISM_RECTS),
             fragment_shader=_assemble("solid.frag", CODEC, defines=defines + (f"#define PRISM_SIDES {CYLINDER_SIDES}",))))
-        # the grain surface as quads (SurfaceMesh.quads): two triangles bounded and tested at once (beam_surface.py)
+        # the grain surface as quads (SurfaceMesh.quads): two triangles bounded and tested at once (surface_gl.py)
         self.prog_quad = self._m(ctx.program(vertex_shader=_assemble("beam_heightfield.vert", ANGLES),
                                              geometry_shader=_assemble("beam_quad.geom", ANGLES, BOUNDS),
                                              fragment_shader=_assemble("beam_quad.frag", CODEC, defines=defines)))
-        self._surface = BeamSurface(ctx, self._m, self.prog_hf, self.prog_quad, quads=surface_quads)
+        self._surface = Surface(ctx, self._m, self.prog_quad if surface_quads else self.prog_hf, quads=surface_quads)
         self._progs = (self.prog_inst, self.prog_hf, self.prog_box, self.prog_prism, self.prog_quad)
         rows, cols = layout.shape
         az = layout.azimuth[:cols]
@@ -216,7 +216,7 @@ class GLBeamRenderer(GLResources):
         self._ground: tuple[np.ndarray, np.ndarray] | None = None
         self._units = {key: self._solids(prog) for key, prog in (("box", self.prog_box), ("box_open", self.prog_box),
                                                                  ("ground", self.prog_box), ("cyl", self.prog_prism))}
-        self._points, self._lines_adjacency = moderngl.POINTS, moderngl.LINES_ADJACENCY
+        self._points = moderngl.POINTS
         self._meshes: dict[str, list] = {}
         self._mesh_names: list[str] = []
         self._origin = np.zeros(3)
@@ -318,7 +318,7 @@ class GLBeamRenderer(GLResources):
                 fbo.clear(*colour, depth=1.0)
         self._frame.draw.use()
         self._render("cyl")
-        self._surface.render(self._lines_adjacency)
+        self._surface.render()
         self._render("box")
         self._render("box_open")
         if key is None:

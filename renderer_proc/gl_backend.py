@@ -32,8 +32,6 @@ from cosim.errors import RendererUnavailable
 from cosim.world.geometry import invert
 
 from .codec import BYTE_MAX, CM_PER_M
-from cosim.world.heightfield import padded_heights
-from .hfmesh import SurfaceMesh
 from cosim.world.meshes import (
     INSTANCE_FLOATS,
     box_instances,
@@ -43,6 +41,7 @@ from cosim.world.meshes import (
     unit_cylinder,
 )
 from .projection import NEAR_M, far_plane_m, gl_projection, gl_view
+from .surface_gl import Surface, mat_bytes as _mat
 from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
 
 __all__ = ["GL_REQUIRE", "SHADER_DIR", "GLResources", "GLRenderer", "create_gl_context"]
@@ -84,11 +83,6 @@ def _fragment_source(rgb: bool, float_depth: bool, mishandled: bool) -> str:
     return "\n".join([head, *defines, _source("codec.glsl"), body])
 
 
-def _mat(m: np.ndarray) -> bytes:
-    """A numpy 4 x 4 as GLSL column-major float32 bytes."""
-    return np.asarray(m, dtype=np.float32).T.tobytes()
-
-
 @dataclass
 class _Buffers:
     """A set of renderbuffers: ``draw`` has every attachment; ``clears`` pairs a framebuffer of each attachment
@@ -114,59 +108,19 @@ class _Target:
     ground_key: tuple | None = None
 
 
-@dataclass
-class _Surface:
-    """The grain surface's GL objects: its :class:`SurfaceMesh`, vertex array, height and index buffers and
-    the index count of the current triangle list."""
-
-    mesh: SurfaceMesh
-    vao: Any
-    heights: Any
-    indices: Any
-    count: int = 0
-
-
 class GLResources:
     """The renderers' common base: a GL context, made here (``context`` None) or lent, every GL object made in it
-    through :meth:`_m` (:meth:`close` releases the context when it is ours, else those objects), and the grain
-    surface's upload (:meth:`_heightfield`; a subclass provides ``prog_hf`` and ``_origin``)."""
+    through :meth:`_m` (:meth:`close` releases the context when it is ours, else those objects)."""
 
     def __init__(self, context: Any = None):
         self._own_ctx = context is None
         self._made: list = []
         self.ctx = context if context is not None else create_gl_context()
-        self._hf: _Surface | None = None             # the grain surface, made at its first upload
 
     def _m(self, obj):
         """Remember a GL object made here, to release it when the context is not ours."""
         self._made.append(obj)
         return obj
-
-    def _heightfield(self, scene: Scene) -> None:
-        """Upload the grain surface for ``self.prog_hf``: vertex heights every frame, the triangle list when the
-        flat blocks change, the model matrix relative to ``self._origin`` (the renderers' camera-relative origin)."""
-        hf = scene.heightfield
-        hp = padded_heights(np.asarray(hf.heights, dtype=np.float32))
-        if self._hf is None or self._hf.mesh.shape != hf.heights.shape:
-            nx, ny = hf.heights.shape
-            mesh = SurfaceMesh(nx, ny, hf.cell_m, hf.length_m, hf.width_m)
-            xy = self._m(self.ctx.buffer(mesh.vertices.tobytes()))
-            hbuf = self._m(self.ctx.buffer(reserve=len(mesh.vertices) * 4, dynamic=True))
-            ibo = self._m(self.ctx.buffer(reserve=2 * (nx + 1) * (ny + 1) * 3 * 4, dynamic=True))
-            vao = self._m(self.ctx.vertex_array(self.prog_hf, [(xy, "2f", "in_xy"), (hbuf, "1f", "in_h")],
-                                                index_buffer=ibo, index_element_size=4))
-            self._hf = _Surface(mesh, vao, hbuf, ibo)
-        surf = self._hf
-        surf.heights.write(surf.mesh.heights(hp))
-        tri, changed = surf.mesh.triangles(hp)
-        if changed:
-            if tri.nbytes > surf.indices.size:
-                surf.indices.orphan(tri.nbytes)
-            surf.indices.write(tri)
-            surf.count = tri.size
-        local = hf.world_from_grid.copy()
-        local[:3, 3] -= self._origin
-        self.prog_hf["u_model"].write(_mat(local))
 
     def close(self) -> None:
         """Release the GL context (when this renderer made it), else every object made in it."""
@@ -201,6 +155,7 @@ class GLRenderer(GLResources):
             self._set(prog, "u_r_per_period", BYTE_MAX * codec.beta_cm / codec.alpha_cm)
             self._set(prog, "u_gamma", codec.gamma)
         self._set(self.prog_hf, "u_colour", GRAIN_COLOUR)
+        self._surface = Surface(ctx, self._m, self.prog_hf)
         self._unit = {}
         units = {"box": unit_cube(), "box_open": unit_cube(open_top=True), "ground": unit_cube(),
                  "cyl": unit_cylinder()}
@@ -290,7 +245,7 @@ class GLRenderer(GLResources):
         self._upload("box_open", boxes[hidden & ~ground])
         self._upload("ground", boxes[ground])
         self._upload("cyl", cylinder_instances(scene.cylinders, self._origin))
-        self._heightfield(scene)
+        self._surface.upload(scene, self._origin)
         for mesh in scene.meshes:
             self._mesh(mesh)
         self._mesh_names = [m.name for m in scene.meshes]
@@ -356,8 +311,7 @@ class GLRenderer(GLResources):
         vao, _, n = self._unit["cyl"]
         if n:
             vao.render(instances=n)
-        if self._hf is not None:
-            self._hf.vao.render(vertices=self._hf.count)
+        self._surface.render()
         for name in ("box_open", "box"):
             vao, _, n = self._unit[name]
             if n:

@@ -1,4 +1,4 @@
-"""The grain surface's quad path in the GL beam-native renderer (renderer_proc/beam_surface.py,
+"""The grain surface's quad path in the GL beam-native renderer (renderer_proc/surface_gl.py,
 shaders/beam_quad.*): SurfaceMesh.quads is SurfaceMesh.triangles in pairs, and rough height fields (steep steps,
 grazing beams, beams straight down across the back seam) are drawn beam for beam as the exact ray cast, with no
 beam the surface is hit by left unwritten (docs/lidar.md)."""

@@ -297,7 +297,7 @@ def test_merged_flat_blocks_render_like_the_full_grid(ctx, monkeypatch):
     pixel falls through a seam to the floor below (both agree with the exact cast)."""
     import functools
 
-    from renderer_proc import gl_backend
+    from renderer_proc import surface_gl
     from renderer_proc.hfmesh import SurfaceMesh
 
     s = Scenario(format_version=1)
@@ -315,14 +315,14 @@ def test_merged_flat_blocks_render_like_the_full_grid(ctx, monkeypatch):
     z = {}
     for name, block in (("merged", None), ("grid", 1)):
         if block is not None:
-            monkeypatch.setattr(gl_backend, "SurfaceMesh", functools.partial(SurfaceMesh, block=block))
+            monkeypatch.setattr(surface_gl, "SurfaceMesh", functools.partial(SurfaceMesh, block=block))
         r = renderer(ctx, rig, float_depth=True)
         r.set_scene(scene)
         r.draw(0, pose)
         z[name] = np.zeros((150, 200), np.float32)
         r.read_zf(0, z[name])
         if block is None:
-            assert r._hf.count < 3 * (61 * 31)         # merged: fewer than half the grid's triangles drawn
+            assert r._surface.count < 3 * (61 * 31)         # merged: fewer than half the grid's triangles drawn
         r.close()
     mock = MockRenderer(rig, CODEC, float_depth=True)
     mock.set_scene(scene)
