@@ -51,13 +51,15 @@ def test_figures_and_markdown_from_runs(monkeypatch):
     assert res["perception"]["wall_s"] == 35.0 and res["ground_truth"]["wall_s"] == 8.0
     assert res["ratio"]["wall"] == pytest.approx(35.0 / 8.0)
     assert res["ratio"]["ring_wall"] == pytest.approx(13.0 / 3.0)
+    # each round's own ratio (30/10, 40/6, 35/8): median 35/8, range 3.0 to 40/6
+    assert res["ratio"]["wall_paired"] == pytest.approx({"median": 35.0 / 8.0, "min": 3.0, "max": 40.0 / 6.0})
     assert res["perception"]["real_time_factor"] == pytest.approx(120.0 / 13.0)
     assert res["perception"]["fill"]["section_peak_max_m"] == 1.909
     assert res["ground_truth"]["fill"]["section_peak_min_m"] == 1.892
     assert res["perception"]["range_error"]["median_m"] == 0.00097
     json.dumps(res, allow_nan=False)
     md = ra.render_markdown(res)
-    for text in ("**4.38x** whole-process wall time", "4.33x ring wall time", "| highest section peak (m) | 1.909 | 1.903 |",
+    for text in ("**4.38x** whole-process wall time", "median 4.38x, 3.00-6.67x", "4.33x ring wall time", "| highest section peak (m) | 1.909 | 1.903 |",
                  "median 0.97 mm", "p99 1.94 mm", "0.000 % of beams above 5 cm", "**0.50x**", "bench/HISTORY.md"):
         assert text in md
 
@@ -69,7 +71,7 @@ def test_quick_mode_writes_both_files(tmp_path):
     ra = _module()
     res = ra.main(["--quick", "--renderer", "mock", "--out", str(tmp_path)])
     on_disk = json.loads((tmp_path / "results.json").read_text())
-    assert on_disk["ratio"].keys() == {"wall", "ring_wall"}
+    assert on_disk["ratio"].keys() == {"wall", "ring_wall", "wall_paired"}
     for v in (res["ratio"]["wall"], res["ratio"]["ring_wall"], res["lidar_step"]["ratio_cpu"],
               res["perception"]["real_time_factor"], res["ground_truth"]["real_time_factor"]):
         assert math.isfinite(v) and v > 0
