@@ -27,7 +27,6 @@ no grid of angles to bound in; the participant gives them the exact ray cast of
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -40,7 +39,7 @@ from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
 from .beam_mock import check_target
 from .surface_gl import Surface
 from .codec import BYTE_MAX, CM_PER_M
-from .gl_backend import SHADER_DIR, GLResources, _mat
+from .gl_backend import SHADER_DIR, GLResources, GroundImage, _Buffers, _mat, begin_frame
 from .projection import far_plane_m
 
 __all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "ROW_BINS", "GLBeamRenderer", "ground_key", "max_rects", "row_bounds"]
@@ -140,15 +139,6 @@ def ground_key(world_from_slab: np.ndarray, half: np.ndarray, world_from_sensor:
     return (*slab_from_sensor[2].tolist(), float(half[2]))
 
 
-@dataclass
-class _Buffers:
-    """A framebuffer with every attachment (``draw``) and one per attachment with its clear colour (``clears``;
-    the first holds the depth buffer)."""
-
-    draw: Any
-    clears: list
-
-
 class GLBeamRenderer(GLResources):
     """Beam-native GL renderer of a gridded :class:`BeamLayout`: ``set_scene``, ``draw(0, world_from_sensor)``,
     ``read_depth(0, out)``, ``read_rgb(0, out)``, ``close`` (the renderer interface with one target).
@@ -212,8 +202,7 @@ class GLBeamRenderer(GLResources):
         for tex in (self._row_tex, self._dir_tex):
             tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self._frame = self._buffers()
-        self._ground_img: _Buffers | None = None          # the ground alone, kept while its key holds
-        self._ground_key: tuple | None = None
+        self._ground_img = GroundImage()                  # the ground alone, kept while its key holds
         self._ground: tuple[np.ndarray, np.ndarray] | None = None
         self._units = {key: self._solids(prog) for key, prog in (("box", self.prog_box), ("box_open", self.prog_box),
                                                                  ("ground", self.prog_box), ("cyl", self.prog_prism))}
@@ -301,23 +290,7 @@ class GLBeamRenderer(GLResources):
         self._row_tex.use(0)
         self._dir_tex.use(1)
         key = None if self._ground is None else ground_key(*self._ground, world_from_sensor, self.far_m)
-        if key is not None:
-            # the ground alone, drawn once while the sensor keeps its pose to the ground plane (a vehicle driving
-            # and turning on flat ground), then copied into each frame: its bytes and depth, a clear's cost
-            if self._ground_img is None:
-                self._ground_img = self._buffers()
-            if key != self._ground_key:
-                for fbo, colour in self._ground_img.clears:
-                    fbo.clear(*colour, depth=1.0)
-                self._ground_img.draw.use()
-                self._render("ground")
-                self._ground_key = key
-            for (dst, _), (src, _) in zip(self._frame.clears, self._ground_img.clears):
-                self.ctx.copy_framebuffer(dst, src)
-        else:
-            for fbo, colour in self._frame.clears:
-                fbo.clear(*colour, depth=1.0)
-        self._frame.draw.use()
+        begin_frame(self.ctx, self._frame, self._ground_img, key, self._buffers, lambda: self._render("ground"))
         self._render("cyl")
         self._surface.render()
         self._render("box")

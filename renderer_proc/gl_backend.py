@@ -20,9 +20,9 @@ no varying in the depth-only pass.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -93,10 +93,42 @@ class _Buffers:
 
 
 @dataclass
+class GroundImage:
+    """The ground slab drawn alone (``buffers``, made on first use), kept while the ``key`` it was drawn for holds
+    (the sensor's pose to the ground plane: a vehicle driving and turning on flat ground keeps it) and copied
+    into each frame: the copy (colour and depth, nearest, same size and format: the bytes themselves) costs what a
+    clear costs, the slab's rasterisation (most of the image) is skipped."""
+
+    buffers: _Buffers | None = None
+    key: tuple | None = None
+
+
+def begin_frame(ctx: Any, frame: _Buffers, ground: GroundImage, key: tuple | None, make: Callable[[], _Buffers],
+                draw_ground: Callable[[], None]) -> None:
+    """Start drawing ``frame``: a copy of the cached ground image when ``key`` is not None (drawn first, into
+    buffers from ``make``, by ``draw_ground``, when the key changed), else a clear; ``frame.draw`` is then in
+    use. The caller draws the ground itself when ``key`` is None."""
+    if key is not None:
+        if ground.buffers is None:
+            ground.buffers = make()
+        if key != ground.key:
+            for fbo, colour in ground.buffers.clears:
+                fbo.clear(*colour, depth=1.0)
+            ground.buffers.draw.use()
+            draw_ground()
+            ground.key = key
+        for (dst, _), (src, _) in zip(frame.clears, ground.buffers.clears):
+            ctx.copy_framebuffer(dst, src)
+    else:
+        for fbo, colour in frame.clears:
+            fbo.clear(*colour, depth=1.0)
+    frame.draw.use()
+
+
+@dataclass
 class _Target:
     """One camera's framebuffers (``frame``), its projection, the farthest a drawn point can be from the camera
-    (``reach_m``: far plane times the corner ray's length per unit planar depth), and the cached ground image
-    (``ground``, made on first use) with the key it was drawn for."""
+    (``reach_m``: far plane times the corner ray's length per unit planar depth), and its cached ground image."""
 
     frame: _Buffers
     size: tuple[int, int]
@@ -104,8 +136,7 @@ class _Target:
     reach_m: float
     rgb_attachment: int
     zf_attachment: int
-    ground: _Buffers | None = None
-    ground_key: tuple | None = None
+    ground: GroundImage = field(default_factory=GroundImage)
 
 
 class GLResources:
@@ -288,23 +319,7 @@ class GLRenderer(GLResources):
         # mesh files have unknown winding and are drawn two-sided
         self.ctx.enable(self._cull)
         key = self._ground_key(t, world_from_camera)
-        if key is not None:
-            # the ground as a cached image: the copy (colour and depth, nearest, same size and format: the
-            # bytes themselves) costs what a clear costs, the slab's rasterisation (the whole image) is skipped
-            if t.ground is None:
-                t.ground = self._buffers(t.size)
-            if key != t.ground_key:
-                for fbo, colour in t.ground.clears:
-                    fbo.clear(*colour, depth=1.0)
-                t.ground.draw.use()
-                self._draw_ground()
-                t.ground_key = key
-            for (dst, _), (src, _) in zip(t.frame.clears, t.ground.clears):
-                self.ctx.copy_framebuffer(dst, src)
-        else:
-            for fbo, colour in t.frame.clears:
-                fbo.clear(*colour, depth=1.0)
-        t.frame.draw.use()
+        begin_frame(self.ctx, t.frame, t.ground, key, lambda: self._buffers(t.size), self._draw_ground)
         # drawn roughly front to back (stream and auger, grain, boxes, the ground slab last when not cached) so
         # that early depth rejection skips the shading of hidden fragments; llvmpipe still rasterises and
         # depth-tests them (a hidden layer costs about 3/4 of a visible one), hence the skipped hidden faces

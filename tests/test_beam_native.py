@@ -188,7 +188,7 @@ def test_gl_matches_the_exact_cast_beam_for_beam_on_default_frames(ctx):
             r.set_scene(scene)
             r.draw(0, pose)
             r.read_depth(0, imgs[name])
-        keys.append(gl_r._ground_key)
+        keys.append(gl_r._ground_img.key)
         exact = mock.ranges()
         gl, mo = (lay.beams_of(decode_depth(imgs[k], CODEC)) for k in ("gl", "mock"))
         assert np.array_equal(np.isfinite(gl), np.isfinite(exact) & (exact < CODEC.max_depth_m))   # coverage

@@ -365,9 +365,9 @@ def test_cached_ground_image_matches_a_fresh_render(ctx):
             zfs[name].append(zf)
             rgbs[name].append(rgb)
         if name == "first":
-            keys = [t.ground_key for t in cached.targets]
+            keys = [t.ground.key for t in cached.targets]
     assert all(k is not None for k in keys)
-    assert [t.ground_key for t in cached.targets] == keys      # the heading changed, the ground image did not
+    assert [t.ground.key for t in cached.targets] == keys      # the heading changed, the ground image did not
     for a, b in zip(imgs["cached"], imgs["fresh"]):
         np.testing.assert_array_equal(a[..., 3], b[..., 3])
         da, db = decode_depth(a, CODEC), decode_depth(b, CODEC)
@@ -395,5 +395,5 @@ def test_ground_drawn_directly_when_its_edge_is_in_reach(ctx):
     r = renderer(ctx, rig)
     r.set_scene(scene_from_state(s, state, h, stream))
     r.draw(0, camera_poses(s, state, rig)[0])
-    assert r.targets[0].ground is None and r.targets[0].ground_key is None
+    assert r.targets[0].ground.buffers is None and r.targets[0].ground.key is None
     r.close()
