@@ -316,3 +316,13 @@ def test_load_plugin_binds_options_as_keywords(tmp_path, monkeypatch):
     assert load_plugin("strategies", f"{mod}:ordered")(np.zeros(9, bool), np.full(9, np.nan), -1) == 0
     with pytest.raises(PluginError, match="takes no option 'size'"):
         load_plugin("strategies", "front_to_back", options={"size": 1})
+
+
+def test_validate_lists_a_plugins_options(tmp_path, capsys):
+    mod = _module(tmp_path, ORDERED)
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text(f"format_version: 1\ncontroller:\n  strategy: {mod}:ordered\n  strategy_options:\n"
+                        "    order: [4, 3]\n")
+    assert main(["validate", str(scenario)]) == 0
+    assert f"plug-in controller.strategy = {mod}:ordered with order=[4, 3]: EXTERNAL (runs its code)" in \
+        capsys.readouterr().out

@@ -14,6 +14,7 @@ kind of external model adds its function there.
 """
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -32,7 +33,8 @@ __all__ = ["Loaded", "Issue", "Check", "PLUGIN_POINTS", "options_key", "plugin_p
 class Loaded:
     """One thing a scenario would load: ``kind`` ('plug-in', 'fmu', ...), ``key`` the scenario key naming it,
     ``ref`` as named there, ``builtin`` whether it ships with graincosim, ``file`` the file that would be
-    loaded, ``version`` of its distribution ('' unknown), ``target`` what the reference resolved to."""
+    loaded, ``version`` of its distribution ('' unknown), ``target`` what the reference resolved to, ``options``
+    the keyword options it is called with (``json``-like text, '' none)."""
 
     kind: str
     key: str
@@ -41,6 +43,7 @@ class Loaded:
     file: str
     version: str
     target: str = ""
+    options: str = ""
 
 
 @dataclass(frozen=True)
@@ -105,7 +108,8 @@ def check_plugin_refs(refs: list[tuple[tuple[str, ...], str, str, dict]], plugin
             continue
         dist, version = distribution_of(info) if versions else ("", "")
         loaded.append(Loaded("plug-in", ".".join(loc), ref, info.builtin, info.file,
-                             f"{dist} {version}" if dist else "", info.target))
+                             f"{dist} {version}" if dist else "", info.target,
+                             ", ".join(f"{k}={json.dumps(v)}" for k, v in options.items())))
     return loaded, issues
 
 
@@ -140,10 +144,12 @@ def inspect_scenario(s: Scenario, *, allow_plugins: bool = True,
 
 
 def format_inventory(loaded: list[Loaded]) -> str:
-    """The inventory as text lines, one per item: kind, key, ref, built-in or external, file, version."""
+    """The inventory as text lines, one per item: kind, key, ref (with its options), built-in or external, file,
+    version."""
     lines = []
     for item in loaded:
         origin = "built in" if item.builtin else "EXTERNAL (runs its code)"
-        lines.append(f"  {item.kind} {item.key} = {item.ref}: {origin}; file {item.file or '?'}; "
+        options = f" with {item.options}" if item.options else ""
+        lines.append(f"  {item.kind} {item.key} = {item.ref}{options}: {origin}; file {item.file or '?'}; "
                      f"version {item.version or 'unknown'}")
     return "\n".join(lines)
