@@ -249,7 +249,8 @@ def test_own_perception_example_stage_maps_the_grain(shm_clean):
 def test_own_strategy_example_validates_and_is_refused_without_plugins(capsys):
     path = str(ROOT / "examples" / "own_strategy" / "scenario.yaml")
     assert main(["validate", path]) == 0
-    assert "plug-in controller.strategy = middle_out:middle_out: EXTERNAL (runs its code)" in capsys.readouterr().out
+    assert ("plug-in controller.strategy = middle_out:middle_out with middle=4: EXTERNAL (runs its code)"
+            in capsys.readouterr().out)
     assert main(["validate", path, "--no-plugins"]) == 2
     assert "plug-ins are disabled" in capsys.readouterr().err
 
@@ -326,3 +327,17 @@ def test_validate_lists_a_plugins_options(tmp_path, capsys):
     assert main(["validate", str(scenario)]) == 0
     assert f"plug-in controller.strategy = {mod}:ordered with order=[4, 3]: EXTERNAL (runs its code)" in \
         capsys.readouterr().out
+
+
+def test_own_strategy_examples_option_moves_the_start(tmp_path):
+    """The example's README: --set controller.strategy_options.middle=6 fills section 7 first, then 6 and 8."""
+    path = ROOT / "examples" / "own_strategy" / "scenario.yaml"
+    extra = {"duration_s": 40.0}
+    seqs = {}
+    for middle in (4, 6):
+        s = load_scenario(path, ["grain.initial_fill_m=1.6", f"controller.strategy_options.middle={middle}"],
+                          extra=extra)
+        seqs[middle] = _sequence(simulate(s).recorder.series()["dyn_state.target_section"])
+    assert seqs[4][:2] == [5, 4] and seqs[6][:2] == [7, 6]
+    with pytest.raises(ScenarioError, match="takes no option 'centre'"):
+        load_scenario(path, ["controller.strategy_options.centre=3"])

@@ -15,19 +15,19 @@ import numpy as np
 __all__ = ["middle_out", "middle_out_order"]
 
 
-def middle_out_order(n: int) -> list[int]:
-    """The order middle-out visits ``n`` sections when each is filled in turn: the middle, then by distance
-    from it (ties to the front)."""
-    middle = (n - 1) / 2.0
-    return sorted(range(n), key=lambda i: (abs(i - middle), i))
+def middle_out_order(n: int, middle: float | None = None) -> list[int]:
+    """The order middle-out visits ``n`` sections when each is filled in turn: ``middle`` (0-based; None: the
+    cart's middle, (n - 1) / 2), then by distance from it (ties to the front)."""
+    centre = (n - 1) / 2.0 if middle is None else float(middle)
+    return sorted(range(n), key=lambda i: (abs(i - centre), i))
 
 
-def middle_out(full: np.ndarray, height: np.ndarray, current: int) -> int:
-    """The current section while it is not full, else the not-full section nearest the middle; -1 when all
-    are full."""
+def middle_out(full: np.ndarray, height: np.ndarray, current: int, *, middle: float | None = None) -> int:
+    """The current section while it is not full, else the not-full section nearest ``middle`` (an option:
+    ``controller.strategy_options.middle``, 0-based; the cart's middle when not given); -1 when all are full."""
     if 0 <= current < full.size and not full[current]:
         return current
-    for i in middle_out_order(full.size):
+    for i in middle_out_order(full.size, middle):
         if not full[i]:
             return i
     return -1
