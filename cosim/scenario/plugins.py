@@ -40,8 +40,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
 
-__all__ = ["BUILTINS", "ENTRY_POINT_GROUPS", "ARITY", "PluginError", "PluginOptionsError", "PluginInfo", "load_plugin", "resolve_plugin",
-           "is_import_path", "distribution_of", "check_options", "with_options"]
+__all__ = ["BUILTINS", "ENTRY_POINT_GROUPS", "ARITY", "PluginError", "PluginOptionsError", "PluginInfo",
+           "load_plugin", "resolve_plugin", "check_options", "is_import_path", "distribution_of"]
 
 #: plug-in group -> built-in short name -> import path (the same as the package's entry points)
 BUILTINS: dict[str, dict[str, str]] = {
@@ -169,11 +169,6 @@ def check_options(group: str, ref: str, obj: object, options: Mapping[str, objec
                                  f"{', '.join(named) if named else 'none'}", bad) from None
 
 
-def with_options(obj: object, options: Mapping[str, object]) -> object:
-    """``obj`` with ``options`` bound as keyword arguments (itself when there are none)."""
-    return functools.partial(obj, **options) if options else obj
-
-
 def _module_file(obj: object) -> str:
     module = sys.modules.get(getattr(obj, "__module__", "") or "")
     return str(getattr(module, "__file__", "") or "")
@@ -225,5 +220,7 @@ def load_plugin(group: str, ref: str, *, base_dir: Path | None = None, allow_ext
     with ``options`` (the scenario's ``*_options``) bound as keyword arguments; :class:`PluginError` naming
     ``ref`` otherwise."""
     obj = resolve_plugin(group, ref, base_dir=base_dir, allow_external=allow_external).obj
-    check_options(group, ref, obj, options or {})
-    return with_options(obj, options or {})
+    if not options:
+        return obj
+    check_options(group, ref, obj, options)
+    return functools.partial(obj, **options)

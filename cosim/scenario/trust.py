@@ -25,8 +25,7 @@ from .config import FMU_REF, Scenario
 from .plugins import PluginError, PluginOptionsError, check_options, distribution_of, resolve_plugin
 
 __all__ = ["Loaded", "Issue", "Check", "PLUGIN_POINTS", "options_key", "plugin_points", "check_plugin_refs",
-           "check_plugins",
-           "check_fmus", "CHECKS", "inspect_scenario", "format_inventory"]
+           "check_plugins", "check_fmus", "CHECKS", "inspect_scenario", "format_inventory"]
 
 
 @dataclass(frozen=True)
