@@ -1,4 +1,4 @@
-"""Per-frame cost of driving a run through ``cosim.Simulation`` against ``simulate()`` (issue 16).
+"""Per-frame cost of driving a run through ``cosim.Simulation`` against ``simulate()``.
 
 The same scenario (default, ground-truth feedback, no renderer: the cheapest frame, so the API's own cost shows
 most) runs whole, in this process, as ``simulate(s)``, as ``Simulation(s)`` stepped one frame per ``step()``

@@ -1,4 +1,4 @@
-"""Beam-native LiDAR against the camera rig (issue 20): render + LiDAR step CPU and range error, same frames.
+"""Beam-native LiDAR against the camera rig: render + LiDAR step CPU and range error, same frames.
 
 For each of ``--frames`` sample frames of the default scene (``renderer_proc.sample.sample_frame`` at times
 spread over ``--span`` s, the vehicles driving), interleaved per frame (A B, B A, ...):

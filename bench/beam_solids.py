@@ -1,4 +1,4 @@
-"""Convex solids of the GL beam-native renderer (issue 20 item 5): fragments shaded and CPU per frame of the box
+"""Convex solids of the GL beam-native renderer: fragments shaded and CPU per frame of the box
 and cylinder draws, for one source tree or several interleaved (A/B).
 
 For each of ``--frames`` sample frames of the default scene (``renderer_proc.sample.sample_frame`` at times spread

@@ -1,4 +1,4 @@
-"""The grain surface's draw in the GL beam-native renderer: grid quads against triangles (issue 20).
+"""The grain surface's draw in the GL beam-native renderer: grid quads against triangles.
 
 Two GL beam-native renderers in one context, ``quads`` (``SurfaceMesh.quads``: a quad's two triangles bounded and
 tested at once, ``renderer_proc/surface_gl.py``) and ``triangles`` (every triangle of

@@ -24,8 +24,7 @@ from dynamics_proc.controller import Delivery, controller_step  # noqa: E402
 from dynamics_proc.grainfill import deposit  # noqa: E402
 from dynamics_proc.integrators import integrate  # noqa: E402
 from dynamics_proc.machine_sync import sync_command  # noqa: E402
-from dynamics_proc.model import (ModelParams, initial_world, signals, spout_grid, step_frame,  # noqa: E402
-                                 truth_measurement)
+from dynamics_proc.model import ModelParams, initial_world, signals, spout_grid, step_frame, truth_measurement  # noqa: E402
 
 FRAMES = 900
 

@@ -1,4 +1,4 @@
-"""End to end (issue 6): launched runs as a user makes them; real-time factor, start-up and shut-down, per-stage
+"""End to end: launched runs as a user makes them; real-time factor, start-up and shut-down, per-stage
 medians, and the CPU per frame of every process, for one source tree or several interleaved (A/B).
 
 Run from the repository root::

@@ -16,8 +16,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from cosim.runtime.inprocess import simulate  # noqa: E402
-from cosim.scenario.loader import load_scenario, packaged_scenarios  # noqa: E402
 from cosim.runtime.outputs import compose_summary  # noqa: E402
+from cosim.scenario.loader import load_scenario, packaged_scenarios  # noqa: E402
 
 CASES = ["default", "stiff_drivetrain", "high_flow", "fast_harvest", "misaligned_start", "heavy_noise",
          "grazing_sensor", "near_alpha", "curved_pass", "soybeans", "back_to_front", "lowest_first"]

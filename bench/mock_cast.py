@@ -1,4 +1,4 @@
-"""The beam-native mock renderer's cost per frame: Embree against the numpy ray cast (issue 20, item 4).
+"""The beam-native mock renderer's cost per frame: Embree against the numpy ray cast.
 
 For ``--frames`` sample frames of the default scene (``renderer_proc.sample.sample_frame`` spread over
 ``--span`` s), interleaved per frame (A B, B A, ...), one mock frame = ``draw`` (the exact cast of every beam)

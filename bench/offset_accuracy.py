@@ -28,10 +28,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cosim.world.camera import Rig, RigCamera, beam_directions  # noqa: E402
 from cosim.scenario.config import Codec, Pattern, Scenario  # noqa: E402
-from perception_proc.accuracy import exact_ranges, range_error_stats  # noqa: E402
+from cosim.world.camera import Rig, RigCamera, beam_directions  # noqa: E402
 from cosim.world.patterns import beam_table, pattern_shape  # noqa: E402
+from perception_proc.accuracy import exact_ranges, range_error_stats  # noqa: E402
 from perception_proc.synthetic import Box, Plane, encode_linear, raycast, render_depth, stitched_rig  # noqa: E402
 
 #: LiDAR-to-camera offset of the study, sensor frame, m (as in bench/perception_bench.py)
@@ -55,12 +55,12 @@ def offset_rig(rig: Rig, offset_m=OFFSET_M) -> Rig:
 
 def default_case():
     """(images, rig, elevation, azimuth, shape, codec, exact, range limits) of the default scene."""
+    from cosim.world.rig import plan_rig
+    from cosim.world.scene import scene_from_state
     from perception_proc.pipeline import Perception
     from renderer_proc.mock_backend import MockRenderer
     from renderer_proc.projection import camera_poses
-    from cosim.world.rig import plan_rig
     from renderer_proc.sample import sample_frame
-    from cosim.world.scene import scene_from_state
 
     sc = Scenario.model_validate_json(json.dumps(
         {"format_version": 1, "renderer": "mock", "render": {"mock_scale": 1.0}}))

@@ -1,4 +1,4 @@
-"""Accuracy of the perception stage on the default scene against an exact ray cast (issue 5, point 5).
+"""Accuracy of the perception stage on the default scene against an exact ray cast.
 
 Run: ``python bench/perception_accuracy.py [frames]`` (from the repository root; default 4 frames). Runs the
 default scenario in-process with the mock renderer at full resolution (the GL renderer writes the same
@@ -18,11 +18,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cosim.scenario.config import Scenario  # noqa: E402
 from cosim.runtime.inprocess import simulate  # noqa: E402
+from cosim.scenario.config import Scenario  # noqa: E402
 from perception_proc.accuracy_report import render_markdown, write_report  # noqa: E402
 from perception_proc.summary import summarize  # noqa: E402
-
 
 #: a mount that sees past the auger tube: behind the auger pivot, looking left and forward (from the default
 #: auger-side mast the tube and spout hide the falling stream)

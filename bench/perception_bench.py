@@ -23,11 +23,11 @@ default_to_single_threaded_pools()      # before numpy and cv2 load: one-thread 
 
 import numpy as np  # noqa: E402
 
-from cosim.world.camera import beam_directions  # noqa: E402
 from cosim.scenario.config import Codec, Pattern, Scenario  # noqa: E402
+from cosim.world.camera import beam_directions  # noqa: E402
 from cosim.world.geometry import vehicle_pose  # noqa: E402
-from perception_proc.codec import decode_depth  # noqa: E402
 from cosim.world.patterns import beam_table, pattern_shape  # noqa: E402
+from perception_proc.codec import decode_depth  # noqa: E402
 from perception_proc.pipeline import Perception  # noqa: E402
 from perception_proc.resample import build_table, resample  # noqa: E402
 from perception_proc.resample_offset import build_offset_table, resample_offset  # noqa: E402
@@ -77,12 +77,12 @@ def lidar_rows() -> list[tuple]:
         for offset in (False, True):
             rig = stitched_rig(2, w, h, 60.0, yaw_step_deg=55.0, offset_m=OFFSET_M if offset else (0, 0, 0))
             imgs = [encode_linear(render_depth(shapes, np.eye(4), c), CODEC) for c in rig.cameras]
-            dec = timeit(lambda: [decode_depth(i, CODEC) for i in imgs], 5)
+            dec = timeit(lambda imgs=imgs: [decode_depth(i, CODEC) for i in imgs], 5)
             if offset:
                 t0 = time.perf_counter()
                 tab = build_offset_table(rig, e, a, pattern_shape(PATTERN))
                 build = 1e3 * (time.perf_counter() - t0)
-                ms = timeit(lambda: resample_offset(imgs, tab, CODEC), 20)
+                ms = timeit(lambda imgs=imgs, tab=tab: resample_offset(imgs, tab, CODEC), 20)
                 rows.append((f"{w}x{h}", "offset 0.2 m", "back-project + nearest return (column pre-test)", build,
                              dec, ms, n / ms * 1e3))
             else:
@@ -90,9 +90,9 @@ def lidar_rows() -> list[tuple]:
                 tab = build_table(rig, d)
                 build = 1e3 * (time.perf_counter() - t0)
                 for sampler in ("nearest", "planar"):
-                    ms = timeit(lambda: resample(imgs, tab, CODEC, sampler), 30)
+                    ms = timeit(lambda imgs=imgs, tab=tab, sampler=sampler: resample(imgs, tab, CODEC, sampler), 30)
                     rows.append((f"{w}x{h}", "co-located", sampler, build, dec, ms, n / ms * 1e3))
-                ms = timeit(lambda: remap_nearest(imgs, tab), 30)
+                ms = timeit(lambda imgs=imgs, tab=tab: remap_nearest(imgs, tab), 30)
                 rows.append((f"{w}x{h}", "co-located", "nearest via cv2.remap (comparison)", build, dec, ms,
                              n / ms * 1e3))
     return rows
@@ -151,8 +151,8 @@ def stage_rows(repeats: int = 20) -> list[tuple]:
 def accuracy_cost_rows(repeats: int = 5) -> list[tuple]:
     """Cost of one accuracy evaluation's exact ray cast on the default scene (renderer_proc.sample frame):
     every beam vs the default stratified sample (``perception.accuracy_beams``), ms median and best."""
-    from perception_proc.accuracy import exact_ranges, sample_beams, world_from_parent
     from cosim.world.rig import plan_rig
+    from perception_proc.accuracy import exact_ranges, sample_beams, world_from_parent
     from renderer_proc.sample import sample_frame
 
     sc = Scenario(format_version=1)

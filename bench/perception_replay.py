@@ -341,8 +341,8 @@ def run_stages(rec: Recording, meter, repeat: int = 1, upto: str | None = None) 
     meter (first-call costs: lazy imports, caches); the inputs of later stages are computed outside the meter
     as well. Stages after ``upto`` are left out. Returns the number of metered calls per stage."""
     from perception_proc import accuracy as acc
+    from perception_proc import impact as impact_module  # looked up per call: --focus can wrap them
     from perception_proc.heightmap import height_map
-    from perception_proc import impact as impact_module           # looked up per call: --focus can wrap them
     from perception_proc.participant import PerceptionParticipant
     from perception_proc.rim import border_beams, find_cart
 

@@ -1,4 +1,4 @@
-"""Reliability figures (issue 18): how fast a stopped child is named, what kill -9 of the launcher loses, what
+"""Reliability figures: how fast a stopped child is named, what kill -9 of the launcher loses, what
 streaming the outputs costs the ground-truth ring.
 
     python bench/reliability.py detect [--reps 7]      # SIGSTOP before frame 0 / mid-run, a GIL deadlock

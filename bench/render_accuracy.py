@@ -17,15 +17,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 from scipy.ndimage import maximum_filter, minimum_filter  # noqa: E402
 
-from cosim.world.camera import Pinhole, Rig, RigCamera  # noqa: E402
 from cosim.scenario.config import Scenario  # noqa: E402
 from cosim.scenario.config.sensing import Codec  # noqa: E402
+from cosim.world.camera import Pinhole, Rig, RigCamera  # noqa: E402
+from cosim.world.raycast import raycast  # noqa: E402
+from cosim.world.scene import scene_from_state  # noqa: E402
 from renderer_proc.codec import decode_depth  # noqa: E402
 from renderer_proc.gl_backend import GLRenderer  # noqa: E402
 from renderer_proc.projection import camera_poses, pixel_rays  # noqa: E402
-from cosim.world.raycast import raycast  # noqa: E402
 from renderer_proc.sample import sample_frame  # noqa: E402
-from cosim.world.scene import scene_from_state  # noqa: E402
 
 #: neighbourhood depth span that marks a depth edge, m
 EDGE_M = 0.05

@@ -27,15 +27,17 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
+import numpy as np  # noqa: E402  (after the sys.path line above)
+
 from cosim.scenario.config import Scenario  # noqa: E402
-from renderer_proc.blocks import declare_blocks  # noqa: E402
 from cosim.world.heightfield import padded_heights  # noqa: E402
-from renderer_proc.hfmesh import SurfaceMesh  # noqa: E402
 from cosim.world.meshes import unit_cube, unit_cylinder  # noqa: E402
-from renderer_proc.participant import create  # noqa: E402
 from cosim.world.rig import plan_rig  # noqa: E402
-from renderer_proc.sample import sample_frame  # noqa: E402
 from cosim.world.scene import scene_from_state  # noqa: E402
+from renderer_proc.blocks import declare_blocks  # noqa: E402
+from renderer_proc.hfmesh import SurfaceMesh  # noqa: E402
+from renderer_proc.participant import create  # noqa: E402
+from renderer_proc.sample import sample_frame  # noqa: E402
 from shm_schema import ArrayBlock, Field, Schema, Segment, StructBlock  # noqa: E402
 
 #: untimed frames before timing (shader compilation, first allocation)

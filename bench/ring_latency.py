@@ -1,4 +1,4 @@
-"""Ring round-trip latency: three OS processes passing the token over semaphores (issue 2 benchmark).
+"""Ring round-trip latency: three OS processes passing the token over semaphores.
 
 Two measurements:
 * ``bare``: three spawned processes running ``cosim.runtime.lockstep.member_loop`` with trivial steps; the first member
@@ -84,8 +84,9 @@ def bare_ring(frames: int, payload: bool) -> np.ndarray:
 
 def launcher_ring(frames: int) -> dict:
     import fakes
-    from cosim.scenario.config import Scenario
+
     from cosim.runtime.launcher import launch
+    from cosim.scenario.config import Scenario
 
     period = 0.01
     sc = Scenario(format_version=1, duration_s=frames * period, renderer="mock")

@@ -79,8 +79,8 @@ def _range_error(summary: dict) -> dict:
 def step_ratio(frames: int, renderer: str) -> dict:
     """Render + LiDAR step CPU ms per frame of both sensor methods on the same sample frames (interleaved)."""
     import numpy as np
-
     from beam_native import BeamNative, CameraRig, timed
+
     from cosim.scenario.config import Scenario
     from cosim.world.scene import scene_from_state
     from renderer_proc.sample import sample_frame

@@ -1,6 +1,6 @@
 """What each leave-out saves: the default scenario run with and without it, wall time and per-stage medians.
 
-Leave-outs (issue 6, point 6):
+Leave-outs:
 
 * a ground-truth run without a viewer starts no renderer and no perception process (against the same run with
   ``viewer: true`` set and no viewer attached: renderer, perception and the RGB image all run for nobody);

@@ -1,4 +1,4 @@
-"""Instructions of start-up and shut-down, step by step (callgrind, deterministic; issue 6).
+"""Instructions of start-up and shut-down, step by step (callgrind, deterministic).
 
 Each step is a ``python -c`` snippet run from a source tree (default this checkout, ``--src`` another one, e.g.
 an export of main) under ``valgrind --tool=callgrind``, after a native run that leaves every module's bytecode

@@ -1,4 +1,4 @@
-"""The sweep engine's own cost per run, apart from the runs (issue 17): companion of sweep_throughput.py.
+"""The sweep engine's own cost per run, apart from the runs: companion of sweep_throughput.py.
 
 Run from the repository root::
 

@@ -1,4 +1,4 @@
-"""Sweep throughput and the engine's overhead per run (issue 17).
+"""Sweep throughput and the engine's overhead per run.
 
 Run from the repository root::
 

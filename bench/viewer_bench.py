@@ -1,4 +1,4 @@
-"""Cost of the live viewer and of MCAP recording to a run's real-time factor (issue 7 benchmark).
+"""Cost of the live viewer and of MCAP recording to a run's real-time factor.
 
 Six configurations, interleaved and repeated (``--configs`` picks some): plain, ``viewer`` (the observer
 process attached, with a client polling the dashboard like the page does: state every 250 ms, each changed
@@ -40,13 +40,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from cosim.scenario.config import Scenario  # noqa: E402
-from cosim.runtime.launcher import ObserverSpec, launch  # noqa: E402
-from cosim.recording import RecordOptions, mcap_sink  # noqa: E402
-from cosim.runtime.specs import ParticipantSpec  # noqa: E402
-from shm_schema import ArrayBlock, Field, StructBlock, image_block  # noqa: E402
-
 from e2e import process_cpu_s  # noqa: E402  (bench/, this script's folder)
+
+from cosim.recording import RecordOptions, mcap_sink  # noqa: E402
+from cosim.runtime.launcher import ObserverSpec, launch  # noqa: E402
+from cosim.runtime.specs import ParticipantSpec  # noqa: E402
+from cosim.scenario.config import Scenario  # noqa: E402
+from shm_schema import ArrayBlock, Field, StructBlock, image_block  # noqa: E402
 
 #: wall time after frame 0 left out of the measurement (start-up of the viewer process and its client), s
 SETTLE_S = 4.0
@@ -56,7 +56,7 @@ CONFIGS = ("plain", "viewer", "viewer-idle", "record", "record-img5", "viewer+re
 
 
 def depth_image() -> np.ndarray:
-    """(H, W, 4) uint8 depth-encoded image (the renderer's codec, DESIGN.md 4) of what a camera 3 m above
+    """(H, W, 4) uint8 depth-encoded image (the renderer's codec, docs/CONTRACTS.md) of what a camera 3 m above
     undulating ground (+-5 % in depth: a heap), pitched 20 degrees down, sees (60 degree field of view): rows
     near the horizon are out of the codec's range (invalid, A = 0), like a real frame."""
     from cosim.scenario.config.sensing import Codec

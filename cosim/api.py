@@ -16,7 +16,6 @@ would need the supervisor loop of cosim.runtime.launcher split into calls, which
 from __future__ import annotations
 
 import math
-import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,14 +24,20 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 from pydantic import ValidationError
 
-from cosim.errors import (InputNotSettable, InputOutOfRange, ParticipantCrashed, RunError, SimulationClosed,
-                          SimulationDone, UnknownInput)
+from cosim.errors import (
+    InputNotSettable,
+    InputOutOfRange,
+    ParticipantCrashed,
+    RunError,
+    SimulationClosed,
+    SimulationDone,
+    UnknownInput,
+)
 from cosim.runtime.inprocess import InProcessSession
 from cosim.runtime.outputs import compose_summary, write_figures, write_outputs, write_scenario
 from cosim.runtime.state import FrameState, StateReader
 from cosim.scenario.config import Scenario
 from cosim.scenario.options import load_with_options
-
 
 __all__ = ["Simulation", "SimulationResult", "run"]
 

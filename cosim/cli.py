@@ -16,9 +16,10 @@ import threading
 from pathlib import Path
 from typing import Sequence
 
+from cosim.runtime.threadpools import default_to_single_threaded_pools
+
 from .errors import RunRefused, ScenarioError
 from .studies.commands import add_sweep_parser, study_command, sweep_command
-from cosim.runtime.threadpools import default_to_single_threaded_pools
 
 __all__ = ["main", "build_parser", "run_extras", "VERBS"]
 
@@ -107,6 +108,7 @@ def run_extras(args: argparse.Namespace, scenario=None) -> tuple[list, list]:
     observers, sinks = [], []
     if getattr(args, "foxglove", False):
         from cosim.runtime.launcher import ObserverSpec
+
         from .foxglove.live import DEFAULT_HOST
         from .viewer.address import PortBusy, check_port
 
@@ -267,8 +269,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.verb == "study":
         return study_command(args, scenario)
     if args.verb == "compare":
-        from cosim.studies.compare import compare
         from cosim.runtime.outputs import default_run_dir
+        from cosim.studies.compare import compare
 
         out = args.out or default_run_dir(scenario.model_copy(update={"name": f"compare-{scenario.name}"}))
         report = compare(scenario, out, quiet=args.quiet)

@@ -1,4 +1,4 @@
-"""The exception hierarchy, split by phase (STYLE.md 9).
+"""The exception hierarchy, split by phase.
 
 * before the run: :class:`ScenarioError` (with every problem found, each ``file:line:col: path: message``);
 * at attach: :class:`shm_schema.SchemaMismatch` (lives in shm_schema, which does not import cosim);

@@ -95,7 +95,7 @@ def step_exponential_values(xs: list[float], u: tuple[float, float], p: VehicleP
 def step_ivp(x: np.ndarray, u: tuple[float, float], p: VehicleParams, dt: float,
              method: Literal["radau", "bdf"] = "radau", rtol: float = 1e-8, atol: float = 1e-10) -> np.ndarray:
     """One step of ``dt`` s with scipy ``solve_ivp`` (``Radau`` or ``BDF``). Raises RuntimeError on failure."""
-    from scipy.integrate import solve_ivp   # only the reference methods need scipy (~0.3 s to import)
+    from scipy.integrate import solve_ivp  # only the reference methods need scipy (~0.3 s to import)
 
     sol = solve_ivp(lambda _t, y: derivative(y, u, p), (0.0, dt), x, method="Radau" if method == "radau" else "BDF",
                     rtol=rtol, atol=atol)

@@ -21,8 +21,14 @@ from cosim.world.geometry import cart_grid_from_body, invert, vehicle_pose
 
 from . import auger as ag
 from .blocks import SECTION_FIELD
-from .control_protocol import (CONTROLLER_POINT, ControllerCommand, ControllerInput, Delivery, OffloadingController,
-                               check_command)
+from .control_protocol import (
+    CONTROLLER_POINT,
+    ControllerCommand,
+    ControllerInput,
+    Delivery,
+    OffloadingController,
+    check_command,
+)
 from .controller import ControllerParams, plugin_dir
 from .fmus import Fmus
 from .grainfill import GrainGrid, deposit, initial_heights, resample, volume

@@ -16,9 +16,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cosim.scenario.config import Scenario
 from cosim.errors import FrameMismatch
 from cosim.runtime.participant import perception_overlaps
+from cosim.scenario.config import Scenario
 
 from .blocks import WRITER, state_fields
 from .fmus import Fmus, open_fmus

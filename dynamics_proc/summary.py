@@ -1,4 +1,4 @@
-"""summary.json parts owned by dynamics: ``fill``, ``spill``, ``mass_balance``, ``controller`` (DESIGN.md 6).
+"""summary.json parts owned by dynamics: ``fill``, ``spill``, ``mass_balance``, ``controller`` (docs/architecture.md).
 
 Computed in the launcher process from the recorded series and the final truth height map alone.
 """

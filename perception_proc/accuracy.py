@@ -1,4 +1,4 @@
-"""Accuracy of the perception stage against truth (DESIGN.md sections 4 and 6).
+"""Accuracy of the perception stage against truth (docs/CONTRACTS.md, docs/architecture.md).
 
 Pure functions. Range errors compare each beam's noise-free range with the exact range of the same beam from
 the LiDAR origin (an exact ray cast of the same scene: ``cosim.world.raycast``); a beam counts when both
@@ -107,7 +107,7 @@ def exact_ranges(scenario: Scenario, state: Mapping[str, float], heightmap_truth
     """Exact range (N,) float64 m (inf on a miss) of every beam, by the renderer's ray caster on the scene
     the renderer drew (``cosim.world.fastcast``: Embree when installed, else the numpy ray cast).
     ``directions`` (N, 3) unit beams in the sensor frame."""
-    from cosim.world.fastcast import cast_from       # lazily: only accuracy frames need the scene
+    from cosim.world.fastcast import cast_from  # lazily: only accuracy frames need the scene
     from cosim.world.scene import scene_from_state
 
     scene = scene_from_state(scenario, state, heightmap_truth, stream)

@@ -10,9 +10,8 @@
 from __future__ import annotations
 
 from cosim.scenario.config import Scenario
-from shm_schema import ArrayBlock, Block, Field, StructBlock
-
 from cosim.world.patterns import beam_table
+from shm_schema import ArrayBlock, Block, Field, StructBlock
 
 __all__ = ["WRITER", "STATE_BLOCK", "HEIGHTS_BLOCK", "POINTS_BLOCK", "RANGE_BANDS_M", "band_name",
            "state_fields", "declare_blocks", "ACCURACY_FIELDS"]

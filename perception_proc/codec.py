@@ -1,4 +1,4 @@
-"""Depth decoder of the paper's Eq 3 (DESIGN.md section 4), written independently of the renderer's encoder.
+"""Depth decoder of the paper's Eq 3 (docs/CONTRACTS.md), written independently of the renderer's encoder.
 
 Stored bytes are linear (``gamma_mode == "linear"``): R = G = round(255 min(d/alpha, 1)),
 B = round(255 (d mod beta)/beta), d in cm. Eq 3: d' = [round(R/255 alpha/beta - B/255) + B/255] beta.

@@ -28,12 +28,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from cosim.errors import FrameMismatch
+from cosim.runtime.participant import perception_overlaps
+from cosim.scenario.config import Scenario
 from cosim.world.beamtarget import BEAMS_DEPTH_BLOCK
 from cosim.world.camera import Rig
-from cosim.scenario.config import Scenario
-from cosim.errors import FrameMismatch
 from cosim.world.geometry import invert
-from cosim.runtime.participant import perception_overlaps
 
 from . import accuracy as acc
 from .blocks import ACCURACY_FIELDS, HEIGHTS_BLOCK, POINTS_BLOCK, STATE_BLOCK, WRITER

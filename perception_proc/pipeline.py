@@ -19,20 +19,20 @@ from typing import Sequence
 import numpy as np
 
 from cosim.errors import PluginFault
-from cosim.world.camera import Rig, beam_directions
 from cosim.scenario.config import Scenario
 from cosim.scenario.plugins import load_plugin
+from cosim.world.beamtarget import beam_layout
+from cosim.world.camera import Rig, beam_directions
 from cosim.world.geometry import body_from_camera_axes, mount_transform
+from cosim.world.patterns import beam_table, pattern_shape
 
 from .beam_decode import BeamDecoder
 from .heightmap import HeightMap, grid_shape
 from .impact import Impact
 from .lidar import apply_noise_and_limits, frame_generator, point_basis, to_points
-from cosim.world.beamtarget import beam_layout
-from cosim.world.patterns import beam_table, pattern_shape
+from .protocol import ALGORITHM_POINT, PerceptionContext, PerceptionInput, StageSet, check_output
 from .resample import beam_words, build_table, resample, resample_words
 from .resample_offset import build_offset_table, is_offset, resample_offset
-from .protocol import ALGORITHM_POINT, PerceptionContext, PerceptionInput, StageSet, check_output
 from .rim import CartEstimate, border_beams
 
 __all__ = ["Perception", "FrameResult", "own_vehicle_box", "OWN_BOX_MARGIN_M"]

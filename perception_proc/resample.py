@@ -1,4 +1,4 @@
-"""LiDAR from camera images, co-located case (the paper's Eqs 6-7, corrected; DESIGN.md section 4).
+"""LiDAR from camera images, co-located case (the paper's Eqs 6-7, corrected; docs/CONTRACTS.md).
 
 Every beam of the pattern is assigned to exactly one rig camera: the one whose optical axis it is closest to
 (largest cosine), provided its image point lies inside that camera's image. Within the camera the beam's image
@@ -30,8 +30,8 @@ from typing import Literal, Sequence
 
 import numpy as np
 
-from cosim.world.camera import Rig
 from cosim.scenario.config import Codec
+from cosim.world.camera import Rig
 
 from .codec import decode_lut, decode_words
 
@@ -128,7 +128,7 @@ class ResampleTable:
 
 
 def paper_pixel(theta: np.ndarray, phi: np.ndarray, width: int, height: int, f: float) -> tuple[np.ndarray, np.ndarray]:
-    """Eqs 6-7 as printed but with cos(phi) in the u term (DESIGN.md section 4), before rounding.
+    """Eqs 6-7 as printed but with cos(phi) in the u term (docs/CONTRACTS.md), before rounding.
 
     ``theta`` polar angle from +Y, ``phi`` azimuth from +X towards +Z (rad, any shape), LiDAR aligned with the
     camera. r = f / (sin th sin ph); u = r sin th cos ph + w/2; v = h/2 - r cos th. Returns (u, v) in pixels.

@@ -49,8 +49,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cosim.world.camera import Rig, beam_directions
 from cosim.scenario.config import Codec
+from cosim.world.camera import Rig, beam_directions
 
 from .codec import decode_lut, decode_words, lut_key
 from .resample import DISCONTINUITY_REL, words_of

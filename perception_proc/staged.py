@@ -17,8 +17,15 @@ from cosim.errors import PluginFault
 
 from .heightmap import HeightMap, height_map
 from .impact import Impact, blank_under_stream, find_impact
-from .protocol import (STAGE_POINTS, PerceptionContext, PerceptionInput, PerceptionOutput, check_cart,
-                       check_heightmap, check_impact)
+from .protocol import (
+    STAGE_POINTS,
+    PerceptionContext,
+    PerceptionInput,
+    PerceptionOutput,
+    check_cart,
+    check_heightmap,
+    check_impact,
+)
 from .rim import CartEstimate, find_cart
 
 __all__ = ["staged", "rim_stage", "heightmap_stage", "impact_stage", "NO_IMPACT_REASON"]

@@ -1,4 +1,4 @@
-"""The ``perception`` section of summary.json (DESIGN.md section 6) from a run's recorded series.
+"""The ``perception`` section of summary.json (docs/architecture.md) from a run's recorded series.
 
 ``series`` maps ``"perc_state.<field>"`` to a (frames,) float64 array, one entry per completed frame.
 Accuracy fields are NaN on frames without an evaluation. Range statistics over the run weight each evaluated

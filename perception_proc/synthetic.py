@@ -9,14 +9,14 @@ top, a floor, a grain height field over the floor and an optional vertical grain
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 import math
+from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 import numpy as np
 
-from cosim.world.camera import Pinhole, Rig, RigCamera, yaw_transform
 from cosim.scenario.config import Cart, Codec
+from cosim.world.camera import Pinhole, Rig, RigCamera, yaw_transform
 from cosim.world.geometry import apply, invert
 
 __all__ = [

@@ -37,10 +37,11 @@ from cosim.world.meshes import CYLINDER_SIDES, INSTANCE_FLOATS, box_instances, c
 from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
 
 from .beam_mock import check_target
-from .surface_gl import Surface, mat_bytes as _mat
 from .codec import BYTE_MAX, CM_PER_M
 from .gl_backend import SHADER_DIR, GLResources, GroundImage, _Buffers, begin_frame
 from .projection import far_plane_m
+from .surface_gl import Surface
+from .surface_gl import mat_bytes as _mat
 
 __all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "ROW_BINS", "GLBeamRenderer", "ground_key", "max_rects", "row_bounds"]
 

@@ -13,10 +13,9 @@ Sizes follow the renderer actually used (``plan_rig`` applies ``render.mock_scal
 from __future__ import annotations
 
 from cosim.scenario.config.scenario import Scenario
-from shm_schema import ArrayBlock, Block, Field, StructBlock, image_block
-
 from cosim.world.beamtarget import BEAMS_DEPTH_BLOCK, BEAMS_RGB_BLOCK, beam_layout
 from cosim.world.rig import plan_rig
+from shm_schema import ArrayBlock, Block, Field, StructBlock, image_block
 
 __all__ = ["STATE_BLOCK", "WRITER", "declare_blocks", "wants_rgb"]
 

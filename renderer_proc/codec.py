@@ -1,4 +1,4 @@
-"""Depth-in-colour codec of the paper's Eqs 1-2: the numpy reference encoder (DESIGN.md section 4).
+"""Depth-in-colour codec of the paper's Eqs 1-2: the numpy reference encoder (docs/CONTRACTS.md).
 
 The GL fragment shader (``shaders/encode.frag``) computes exactly these bytes; this module is the reference the
 mock renderer uses and the GL tests compare against. Decoding (Eq 3) lives in perception_proc and is written

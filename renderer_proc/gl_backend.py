@@ -26,12 +26,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from cosim.world.camera import Rig
-from cosim.scenario.config.sensing import Codec
 from cosim.errors import RendererUnavailable
+from cosim.scenario.config.sensing import Codec
+from cosim.world.camera import Rig
 from cosim.world.geometry import invert
-
-from .codec import BYTE_MAX, CM_PER_M
 from cosim.world.meshes import (
     INSTANCE_FLOATS,
     box_instances,
@@ -40,9 +38,12 @@ from cosim.world.meshes import (
     unit_cube,
     unit_cylinder,
 )
-from .projection import NEAR_M, far_plane_m, gl_projection, gl_view
-from .surface_gl import Surface, mat_bytes as _mat
 from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
+
+from .codec import BYTE_MAX, CM_PER_M
+from .projection import NEAR_M, far_plane_m, gl_projection, gl_view
+from .surface_gl import Surface
+from .surface_gl import mat_bytes as _mat
 
 __all__ = ["GL_REQUIRE", "SHADER_DIR", "GLResources", "GLRenderer", "create_gl_context"]
 

@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from cosim.world.camera import Rig
 from cosim.scenario.config.sensing import Codec
+from cosim.world.camera import Rig
+from cosim.world.fastcast import cast_from
+from cosim.world.scene import SKY_RGBA, SUN_WORLD, Scene
 
 from .codec import encode_depth, valid_depth_mask
 from .projection import NEAR_M, far_plane_m, pixel_rays
-from cosim.world.fastcast import cast_from
-from cosim.world.scene import SKY_RGBA, SUN_WORLD, Scene
 
 __all__ = ["AMBIENT", "DIFFUSE", "MOCK_GREY", "MockRenderer"]
 

@@ -1,6 +1,6 @@
 """The renderer ring member: reads the dynamics state, renders every camera, writes the image blocks.
 
-Thin shell (STYLE.md 3): ``start`` makes the backend (GL context or the numpy mock) and binds the segment's
+Thin shell: ``start`` makes the backend (GL context or the numpy mock) and binds the segment's
 views; ``step(frame)`` checks the state's frame stamp, rebuilds the :class:`~cosim.world.scene.Scene`,
 uploads it (poses as instance records, grain heights as a buffer write), then per camera draws and reads
 straight into the shared-memory blocks under their seqlocks.
@@ -12,14 +12,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cosim.scenario.config.scenario import Scenario
 from cosim.errors import FrameMismatch
-
-from .blocks import STATE_BLOCK, WRITER, wants_rgb
-from .projection import camera_poses, world_from_sensor
+from cosim.scenario.config.scenario import Scenario
 from cosim.world.beamtarget import BEAMS_DEPTH_BLOCK, BEAMS_RGB_BLOCK, beam_layout
 from cosim.world.rig import plan_rig
 from cosim.world.scene import scene_from_state
+
+from .blocks import STATE_BLOCK, WRITER, wants_rgb
+from .projection import camera_poses, world_from_sensor
 
 if TYPE_CHECKING:
     from shm_schema.segment import Segment

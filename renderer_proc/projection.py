@@ -1,4 +1,4 @@
-"""Camera poses and the GL view / projection matrices, written once (DESIGN.md section 3).
+"""Camera poses and the GL view / projection matrices, written once (docs/architecture.md).
 
 The paper's camera frame (X right, Y up, Z forward) is left-handed; GL view space is right-handed with -z
 forward. ``GL_FROM_CAMERA = diag(1, 1, -1)`` converts between them, so GL view z = -Z and planar camera depth
@@ -12,8 +12,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from cosim.world.camera import Pinhole, Rig
 from cosim.scenario.config.scenario import Scenario
+from cosim.world.camera import Pinhole, Rig
 from cosim.world.geometry import body_from_camera_axes, invert, mount_transform, vehicle_pose
 
 __all__ = [
@@ -67,7 +67,7 @@ def gl_projection(cam: Pinhole, near_m: float, far_m: float) -> np.ndarray:
     """4 x 4 float64 projection of a centred pinhole (focal f px, w x h) with the image flipped vertically.
 
     For a view-space point (x, y, z), z < 0: NDC x = 2 f x / (w (-z)), NDC y = -2 f y / (h (-z)), so window
-    x = u and window y = v of the top-down image (DESIGN.md section 3); depth maps [near, far] to [-1, 1]."""
+    x = u and window y = v of the top-down image (docs/architecture.md); depth maps [near, far] to [-1, 1]."""
     if not 0.0 < near_m < far_m:
         raise ValueError(f"need 0 < near < far, got {near_m}, {far_m}")
     f, w, h = cam.f, cam.width, cam.height

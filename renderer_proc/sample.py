@@ -13,7 +13,6 @@ import numpy as np
 
 from cosim.scenario.config.scenario import Scenario
 from cosim.world.geometry import apply, cart_grid_from_body, invert, vehicle_pose
-
 from cosim.world.scene import STREAM_ROWS
 
 __all__ = ["GRAVITY_MPS2", "PILE_HEIGHT_M", "STREAM_SAMPLES", "sample_frame"]

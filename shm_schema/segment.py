@@ -16,8 +16,7 @@ from multiprocessing import resource_tracker, shared_memory
 import msgpack
 import numpy as np
 
-from .layout import (BLOCK_HEADER_DTYPE, BLOCK_WORD, ERROR_BYTES, HEADER_DTYPE, LAYOUT_VERSION, MAGIC, PROC_DTYPE,
-                     Schema)
+from .layout import BLOCK_HEADER_DTYPE, BLOCK_WORD, ERROR_BYTES, HEADER_DTYPE, LAYOUT_VERSION, MAGIC, PROC_DTYPE, Schema
 from .spec import StructBlock
 
 __all__ = ["Segment", "StructView", "BlockWrite", "SchemaMismatch", "SegmentNotFound", "Phase", "SnapshotTimeout"]

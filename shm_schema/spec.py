@@ -1,4 +1,4 @@
-"""Block declarations: the only place a shared-memory layout is written (STYLE.md 1).
+"""Block declarations: the only place a shared-memory layout is written.
 
 Three kinds of block, each with exactly one writer process:
 

@@ -15,8 +15,15 @@ import pytest
 from scipy.linalg import expm
 
 from cosim import Simulation, SimulationResult, run
-from cosim.errors import (InputNotSettable, InputOutOfRange, ParticipantCrashed, ScenarioError, SimulationClosed,
-                          SimulationDone, UnknownInput)
+from cosim.errors import (
+    InputNotSettable,
+    InputOutOfRange,
+    ParticipantCrashed,
+    ScenarioError,
+    SimulationClosed,
+    SimulationDone,
+    UnknownInput,
+)
 from cosim.runtime.inprocess import simulate
 from cosim.scenario.options import load_with_options
 
@@ -67,7 +74,7 @@ def test_state_is_keyed_like_the_timeseries_and_holds_the_current_frame():
     struct_keys = [k for k in state if "." in k or k == "frame"]
     assert sorted(struct_keys) == sorted(series)      # timing.csv's wall-clock columns come last in series
     assert {"heightmap_truth", "stream", "heightmap_perceived"} <= set(state)
-    for f, (t, grain, h) in rows.items():
+    for f, (t, grain, _h) in rows.items():
         assert t == series["dyn_state.t_s"][f] == pytest.approx(f * 0.1, abs=1e-12)
         assert grain == series["dyn_state.cart_grain_m3"][f]
     # the perception blocks of an overlapping run hold the previous frame until the flush

@@ -295,8 +295,8 @@ def test_csv_patterns_get_the_exact_cast_under_gl_too(tmp_path):
 
 @pytest.mark.gl
 def test_gl_shaded_image_marks_hits_and_sky(ctx):
-    from renderer_proc.beam_gl import GLBeamRenderer
     from cosim.world.scene import SKY_RGBA
+    from renderer_proc.beam_gl import GLBeamRenderer
 
     pattern = grid((-10.0, 10.0, 21), (-1.0, 1.0, 1))
     edge_x = -5.0 * math.tan(math.radians(0.5))

@@ -8,11 +8,11 @@ import re
 import socket
 import subprocess
 import sys
-import tomllib
 from contextlib import redirect_stderr, redirect_stdout
 from pathlib import Path
 
 import pytest
+import tomllib
 
 from cosim.cli import VERBS, main
 from cosim.scenario.loader import describe_packaged, load_scenario, packaged_scenarios, resolve_scenario_arg
@@ -118,6 +118,7 @@ def test_a_busy_viewer_port_is_one_line_before_anything_starts(tmp_path, busy_po
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
     import test_viewer_standins as standins
+
     from cosim.recording import mcap_sink
     from cosim.runtime.launcher import launch
 
@@ -143,8 +144,8 @@ def test_the_viewer_address_is_printed_only_once_it_answers(recording):
     import threading
     import time
 
-    from cosim.viewer.replay import ReplaySource
     from cosim.viewer.address import ViewerAnnouncer
+    from cosim.viewer.replay import ReplaySource
     from cosim.viewer.server import DashboardServer
 
     stream = io.StringIO()

@@ -1,4 +1,4 @@
-"""``launch()`` inside daemonic workers: a multiprocessing.Pool worker and a Dask worker (issue 17 item 4)."""
+"""``launch()`` inside daemonic workers: a multiprocessing.Pool worker and a Dask worker."""
 from __future__ import annotations
 
 import multiprocessing as mp

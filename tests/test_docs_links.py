@@ -40,3 +40,27 @@ def test_relative_links_resolve_inside_the_repository(page):
 def test_no_page_points_outside_the_repository(page):
     text = page.read_text()
     assert "../shared" not in text and "shared/DESIGN.md" not in text
+
+
+#: citations of files that are not in the repository (the team's design notes) or of an issue tracker's numbers
+_OUTSIDE = re.compile(r"\b(?:DESIGN|STYLE)\.md\b|\.\./shared/|\bissue \d+\b", re.I)
+
+
+def tracked_text_files() -> list[Path]:
+    import subprocess
+    out = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=False).stdout.split()
+    keep = (".py", ".md", ".yaml", ".yml", ".json", ".glsl", ".frag", ".vert", ".geom", ".toml", ".txt", ".html")
+    # bench/HISTORY.md is the dated log: it names what each dated measurement was made for
+    return [ROOT / f for f in out if f.endswith(keep) and f != "bench/HISTORY.md" and f != "tests/test_docs_links.py"]
+
+
+def test_nothing_in_the_repository_cites_files_outside_it():
+    files = tracked_text_files()
+    if not files:
+        pytest.skip("not a git checkout")
+    hits = []
+    for f in files:
+        for n, line in enumerate(f.read_text(errors="replace").splitlines(), 1):
+            if _OUTSIDE.search(line):
+                hits.append(f"{f.relative_to(ROOT)}:{n}: {line.strip()[:80]}")
+    assert hits == [], "citations a user who clones the project cannot follow:\n" + "\n".join(hits)

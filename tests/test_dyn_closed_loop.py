@@ -147,6 +147,7 @@ def test_forced_auger_spill_is_accounted(monkeypatch, where, surface):
     """With the controller's safety bypassed (auger forced on), grain on the ground or the rim, and grain that
     slides over a wall top, is spill, and delivered = in cart + spilled still holds."""
     from dataclasses import replace
+
     from dynamics_proc.controller import SectionFillController
 
     real = SectionFillController.step

@@ -9,8 +9,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cosim.scenario.config import Scenario
-from dynamics_proc.grainfill import (GrainGrid, deposit, initial_heights, max_slope, relax, resample,
-                                     section_rows, volume)
+from dynamics_proc.grainfill import (
+    GrainGrid,
+    deposit,
+    initial_heights,
+    max_slope,
+    relax,
+    resample,
+    section_rows,
+    volume,
+)
 
 SLOPE_TOL = 1e-3
 
@@ -110,7 +118,7 @@ def test_stable_at_high_flow_and_long_frames(factor, frame_s):
     v0 = volume(h, g)
     dv = 0.125 * factor * frame_s
     spilled = delivered = 0.0
-    for k in range(int(40.0 / frame_s)):
+    for _ in range(int(40.0 / frame_s)):
         h, s = deposit(h, 3.0, 1.5, dv, g)
         spilled += s
         delivered += dv

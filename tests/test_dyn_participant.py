@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cosim.scenario.config import Scenario
 from cosim.errors import FrameMismatch
+from cosim.scenario.config import Scenario
 from dynamics_proc.blocks import declare_blocks
 from dynamics_proc.closed_loop import simulate
 from dynamics_proc.participant import create

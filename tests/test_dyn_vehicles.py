@@ -14,9 +14,23 @@ from scipy.linalg import expm
 from cosim.scenario.config import Scenario
 from dynamics_proc.integrators import integrate, step_exponential, step_exponential_values, step_ivp
 from dynamics_proc.machine_sync import cart_offset, sync_command, tractor_offset
-from dynamics_proc.vehicles import (CX, CY, DELTA, PYAW, TX, TY, TYAW, V, VehicleParams, cart_pose, combine_advance,
-                                    initial_state,
-                                    kinematic_derivative, lag_exact, lag_integral)
+from dynamics_proc.vehicles import (
+    CX,
+    CY,
+    DELTA,
+    PYAW,
+    TX,
+    TY,
+    TYAW,
+    V,
+    VehicleParams,
+    cart_pose,
+    combine_advance,
+    initial_state,
+    kinematic_derivative,
+    lag_exact,
+    lag_integral,
+)
 
 
 def scen(**kw) -> Scenario:

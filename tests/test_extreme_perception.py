@@ -12,8 +12,8 @@ import pytest
 
 from cosim.errors import RendererUnavailable
 from cosim.runtime.inprocess import simulate
-from cosim.scenario.loader import load_scenario, packaged_scenarios
 from cosim.runtime.outputs import compose_summary
+from cosim.scenario.loader import load_scenario, packaged_scenarios
 
 pytestmark = pytest.mark.gl
 

@@ -12,10 +12,10 @@ import json
 import shutil
 from pathlib import Path
 
+import fmu_builds
 import numpy as np
 import pytest
 
-import fmu_builds
 from cosim.cli import main
 from cosim.errors import PluginFault
 from cosim.fmi.slave import FmuStepError

@@ -6,9 +6,9 @@ import shutil
 import sys
 from pathlib import Path
 
+import fmu_builds
 import pytest
 
-import fmu_builds
 from cosim.cli import main
 from cosim.errors import ScenarioError
 from cosim.fmi.describe import FmiUnavailable, describe, require_fmpy

@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 import test_viewer_standins as standins
+
 from cosim.runtime.launcher import ObserverSpec, launch
 
 websockets = pytest.importorskip("websockets", reason="the test client needs the websockets package ([test] extra)")

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from cosim.runtime.inprocess import simulate
-from cosim.scenario.loader import load_scenario, packaged_scenarios
 from cosim.runtime.outputs import compose_summary
+from cosim.scenario.loader import load_scenario, packaged_scenarios
 
 NAMES = sorted(packaged_scenarios())
 

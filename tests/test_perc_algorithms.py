@@ -6,13 +6,13 @@ import math
 import numpy as np
 import pytest
 
-from cosim.world.camera import beam_directions
 from cosim.scenario.config import Cart, Mount, Noise, Pattern, Sensor
+from cosim.world.camera import beam_directions
 from cosim.world.geometry import apply, body_from_camera_axes, cart_body_from_grid, mount_transform, vehicle_pose
+from cosim.world.patterns import beam_table, pattern_shape
 from perception_proc.heightmap import grid_shape, height_map
 from perception_proc.impact import blank_under_stream, find_impact
 from perception_proc.lidar import apply_noise_and_limits, frame_generator
-from cosim.world.patterns import beam_table, pattern_shape
 from perception_proc.rim import border_beams, find_cart
 from perception_proc.synthetic import Box, cart_shapes, raycast
 
@@ -25,12 +25,19 @@ PATTERN = Pattern(preset="grid", elevation_min_deg=-40, elevation_max_deg=30, az
 L, W = CART.interior_length_m, CART.interior_width_m
 
 
-def heap(peak_m, gx0=3.0, gy0=1.5, base_m=0.8, slope=math.tan(math.radians(23.0))):
+#: corn's angle of repose, 23 deg, as a slope
+REPOSE_SLOPE = math.tan(math.radians(23.0))
+
+
+def heap(peak_m, gx0=3.0, gy0=1.5, base_m=0.8, slope=REPOSE_SLOPE):
     """Cone of repose on a flat bed: h = max(base, peak - slope * distance), grid frame, m."""
     return lambda gx, gy: np.maximum(base_m, peak_m - slope * np.hypot(gx - gx0, gy - gy0))
 
 
-def scan(shapes, pattern=PATTERN, mount=MOUNT, sensor_noise=Noise(), frame=0):
+NO_NOISE = Noise()
+
+
+def scan(shapes, pattern=PATTERN, mount=MOUNT, sensor_noise=NO_NOISE, frame=0):
     """Ranges (N,) float32 of an exact scan, with the sensor's noise; plus the level points and border."""
     e, a = beam_table(pattern)
     d = beam_directions(e, a)

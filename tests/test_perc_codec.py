@@ -1,4 +1,4 @@
-"""Depth codec (Eqs 1-3): the decoder against a reference encoder written here from DESIGN.md section 4."""
+"""Depth codec (Eqs 1-3): the decoder against a reference encoder written here from docs/CONTRACTS.md."""
 from __future__ import annotations
 
 import numpy as np
@@ -13,7 +13,7 @@ from perception_proc.synthetic import encode_linear
 
 def encode_reference(d_m: np.ndarray, alpha_cm: float, beta_cm: float, gamma: float = 2.2,
                      mishandled: bool = False) -> np.ndarray:
-    """DESIGN.md section 4, written independently: x_R = min(d/alpha, 1), x_B = (d mod beta)/beta (d in cm);
+    """docs/CONTRACTS.md, written independently: x_R = min(d/alpha, 1), x_B = (d mod beta)/beta (d in cm);
     linear bytes R = G = round(255 x_R), B = round(255 x_B); mishandled stores x^gamma. A = 255 when d < alpha."""
     d = np.atleast_1d(np.asarray(d_m, dtype=np.float64)) * 100.0
     xr = np.minimum(d / alpha_cm, 1.0)
@@ -58,7 +58,7 @@ def test_dense_sweep_default_codec_bound_is_tight():
 
 
 def test_ratio_256_breaks_the_period_count():
-    # Codec refuses it; the decoder maths itself then makes whole-period errors (DESIGN.md section 4)
+    # Codec refuses it; the decoder maths itself then makes whole-period errors (docs/CONTRACTS.md)
     with pytest.raises(ValueError, match="exceeds 254"):
         Codec(alpha_cm=25_600.0, beta_cm=100.0)
     alpha, beta = 25_600.0, 100.0
@@ -85,7 +85,7 @@ def test_mishandled_gamma_is_visibly_worse():
     e_lin = np.abs(_roundtrip(d, lin) - d)
     e_bad = np.abs(_roundtrip(d, bad, mishandled=True) - d)
     assert np.nanmax(e_lin) <= lin.bound_m + 2e-5
-    # DESIGN.md: mean about 11 cm, worst about 3 m at alpha 50 m, beta 1 m
+    # docs/CONTRACTS.md: mean about 11 cm, worst about 3 m at alpha 50 m, beta 1 m
     assert 0.05 <= np.nanmean(e_bad) <= 0.25
     assert 1.0 <= np.nanmax(e_bad) <= 5.0
 

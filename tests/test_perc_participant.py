@@ -9,18 +9,18 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as hst
 
-from cosim.scenario.config import Scenario
 from cosim.errors import FrameMismatch
+from cosim.scenario.config import Scenario
 from cosim.world.geometry import vehicle_pose
+from cosim.world.raycast import raycast
+from cosim.world.scene import scene_from_state
 from dynamics_proc.blocks import declare_blocks as dynamics_blocks
-from perception_proc.orderstats import median_sorted, percentile_sorted, percentiles
 from perception_proc.accuracy_report import render_markdown, write_report
 from perception_proc.blocks import declare_blocks
+from perception_proc.orderstats import median_sorted, percentile_sorted, percentiles
 from perception_proc.participant import PerceptionParticipant, create
 from perception_proc.summary import summarize
 from perception_proc.synthetic import encode_linear, stitched_rig
-from cosim.world.raycast import raycast
-from cosim.world.scene import scene_from_state
 from shm_schema import Schema, Segment, image_block
 
 SCENARIO = Scenario.model_validate_json(json.dumps({

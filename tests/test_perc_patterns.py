@@ -9,9 +9,17 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cosim.scenario.config import Noise, Pattern, Sensor
+from cosim.world.patterns import (
+    HONEYCOMB_DENSITY_RATIO,
+    HONEYCOMB_VFOV_DEG,
+    PatternError,
+    beam_table,
+    honeycomb_elevations,
+    load_csv_table,
+    pattern_shape,
+    validate_table,
+)
 from perception_proc.lidar import apply_noise_and_limits, frame_generator, to_points
-from cosim.world.patterns import (HONEYCOMB_DENSITY_RATIO, HONEYCOMB_VFOV_DEG, PatternError, beam_table,
-                                      honeycomb_elevations, load_csv_table, pattern_shape, validate_table)
 
 
 def test_grid_is_uniform_with_both_ends_in_image_order():

@@ -10,10 +10,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from cosim.world.camera import beam_directions
 from cosim.scenario.config import Codec, Pattern
-from perception_proc import resample_offset as ro
+from cosim.world.camera import beam_directions
 from cosim.world.patterns import beam_table, pattern_shape
+from perception_proc import resample_offset as ro
 from perception_proc.resample import beam_pixels, build_table, resample
 from perception_proc.synthetic import Box, Plane, encode_linear, raycast, render_depth, stitched_rig
 

@@ -6,19 +6,25 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import tomllib
 import uuid
 from pathlib import Path
 
 import numpy as np
 import pytest
+import tomllib
 
 from cosim.cli import main
 from cosim.errors import ScenarioError
 from cosim.runtime.inprocess import simulate
 from cosim.scenario.loader import load_scenario, load_scenario_text, resolve_scenario_arg
-from cosim.scenario.plugins import (BUILTINS, ENTRY_POINT_GROUPS, PluginError, distribution_of, load_plugin,
-                                    resolve_plugin)
+from cosim.scenario.plugins import (
+    BUILTINS,
+    ENTRY_POINT_GROUPS,
+    PluginError,
+    distribution_of,
+    load_plugin,
+    resolve_plugin,
+)
 from dynamics_proc import closed_loop
 from dynamics_proc.strategies import front_to_back
 
@@ -242,7 +248,7 @@ def test_own_perception_example_stage_maps_the_grain(shm_clean):
     truth = truth_on_grid(run.recorder.arrays["heightmap_truth"], s.grain.cell_m, perceived.shape, s.cart)
     rmse, bias, coverage = heightmap_error(perceived, truth)
     assert coverage > 0.6 and rmse < 0.05 and abs(bias) < 0.03, (rmse, bias, coverage)
-    import cell_median                              # imported from the scenario's folder by the loader
+    import cell_median  # imported from the scenario's folder by the loader
     assert Path(cell_median.__file__).parent == ROOT / "examples" / "own_perception"
 
 

@@ -4,10 +4,7 @@ from __future__ import annotations
 
 import io
 import re
-from pathlib import Path
 from types import SimpleNamespace
-
-import pytest
 
 import cosim.studies.compare as compare_mod
 from cosim.runtime.progress import PLAIN_INTERVAL_S, ProgressPrinter, run_progress

@@ -17,12 +17,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 import test_viewer_standins as standins
+
 from cosim.errors import ParticipantDied
-from cosim.runtime.launcher import launch
 from cosim.recording import RecordingError, RecordOptions, mcap_sink, read_recording
 from cosim.recording.encode import heights_from_grid, image_from_msg, points_from_cloud
+from cosim.runtime.launcher import launch
 
 TOPICS = {"/tf": "foxglove.FrameTransform", "/dyn_state": "cosim.struct.dyn_state",
           "/render_state": "cosim.struct.render_state", "/perc_state": "cosim.struct.perc_state",
@@ -394,9 +394,8 @@ def _write_lagging(seg, k: int, current: bool = True, lagging: bool = True) -> N
 def test_lagging_blocks_are_written_once_at_their_own_stamp(tmp_path, shm_clean, queue_frames):
     """Perception one frame behind: at sink call m its blocks hold frame m - 1 (their stamp); a last call
     m = last + 1 brings its final frame. Every message is logged at its block's stamp, none twice."""
-    from shm_schema import Segment
-
     from cosim.recording import McapRecorder
+    from shm_schema import Segment
 
     sc = standins.scenario(1.0)
     period_ns = round(sc.timing.sensor_period_s * 1e9)
@@ -434,9 +433,8 @@ def test_lagging_blocks_are_written_once_at_their_own_stamp(tmp_path, shm_clean,
 
 
 def test_frame_data_gives_each_blocks_stamp():
-    from shm_schema import Segment
-
     from cosim.recording.writer import frame_data
+    from shm_schema import Segment
 
     seg = Segment.local(_lag_schema())
     _write_lagging(seg, 3)
@@ -449,9 +447,8 @@ def test_frame_data_gives_each_blocks_stamp():
 def _lag_recorder(tmp_path, monkeypatch, queue_frames: int, notify_frames: int | None = None):
     """A recorder process fed from a local segment of the lagging schema; ``notify_frames`` None: the sink's own
     batching, else tell the recorder only every that many frames (and never on time)."""
-    from shm_schema import Segment
-
     from cosim.recording import McapRecorder, sink
+    from shm_schema import Segment
 
     if notify_frames is not None:
         monkeypatch.setattr(sink, "NOTIFY_S", 1e9)

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cosim.recording.slots import NOT_PUT, FrameSlots, block_bytes, slot_block
+from cosim.recording.slots import NOT_PUT, FrameSlots
 from shm_schema import (
     ArrayBlock,
     Field,

@@ -73,7 +73,7 @@ def test_encodes_in_place_into_destination():
 
 
 def test_mishandled_gamma_costs_whole_periods():
-    """DESIGN.md section 4: alpha = 50 m, beta = 1 m, gamma 2.2 quantised in the gamma domain: mean about
+    """docs/CONTRACTS.md: alpha = 50 m, beta = 1 m, gamma 2.2 quantised in the gamma domain: mean about
     11 cm, worst about 3 m, even with the gamma undone exactly after reading."""
     bad = Codec(gamma_mode="mishandled")
     d = np.linspace(0.01, bad.max_depth_m - 0.01, 200_001)[None]

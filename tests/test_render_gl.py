@@ -6,16 +6,16 @@ import math
 import numpy as np
 import pytest
 
-from cosim.world.camera import Pinhole, Rig, RigCamera
+from cosim.errors import RendererUnavailable
 from cosim.scenario.config import Scenario
 from cosim.scenario.config.sensing import Codec
-from cosim.errors import RendererUnavailable
+from cosim.world.camera import Pinhole, Rig, RigCamera
 from cosim.world.geometry import make_transform, rot_x, rot_y
+from cosim.world.scene import Boxes, Cylinders, HeightField, Scene, scene_from_state
 from renderer_proc.codec import decode_depth, encode_depth
 from renderer_proc.mock_backend import MockRenderer
 from renderer_proc.projection import camera_poses
 from renderer_proc.sample import sample_frame
-from cosim.world.scene import Boxes, Cylinders, HeightField, Scene, scene_from_state
 
 pytestmark = pytest.mark.gl
 CODEC = Codec()

@@ -7,12 +7,12 @@ import sys
 import numpy as np
 import pytest
 
-from cosim.scenario.config import Scenario
 from cosim.errors import FrameMismatch, RendererUnavailable
+from cosim.scenario.config import Scenario
+from cosim.world.rig import plan_rig
 from renderer_proc.blocks import declare_blocks
 from renderer_proc.codec import decode_depth
 from renderer_proc.participant import create
-from cosim.world.rig import plan_rig
 from renderer_proc.sample import sample_frame
 from shm_schema import ArrayBlock, Field, Schema, Segment, StructBlock
 

@@ -1,4 +1,4 @@
-"""GL view / projection against the pinhole closed forms (DESIGN.md section 3), and the sensor pose chain."""
+"""GL view / projection against the pinhole closed forms (docs/architecture.md), and the sensor pose chain."""
 from __future__ import annotations
 
 import math
@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from cosim.world.camera import Pinhole, Rig, RigCamera, yaw_transform
 from cosim.scenario.config import Scenario
+from cosim.world.camera import Pinhole, Rig, RigCamera, yaw_transform
 from cosim.world.geometry import apply, body_from_camera_axes, mount_transform, vehicle_pose
 from renderer_proc.projection import GL_FROM_CAMERA, camera_poses, gl_projection, gl_view, pixel_rays, world_from_sensor
 

@@ -14,8 +14,8 @@ from cosim.world.geometry import make_transform, rot_z
 from cosim.world.heightfield import grid_triangles, grid_vertices, padded_heights, surface_height
 from cosim.world.meshes import CYLINDER_SIDES
 from cosim.world.raycast import ray_boxes, ray_cylinders, ray_heightfield, ray_mesh, raycast
-from renderer_proc.sample import sample_frame
 from cosim.world.scene import Boxes, Cylinders, HeightField, MeshInstance, scene_from_state
+from renderer_proc.sample import sample_frame
 
 
 def boxes(*specs) -> Boxes:

@@ -11,8 +11,8 @@ from cosim.scenario.config import Scenario
 from cosim.world.geometry import apply, cart_body_from_grid, vehicle_pose
 from cosim.world.meshes import unit_cube, unit_cylinder
 from cosim.world.raycast import raycast
-from renderer_proc.sample import sample_frame
 from cosim.world.scene import scene_from_state
+from renderer_proc.sample import sample_frame
 
 #: the default scene's triangle budget (one 640 x 480 camera in ~5 ms on llvmpipe)
 TRIANGLE_BUDGET = 10_000

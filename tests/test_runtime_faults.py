@@ -1,4 +1,4 @@
-"""Run faults beyond crashes (issue 18): stopped and deadlocked children, a stopped recorder, a killed launcher,
+"""Run faults beyond crashes: stopped and deadlocked children, a stopped recorder, a killed launcher,
 full disks, unusable run directories, determinism. Real launched runs with the stand-ins of fakes.py."""
 from __future__ import annotations
 
@@ -13,10 +13,10 @@ import textwrap
 import time
 from pathlib import Path
 
+import fakes
 import numpy as np
 import pytest
 
-import fakes
 from cosim.errors import HandoffTimeout, OutputError, ParticipantHung
 from cosim.recording import RecordOptions, mcap_sink
 from cosim.runtime import stream

@@ -6,11 +6,11 @@ import json
 import numpy as np
 import pytest
 
-from cosim.scenario.config import Scenario
+from cosim.report import load_run
 from cosim.runtime.inprocess import simulate
 from cosim.runtime.outputs import run_data, write_outputs, write_scenario
 from cosim.runtime.stream import RunFiles
-from cosim.report import load_run
+from cosim.scenario.config import Scenario
 
 
 @pytest.mark.parametrize("setup", [{"feedback": "ground_truth", "renderer": "none", "duration_s": 3.0},

@@ -3,15 +3,15 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import fakes
 import numpy as np
 import pytest
 
-import fakes
-from cosim.scenario.config import Scenario
 from cosim.runtime.inprocess import simulate
 from cosim.runtime.launcher import launch
 from cosim.runtime.lockstep import RingPlan
 from cosim.runtime.participant import perception_overlaps
+from cosim.scenario.config import Scenario
 
 ROLES = ("dynamics", "renderer", "perception")
 

@@ -1,15 +1,15 @@
 """Who takes part in a run, and the two transports giving the same results."""
 from __future__ import annotations
 
+import fakes
 import numpy as np
 import pytest
 
-import fakes
-from cosim.scenario.config import Scenario
 from cosim.runtime.inprocess import simulate
 from cosim.runtime.launcher import launch
 from cosim.runtime.lockstep import RingPlan
 from cosim.runtime.specs import DEFAULT_SPECS, SUPERVISOR, ring_specs
+from cosim.scenario.config import Scenario
 
 
 @pytest.mark.parametrize("feedback, renderer, viewer, ring", [

@@ -9,16 +9,16 @@ import textwrap
 import time
 from pathlib import Path
 
+import fakes
 import numpy as np
 import pytest
 
-import fakes
-from cosim.scenario.config import Scenario
 from cosim.errors import FrameMismatch, HandoffTimeout, ParticipantCrashed, ParticipantDied
 from cosim.runtime.inprocess import simulate
 from cosim.runtime.launcher import EXIT_INTERRUPTED, EXIT_RUN_ERROR, launch
 from cosim.runtime.lockstep import RingPlan, Token
-from shm_schema import Schema, Segment, StructBlock, Field
+from cosim.scenario.config import Scenario
+from shm_schema import Field, Schema, Segment, StructBlock
 
 ROLES = ("dynamics", "renderer", "perception")
 #: the promise: a dead or hung child ends the run within this long after it happens

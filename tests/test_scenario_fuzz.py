@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import string
 
-from hypothesis import HealthCheck, given, settings, strategies as st
-
-from cosim.scenario.config import Scenario
-from cosim.errors import ScenarioError
-from cosim.scenario.loader import _model_of, load_scenario_text
-
 import yaml
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from cosim.errors import ScenarioError
+from cosim.scenario.config import Scenario
+from cosim.scenario.loader import _model_of, load_scenario_text
 
 
 def _known_keys(model=Scenario) -> list[str]:

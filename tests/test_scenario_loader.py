@@ -8,10 +8,15 @@ from pathlib import Path
 
 import pytest
 
-from cosim.scenario.config import Scenario
 from cosim.errors import Problem, ScenarioError
+from cosim.scenario.config import Scenario
 from cosim.scenario.loader import (
-    OPTIONS_FILE, SET_FILE, load_scenario, load_scenario_text, packaged_scenarios, path_fields,
+    OPTIONS_FILE,
+    SET_FILE,
+    load_scenario,
+    load_scenario_text,
+    packaged_scenarios,
+    path_fields,
     resolve_scenario_arg,
 )
 

@@ -1,4 +1,4 @@
-"""Input limits and the frame-0 plausibility checks (issue 18) beyond the gallery: sizes, memory, the CLI."""
+"""Input limits and the frame-0 plausibility checks beyond the gallery: sizes, memory, the CLI."""
 from __future__ import annotations
 
 import pytest
@@ -7,8 +7,7 @@ from cosim.errors import RunRefused, ScenarioError
 from cosim.runtime.capacity import check_segment_fits
 from cosim.runtime.specs import build_schema, ring_specs
 from cosim.scenario.loader import MAX_SCENARIO_BYTES, load_scenario, load_scenario_text, resolve_scenario_arg
-from cosim.scenario.plausibility import (PROCESS_BYTES_PER_BEAM, SHARED_BYTES_PER_BEAM, implausible,
-                                         memory_problems)
+from cosim.scenario.plausibility import PROCESS_BYTES_PER_BEAM, SHARED_BYTES_PER_BEAM, implausible, memory_problems
 from cosim.scenario.yamlmarks import MAX_VALUES
 
 DEFAULT = resolve_scenario_arg("default")

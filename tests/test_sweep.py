@@ -1,5 +1,5 @@
 """``launch.py sweep``: sweep files validated whole, runs on a LocalCluster and on a scheduler with workers,
-resume, failures, the results table (issue 17)."""
+resume, failures, the results table."""
 from __future__ import annotations
 
 import csv

@@ -12,8 +12,8 @@ import urllib.request
 from pathlib import Path
 
 import pytest
-
 import test_viewer_standins as standins
+
 from cosim.runtime.launcher import ObserverSpec, launch
 from cosim.viewer import LiveSource, RunEnded, RunNotFound, resolve_run
 from cosim.viewer.live import SHM_DIR

@@ -8,15 +8,28 @@ import urllib.request
 import cv2
 import numpy as np
 import pytest
-
 import test_viewer_standins as standins
-from cosim.runtime.launcher import launch
+
 from cosim.recording import mcap_sink
-from cosim.viewer.replay import ReplaySource
+from cosim.runtime.launcher import launch
 from cosim.viewer.page import page_html
-from cosim.viewer.panels import (BACKGROUND, IMAGE_PANELS, MAP_MARGIN_BOTTOM, MAP_MARGIN_LEFT, MAP_MARGIN_TOP,
-                                  MAP_W, PANELS, PLOT_BOX, PLOT_H, PLOT_W, UNKNOWN, lidar_frame, panel_info,
-                                  render_panel)
+from cosim.viewer.panels import (
+    BACKGROUND,
+    IMAGE_PANELS,
+    MAP_MARGIN_BOTTOM,
+    MAP_MARGIN_LEFT,
+    MAP_MARGIN_TOP,
+    MAP_W,
+    PANELS,
+    PLOT_BOX,
+    PLOT_H,
+    PLOT_W,
+    UNKNOWN,
+    lidar_frame,
+    panel_info,
+    render_panel,
+)
+from cosim.viewer.replay import ReplaySource
 from cosim.viewer.server import DashboardServer
 from cosim.viewer.snapshot import Snapshot, auger_now, fullness
 

@@ -20,11 +20,11 @@ import urllib.request
 import cv2
 import numpy as np
 import pytest
-
 import test_viewer_standins as standins
+
 from cosim.recording import mcap_sink
-from cosim.viewer.replay import ReplaySource
 from cosim.runtime.launcher import launch
+from cosim.viewer.replay import ReplaySource
 from cosim.viewer.server import DashboardServer
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -167,7 +167,7 @@ def test_replay_dashboard_in_chromium_play_pause_step_seek_and_layout(server, tm
               const r = s.getBoundingClientRect(); return [s.id, r.left, r.top, r.right, r.bottom]; })}; })()""")
         left, right = rects["main"]
         rows = {}
-        for pid, x0, y0, x1, y1 in rects["panels"]:
+        for _pid, x0, y0, x1, _y1 in rects["panels"]:
             rows.setdefault(round(y0), []).append((x0, x1))
         for y, spans in rows.items():
             covered = sum(x1 - x0 for x0, x1 in spans)

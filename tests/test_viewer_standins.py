@@ -14,9 +14,9 @@ import time
 
 import numpy as np
 
-from cosim.scenario.config import Scenario
 from cosim.runtime.inprocess import simulate
 from cosim.runtime.specs import ParticipantSpec
+from cosim.scenario.config import Scenario
 from shm_schema import ArrayBlock, Field, StructBlock, image_block
 
 IMG_H, IMG_W = 48, 64

@@ -10,7 +10,7 @@ therefore sent in the ``lidar`` frame, the sensor *mount* frame with body axes (
 ``p_mount = BODY_FROM_CAMERA @ p_cam``, i.e. (x, y, z) = (Z, -X, Y). Height maps ``h[i, j]`` (i along cart
 grid x) become a Grid in the ``cart_grid`` frame with columns along x and rows along y (Foxglove's y-major
 order), i.e. the bytes of ``h.T``. A depth-encoded image block goes into a RawImage ``rgba8`` byte for byte (R,
-G, B carry the depth code, alpha the validity, DESIGN.md 4): lossless. RGB images may be JPEG or PNG
+G, B carry the depth code, alpha the validity, docs/CONTRACTS.md): lossless. RGB images may be JPEG or PNG
 CompressedImage, or RawImage.
 
 Our own channels are JSON: ``cosim.struct.<block>`` (one scalar time series message per struct block and
@@ -124,7 +124,7 @@ def compressed_image_msg(t_ns: int, rgba: np.ndarray, frame_id: str, fmt: str = 
     """CompressedImage (``png`` or ``jpeg``) of the RGB channels of an (H, W, 4) uint8 image block.
 
     Never for depth-encoded images: lossy compression decodes to wrong depths, and even PNG drops the alpha
-    (validity) channel (DESIGN.md 4); those go through :func:`raw_image_msg`.
+    (validity) channel (docs/CONTRACTS.md); those go through :func:`raw_image_msg`.
     """
     import cv2  # lazily: only RGB camera images need it
 

@@ -44,9 +44,9 @@ from .messages import (
     marker_json,
     planar_transform_msg,
     point_cloud_msg,
+    quaternion_from_matrix,
     raw_image_msg,
     scalars_json,
-    quaternion_from_matrix,
     struct_schema,
 )
 

@@ -1,4 +1,4 @@
-"""MCAP recording of a run with Foxglove's well-known schemas, reading it back, and replaying it (issue 7).
+"""MCAP recording of a run with Foxglove's well-known schemas, reading it back, and replaying it.
 
 ``launch(..., sinks=[mcap_sink()])`` (``launch.py run ... --record``) writes ``<run_dir>/recording.mcap`` with
 Foxglove's well-known schemas in protobuf encoding: foxglove.PointCloud (LiDAR), foxglove.RawImage (depth-encoded

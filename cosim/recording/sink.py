@@ -30,11 +30,11 @@ import struct
 import time
 from pathlib import Path
 
-from shm_schema import Schema, Segment
-
 from cosim.runtime.files import write_error
 from cosim.runtime.liveness import STALL_S, cpu_ticks, end_process, is_stopped
 from cosim.runtime.threadpools import single_threaded_pools
+from shm_schema import Schema, Segment
+
 from .slots import FrameSlots
 from .writer import (
     DEFAULT_NAME,

@@ -24,9 +24,8 @@ import foxglove
 import numpy as np
 from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
-from shm_schema import Schema, Segment, StructBlock
-
 from cosim.foxglove.publish import FRAME_TOPIC, VEHICLES, FramePublisher, Recorded, RunInfo
+from shm_schema import Schema, Segment, StructBlock
 
 __all__ = ["RecordOptions", "RunInfo", "McapWriter", "Recorded", "FrameData", "frame_data", "DEFAULT_NAME", "PROFILE",
            "VEHICLES", "FRAME_TOPIC"]

@@ -14,7 +14,6 @@ import matplotlib
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-
 from matplotlib.patches import Patch, Rectangle
 
 from .rundata import RunData
@@ -202,7 +201,7 @@ def fig_study(panels: Sequence[tuple[str, str, Sequence[tuple[str, float, float]
         ax.set_xscale("log")
         ax.set_yscale("log")
         zero_drawn = False
-        for i, (label, x, y) in enumerate(pts):
+        for label, x, y in pts:
             zero = not y > 0
             yy = floor if zero else y
             ax.plot([x], [yy], "v" if zero else "o", color="tab:blue", mfc="none" if zero else "tab:blue",

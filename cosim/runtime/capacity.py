@@ -7,10 +7,9 @@ instead of a MemoryError or a SIGBUS minutes into the run.
 """
 from __future__ import annotations
 
-from shm_schema import Schema
-
 from cosim.errors import RunRefused
 from cosim.scenario.plausibility import available_bytes, size_text
+from shm_schema import Schema
 
 __all__ = ["check_segment_fits", "SHOWN_BLOCKS"]
 

@@ -20,10 +20,10 @@ import traceback
 from dataclasses import dataclass
 from typing import Mapping
 
+from cosim.errors import RunError
+from cosim.scenario.config import Scenario
 from shm_schema import Phase, Segment
 
-from cosim.scenario.config import Scenario
-from cosim.errors import RunError
 from .liveness import Heartbeat
 from .lockstep import RingPlan, Token, member_loop
 from .logs import configure_logging

@@ -10,9 +10,9 @@ import time
 from dataclasses import dataclass
 from typing import Callable, Mapping
 
+from cosim.scenario.config import Scenario
 from shm_schema import Segment
 
-from cosim.scenario.config import Scenario
 from .lockstep import InProcessRing
 from .recorder import Recorder
 from .specs import ParticipantSpec, build_schema, ring_specs

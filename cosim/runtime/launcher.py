@@ -1,4 +1,4 @@
-"""Launcher and supervisor of one run (issue 2, DESIGN.md sections 1, 2, 6, 7): set-up, supervision, teardown.
+"""Launcher and supervisor of one run (docs/architecture.md): set-up, supervision, teardown.
 
 :func:`launch` reads as the run's lifecycle. :func:`_set_up` locks the run directory, writes scenario.yaml and a
 "running" summary, creates the segment and starts the observers, the sinks and one named process per ring
@@ -26,14 +26,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
+from cosim.errors import OutputError, RunError, RunInterrupted
+from cosim.scenario.config import Scenario
 from shm_schema import Phase, Segment
 from shm_schema.layout import SLOT_WORD
 
 from .capacity import check_segment_fits
 from .child import ChildArgs, child_main
 from .daemonic import children_allowed
-from cosim.scenario.config import Scenario
-from cosim.errors import OutputError, RunError, RunInterrupted
 from .files import RunDirLock, atomic_write, open_run_dir
 from .liveness import Watch, child_failure, stop_processes
 from .lockstep import RingPlan, Token

@@ -1,4 +1,4 @@
-"""Liveness apart from slowness (DESIGN.md section 1): heartbeats, stopped processes, bounded ends.
+"""Liveness apart from slowness (docs/architecture.md): heartbeats, stopped processes, bounded ends.
 
 A child beats from a thread of its own (:class:`Heartbeat`): every ``BEAT_S`` it stamps CLOCK_MONOTONIC (one
 clock for every process of the machine) into its slot's ``alive_ns``, whatever its frame work does, so a long
@@ -22,10 +22,9 @@ import threading
 import time
 from typing import Callable, Mapping
 
+from cosim.errors import ParticipantCrashed, ParticipantDied, ParticipantHung, RunError
 from shm_schema import Phase, Segment
 from shm_schema.layout import SLOT_WORD
-
-from cosim.errors import ParticipantCrashed, ParticipantDied, ParticipantHung, RunError
 
 __all__ = ["BEAT_S", "STALL_S", "CONFIRM_S", "Heartbeat", "Watch", "process_state", "cpu_ticks", "is_stopped",
            "end_process",

@@ -1,4 +1,4 @@
-"""The lockstep token ring (DESIGN.md section 1, STYLE.md 5).
+"""The lockstep token ring (docs/architecture.md).
 
 One turn per frame: dynamics -> renderer -> perception -> supervisor -> dynamics ... Each member blocks on its
 own semaphore; the sender writes the frame id into the receiver's header slot before releasing it, and the
@@ -16,10 +16,9 @@ import time
 from dataclasses import dataclass
 from typing import Callable, Mapping, Sequence
 
+from cosim.errors import FrameMismatch, HandoffTimeout
 from shm_schema import Phase, Segment
 from shm_schema.layout import SLOT_WORD
-
-from cosim.errors import FrameMismatch, HandoffTimeout
 
 _TOKEN, _PHASE, _FRAME = SLOT_WORD["token"], SLOT_WORD["phase"], SLOT_WORD["frame"]
 _HEARTBEAT, _STEP = SLOT_WORD["heartbeat_ns"], SLOT_WORD["step_ns"]

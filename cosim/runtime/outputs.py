@@ -1,4 +1,4 @@
-"""The run directory (DESIGN.md section 6): scenario.yaml, log.txt, summary.json, timeseries.csv, timing.csv,
+"""The run directory (docs/architecture.md): scenario.yaml, log.txt, summary.json, timeseries.csv, timing.csv,
 final maps.
 
 Written by the launcher from what the recorder holds, so a failed or stopped run still writes everything up to
@@ -19,8 +19,9 @@ from typing import Sequence
 
 import numpy as np
 
-from cosim.scenario.config import Scenario
 from cosim.errors import OutputError, RunError, RunInterrupted
+from cosim.scenario.config import Scenario
+
 from .files import atomic_write
 from .recorder import Recorder
 from .specs import ParticipantSpec, load_callable
@@ -72,7 +73,7 @@ def clean_json(obj):
 
 def compose_summary(scenario: Scenario, recorder: Recorder | None, ring: Sequence[ParticipantSpec], *,
                     wall_time_s: float, error: RunError | None) -> dict:
-    """summary.json's content (DESIGN.md section 6) from what the recorder holds."""
+    """summary.json's content (docs/architecture.md) from what the recorder holds."""
     completed_frames = len(recorder.frames) if recorder else 0
     last = recorder.frames[-1] if recorder and recorder.frames else -1
     sim_time = max(0, last) * scenario.timing.sensor_period_s

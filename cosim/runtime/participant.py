@@ -1,4 +1,4 @@
-"""The participant contract: one frame-stepped component of the ring (STYLE.md 4).
+"""The participant contract: one frame-stepped component of the ring.
 
 A participant is created from the scenario, started with the run's segment, then stepped once per frame in
 ring order (dynamics -> renderer -> perception). The same object runs in-process (tests, debugging:

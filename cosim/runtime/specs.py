@@ -5,9 +5,8 @@ import importlib
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
-from shm_schema import Schema
-
 from cosim.scenario.config import Scenario
+from shm_schema import Schema
 
 __all__ = ["ParticipantSpec", "DEFAULT_SPECS", "SUPERVISOR", "load_callable", "build_schema", "ring_specs"]
 

@@ -1,4 +1,4 @@
-"""The run directory written as the run goes (DESIGN.md section 6): nothing lives only in the launcher's memory.
+"""The run directory written as the run goes (docs/architecture.md): nothing lives only in the launcher's memory.
 
 * summary.json is written first, small, with ``status: "running"`` and ``completed: false`` and padded to
   ``SUMMARY_RESERVE`` bytes: a launcher killed with SIGKILL leaves a summary that says the run did not finish,
@@ -19,6 +19,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from cosim.errors import OutputError
+
 from .files import atomic_write, overwrite_in_place, write_error
 from .recorder import Recorder
 

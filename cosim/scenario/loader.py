@@ -1,6 +1,6 @@
 """Scenario loading: YAML with line/col marks -> overrides -> path resolution -> strict validation.
 
-A scenario is validated whole before anything starts (DESIGN.md section 7). Every problem found (YAML syntax,
+A scenario is validated whole before anything starts (docs/architecture.md). Every problem found (YAML syntax,
 duplicate keys, ``--set`` overrides, missing files, every pydantic error) is collected and raised once as a
 :class:`cosim.errors.ScenarioError`, each problem as ``file:line:col: dotted.path: message`` (1-based).
 
@@ -28,12 +28,18 @@ from pathlib import Path
 import yaml
 from pydantic import BaseModel, ValidationError
 
+from cosim.errors import Problem, ScenarioError
+
 from .config import FORMAT_VERSION, Scenario
 from .plausibility import implausible
-from cosim.errors import Problem, ScenarioError
 from .trust import CHECKS, PLUGIN_POINTS, check_plugin_refs, options_key
-from .yamlmarks import (Doc as _Doc, Dumper as _Dumper, Loc, Mark as _Mark,
-                        dotted as _dotted, parse as _parse, show as _show)
+from .yamlmarks import Doc as _Doc
+from .yamlmarks import Dumper as _Dumper
+from .yamlmarks import Loc
+from .yamlmarks import Mark as _Mark
+from .yamlmarks import dotted as _dotted
+from .yamlmarks import parse as _parse
+from .yamlmarks import show as _show
 
 __all__ = [
     "SCENARIO_DIR", "SET_FILE", "OPTIONS_FILE", "load_scenario", "load_scenario_text", "packaged_scenarios",

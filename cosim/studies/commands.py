@@ -78,6 +78,7 @@ def sweep_command(args: argparse.Namespace) -> int:
 
 def study_command(args: argparse.Namespace, scenario) -> int:
     from cosim.runtime.outputs import default_run_dir
+
     from .study import KNOBS, parse_knob, run_study
 
     if _missing_engine():

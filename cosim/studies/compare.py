@@ -5,11 +5,11 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from cosim.scenario.config import Scenario
-from cosim.runtime.launcher import launch
-from cosim.runtime.progress import run_progress
 from cosim.report.html import write_comparison_report
 from cosim.report.rundata import load_run
+from cosim.runtime.launcher import launch
+from cosim.runtime.progress import run_progress
+from cosim.scenario.config import Scenario
 
 __all__ = ["VARIANTS", "variants", "compare"]
 

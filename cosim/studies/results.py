@@ -19,7 +19,7 @@ __all__ = ["METRICS", "metrics_of", "read_summary", "read_table", "ResultsTable"
 
 log = logging.getLogger("cosim.studies.results")
 
-#: table column -> key path in a run's summary.json (DESIGN.md section 6); units in the names
+#: table column -> key path in a run's summary.json (docs/architecture.md); units in the names
 METRICS: dict[str, tuple[str, ...]] = {
     "spill_kg": ("spill", "mass_kg"),
     "max_overfill_m": ("fill", "max_overfill_m"),

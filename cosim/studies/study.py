@@ -23,10 +23,11 @@ import yaml
 from pydantic import ValidationError
 
 from cosim.errors import Problem, ScenarioError
-from cosim.scenario.config import Scenario
-from cosim.scenario.yamlmarks import Loader
 from cosim.report.figures import DPI, fig_study
 from cosim.runtime.outputs import clean_json
+from cosim.scenario.config import Scenario
+from cosim.scenario.yamlmarks import Loader
+
 from .results import read_summary
 from .sweep import run_sweep
 from .sweepfile import RunSpec, Sweep, run_id

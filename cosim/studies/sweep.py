@@ -1,4 +1,4 @@
-"""The sweep engine: a sweep's runs on Dask distributed (issue 17, DESIGN.md section 8, docs/sweeps.md).
+"""The sweep engine: a sweep's runs on Dask distributed (docs/sweeps.md).
 
 Each run is an ordinary launched run (``launch()``, its own OS processes) executed by a Dask worker into
 ``OUT/runs/<id>/``. Locally an embedded ``LocalCluster`` is started (one single-threaded worker process per
@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from cosim.scenario.config import Scenario
+
 from .results import ResultsTable, read_summary, read_table
 from .sweepfile import RunSpec, Sweep
 

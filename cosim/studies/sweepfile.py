@@ -1,4 +1,4 @@
-"""Sweep files: parse, validate whole, expand into runs (issue 17, docs/sweeps.md).
+"""Sweep files: parse, validate whole, expand into runs (docs/sweeps.md).
 
 ``load_sweep(path)`` reads the YAML with line marks (cosim/scenario/yamlmarks.py), validates its structure
 (:class:`cosim.scenario.config.sweep.SweepFile`), then builds and validates every run's scenario with the

@@ -1,4 +1,4 @@
-"""Live viewer of a running co-simulation, and the dashboard it serves (issue 7).
+"""Live viewer of a running co-simulation, and the dashboard it serves.
 
 ``python -m cosim.viewer --attach RUN`` (a run directory or a segment name) attaches read-only, learns the
 layout from the segment, reads seqlock-consistent snapshots, and serves a local web dashboard on 127.0.0.1.

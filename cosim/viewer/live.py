@@ -1,4 +1,4 @@
-"""Attaching to a running co-simulation read-only, by run directory or segment name (DESIGN.md section 2).
+"""Attaching to a running co-simulation read-only, by run directory or segment name (docs/architecture.md).
 
 The viewer learns the layout from the segment itself (``Segment.attach`` decodes the stored schema), copies
 blocks with the seqlock (``Segment.snapshot``: copy, retry if the writer moved), never writes, never unlinks

@@ -1,4 +1,4 @@
-"""The beam-native LiDAR target: one pixel per beam (DESIGN.md section 9, docs/lidar.md).
+"""The beam-native LiDAR target: one pixel per beam (docs/lidar.md).
 
 With ``sensor.method: beam_native`` the renderer draws from the LiDAR origin straight into a target whose
 pixels are the beams, and perception decodes it per beam (Eq 3) with no back-projection or resample. This

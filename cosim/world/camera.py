@@ -1,4 +1,4 @@
-"""Pinhole camera of the paper's Eqs 4-5 (DESIGN.md section 3).
+"""Pinhole camera of the paper's Eqs 4-5 (docs/architecture.md).
 
 Camera frame X right, Y up, Z forward. Image u right, v down, origin at the top-left corner of the image,
 pixel (col i, row j) has its centre at (u, v) = (i + 0.5, j + 0.5). f = w / (2 tan(hfov / 2)) in pixels, square

@@ -1,7 +1,7 @@
 """The fast exact ray cast from one origin (a LiDAR, a camera): Intel Embree when installed, else the numpy
 reference ``cosim.world.raycast``.
 
-Embree (the ``embreex`` binding; DESIGN.md section 4 names it an accepted exact reference) traverses a BVH
+Embree (the ``embreex`` binding; an exact reference like the numpy ray cast) traverses a BVH
 of the scene's triangles (``cosim.world.triangles``: the same surfaces the numpy caster intersects in closed
 form) in float32, built per frame. It decides which triangle each ray hits first; the range is then
 recomputed in float64 as the intersection of the ray with that triangle's plane, so it is exact like the

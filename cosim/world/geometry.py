@@ -1,4 +1,4 @@
-"""Rigid transforms and the project's frame conventions (DESIGN.md section 3).
+"""Rigid transforms and the project's frame conventions (docs/architecture.md).
 
 * World and body frames: x forward, y left, z up; vehicle origin on the ground.
 * Camera / LiDAR frame (the paper's): X right, Y up, Z forward along the optical axis. This frame is

@@ -1,6 +1,6 @@
 """The drawn grain surface: one triangulated height field shared by the GL renderer and the ray caster.
 
-Cart grid frame (DESIGN.md section 3): x along the cart 0..L, y across 0..W, z up from the floor. The grain
+Cart grid frame (docs/architecture.md): x along the cart 0..L, y across 0..W, z up from the floor. The grain
 model's cells (i, j) are centred at ((i + 0.5) c, (j + 0.5) c). The surface interpolates the cell heights
 linearly between cell centres, on a vertex grid at the cell centres padded by one edge-replicated ring:
 vertex (a, b), a = 0..nx+1, b = 0..ny+1, stands at x = (a - 0.5) c, y = (b - 0.5) c with height

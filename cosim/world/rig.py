@@ -1,5 +1,5 @@
 """Camera rig planning: the fewest pinhole cameras, at the smallest resolution, that cover a LiDAR pattern
-with a bounded nearest-pixel angular error (the paper stitches two cameras; DESIGN.md sections 1 and 4).
+with a bounded nearest-pixel angular error (the paper stitches two cameras; docs/architecture.md, docs/CONTRACTS.md).
 
 Error bound. A beam meets the image plane somewhere in a pixel; the nearest pixel centre is at most
 delta = sqrt(2)/2 pixels away. For image-plane points p and q = p + delta (pixels, focal length f),
@@ -21,9 +21,9 @@ import math
 
 import numpy as np
 
-from cosim.world.camera import Pinhole, Rig, RigCamera, beam_directions, yaw_transform
 from cosim.scenario.config.scenario import Scenario
 from cosim.scenario.config.sensing import Pattern
+from cosim.world.camera import Pinhole, Rig, RigCamera, beam_directions, yaw_transform
 
 __all__ = [
     "MAX_CAMERAS",

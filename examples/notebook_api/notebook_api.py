@@ -78,7 +78,7 @@ for c in result.summary["inputs_changed"]:
     print(f"  set at frame {c['frame']} (t = {c['t_s']:.1f} s): {c['path']} = {c['value']:g}")
 
 # %% plot the whole run from the result's timeseries (every frame, not only the ones kept above)
-import matplotlib
+import matplotlib  # noqa: E402  (a notebook cell imports what it plots with)
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402

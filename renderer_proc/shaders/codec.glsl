@@ -1,4 +1,4 @@
-// Depth-in-colour encoding of the paper's Eqs 1-2 (DESIGN.md section 4), bit for bit renderer_proc.codec.encode_depth,
+// Depth-in-colour encoding of the paper's Eqs 1-2 (docs/CONTRACTS.md), bit for bit renderer_proc.codec.encode_depth,
 // shared by the camera pass (encode.frag, planar depth) and the beam-native passes (range along the beam). The
 // renderer inserts it after the #defines (MISHANDLED_GAMMA: compile-time, so the linear pipeline pays for no pow).
 uniform float u_q_per_m;        // periods of B per metre: 100 / beta_cm

@@ -1,5 +1,5 @@
 #version 330
-// Depth-in-colour encoding of the paper's Eqs 1-2 (DESIGN.md section 4), bit-for-bit the numpy reference
+// Depth-in-colour encoding of the paper's Eqs 1-2 (docs/CONTRACTS.md), bit-for-bit the numpy reference
 // renderer_proc.codec.encode_depth. The encoded target is an integer RGBA8 (RGBA8UI) renderbuffer: the shader
 // writes the bytes themselves, so no float->unorm conversion, filtering or blending can touch them.
 // Linear mode: the paper's x^gamma followed by the engine's inverse gamma cancel exactly, the stored bytes are

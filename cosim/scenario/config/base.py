@@ -51,7 +51,7 @@ Entity = Literal["world", "combine", "tractor", "cart"]
 class Mount(Model):
     """Pose of a rigid attachment (sensor, camera) relative to an entity's body frame.
 
-    Body frames are x forward, y left, z up with the origin on the ground (DESIGN.md section 3). ``rpy_deg`` is
+    Body frames are x forward, y left, z up with the origin on the ground (docs/architecture.md). ``rpy_deg`` is
     roll, pitch, yaw applied as R = Rz(yaw) Ry(pitch) Rx(roll). With y left, positive pitch tips the forward axis
     down (nose down) and positive yaw turns it to the left.
     """

@@ -1,6 +1,6 @@
 """Scenario sections for the grain fill model, the offloading controller and the integrator.
 
-Owned by dynamics_proc (issue 3). ``Controller.grid_cell_m`` and ``Controller.sections`` are shared with
+Owned by dynamics_proc. ``Controller.grid_cell_m`` and ``Controller.sections`` are shared with
 perception_proc: the perceived height map is produced on that grid.
 """
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """Scenario sections for the machines and the grain: crop, combine, auger, tractor, cart, Machine Sync.
 
-Owned by dynamics_proc (issue 3). Fields used by other packages (cart geometry, auger geometry, entity
-dimensions, mesh files) keep their names; others may be added. Defaults describe the paper's machines
-(DESIGN.md section 5): S660-class combine, 8345R-class tractor, Brandt 1020XR-class cart, corn.
+Owned by dynamics_proc. Fields used by other packages (cart geometry, auger geometry, entity
+dimensions, mesh files) keep their names; others may be added. Defaults describe the paper's machines:
+S660-class combine, 8345R-class tractor, Brandt 1020XR-class cart, corn.
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Scenario section for the renderer. Owned by renderer_proc (issue 4)."""
+"""Scenario section for the renderer. Owned by renderer_proc."""
 from __future__ import annotations
 
 from typing import Literal

@@ -1,4 +1,4 @@
-"""The top-level scenario record: timing, mode, and every section. Owned by cosim (issue 2)."""
+"""The top-level scenario record: timing, mode, and every section. Owned by cosim."""
 from __future__ import annotations
 
 import math

@@ -1,6 +1,6 @@
 """Scenario sections for the LiDAR, the depth codec and the perception algorithms.
 
-Owned by perception_proc (issue 5); ``Codec`` is shared with renderer_proc (the shader encodes, perception
+Owned by perception_proc; ``Codec`` is shared with renderer_proc (the shader encodes, perception
 decodes) and ``Sensor.mount`` / ``Sensor.pattern`` with the renderer's rig planner.
 """
 from __future__ import annotations
@@ -22,7 +22,7 @@ RATIO_SLACK = 1e-12
 
 
 class Codec(Model):
-    """Depth-in-colour codec of the paper's Eqs 1-3 (d in cm). DESIGN.md section 4.
+    """Depth-in-colour codec of the paper's Eqs 1-3 (d in cm). docs/CONTRACTS.md.
 
     ``gamma_mode``: ``linear`` stores linear bytes (the shader writes x^gamma and the inverse gamma is undone
     before 8-bit storage, as in Unreal); ``mishandled`` quantises in the gamma domain, for the error study.
@@ -41,7 +41,7 @@ class Codec(Model):
         if ratio > MAX_RATIO * (1.0 + RATIO_SLACK):
             raise ValueError(
                 f"alpha_cm / beta_cm = {ratio:g} exceeds {MAX_RATIO:g}: R's quantisation step then exceeds half a "
-                "period and Eq 3 loses whole periods (DESIGN.md section 4 says 255; above 254 the bound holds only "
+                "period and Eq 3 loses whole periods (255, the naive limit, holds only "
                 "for an encoder that rounds R and B from one shared value); raise beta_cm or lower alpha_cm"
             )
         return self
