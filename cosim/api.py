@@ -33,8 +33,9 @@ from cosim.errors import (
     SimulationDone,
     UnknownInput,
 )
+from cosim.runtime.figures import PENDING, draw_figures, figures_plan
 from cosim.runtime.inprocess import InProcessSession
-from cosim.runtime.outputs import compose_summary, write_figures, write_outputs, write_scenario
+from cosim.runtime.outputs import compose_summary, finish_outputs, write_scenario
 from cosim.runtime.state import FrameState, StateReader
 from cosim.scenario.config import Scenario
 from cosim.scenario.options import load_with_options
@@ -256,19 +257,23 @@ class Simulation:
 
     def _finish(self, error: RunError | None) -> None:
         run = self._session.finish()
-        extra = {"inputs_changed": list(self._changes)} if self._changes else {}
-        if self._out is not None:
-            summary = write_outputs(self._out, self._live, run.recorder, run.ring, wall_time_s=run.wall_time_s,
-                                    error=error, extra=extra)
-        else:
-            summary = compose_summary(self._live, run.recorder, run.ring, wall_time_s=run.wall_time_s, error=error)
-            summary.update(extra)
         for sink in self._session.sinks:
             close = getattr(sink, "close", None)
             if close is not None:
                 close()
+            error = error or getattr(sink, "error", None)  # a recording not written whole
+        extra = {"inputs_changed": list(self._changes)} if self._changes else {}
         if self._out is not None:
-            write_figures(self._out, self._live, summary, run.recorder)
+            figures = figures_plan(self._out, self._live, run.recorder, error)
+            summary, failure = finish_outputs(self._out, self._live, run.recorder, run.ring,
+                                              wall_time_s=run.wall_time_s, error=error,
+                                              extra={**extra, "figures": figures}, reserve=figures["status"] == PENDING)
+            if failure is None and figures["status"] == PENDING:
+                summary, failure = draw_figures(self._out, self._live, summary, run.recorder)
+            error = error or failure
+        else:
+            summary = compose_summary(self._live, run.recorder, run.ring, wall_time_s=run.wall_time_s, error=error)
+            summary.update(extra)
         arrays = {k: v.copy() for k, v in run.recorder.arrays.items()}
         self._result = SimulationResult(self._scenario, summary, run.recorder.series(), arrays, self._out, error)
 

@@ -2,9 +2,10 @@
 
 Verbs: ``run [SCENARIO]`` (the default verb; no scenario runs the packaged default), ``validate SCENARIO``,
 ``schema`` (write the scenario JSON Schema), ``view RUN`` (attach the live viewer to a running run) and
-``replay FILE.mcap`` (serve a recording to the viewer's dashboard, with play / pause / step / seek), ``list``
-(the packaged scenarios with their descriptions), ``compare`` and ``study``. Exit codes: 0 success, 1 run failure,
-2 invalid scenario or usage, 130 interrupted.
+``replay FILE.mcap`` (serve a recording to the viewer's dashboard, with play / pause / step / seek), ``report
+RUN_DIR`` (draw a run's figures, a failed run's too), ``list`` (the packaged scenarios with their descriptions),
+``compare``, ``study`` and ``sweep``. Exit codes: 0 success, 1 run failure, 2 invalid scenario or usage, 130
+interrupted.
 """
 from __future__ import annotations
 
@@ -18,12 +19,13 @@ from typing import Sequence
 
 from cosim.runtime.threadpools import default_to_single_threaded_pools
 
-from .errors import RunRefused, ScenarioError
+from .errors import OutputError, RunRefused, ScenarioError
 from .studies.commands import add_sweep_parser, study_command, sweep_command
 
 __all__ = ["main", "build_parser", "run_extras", "VERBS"]
 
-VERBS = ("run", "validate", "schema", "compare", "study", "view", "replay", "list", "sweep")
+VERBS = ("run", "validate", "schema", "compare", "study", "view", "replay", "report", "list", "sweep")
+EXIT_RUN_ERROR = 1
 EXIT_SCENARIO = 2
 EXIT_INTERRUPTED = 130
 
@@ -87,11 +89,13 @@ def build_parser() -> argparse.ArgumentParser:
     view = sub.add_parser("view", help="attach the live viewer to a running run (python -m cosim.viewer --attach)")
     view.add_argument("run", help="run directory (with run.json) or shared-memory segment name")
     _server_options(view)
-    rep = sub.add_parser("replay", help="serve an MCAP recording to the viewer's dashboard (play, pause, step, seek)")
-    rep.add_argument("file", type=Path, help="recording written by run --record")
-    _server_options(rep)
-    rep.add_argument("--speed", type=float, default=1.0, help="x simulated time (default %(default)s)")
-    rep.add_argument("--loop", action="store_true", help="start over at the end")
+    rpl = sub.add_parser("replay", help="serve an MCAP recording to the viewer's dashboard (play, pause, step, seek)")
+    rpl.add_argument("file", type=Path, help="recording written by run --record")
+    _server_options(rpl)
+    rpl.add_argument("--speed", type=float, default=1.0, help="x simulated time (default %(default)s)")
+    rpl.add_argument("--loop", action="store_true", help="start over at the end")
+    rep = sub.add_parser("report", help="draw a run directory's figures (a failed or stopped run's too)")
+    rep.add_argument("run_dir", type=Path, help="run directory")
     sub.add_parser("list", help="list the packaged scenarios (run them by name) with their descriptions")
     return parser
 
@@ -183,6 +187,22 @@ def _print_summary(result, stream) -> None:
     stream.write("\n".join(lines) + "\n")
 
 
+def _report(run_dir: Path) -> int:
+    """``report RUN_DIR``: draw the run's figures and record them in its summary.json."""
+    from cosim.runtime.figures import report
+
+    try:
+        entry = report(run_dir)
+    except (FileNotFoundError, ValueError) as exc:
+        sys.stderr.write(f"{exc}\n")
+        return EXIT_SCENARIO
+    except OutputError as exc:
+        sys.stderr.write(f"{exc}\n")
+        return EXIT_RUN_ERROR
+    sys.stdout.write(f"figures of {run_dir}: {', '.join(entry['files'])}\n")
+    return 0
+
+
 def _interruptible(fn):
     """``main`` ends with exit 130 and one line, no traceback, on Ctrl-C or SIGTERM at any moment (a run handles
     them itself: cosim.runtime.signals; this covers the start-up before it and the printing after it), and with
@@ -228,6 +248,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                            + (["--loop"] if args.loop else []))
     if args.verb == "sweep":
         return sweep_command(args)
+    if args.verb == "report":
+        return _report(args.run_dir)
     if args.verb == "list":
         from cosim.scenario.loader import describe_packaged
 

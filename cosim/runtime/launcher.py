@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
-from cosim.errors import OutputError, RunError, RunInterrupted
+from cosim.errors import HandoffTimeout, OutputError, ParticipantHung, RunError, RunInterrupted
 from cosim.scenario.config import Scenario
 from shm_schema import Phase, Segment
 from shm_schema.layout import SLOT_WORD
@@ -34,12 +34,14 @@ from shm_schema.layout import SLOT_WORD
 from .capacity import check_segment_fits
 from .child import ChildArgs, child_main
 from .daemonic import children_allowed
-from .files import RunDirLock, atomic_write, open_run_dir
-from .liveness import Watch, child_failure, stop_processes
+from .figures import PENDING, draw_figures, figures_plan
+from .files import atomic_write
+from .liveness import Watch, child_failure, ring_holder, stop_processes
 from .lockstep import RingPlan, Token
 from .logs import configure_logging
-from .outputs import default_run_dir, finish_outputs, write_figures, write_scenario
+from .outputs import default_run_dir, finish_outputs, write_scenario
 from .recorder import Recorder
+from .rundir import RunDirLock, open_run_dir
 from .signals import StopSignals, no_sigint_in_children
 from .specs import SUPERVISOR, ParticipantSpec, build_schema, ring_specs
 from .stream import RunFiles, write_running_summary
@@ -133,15 +135,16 @@ class _Run:
 def launch(scenario: Scenario, out_dir: Path | None = None, *,
            specs: Mapping[str, ParticipantSpec] | None = None, progress: Progress | None = None,
            console_log: bool = True, observers: Sequence[ObserverSpec] = (),
-           sinks: Sequence[SinkFactory] = ()) -> RunResult:
+           sinks: Sequence[SinkFactory] = (), overwrite: bool = False, parents: bool = False) -> RunResult:
     """Run ``scenario`` over OS processes and write its run directory. Never raises for run failures.
 
     ``observers`` are started after the segment exists and stopped at the end; ``sinks`` are called with each
     completed frame (see :data:`SinkFactory`). The run directory's ``run.json`` names the segment while the run
-    lives, so that ``python -m cosim.viewer --attach RUN_DIR`` can find it. Raises
-    :class:`cosim.runtime.files.RunDirError` before anything starts when the run directory cannot be used (not a
-    directory, not writable, another run writing there), and :class:`cosim.errors.RunRefused` when its shared
-    memory would not fit (cosim.runtime.capacity).
+    lives, so that ``python -m cosim.viewer --attach RUN_DIR`` can find it. ``overwrite``: replace the files of
+    an earlier run in ``out_dir`` (refused without); ``parents``: create ``out_dir``'s missing parents too (the
+    default run directory always). Raises :class:`cosim.runtime.rundir.RunDirError` before anything starts when
+    the run directory cannot be used (cosim.runtime.rundir), and :class:`cosim.errors.RunRefused` when its
+    shared memory would not fit (cosim.runtime.capacity).
     """
     t_enter = time.perf_counter()
     stop = StopSignals().install()
@@ -150,14 +153,15 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
         schema = build_schema(scenario, ring)
         check_segment_fits(schema)
         run_dir = Path(out_dir) if out_dir is not None else default_run_dir(scenario)
-        run = _Run(scenario, run_dir, open_run_dir(run_dir), stop, t_enter, ring=ring, schema=schema)
+        lock = open_run_dir(run_dir, overwrite=overwrite, parents=parents or out_dir is None)
+        run = _Run(scenario, run_dir, lock, stop, t_enter, ring=ring, schema=schema)
         try:
             error: RunError | None = None
             try:
                 _set_up(run, console_log, observers, sinks)
                 _supervise(run, progress)
             except RunError as exc:
-                error = exc
+                error = _at_fault(run, exc)
             except BaseException as exc:  # noqa: BLE001 - a supervisor bug still ends the run cleanly
                 error = RunError(f"supervisor failed: {type(exc).__name__}: {exc}", process=SUPERVISOR,
                                  frame=run.frame)
@@ -171,19 +175,20 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
 
 def _set_up(run: _Run, console_log: bool, observers: Sequence[ObserverSpec],
             sinks: Sequence[SinkFactory]) -> None:
-    """Logging, scenario.yaml, the "running" summary, the segment, then observers, sinks and ring children.
-    A stop signal is honoured between any two steps."""
+    """The "running" summary (first: it marks the directory as a run's, cosim.runtime.rundir), logging,
+    scenario.yaml, the segment, then observers, sinks and ring children. A stop signal is honoured between any
+    two steps."""
     scenario, stop = run.scenario, run.stop
-    run.log_path = run.run_dir / "log.txt"
-    configure_logging(str(run.log_path), console=console_log)
-    write_scenario(run.run_dir, scenario)
     schema = run.schema
     run.plan = plan = RingPlan(tuple(s.name for s in run.ring), scenario.frames, SUPERVISOR,
                                tuple(s.name for s in run.ring if s.defers_outputs(scenario)))
-    run.name = name = f"cosim-{os.getpid()}-{secrets.token_hex(3)}"
     write_running_summary(run.run_dir, {"scenario": scenario.name, "participants": list(plan.members),
                                         "seed": scenario.seed, "frames_planned": scenario.frames + 1,
                                         "launcher_pid": os.getpid()})
+    run.log_path = run.run_dir / "log.txt"
+    configure_logging(str(run.log_path), console=console_log)
+    write_scenario(run.run_dir, scenario)
+    run.name = name = f"cosim-{os.getpid()}-{secrets.token_hex(3)}"
     stop.check(-1)
     ctx = mp.get_context("spawn")
     run.sems = {n: ctx.Semaphore(0) for n in (*plan.members, SUPERVISOR)}
@@ -283,44 +288,73 @@ def _supervise(run: _Run, progress: Progress | None) -> None:
     sup["phase"] = Phase.DONE
 
 
-def _tear_down(run: _Run, error: RunError | None) -> RunResult:
-    """End every process (bounded), write the last rows, maps and the final summary, unlink the segment, draw the
-    figures. Signals meanwhile are only counted (a first one cuts the figures short); the exit status is 130
-    whenever a stop signal came."""
-    t_down = time.perf_counter()
-    wall = t_down - run.t_start if run.t_start else 0.0
+def _at_fault(run: _Run, error: RunError) -> RunError:
+    """``error`` naming the process at fault: a hand-off timeout met by the supervisor names the member that holds
+    up the ring (its message already describes it); an error that names no process (a write error) names the
+    supervisor, which writes the outputs."""
+    if isinstance(error, HandoffTimeout) and error.process == SUPERVISOR and run.seg is not None:
+        holder = ring_holder(run.seg, run.plan.members)
+        if holder is not None:
+            return HandoffTimeout(f"{holder} did not pass frame {error.frame} on within the hand-off timeout "
+                                  f"(timing.handoff_timeout_s = {run.scenario.timing.handoff_timeout_s:g} s): "
+                                  f"{error}", process=holder, frame=error.frame, detail=error.detail)
+    if not error.process:
+        error.process = SUPERVISOR
+    return error
+
+
+def _close_sinks(run: _Run) -> RunError | None:
+    """Close every frame sink; the first failure one reports (``sink.error``: a recording not written whole)."""
+    failure = None
     for sink in run.frame_sinks:
         close = getattr(sink, "close", None)
-        if close is not None:
-            try:
+        try:
+            if close is not None:
                 close()
-            except Exception:  # noqa: BLE001 - a sink's close must not hide the run's outcome
-                log.exception("closing a frame sink failed")
-    stop_processes(run.procs, graceful=error is None, join_timeout_s=JOIN_TIMEOUT_S, grace_s=TERMINATE_GRACE_S)
+        except Exception:  # noqa: BLE001 - a sink's close must not hide the run's outcome
+            log.exception("closing a frame sink failed")
+        failure = failure or getattr(sink, "error", None)
+    return failure
+
+
+def _tear_down(run: _Run, error: RunError | None) -> RunResult:
+    """End every process (bounded), write the last rows, maps and the final summary, unlink the segment; draw the
+    figures of a completed run only (cosim.runtime.figures: a failed or stopped run returns at once). Signals
+    meanwhile are only counted (a first one cuts the figures short); the exit status is 130 whenever a stop
+    signal came."""
+    t_down = time.perf_counter()
+    wall = t_down - run.t_start if run.t_start else 0.0
+    sink_error = _close_sinks(run)
+    hung = (error.process,) if isinstance(error, ParticipantHung) else ()
+    stop_processes(run.procs, graceful=error is None, join_timeout_s=JOIN_TIMEOUT_S, grace_s=TERMINATE_GRACE_S,
+                   hung=hung)
     stop_processes(run.watchers, graceful=False, join_timeout_s=JOIN_TIMEOUT_S, grace_s=TERMINATE_GRACE_S)
     if run.recorder is not None:
         run.recorder.finish()
     t_stopped = time.perf_counter()
     if error is None and run.stop.signum is not None:
         error = run.stop.error(run.frame)
+    error = error or sink_error
     if error is not None:
         log.error("run failed: %s", error)
         if error.detail:
             log.error("traceback of %s:\n%s", error.process, error.detail)
+    figures = figures_plan(run.run_dir, run.scenario, run.recorder, error)
     try:
         summary, failure = finish_outputs(run.run_dir, run.scenario, run.recorder, run.ring, wall_time_s=wall,
-                                          error=error, files=run.files)
+                                          error=error, files=run.files, extra={"figures": figures},
+                                          reserve=figures["status"] == PENDING)
     finally:
         if run.seg is not None:
             run.seg.close()
             run.seg.unlink()
             _end_run_json(run.run_dir)
+    t_outputs = time.perf_counter()
+    if failure is None and figures["status"] == PENDING:
+        summary, failure = draw_figures(run.run_dir, run.scenario, summary, run.recorder, run.stop.raising)
     if failure is not None:
         log.error("%s", failure)
-        error = error or failure
-    t_outputs = time.perf_counter()
-    if run.schema is not None and failure is None:
-        _write_figures(run, summary)
+        error = error or _at_fault(run, failure)
     code = _exit_code(error, run.stop)
     t_end = time.perf_counter()
     log.info("run %s %s in %.2f s (exit %d); start-up %.2f s to the first frame (set-up before spawning %.2f s), "
@@ -330,18 +364,6 @@ def _tear_down(run: _Run, error: RunError | None) -> RunResult:
              t_outputs - t_stopped, t_end - t_outputs, time.process_time())
     return RunResult(run.run_dir, summary, error, run.name, code, {n: p.exitcode for n, p in run.procs.items()},
                      dict(run.recorder.arrays) if run.recorder is not None else {})
-
-
-def _write_figures(run: _Run, summary: dict) -> None:
-    """The run's figures; a stop signal cuts them short (the run's data is already written)."""
-    if run.stop.signum is not None:
-        log.warning("figures not written: stopped by %s", run.stop.name)
-        return
-    try:
-        with run.stop.raising():
-            write_figures(run.run_dir, run.scenario, summary, run.recorder)
-    except RunInterrupted:
-        log.warning("figures not written: stopped by %s", run.stop.name)
 
 
 def _exit_code(error: RunError | None, stop: StopSignals) -> int:

@@ -55,7 +55,7 @@ class StopSignals:
             self.signum = signum
         if first and self._raise:
             self._raise = False
-            raise self.error(-1)
+            raise self._cut()
 
     @property
     def name(self) -> str:
@@ -70,10 +70,16 @@ class StopSignals:
         if self.signum is not None:
             raise self.error(frame)
 
+    def _cut(self) -> RunInterrupted:
+        return RunInterrupted(f"stopped by {self.name}", process="supervisor")
+
     @contextmanager
     def raising(self) -> Iterator[None]:
-        """Inside, the first signal raises RunInterrupted at once (to cut optional work short)."""
-        self._raise = self.signum is None
+        """Inside, the first signal raises RunInterrupted at once (to cut optional work short); entering it after
+        a signal came raises at once."""
+        if self.signum is not None:
+            raise self._cut()
+        self._raise = True
         try:
             yield
         finally:
