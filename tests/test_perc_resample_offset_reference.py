@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from cosim.scenario.config import Codec, Pattern
+from cosim.testing.synthetic import Box, Plane, encode_linear, render_depth, stitched_rig
 from cosim.world.patterns import beam_table, pattern_shape
 from perception_proc import resample_offset as ro
 from perception_proc.resample_offset_reference import resample_offset_reference
-from perception_proc.synthetic import Box, Plane, encode_linear, render_depth, stitched_rig
 
 CODEC = Codec()
 
