@@ -11,13 +11,13 @@ import json
 import time
 from pathlib import Path
 
-import fakes
 import pytest
 
 from cosim.cli import main
 from cosim.errors import HandoffTimeout, ParticipantCrashed, ParticipantHung
 from cosim.runtime.launcher import EXIT_RUN_ERROR, launch
 from cosim.scenario.loader import load_scenario, resolve_scenario_arg
+from cosim.testing import fakes
 
 #: the promise: from a fault to the launcher's return (named, every child ended, outputs written)
 BACK_WITHIN_S = 2.0

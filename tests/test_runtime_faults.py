@@ -19,9 +19,9 @@ import pytest
 from cosim.errors import HandoffTimeout, OutputError, ParticipantHung, RecordingFailed
 from cosim.recording import RecordOptions, mcap_sink
 from cosim.runtime import stream
-from cosim.runtime.rundir import LOCK_NAME, RunDirError
 from cosim.runtime.launcher import EXIT_RUN_ERROR, launch
 from cosim.runtime.liveness import STALL_S, process_state
+from cosim.runtime.rundir import LOCK_NAME, RunDirError
 from cosim.scenario.config import Scenario
 from cosim.testing import fakes
 
@@ -404,7 +404,7 @@ def test_any_number_of_signals_at_any_moment_exit_130_without_traceback(moment, 
         assert not list(Path("/dev/shm").glob(f"cosim-{proc.pid}-*"))
 
 
-@pytest.mark.parametrize("delay_s", [0.0, 0.01, 0.03, 0.06, 0.1])
+@pytest.mark.parametrize("delay_s", [0.0, 0.03, 0.1])
 def test_a_signal_after_the_summary_is_printed_still_exits_130(delay_s, tmp_path):
     """SIGTERM while the process ends (after the summary is printed): 130, or 0 when it came after the end;
     never killed by it (143, -15) and no traceback."""

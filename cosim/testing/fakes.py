@@ -217,5 +217,5 @@ def real_specs(scenario, **faults_by_role):
 
     from cosim.runtime.specs import ring_specs
 
-    return {s.name: replace(s, factory="fakes:make_real", kwargs={"role": s.name, **faults_by_role.get(s.name, {})})
+    return {s.name: replace(s, factory=f"{__name__}:make_real", kwargs={"role": s.name, **faults_by_role.get(s.name, {})})
             for s in ring_specs(scenario)}
