@@ -20,7 +20,7 @@ from typing import Sequence
 from cosim.runtime.threadpools import default_to_single_threaded_pools
 
 from .errors import OutputError, RunRefused, ScenarioError
-from .studies.commands import add_sweep_parser, study_command, sweep_command
+from .studies.commands import add_sweep_parser, out_options, study_command, sweep_command
 
 __all__ = ["main", "build_parser", "run_extras", "VERBS"]
 
@@ -48,7 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="verb")
     run = sub.add_parser("run", help="run a scenario (default verb)")
     _scenario_options(run)
-    run.add_argument("--out", type=Path, help="run directory (default runs/<scenario>-<timestamp>)")
+    out_options(run, "run directory (default runs/<scenario>-<timestamp>)", overwrite=True)
     run.add_argument("--viewer", action="store_true",
                      help="render the RGB image and serve the live dashboard on 127.0.0.1 (see --viewer-port)")
     run.add_argument("--viewer-port", type=int, default=8765, metavar="PORT",
@@ -69,14 +69,15 @@ def build_parser() -> argparse.ArgumentParser:
     val.add_argument("--print", action="store_true", help="print the fully resolved scenario as YAML")
     cmp_ = sub.add_parser("compare", help="run with ground-truth and with perception feedback; write one report")
     _scenario_options(cmp_)
-    cmp_.add_argument("--out", type=Path, help="report directory (default runs/compare-<scenario>-<timestamp>)")
+    out_options(cmp_, "report directory, a run directory per variant inside (default "
+                "runs/compare-<scenario>-<timestamp>)", overwrite=True)
     cmp_.add_argument("--quiet", action="store_true", help="no progress output")
     st = sub.add_parser("study", help="error against run time over the fidelity knobs")
     _scenario_options(st)
     st.add_argument("--knobs", default="dynamics,grain_cell", help="comma-separated: dynamics, grain_cell, render, "
                     "beams, perception_grid (default: %(default)s)")
     st.add_argument("--sim-seconds", type=float, default=20.0, help="simulated seconds per setting")
-    st.add_argument("--out", type=Path, help="output directory (default runs/study-<scenario>-<timestamp>)")
+    out_options(st, "output directory (default runs/study-<scenario>-<timestamp>; run again to resume)")
     st.add_argument("--quiet", action="store_true", help="no progress output")
     st.add_argument("--knob", action="append", default=[], metavar="NAME=PATH:V1,V2",
                     help="a knob of your own: one field over values, the last the reference (repeatable)")
@@ -182,6 +183,11 @@ def _print_summary(result, stream) -> None:
     if s.get("timing_ms"):
         lines.append("per-frame medians (ms): " + ", ".join(f"{k} {v:.2f}" for k, v in s["timing_ms"].items()
                                                             if v is not None))
+    figures = s.get("figures") or {}
+    if figures.get("status") == "not_drawn":
+        lines.append(f"figures: not drawn ({figures['reason']}); to draw them: {figures['command']}")
+    elif figures.get("status") == "failed":
+        lines.append(f"figures: failed: {figures['error']}")
     if result.error is not None:
         lines.append(f"error: {result.error}")
     stream.write("\n".join(lines) + "\n")
@@ -295,7 +301,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         from cosim.studies.compare import compare
 
         out = args.out or default_run_dir(scenario.model_copy(update={"name": f"compare-{scenario.name}"}))
-        report = compare(scenario, out, quiet=args.quiet)
+        report = compare(scenario, out, quiet=args.quiet, overwrite=args.overwrite,
+                         parents=args.parents or args.out is None)
         sys.stdout.write(f"report: {report}\n")
         return 0
     from cosim.runtime.launcher import launch
@@ -318,7 +325,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stderr.write(f"{exc}\n")
         return EXIT_SCENARIO
     try:
-        result = launch(scenario, args.out, progress=progress, observers=observers, sinks=sinks)
+        result = launch(scenario, args.out, progress=progress, observers=observers, sinks=sinks,
+                        overwrite=args.overwrite, parents=args.parents)
     finally:
         if announcer is not None:
             announcer.close()

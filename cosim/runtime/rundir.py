@@ -27,7 +27,8 @@ from cosim.errors import RunRefused
 
 from .files import TMP_PREFIX, TMP_SUFFIX
 
-__all__ = ["LOCK_NAME", "RUN_FILES", "RunDirError", "RunDirLock", "open_run_dir", "earlier_run", "clear_run_files"]
+__all__ = ["LOCK_NAME", "RUN_FILES", "RunDirError", "RunDirLock", "open_run_dir", "make_out_dir", "earlier_run",
+           "clear_run_files"]
 
 #: the lock file inside a run directory (held with flock while a run writes there)
 LOCK_NAME = ".lock"
@@ -98,7 +99,10 @@ def clear_run_files(run_dir: Path) -> list[str]:
     return removed
 
 
-def _make(run_dir: Path, parents: bool) -> None:
+def make_out_dir(run_dir: Path, parents: bool = False) -> None:
+    """Make the directory ``run_dir`` names (``--out``): only its last level unless ``parents``. Raises
+    :class:`RunDirError` when it is not a directory, cannot be made, or cannot be written."""
+    run_dir = Path(run_dir)
     if run_dir.exists() and not run_dir.is_dir():
         raise RunDirError(f"--out {run_dir}: exists and is not a directory")
     try:
@@ -158,7 +162,7 @@ def open_run_dir(run_dir: Path, *, overwrite: bool = False, parents: bool = Fals
     claim it (an earlier run's files removed with ``overwrite``, refused without). Raises :class:`RunDirError`
     naming the path and the reason; nothing is started before this."""
     run_dir = Path(run_dir)
-    _make(run_dir, parents)
+    make_out_dir(run_dir, parents)
     lock = _lock(run_dir)
     try:
         _claim(run_dir, overwrite)

@@ -13,12 +13,12 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-import shutil
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterator
 
+from cosim.runtime.rundir import make_out_dir
 from cosim.scenario.config import Scenario
 
 from .results import ResultsTable, read_summary, read_table
@@ -62,10 +62,10 @@ def execute_run(run_dir: str, scenario_json: str) -> dict:
         worker = get_worker().address
     except (ImportError, ValueError):
         worker = LOCAL
-    path = Path(run_dir)
-    if path.exists():  # an earlier, failed attempt: start clean so its files do not mix with this one's
-        shutil.rmtree(path)
-    result = launch(Scenario.model_validate_json(scenario_json), path, console_log=False)
+    # overwrite: an earlier attempt's files (a failed run, a run cut short) are removed first, so that they do
+    # not mix with this one's; the run directory's parent is the sweep's runs/ (never created here: a worker that
+    # does not see it has no shared file system with the sweep, which the error then says)
+    result = launch(Scenario.model_validate_json(scenario_json), Path(run_dir), console_log=False, overwrite=True)
     return {"summary": result.summary, "error": "" if result.error is None else str(result.error),
             "worker": worker}
 
@@ -116,15 +116,18 @@ def _progress(total: int, done: int, quiet: bool):
 
 def run_sweep(sweep: Sweep, out: Path, *, scheduler: str | None = None, jobs: int | None = None,
               quiet: bool = False, retries: int = 1, runner: Callable[[str, str], dict] = execute_run,
-              figures: bool = True) -> SweepOutcome:
+              figures: bool = True, parents: bool = True) -> SweepOutcome:
     """Run ``sweep`` into ``out`` (runs/<id>/, results.csv, figures); see the module docstring.
 
     ``runner(run_dir, scenario_json) -> {"summary", "error", "worker"}`` executes one run on a worker
-    (default :func:`execute_run`). Never raises for a run's failure; raises RuntimeError when a GL run has
-    nowhere to go.
+    (default :func:`execute_run`) and is given the run directory as an absolute path: a worker's working
+    directory is its own. ``parents``: create ``out``'s missing parents too (cosim.runtime.rundir). Never raises
+    for a run's failure; raises RuntimeError when a GL run has nowhere to go and
+    :class:`cosim.runtime.rundir.RunDirError` when ``out`` cannot be made.
     """
-    out = Path(out)
-    (out / "runs").mkdir(parents=True, exist_ok=True)
+    out = Path(out).absolute()
+    make_out_dir(out, parents)
+    (out / "runs").mkdir(exist_ok=True)
     table = ResultsTable(out, sweep.labels, sweep.parameters, [r.id for r in sweep.runs])
     pending: list[RunSpec] = []
     before = read_table(out)
