@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -293,3 +294,31 @@ def test_sweep_figures_of_a_group_whose_values_are_identical(tmp_path):
     assert sum([0.1] * 3) / 3 > 0.1 and sum([0.7] * 3) / 3 < 0.7  # the float facts behind it
     assert [(v, mean) for v, mean, *_ in spread(rows, "controller.strategy", "spill_kg")] == [("a", 0.1), ("b", 0.7)]
     assert [p.name for p in write_sweep_figures(tmp_path, rows, ("controller.strategy",))] == ["sweep_spill_kg.png"]
+
+
+def test_ctrl_c_during_a_sweep_stops_it_in_order_without_tracebacks(tmp_path):
+    """Ctrl-C on the terminal reaches the whole foreground process group: the sweep, its Dask workers and the
+    runs' children. Only the sweep acts on it (the cluster's processes are born with SIGINT blocked): the runs in
+    progress end interrupted with their rows, exit 130, one message, no traceback and no leaked resource."""
+    _write(tmp_path, HEAD.replace("duration_s: 5.0", "duration_s: 3600.0")
+           + "grid:\n  controller.strategy: [front_to_back, lowest_first]\n")
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, str(ROOT / "launch.py"), "sweep", str(tmp_path / "sweep.yaml"),
+                             "--jobs", "2", "--out", str(out), "--quiet"], cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not any(p.stat().st_size > 2000 for p in out.glob("runs/*/timeseries.csv")):
+            assert time.monotonic() < deadline and proc.poll() is None, "no run got going"
+            time.sleep(0.1)
+        os.killpg(proc.pid, signal.SIGINT)  # what a terminal's Ctrl-C does
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, stderr
+    assert "interrupted: the runs that finished are kept; run the same command to resume" in stderr
+    assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr and "leaked" not in stderr, stderr
+    summaries = [json.loads(p.read_text()) for p in out.glob("runs/*/summary.json")]
+    assert summaries and all(s["status"] == "interrupted" and s["frames"] > 0 for s in summaries)
+    _assert_nothing_left(out)

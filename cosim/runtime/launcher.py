@@ -154,6 +154,7 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
         check_segment_fits(schema)
         run_dir = Path(out_dir) if out_dir is not None else default_run_dir(scenario)
         lock = open_run_dir(run_dir, overwrite=overwrite, parents=parents or out_dir is None)
+        stop.register(run_dir)
         run = _Run(scenario, run_dir, lock, stop, t_enter, ring=ring, schema=schema)
         try:
             error: RunError | None = None

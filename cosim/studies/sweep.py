@@ -13,12 +13,14 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import signal
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterator
 
 from cosim.runtime.rundir import make_out_dir
+from cosim.runtime.signals import request_stop, sigint_blocked_in_new_threads
 from cosim.scenario.config import Scenario
 
 from .results import ResultsTable, read_summary, read_table
@@ -32,6 +34,9 @@ log = logging.getLogger("cosim.studies.sweep")
 EGL = "EGL"
 LOCAL = "local"
 LOOPBACK_ANY_PORT = "127.0.0.1:0"
+#: how long an interrupted sweep waits for the runs in progress on the workers to end (each stops within ~0.5 s
+#: of being asked, and writes its outputs), s
+STOP_WAIT_S = 10.0
 #: Dask settings of the embedded cluster: its idle work competes with the runs for the cores. No statistical
 #: profiler (it samples every thread of a worker every 10 ms, the run's supervisor included); event-loop health
 #: ticks, system and memory monitors at 1-2 s instead of 20-500 ms
@@ -89,12 +94,15 @@ def open_client(scheduler: str | None, jobs: int, gl: bool) -> Iterator:
     import dask
 
     resources = {EGL: 1} if gl else None
-    # no dashboard; Dask's HTTP routes (health, metrics) on a free loopback port, not 0.0.0.0:8787
-    with dask.config.set(QUIET_CLUSTER), LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=LOOPBACK_ANY_PORT, scheduler_kwargs={"dashboard": False},
-                      worker_dashboard_address=LOOPBACK_ANY_PORT, resources=resources,
-                      silence_logs=logging.ERROR) as cluster, \
-            Client(cluster) as client:
+    # no dashboard; Dask's HTTP routes (health, metrics) on a free loopback port, not 0.0.0.0:8787. The cluster's
+    # threads are born with SIGINT blocked, and so are the worker processes they start (restarts included) and
+    # the runs' children: a Ctrl-C on the terminal reaches this process alone, which stops the sweep
+    with dask.config.set(QUIET_CLUSTER), sigint_blocked_in_new_threads():
+        cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=LOOPBACK_ANY_PORT, scheduler_kwargs={"dashboard": False},
+                               worker_dashboard_address=LOOPBACK_ANY_PORT, resources=resources,
+                               silence_logs=logging.ERROR)
+    with cluster, Client(cluster) as client:
         yield client
 
 
@@ -195,6 +203,11 @@ def _drive(client, pending: list[RunSpec], out: Path, table: ResultsTable, bar, 
             bar.update(1)
             bar.set_postfix(failed=failed, refresh=False)
     except KeyboardInterrupt:
-        client.cancel(futures)
+        client.cancel(futures)  # the queued runs never start; those running end now, as interrupted
+        try:
+            client.run(request_stop, [str(out / "runs" / r.id) for r in pending], signal.SIGINT, STOP_WAIT_S,
+                       wait=True)
+        except Exception as exc:  # noqa: BLE001 - a worker that is gone: its runs ended with it
+            log.warning("could not stop the runs in progress on every worker: %s", exc)
         return failed, True
     return failed, False
