@@ -33,7 +33,7 @@ from pathlib import Path
 from cosim.errors import RecordingFailed
 from cosim.runtime.files import write_error
 from cosim.runtime.liveness import STALL_S, cpu_ticks, end_process, is_stopped
-from cosim.runtime.threadpools import single_threaded_pools
+from cosim.runtime.spawning import start_process
 from shm_schema import Schema, Segment
 
 from .slots import FrameSlots
@@ -185,13 +185,11 @@ class McapRecorder:
         self._notify_frames = max(1, min(NOTIFY_FRAMES, n_slots // 2))
         self._credits = ctx.Semaphore(n_slots)
         recv, self._conn = ctx.Pipe(duplex=False)
-        self._proc = ctx.Process(target=_recorder_main, name="cosim-recorder", daemon=True,
-                                 args=(recv, self._credits, RunInfo.of(scenario), segment.schema.encoded,
-                                       self._slots.name, n_slots, str(self.path), self.options, segment.run_id,
-                                       segment.fingerprint))
         try:
-            with single_threaded_pools():
-                self._proc.start()
+            self._proc = start_process(_recorder_main, (recv, self._credits, RunInfo.of(scenario),
+                                                        segment.schema.encoded, self._slots.name, n_slots,
+                                                        str(self.path), self.options, segment.run_id,
+                                                        segment.fingerprint), name="cosim-recorder")
         except BaseException:
             self._release_slots()
             raise

@@ -43,9 +43,9 @@ from .outputs import default_run_dir, finish_outputs, write_scenario
 from .recorder import Recorder
 from .rundir import RunDirLock, open_run_dir
 from .signals import StopSignals, no_sigint_in_children
+from .spawning import start_process
 from .specs import SUPERVISOR, ParticipantSpec, build_schema, ring_specs
 from .stream import RunFiles, write_running_summary
-from .threadpools import single_threaded_pools
 
 __all__ = ["RunResult", "ObserverSpec", "launch", "EXIT_OK", "EXIT_RUN_ERROR", "EXIT_INTERRUPTED", "JOIN_TIMEOUT_S"]
 
@@ -202,14 +202,11 @@ def _set_up(run: _Run, console_log: bool, observers: Sequence[ObserverSpec],
     seg.slot(SUPERVISOR)["pid"] = os.getpid()
     for obs in observers:
         stop.check(-1)
-        w = ctx.Process(target=_observer_main, args=(obs, name, str(run.log_path)), name=f"cosim-{obs.name}",
-                        daemon=True)
-        with single_threaded_pools(), no_sigint_in_children(), children_allowed():
-            w.start()
-        run.watchers[obs.name] = w
+        run.watchers[obs.name] = start_process(_observer_main, (obs, name, str(run.log_path)),
+                                               name=f"cosim-{obs.name}")
     for make_sink in sinks:
         stop.check(-1)
-        with no_sigint_in_children(), children_allowed():
+        with no_sigint_in_children(), children_allowed():  # a sink of the user's may start a process its own way
             run.frame_sinks.append(make_sink(scenario, run.run_dir, seg))
     scenario_json = scenario.model_dump_json()
     for spec in run.ring:
@@ -217,10 +214,7 @@ def _set_up(run: _Run, console_log: bool, observers: Sequence[ObserverSpec],
         args = ChildArgs(spec, scenario_json, name, schema.fingerprint, plan, run.sems, str(run.log_path),
                          os.getpid(), scenario.timing.startup_timeout_s, scenario.timing.handoff_timeout_s + 5.0,
                          time.time())
-        p = ctx.Process(target=child_main, args=(args,), name=f"cosim-{spec.name}", daemon=True)
-        with single_threaded_pools(), no_sigint_in_children(), children_allowed():
-            p.start()
-        run.procs[spec.name] = p
+        run.procs[spec.name] = start_process(child_main, (args,), name=f"cosim-{spec.name}")
     run.recorder = Recorder(seg, plan.members, deferred=bool(plan.deferred))
     run.files = RunFiles(run.run_dir, run.recorder, lag=1 if plan.deferred else 0)
 
