@@ -56,6 +56,10 @@ EXIT_OK, EXIT_RUN_ERROR, EXIT_INTERRUPTED = 0, 1, 130
 JOIN_TIMEOUT_S = 10.0
 #: how long a terminated child gets before SIGKILL, s
 TERMINATE_GRACE_S = 0.5
+#: how long an observer may take to end after the SIGTERM that tells it a completed run has ended (the viewer
+#: shows the last frame to a watching page, at most cosim.viewer.server.LINGER_S, then drains), s; after a
+#: failed run, TERMINATE_GRACE_S (the launcher is back within 2 s of a fault)
+OBSERVER_GRACE_S = 1.5
 
 Progress = Callable[[int, int, float, float], None]
 
@@ -323,7 +327,9 @@ def _tear_down(run: _Run, error: RunError | None) -> RunResult:
     hung = (error.process,) if isinstance(error, ParticipantHung) else ()
     stop_processes(run.procs, graceful=error is None, join_timeout_s=JOIN_TIMEOUT_S, grace_s=TERMINATE_GRACE_S,
                    hung=hung)
-    stop_processes(run.watchers, graceful=False, join_timeout_s=JOIN_TIMEOUT_S, grace_s=TERMINATE_GRACE_S)
+    # the segment is final: tell the observers now (a viewer shows the last frame), end them after the outputs
+    observers_until = time.monotonic() + (OBSERVER_GRACE_S if error is None else TERMINATE_GRACE_S)
+    _tell_observers(run.watchers)
     if run.recorder is not None:
         run.recorder.finish()
     t_stopped = time.perf_counter()
@@ -350,6 +356,8 @@ def _tear_down(run: _Run, error: RunError | None) -> RunResult:
     if failure is not None:
         log.error("%s", failure)
         error = error or _at_fault(run, failure)
+    stop_processes(run.watchers, graceful=True, join_timeout_s=max(0.0, observers_until - time.monotonic()),
+                   grace_s=0.0)
     code = _exit_code(error, run.stop)
     t_end = time.perf_counter()
     log.info("run %s %s in %.2f s (exit %d); start-up %.2f s to the first frame (set-up before spawning %.2f s), "
@@ -388,6 +396,16 @@ def _observer_main(obs: ObserverSpec, segment: str, log_path: str) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     configure_logging(log_path, console=False)
     load_callable(obs.target)(segment, **dict(obs.kwargs))
+
+
+def _tell_observers(watchers: Mapping[str, mp.process.BaseProcess]) -> None:
+    """SIGTERM every observer still running: the run has ended."""
+    for w in watchers.values():
+        if w.exitcode is None:
+            try:
+                w.terminate()
+            except ProcessLookupError:
+                pass
 
 
 def _warn_dead_observers(watchers: Mapping[str, mp.process.BaseProcess], warned: set[str]) -> None:
