@@ -179,11 +179,14 @@ def test_kill9_of_the_launcher_leaves_the_rows_and_a_running_summary(tmp_path):
 
 
 @pytest.fixture
-def small_tmpfs(tmp_path):
-    """A 48 KiB tmpfs (root and a kernel that allows the mount), else the test is skipped."""
+def small_tmpfs(tmp_path, request):
+    """A small tmpfs (48 KiB, or ``@pytest.mark.tmpfs_size("128k")``; root and a kernel that allows the mount),
+    else the test is skipped."""
     mnt = tmp_path / "small"
     mnt.mkdir()
-    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=48k", "tmpfs", str(mnt)], capture_output=True).returncode:
+    size = getattr(request.node.get_closest_marker("tmpfs_size"), "args", ("48k",))[0]
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(mnt)],
+                      capture_output=True).returncode:
         pytest.skip("cannot mount a small tmpfs here (needs root)")
     yield mnt
     subprocess.run(["umount", "-l", str(mnt)], check=False)
@@ -479,3 +482,62 @@ def test_a_failed_row_block_is_cut_back_even_when_the_close_writes_the_rest(tmp_
     with pytest.raises(OutputError, match="no space left on device writing"):
         app.append("1,2\n3,4\n5,6\n")
     assert path.read_text() == "a,b\n"
+
+
+def test_a_full_disk_while_the_figures_are_drawn_is_named_and_leaves_no_half_file(tmp_path, shm_clean, capfd,
+                                                                                   monkeypatch):
+    """ENOSPC halfway through the second figure: exit 1, named with its path in the result and the summary, the
+    first figure whole, no half or temporary file, the summary's figures entry says what happened."""
+    from cosim.runtime import files
+
+    real_open = open
+    target = ".fig8_heightmaps.png.tmp"
+
+    class Full:
+        def __init__(self, f):
+            self._f = f
+
+        def write(self, data):
+            self._f.write(data[: len(data) // 2])
+            self._f.flush()
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self._f.close()
+
+    monkeypatch.setattr(files, "open", lambda p, *a, **k: Full(real_open(p, *a, **k)) if str(p).endswith(target)
+                        else real_open(p, *a, **k), raising=False)
+    sc = Scenario(format_version=1, duration_s=0.5, renderer="none", feedback="ground_truth")
+    run_dir = tmp_path / "run"
+    res = launch(sc, run_dir, console_log=True)
+    assert res.exit_code == EXIT_RUN_ERROR and isinstance(res.error, OutputError)
+    assert str(res.error) == f"no space left on device writing {run_dir / 'fig8_heightmaps.png'}"
+    names = {p.name for p in run_dir.iterdir()}
+    assert "fig7_fullness.png" in names and not names & {"fig8_heightmaps.png", target, "fig9_auger.png"}
+    assert (run_dir / "fig7_fullness.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["status"] == "failed" and summary["completed"] is False
+    assert summary["error"]["type"] == "OutputError" and summary["error"]["process"] == "supervisor"
+    assert summary["figures"] == {"status": "failed", "error": str(res.error)}
+    assert summary["frames"] == summary["frames_planned"]  # the simulation itself completed
+    assert "Traceback" not in capfd.readouterr().err
+
+
+@pytest.mark.tmpfs_size("128k")
+def test_a_disk_that_fills_while_the_figures_are_drawn(small_tmpfs, shm_clean, capfd):
+    """The same on a real 128 KiB file system: the data fits, the figures do not."""
+    sc = Scenario(format_version=1, duration_s=0.5, renderer="none", feedback="ground_truth")
+    run_dir = small_tmpfs / "run"
+    res = launch(sc, run_dir, console_log=True)
+    assert res.exit_code == EXIT_RUN_ERROR and isinstance(res.error, OutputError)
+    assert str(res.error).startswith(f"no space left on device writing {run_dir}/fig")
+    pngs = sorted(run_dir.glob("*.png"))
+    assert not list(run_dir.glob(".*.tmp")) and len(pngs) < 4
+    assert all(p.read_bytes().endswith(b"IEND\xaeB`\x82") for p in pngs)  # whole files only
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["status"] == "failed" and summary["error"]["message"] == str(res.error)
+    assert summary["figures"]["status"] == "failed"
+    assert "Traceback" not in capfd.readouterr().err

@@ -1,21 +1,22 @@
 """Launcher and supervisor of one run (docs/architecture.md): set-up, supervision, teardown.
 
-:func:`launch` reads as the run's lifecycle. :func:`_set_up` locks the run directory, writes scenario.yaml and a
-"running" summary, creates the segment and starts the observers, the sinks and one named process per ring
-member (spawn context). :func:`_supervise` closes the ring as the supervisor, recording each completed frame and
-appending the rows to disk in blocks (cosim.runtime.stream). :func:`_tear_down` ends every process in bounded
-time, writes the last rows, the maps and the final summary, and unlinks the segment.
+:func:`launch` reads as the run's lifecycle. It claims and locks the run directory (cosim.runtime.rundir);
+:func:`_set_up` writes a "running" summary and scenario.yaml, creates the segment and starts the observers, the
+sinks and one named process per ring member (cosim.runtime.spawning). :func:`_supervise` closes the ring as the
+supervisor, recording each completed frame and appending the rows to disk in blocks (cosim.runtime.stream).
+:func:`cosim.runtime.teardown.tear_down` ends every process in bounded time, writes the last rows, the maps and
+the final summary, unlinks the segment and draws the figures of a completed run. The three share one
+:class:`cosim.runtime.runstate.RunState`.
 
 Whatever happens the run ends cleanly: a child's exception comes back with its traceback; a dead child, or one
 that stops beating (SIGSTOP, a deadlock: cosim.runtime.liveness), stops the run within 2 s naming the process,
 the frame and the cause; a child that beats but does not finish its frame meets the hand-off timeout; any number
 of SIGINT/SIGTERM at any moment stop it the same way (cosim.runtime.signals); a write error (a full disk) is
 named with its path. Afterwards no child is left running and the segment is unlinked; the run directory holds
-everything up to the last completed frame.
+everything up to the last completed frame. The launcher is back within 2 s of any fault (docs/reliability.md).
 """
 from __future__ import annotations
 
-import json
 import logging
 import multiprocessing as mp
 import os
@@ -26,7 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
-from cosim.errors import HandoffTimeout, OutputError, ParticipantHung, RunError, RunInterrupted
+from cosim.errors import RunError
 from cosim.scenario.config import Scenario
 from shm_schema import Phase, Segment
 from shm_schema.layout import SLOT_WORD
@@ -34,32 +35,22 @@ from shm_schema.layout import SLOT_WORD
 from .capacity import check_segment_fits
 from .child import ChildArgs, child_main
 from .daemonic import children_allowed
-from .figures import PENDING, draw_figures, figures_plan
-from .files import atomic_write
-from .liveness import Watch, child_failure, ring_holder, stop_processes
+from .liveness import Watch, child_failure
 from .lockstep import RingPlan, Token
 from .logs import configure_logging
-from .outputs import default_run_dir, finish_outputs, write_scenario
+from .outputs import default_run_dir, write_scenario
 from .recorder import Recorder
-from .rundir import RunDirLock, open_run_dir
+from .rundir import open_run_dir
+from .runstate import RunState
 from .signals import StopSignals, no_sigint_in_children
 from .spawning import start_process
 from .specs import SUPERVISOR, ParticipantSpec, build_schema, ring_specs
 from .stream import RunFiles, write_running_summary
+from .teardown import EXIT_INTERRUPTED, EXIT_OK, EXIT_RUN_ERROR, JOIN_TIMEOUT_S, at_fault, tear_down, write_run_json
 
 __all__ = ["RunResult", "ObserverSpec", "launch", "EXIT_OK", "EXIT_RUN_ERROR", "EXIT_INTERRUPTED", "JOIN_TIMEOUT_S"]
 
 log = logging.getLogger("cosim.runtime.launcher")
-
-EXIT_OK, EXIT_RUN_ERROR, EXIT_INTERRUPTED = 0, 1, 130
-#: how long a child may take to close after the last frame (GL teardown) before it is terminated, s
-JOIN_TIMEOUT_S = 10.0
-#: how long a terminated child gets before SIGKILL, s
-TERMINATE_GRACE_S = 0.5
-#: how long an observer may take to end after the SIGTERM that tells it a completed run has ended (the viewer
-#: shows the last frame to a watching page, at most cosim.viewer.server.LINGER_S, then drains), s; after a
-#: failed run, TERMINATE_GRACE_S (the launcher is back within 2 s of a fault)
-OBSERVER_GRACE_S = 1.5
 
 Progress = Callable[[int, int, float, float], None]
 
@@ -105,37 +96,6 @@ class RunResult:
         return bool(self.summary.get("completed"))
 
 
-@dataclass
-class _Run:
-    """One run's state: what set-up made, what supervision and teardown use. Teardown copes with any prefix of
-    set-up having happened (a stop or a failure can come at any step)."""
-
-    scenario: Scenario
-    run_dir: Path
-    lock: RunDirLock
-    stop: StopSignals
-    t_enter: float
-    log_path: Path = Path()
-    ring: list = field(default_factory=list)
-    schema: object = None
-    plan: RingPlan | None = None
-    name: str = ""
-    sems: dict = field(default_factory=dict)
-    seg: Segment | None = None
-    procs: dict[str, mp.process.BaseProcess] = field(default_factory=dict)
-    watchers: dict[str, mp.process.BaseProcess] = field(default_factory=dict)
-    frame_sinks: list = field(default_factory=list)
-    recorder: Recorder | None = None
-    files: RunFiles | None = None
-    t_start: float = 0.0
-    t_first: float = 0.0
-
-    @property
-    def frame(self) -> int:
-        """The supervisor's last completed frame (-1 before frame 0)."""
-        return int(self.seg.slot(SUPERVISOR)["frame"]) if self.seg is not None else -1
-
-
 def launch(scenario: Scenario, out_dir: Path | None = None, *,
            specs: Mapping[str, ParticipantSpec] | None = None, progress: Progress | None = None,
            console_log: bool = True, observers: Sequence[ObserverSpec] = (),
@@ -159,26 +119,28 @@ def launch(scenario: Scenario, out_dir: Path | None = None, *,
         run_dir = Path(out_dir) if out_dir is not None else default_run_dir(scenario)
         lock = open_run_dir(run_dir, overwrite=overwrite, parents=parents or out_dir is None)
         stop.register(run_dir)
-        run = _Run(scenario, run_dir, lock, stop, t_enter, ring=ring, schema=schema)
+        run = RunState(scenario, run_dir, lock, stop, t_enter, ring=ring, schema=schema)
         try:
             error: RunError | None = None
             try:
                 _set_up(run, console_log, observers, sinks)
                 _supervise(run, progress)
             except RunError as exc:
-                error = _at_fault(run, exc)
+                error = at_fault(run, exc)
             except BaseException as exc:  # noqa: BLE001 - a supervisor bug still ends the run cleanly
                 error = RunError(f"supervisor failed: {type(exc).__name__}: {exc}", process=SUPERVISOR,
                                  frame=run.frame)
                 log.exception("supervisor failure")
-            return _tear_down(run, error)
+            summary, error, code = tear_down(run, error)
+            return RunResult(run.run_dir, summary, error, run.name, code, {n: p.exitcode for n, p in run.procs.items()},
+                             dict(run.recorder.arrays) if run.recorder is not None else {})
         finally:
             run.lock.release()
     finally:
         stop.restore()
 
 
-def _set_up(run: _Run, console_log: bool, observers: Sequence[ObserverSpec],
+def _set_up(run: RunState, console_log: bool, observers: Sequence[ObserverSpec],
             sinks: Sequence[SinkFactory]) -> None:
     """The "running" summary (first: it marks the directory as a run's, cosim.runtime.rundir), logging,
     scenario.yaml, the segment, then observers, sinks and ring children. A stop signal is honoured between any
@@ -201,7 +163,7 @@ def _set_up(run: _Run, console_log: bool, observers: Sequence[ObserverSpec],
     run.t_start = run.t_first = time.perf_counter()
     log.info("run %s: segment %s (%d bytes, fingerprint %s), ring %s, %d frames", run.run_dir.name, name,
              schema.total_nbytes, schema.fingerprint[:12], " -> ".join(plan.members), scenario.frames + 1)
-    _write_run_json(run.run_dir, {"segment": name, "launcher_pid": os.getpid(), "fingerprint": schema.fingerprint,
+    write_run_json(run.run_dir, {"segment": name, "launcher_pid": os.getpid(), "fingerprint": schema.fingerprint,
                                   "participants": list(plan.members), "ended": False})
     seg.slot(SUPERVISOR)["pid"] = os.getpid()
     for obs in observers:
@@ -223,7 +185,7 @@ def _set_up(run: _Run, console_log: bool, observers: Sequence[ObserverSpec],
     run.files = RunFiles(run.run_dir, run.recorder, lag=1 if plan.deferred else 0)
 
 
-def _supervise(run: _Run, progress: Progress | None) -> None:
+def _supervise(run: RunState, progress: Progress | None) -> None:
     """Close the ring for every frame (and the flush turn): record, feed the sinks, append rows, report progress.
 
     Between wait slices it checks, in this order: a stop signal, a child that stopped beating or is stopped
@@ -287,108 +249,6 @@ def _supervise(run: _Run, progress: Progress | None) -> None:
     sup["phase"] = Phase.DONE
 
 
-def _at_fault(run: _Run, error: RunError) -> RunError:
-    """``error`` naming the process at fault: a hand-off timeout met by the supervisor names the member that holds
-    up the ring (its message already describes it); an error that names no process (a write error) names the
-    supervisor, which writes the outputs."""
-    if isinstance(error, HandoffTimeout) and error.process == SUPERVISOR and run.seg is not None:
-        holder = ring_holder(run.seg, run.plan.members)
-        if holder is not None:
-            return HandoffTimeout(f"{holder} did not pass frame {error.frame} on within the hand-off timeout "
-                                  f"(timing.handoff_timeout_s = {run.scenario.timing.handoff_timeout_s:g} s): "
-                                  f"{error}", process=holder, frame=error.frame, detail=error.detail)
-    if not error.process:
-        error.process = SUPERVISOR
-    return error
-
-
-def _close_sinks(run: _Run) -> RunError | None:
-    """Close every frame sink; the first failure one reports (``sink.error``: a recording not written whole)."""
-    failure = None
-    for sink in run.frame_sinks:
-        close = getattr(sink, "close", None)
-        try:
-            if close is not None:
-                close()
-        except Exception:  # noqa: BLE001 - a sink's close must not hide the run's outcome
-            log.exception("closing a frame sink failed")
-        failure = failure or getattr(sink, "error", None)
-    return failure
-
-
-def _tear_down(run: _Run, error: RunError | None) -> RunResult:
-    """End every process (bounded), write the last rows, maps and the final summary, unlink the segment; draw the
-    figures of a completed run only (cosim.runtime.figures: a failed or stopped run returns at once). Signals
-    meanwhile are only counted (a first one cuts the figures short); the exit status is 130 whenever a stop
-    signal came."""
-    t_down = time.perf_counter()
-    wall = t_down - run.t_start if run.t_start else 0.0
-    sink_error = _close_sinks(run)
-    hung = (error.process,) if isinstance(error, ParticipantHung) else ()
-    stop_processes(run.procs, graceful=error is None, join_timeout_s=JOIN_TIMEOUT_S, grace_s=TERMINATE_GRACE_S,
-                   hung=hung)
-    # the segment is final: tell the observers now (a viewer shows the last frame), end them after the outputs
-    observers_until = time.monotonic() + (OBSERVER_GRACE_S if error is None else TERMINATE_GRACE_S)
-    _tell_observers(run.watchers)
-    if run.recorder is not None:
-        run.recorder.finish()
-    t_stopped = time.perf_counter()
-    if error is None and run.stop.signum is not None:
-        error = run.stop.error(run.frame)
-    error = error or sink_error
-    if error is not None:
-        log.error("run failed: %s", error)
-        if error.detail:
-            log.error("traceback of %s:\n%s", error.process, error.detail)
-    figures = figures_plan(run.run_dir, run.scenario, run.recorder, error)
-    try:
-        summary, failure = finish_outputs(run.run_dir, run.scenario, run.recorder, run.ring, wall_time_s=wall,
-                                          error=error, files=run.files, extra={"figures": figures},
-                                          reserve=figures["status"] == PENDING)
-    finally:
-        if run.seg is not None:
-            run.seg.close()
-            run.seg.unlink()
-            _end_run_json(run.run_dir)
-    t_outputs = time.perf_counter()
-    if failure is None and figures["status"] == PENDING:
-        summary, failure = draw_figures(run.run_dir, run.scenario, summary, run.recorder, run.stop.raising)
-    if failure is not None:
-        log.error("%s", failure)
-        error = error or _at_fault(run, failure)
-    stop_processes(run.watchers, graceful=True, join_timeout_s=max(0.0, observers_until - time.monotonic()),
-                   grace_s=0.0)
-    code = _exit_code(error, run.stop)
-    t_end = time.perf_counter()
-    log.info("run %s %s in %.2f s (exit %d); start-up %.2f s to the first frame (set-up before spawning %.2f s), "
-             "shut-down %.2f s (children %.2f s, outputs %.2f s, figures %.2f s); launcher cpu %.2f s",
-             run.run_dir.name, "completed" if error is None else "stopped", wall, code, run.t_first - run.t_enter,
-             run.t_start - run.t_enter if run.t_start else 0.0, t_end - t_down, t_stopped - t_down,
-             t_outputs - t_stopped, t_end - t_outputs, time.process_time())
-    return RunResult(run.run_dir, summary, error, run.name, code, {n: p.exitcode for n, p in run.procs.items()},
-                     dict(run.recorder.arrays) if run.recorder is not None else {})
-
-
-def _exit_code(error: RunError | None, stop: StopSignals) -> int:
-    if stop.signum is not None or isinstance(error, RunInterrupted):
-        return EXIT_INTERRUPTED
-    return EXIT_OK if error is None else EXIT_RUN_ERROR
-
-
-def _write_run_json(run_dir: Path, info: dict) -> None:
-    atomic_write(run_dir / "run.json", json.dumps(info, indent=2) + "\n")
-
-
-def _end_run_json(run_dir: Path) -> None:
-    """Mark run.json ended (the segment is gone); a write error here is only logged."""
-    try:
-        info = json.loads((run_dir / "run.json").read_text())
-        info["ended"] = True
-        _write_run_json(run_dir, info)
-    except (OSError, ValueError, OutputError) as exc:
-        log.warning("could not mark run.json ended: %s", exc)
-
-
 def _observer_main(obs: ObserverSpec, segment: str, log_path: str) -> None:
     """Entry of an observer process: log to the run's log, ignore Ctrl-C (the launcher stops it)."""
     from .specs import load_callable
@@ -396,16 +256,6 @@ def _observer_main(obs: ObserverSpec, segment: str, log_path: str) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     configure_logging(log_path, console=False)
     load_callable(obs.target)(segment, **dict(obs.kwargs))
-
-
-def _tell_observers(watchers: Mapping[str, mp.process.BaseProcess]) -> None:
-    """SIGTERM every observer still running: the run has ended."""
-    for w in watchers.values():
-        if w.exitcode is None:
-            try:
-                w.terminate()
-            except ProcessLookupError:
-                pass
 
 
 def _warn_dead_observers(watchers: Mapping[str, mp.process.BaseProcess], warned: set[str]) -> None:

@@ -53,7 +53,8 @@ NICE = 10
 #: how often the server checks whether the run has ended (to unmap promptly), s
 HOUSEKEEPING_S = 1.0
 #: longest wait, when stopping, for the responses being sent to finish, s (the launcher allows its observers
-#: cosim.runtime.launcher.TERMINATE_GRACE_S = 0.5 s after SIGTERM before it kills them)
+#: cosim.runtime.teardown.OBSERVER_GRACE_S = 1.5 s after SIGTERM at the end of a completed run, 0.5 s after a
+#: failed one, before it kills them)
 DRAIN_S = 0.3
 #: longest time the viewer keeps answering after the run ended, for a watching page to fetch its last frame, s (a
 #: page polls the state every cosim.viewer.page.POLL_MS and then fetches the image panels of a new frame)
