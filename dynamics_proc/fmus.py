@@ -21,6 +21,10 @@ Stepping (lockstep with the dynamics):
   measurement the latency rule gives that frame (NaN without one).
 * strategy: whenever the controller asks for a section (every frame from the first measurement on), the
   inputs are set and one ``doStep`` runs from the end of the previous one to the end of the current frame.
+
+An FMI 3.0 controller or strategy with an input clock (cosim.fmi.roles.frame_clock) is ticked at the decision
+time, the start of the frame, and answers at the tick (cosim.fmi.slave); a clocked strategy is first stepped up
+to that time with its inputs held.
 """
 from __future__ import annotations
 
@@ -30,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cosim.fmi.describe import describe
-from cosim.fmi.roles import CONTROLLER, STRATEGY, VEHICLE, expand, step_mode
+from cosim.fmi.roles import CONTROLLER, STRATEGY, VEHICLE, expand, frame_clock, step_mode
 from cosim.fmi.slave import PROCESS, FmuSlave, FmuStepError
 from cosim.scenario.config import FMU_REF, Fmu, Scenario
 
@@ -60,7 +64,9 @@ def _open(fmu: Fmu, role, sections: int, label: str, initial: dict[str, float]) 
               for n in expand(s, fmu.outputs[s.name], sections)]
     start = dict(fmu.parameters)
     start.update({fmu.initial[ours]: value for ours, value in initial.items() if ours in fmu.initial})
-    return FmuSlave(desc, names["inputs"], names["outputs"], start, label, 0.0, fmu.instance_name, nan_ok)
+    clock = frame_clock(desc) if role.clocks else None
+    return FmuSlave(desc, names["inputs"], names["outputs"], start, label, 0.0, fmu.instance_name, nan_ok,
+                    None if clock is None else clock.name)
 
 
 class FmuVehicle:
@@ -106,6 +112,7 @@ class FmuStrategy:
         self.slave, self.sections, self.frame_dt_s = slave, sections, frame_dt_s
         self._height = "height_m" in fmu.inputs
         self._current = "current_section" in fmu.inputs
+        self.clocked = slave.clocked
         self.frame, self._t_end = 0, 0.0
 
     def begin_frame(self, frame: int) -> None:
@@ -119,7 +126,13 @@ class FmuStrategy:
         if self._current:
             u.append(float(current + 1))
         t_end = self.frame * self.frame_dt_s
-        out = self.slave.step(u, self._t_end, t_end - self._t_end, self.frame)
+        if self.clocked:                    # the tick is the decision, at the frame's start
+            t = t_end - self.frame_dt_s
+            if t > self._t_end:
+                self.slave.advance(self._t_end, t - self._t_end, self.frame)
+            out = self.slave.step(u, t, self.frame_dt_s, self.frame)
+        else:
+            out = self.slave.step(u, self._t_end, t_end - self._t_end, self.frame)
         self._t_end = t_end
         return _section(self.slave, out[0], self.sections, "section", self.frame)
 

@@ -1,8 +1,9 @@
 """FMUs in the loop against the built-in models, and FMU faults during a run (docs/fmu.md).
 
-The FMUs are built from Python with pythonfmu (tests/fmu_builds.py): the example vehicle (RK4 tractor-cart),
-the example controller (section fill, front to back) and the test-only strategy (front_to_back) and faulty
-vehicle. Runs are ground-truth feedback without a renderer, in-process (cosim.runtime.inprocess.simulate) unless
+The FMUs are built once per session (tests/fmu_builds.py): with pythonfmu (FMI 2.0) the example vehicle (RK4
+tractor-cart), the example controller (section fill, front to back) and the test-only strategy (front_to_back) and
+faulty vehicle; with pythonfmu3 (FMI 3.0) the same vehicle and the strategy with array variables; in C (FMI 3.0)
+the strategy with an input clock. Runs are ground-truth feedback without a renderer, in-process (cosim.runtime.inprocess.simulate) unless
 the test is about the launched process ring.
 """
 from __future__ import annotations
@@ -51,9 +52,12 @@ def _series(path: Path, overrides=()) -> dict[str, np.ndarray]:
     return simulate(load_scenario(path, list(overrides))).recorder.series()
 
 
-def test_fmu_vehicle_reproduces_builtin_trajectory(tmp_path, built_fmus):
+@pytest.mark.parametrize("name", ["TractorCart", "TractorCart3"])
+def test_fmu_vehicle_reproduces_builtin_trajectory(tmp_path, built_fmus, name):
+    """The example vehicle as an FMI 2.0 (pythonfmu) and an FMI 3.0 (pythonfmu3) FMU: the same equations, the same
+    tolerances."""
     path = _place(tmp_path, built_fmus, "fmu_vehicle", "TractorCart")
-    fmu = _series(path, MANOEUVRE)
+    fmu = _series(path, MANOEUVRE + [f"vehicles.tractor_cart.fmu.path={fmu_builds.need(built_fmus, name)}"])
     rk4 = _series(path, MANOEUVRE + ["vehicles.tractor_cart.fmu=null", "integrator.method=rk4"])
     exp = _series(path, MANOEUVRE + ["vehicles.tractor_cart.fmu=null"])
     assert fmu["dyn_state.t_s"][-1] == pytest.approx(30.0)
@@ -80,12 +84,22 @@ def test_fmu_vehicle_stepped_per_frame(tmp_path, built_fmus):
     assert np.max(np.abs(per_frame[k] - per_step[k])) > 1e-4      # a real difference: held over 10x longer
 
 
-def test_fmu_strategy_reproduces_front_to_back(tmp_path, built_fmus):
-    shutil.copy(built_fmus["FrontToBack"], tmp_path / "FrontToBack.fmu")
+#: strategy FMU -> its mapping: FMI 2.0 scalars per section ({k}); FMI 3.0 arrays (the section vectors as one
+#: variable each, Float64 heights and an Int64 current section); FMI 3.0 in C with a triggered input clock
+STRATEGY_MAPPINGS = {
+    "FrontToBack": "{full: 'full_{k}', current_section: current}",
+    "FrontToBack3": "{full: full, height_m: height, current_section: current}",
+    "Clocked": "{full: full}",
+}
+
+
+@pytest.mark.parametrize("name", list(STRATEGY_MAPPINGS))
+def test_fmu_strategy_reproduces_front_to_back(tmp_path, built_fmus, name):
+    shutil.copy(fmu_builds.need(built_fmus, name), tmp_path / "Strategy.fmu")
     path = tmp_path / "scenario.yaml"
     path.write_text("format_version: 1\nduration_s: 60.0\nfeedback: ground_truth\nrenderer: none\n"
-                    "controller:\n  strategy: fmu\n  fmu:\n    path: FrontToBack.fmu\n"
-                    "    inputs: {full: 'full_{k}', current_section: current}\n    outputs: {section: section}\n")
+                    "controller:\n  strategy: fmu\n  fmu:\n    path: Strategy.fmu\n"
+                    f"    inputs: {STRATEGY_MAPPINGS[name]}\n    outputs: {{section: section}}\n")
     s = load_scenario(path)
     fmu = simulate(s)
     builtin = simulate(load_scenario(path, ["controller.strategy=front_to_back", "controller.fmu=null"]))
@@ -157,6 +171,8 @@ def test_example_builds_and_runs_launched(tmp_path, built_fmus, shm_clean, examp
     build = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(build)
     assert build.build(tmp_path) == tmp_path / f"{fmu}.fmu"
+    if example == "fmu_vehicle" and not fmu_builds.MISSING3:
+        assert build.build3(tmp_path) == tmp_path / "TractorCart3.fmu"
     shutil.copy(EXAMPLES / example / "scenario.yaml", tmp_path / "scenario.yaml")
     assert main(["run", str(tmp_path / "scenario.yaml"), "--duration", "5", "--out", str(tmp_path / "run"),
                  "--quiet"]) == 0

@@ -8,7 +8,7 @@ Where it is used:
 * ``controller.fmu`` with ``controller.model: fmu``: the offloading controller; with ``controller.strategy:
   fmu``: the fill strategy.
 
-Whether the file is an FMI 2.0 co-simulation FMU and whether every mapped variable exists with the right
+Whether the file is an FMI 2.0 or 3.0 co-simulation FMU and whether every mapped variable exists with the right
 causality is checked when the scenario is loaded (``cosim.fmi.check``), each problem at its YAML line.
 """
 from __future__ import annotations
