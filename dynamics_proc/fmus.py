@@ -59,9 +59,9 @@ def _open(fmu: Fmu, role, sections: int, label: str, initial: dict[str, float]) 
     names = {}
     for kind in ("inputs", "outputs"):
         names[kind] = [n for s in role.signals(kind) if s.name in getattr(fmu, kind)
-                       for n in expand(s, getattr(fmu, kind)[s.name], sections)]
+                       for n in expand(s, getattr(fmu, kind)[s.name], sections, fmu.index_base)]
     nan_ok = [n for s in role.outputs if s.nan_ok and s.name in fmu.outputs
-              for n in expand(s, fmu.outputs[s.name], sections)]
+              for n in expand(s, fmu.outputs[s.name], sections, fmu.index_base)]
     start = dict(fmu.parameters)
     start.update({fmu.initial[ours]: value for ours, value in initial.items() if ours in fmu.initial})
     clock = frame_clock(desc) if role.clocks else None
@@ -97,19 +97,23 @@ def _fault(slave: FmuSlave, frame: int, cause: str) -> FmuStepError:
                         frame=frame)
 
 
-def _section(slave: FmuSlave, value: float, sections: int, name: str, frame: int) -> int:
-    """An FMU's section output (1..N, 0 none) as a 0-based index (-1 none); FmuStepError when out of range."""
-    if value != math.floor(value) or not 0 <= value <= sections:
-        raise _fault(slave, frame, f"output {name!r} is {value:g}, not a section 1..{sections} or 0 (none)")
-    return int(value) - 1
+def _section(slave: FmuSlave, value: float, sections: int, name: str, frame: int, base: int) -> int:
+    """An FMU's section output (base .. base + N - 1, base - 1 none) as a 0-based index (-1 none); FmuStepError when
+    out of range."""
+    if value != math.floor(value) or not base - 1 <= value <= sections - 1 + base:
+        raise _fault(slave, frame, f"output {name!r} is {value:g}, not a section {base}..{sections - 1 + base} or "
+                                   f"{base - 1} (none)")
+    return int(value) - base
 
 
 class FmuStrategy:
     """A fill strategy from an FMU, with the strategy signature ``(full (N,) bool, height (N,) m, current
-    0-based or -1) -> 0-based section or -1``; the FMU sees sections numbered 1..N (0: none)."""
+    0-based or -1) -> 0-based section or -1``; the FMU sees sections numbered from its ``index_base`` (1: 1..N,
+    0 none; 0: 0..N-1, -1 none)."""
 
     def __init__(self, slave: FmuSlave, fmu: Fmu, sections: int, frame_dt_s: float):
         self.slave, self.sections, self.frame_dt_s = slave, sections, frame_dt_s
+        self.base = fmu.index_base
         self._height = "height_m" in fmu.inputs
         self._current = "current_section" in fmu.inputs
         self.clocked = slave.clocked
@@ -124,7 +128,7 @@ class FmuStrategy:
         if self._height:
             u += height.tolist()
         if self._current:
-            u.append(float(current + 1))
+            u.append(float(current + self.base))
         t_end = self.frame * self.frame_dt_s
         if self.clocked:                    # the tick is the decision, at the frame's start
             t = t_end - self.frame_dt_s
@@ -134,7 +138,7 @@ class FmuStrategy:
         else:
             out = self.slave.step(u, self._t_end, t_end - self._t_end, self.frame)
         self._t_end = t_end
-        return _section(self.slave, out[0], self.sections, "section", self.frame)
+        return _section(self.slave, out[0], self.sections, "section", self.frame, self.base)
 
 
 #: ControllerInput -> value of each optional scalar controller input, in CONTROLLER.inputs order
@@ -152,7 +156,7 @@ class FmuController:
     state is None). Stepped once per frame at the decision time (see the module docstring)."""
 
     def __init__(self, slave: FmuSlave, fmu: Fmu, params: ControllerParams):
-        self.slave, self.params = slave, params
+        self.slave, self.params, self.base = slave, params, fmu.index_base
         self._inputs = [(n, f) for n, f in _CONTROLLER_INPUTS.items() if n in fmu.inputs]
         self._outputs = [s.name for s in CONTROLLER.outputs if s.name in fmu.outputs]
         self._seen = False
@@ -172,7 +176,8 @@ class FmuController:
         nudge = got["nudge"]
         if nudge not in (-1.0, 0.0, 1.0):
             raise _fault(self.slave, frame, f"output 'nudge' is {nudge:g}, not -1, 0 or +1")
-        target = _section(self.slave, got.get("target_section", 0.0), n, "target_section", frame)
+        target = _section(self.slave, got.get("target_section", self.base - 1.0), n, "target_section", frame,
+                          self.base)
         fullness = np.array(out[-n:]) if "fullness" in got else np.full(n, np.nan)
         return None, ControllerCommand(int(nudge), got["auger_on"] != 0.0, got.get("desired_x_m", inp.spout_x_m),
                                        got.get("effort_m", math.nan), target, fullness,

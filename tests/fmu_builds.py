@@ -35,6 +35,7 @@ SOURCES = {
     "TractorCart": (VEHICLE / "TractorCart.py", [VEHICLE / "tractor_cart_model.py"]),
     "SectionFill": (ROOT / "examples" / "fmu_controller" / "SectionFill.py", []),
     "FrontToBack": (FMUS / "FrontToBack.py", []),
+    "FrontToBack0": (FMUS / "FrontToBack0.py", []),
     "Faulty": (FMUS / "Faulty.py", []),
 }
 #: name -> (script, project files) built with pythonfmu3 (FMI 3.0)

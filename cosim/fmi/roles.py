@@ -8,7 +8,7 @@ with a value of their type, step mode allowed.
 
 Per-section signals (``per_section``) map to one FMU variable per section: the FMU name holds ``{k}``,
 replaced by the section number 1..N (``full_{k}`` -> ``full_1`` ... ``full_9``; ``full[{k}]`` for Simulink's
-vector naming); or, in an FMI 3.0 FMU, to one array variable of N elements (the name without ``{k}``).
+vector naming), or 0..N-1 with the record's ``index_base: 0``; or, in an FMI 3.0 FMU, to one array variable of N elements (the name without ``{k}``).
 
 An FMI 3.0 FMU may declare one input clock: the run's sensor frame ticks it (:func:`clock_problems` says which
 clocks a role takes).
@@ -137,11 +137,12 @@ CONTROLLER = Role(
 ROLES = {r.name: r for r in (VEHICLE, STRATEGY, CONTROLLER)}
 
 
-def expand(signal: Signal, fmu_name: str, sections: int) -> list[str]:
+def expand(signal: Signal, fmu_name: str, sections: int, base: int = 1) -> list[str]:
     """The FMU variable names a mapping entry stands for: one per section for a per-section signal whose name holds
-    ``{k}``; else the name itself (a scalar, or for a per-section signal an FMI 3.0 array of N elements)."""
+    ``{k}`` (k = base .. base + N - 1); else the name itself (a scalar, or for a per-section signal an FMI 3.0 array
+    of N elements)."""
     if signal.per_section and "{k}" in fmu_name:
-        return [fmu_name.replace("{k}", str(k)) for k in range(1, sections + 1)]
+        return [fmu_name.replace("{k}", str(k)) for k in range(base, base + sections)]
     return [fmu_name]
 
 
@@ -198,11 +199,11 @@ def _value_problem(var: Variable, value) -> str | None:
     return None if ok else f"FMU parameter {var.name!r} is {var.type}, got {value!r}"
 
 
-def _per_section_problem(ours: str, theirs: str, desc: FmuDescription, sections: int) -> str | None:
+def _per_section_problem(ours: str, theirs: str, desc: FmuDescription, sections: int, base: int) -> str | None:
     """Why a per-section mapping without ``{k}`` cannot be an array here (FMI 2.0 has none), or None."""
     if desc.fmi_version == "2.0":
         return (f"{ours!r} is one value per section: the FMU name must hold {{k}} (the section number "
-                f"1..{sections}), e.g. '{theirs}_{{k}}'")
+                f"{base}..{sections - 1 + base}), e.g. '{theirs}_{{k}}'")
     return None
 
 
@@ -234,10 +235,10 @@ def mapping_problems(fmu: Fmu, desc: FmuDescription, role: Role, sections: int,
                             f" for the {role.label} FMU; known: {known}"))
                 continue
             array = sig.per_section and "{k}" not in theirs
-            if array and (msg := _per_section_problem(ours, theirs, desc, sections)):
+            if array and (msg := _per_section_problem(ours, theirs, desc, sections, fmu.index_base)):
                 out.append(((kind, ours), msg))
                 continue
-            for name in expand(sig, theirs, sections):
+            for name in expand(sig, theirs, sections, fmu.index_base):
                 msg = _check_variable(desc.variables.get(name), name, desc, causality[kind], sig.types,
                                       sections if array else None)
                 if msg:
