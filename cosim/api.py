@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import traceback
+import weakref
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -313,6 +314,7 @@ class Simulation:
         at a later reset, remove the files of this simulation's previous run."""
         if self._lock is None:
             self._lock = open_run_dir(self._out, overwrite=self._overwrite, parents=True)
+            weakref.finalize(self, self._lock.release)  # a Simulation dropped without close() frees ``out`` too
         else:
             clear_run_files(self._out)
 
