@@ -416,7 +416,7 @@ def test_a_signal_after_the_summary_is_printed_still_exits_130(delay_s, tmp_path
                              str(tmp_path / "run")], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
     lines = []
-    while not any(line.startswith("per-frame medians") for line in lines):  # the summary's last line
+    while not any(line.startswith("outcome") for line in lines):  # the summary's last line
         lines.append(proc.stdout.readline())
         assert lines[-1] or proc.poll() is None, lines
     time.sleep(delay_s)

@@ -22,6 +22,7 @@ from cosim.errors import HandoffTimeout, OutputError, ParticipantHung, RunError,
 from .figures import PENDING, draw_figures, figures_plan
 from .files import atomic_write
 from .liveness import ring_holder, stop_processes
+from .outcome import outcome_line
 from .outputs import finish_outputs
 from .runstate import RunState
 from .signals import StopSignals
@@ -106,6 +107,7 @@ def tear_down(run: RunState, error: RunError | None) -> tuple[dict, RunError | N
             run.seg.close()
             run.seg.unlink()
             _end_run_json(run.run_dir)
+    log.info("%s", outcome_line(summary.get("outcome")))
     t_outputs = time.perf_counter()
     if failure is None and figures["status"] == PENDING:
         summary, failure = draw_figures(run.run_dir, run.scenario, summary, run.recorder, run.stop.raising)
