@@ -170,3 +170,30 @@ def test_a_ground_truth_run_on_uneven_ground_fills_with_exact_mass_balance_and_r
     assert roll.max() > 0.5                                # the cart really tilts
     again = simulate(s)
     assert all(np.array_equal(se[k], again.series[k], equal_nan=True) for k in se)
+
+
+@pytest.mark.parametrize("terrain", [{"grade_pct": 5.0}, {"roughness_rms_m": 0.04}])
+def test_the_mock_renderers_rigid_cast_agrees_with_the_exact_reference_on_uneven_ground(terrain):
+    pytest.importorskip("embreex")
+    from cosim.world.camera import beam_directions
+    from cosim.world.fastcast import cast_from, make_caster
+    from cosim.world.parts import entity_parts
+    from cosim.world.patterns import beam_table
+    from renderer_proc.projection import world_from_sensor
+
+    s = scen(terrain, renderer="mock")
+    p = ModelParams.from_scenario(s)
+    w = initial_world(s, p)
+    state = signals(w, p)
+    caster = make_caster(entity_parts(s))
+    el, az = beam_table(s.sensor.pattern)
+    for shift in (0.0, 13.0):                              # the terrain's patch moves on between the two
+        st = {**state, "stream_points": 0, **{f"{n}_x_m": state[f"{n}_x_m"] + shift for n in ("combine", "tractor",
+                                                                                             "cart")}}
+        scene = scene_from_state(s, st, np.asarray(w.heights, np.float32), np.zeros((64, 4)))
+        ws = world_from_sensor(s, st)
+        d = beam_directions(el, az) @ ws[:3, :3].T
+        a, b = caster.cast(scene, ws[:3, 3], d), cast_from(scene, ws[:3, 3], d)
+        hit = np.isfinite(a)
+        assert np.array_equal(hit, np.isfinite(b)) and np.abs(a[hit] - b[hit]).max() < 1e-9
+    caster.close()
