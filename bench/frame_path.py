@@ -54,9 +54,9 @@ def _timed(obj, name: str, into: list, clock=time.thread_time) -> None:
 
 def measure(frames: int, warmup: int, split_draws: bool = False, scenario: str = "default") -> dict[str, float]:
     """Median ms per frame of every part above (and ``faults``: minor page faults per frame)."""
+    import renderer_proc.participant as rp
     from cosim.runtime.inprocess import InProcessSession
     from cosim.scenario.loader import load_scenario, resolve_scenario_arg
-    import renderer_proc.participant as rp
 
     keep_heap()
     sess = InProcessSession(load_scenario(resolve_scenario_arg(scenario)))
