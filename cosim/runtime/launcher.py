@@ -39,6 +39,7 @@ from .liveness import Watch, child_failure
 from .lockstep import RingPlan, Token
 from .logs import configure_logging
 from .outputs import default_run_dir, write_scenario
+from .pipeline import Gates, PipePlan, effective_schedule, supervise
 from .recorder import Recorder
 from .rundir import open_run_dir
 from .runstate import RunState
@@ -147,8 +148,8 @@ def _set_up(run: RunState, console_log: bool, observers: Sequence[ObserverSpec],
     two steps."""
     scenario, stop = run.scenario, run.stop
     schema = run.schema
-    run.plan = plan = RingPlan(tuple(s.name for s in run.ring), scenario.frames, SUPERVISOR,
-                               tuple(s.name for s in run.ring if s.defers_outputs(scenario)))
+    run.plan, run.schedule_why = _plan(scenario, run.ring, hold=bool(sinks))
+    plan = run.plan
     write_running_summary(run.run_dir, {"scenario": scenario.name, "participants": list(plan.members),
                                         "seed": scenario.seed, "frames_planned": scenario.frames + 1,
                                         "launcher_pid": os.getpid()})
@@ -158,11 +159,13 @@ def _set_up(run: RunState, console_log: bool, observers: Sequence[ObserverSpec],
     run.name = name = f"cosim-{os.getpid()}-{secrets.token_hex(3)}"
     stop.check(-1)
     ctx = mp.get_context("spawn")
-    run.sems = {n: ctx.Semaphore(0) for n in (*plan.members, SUPERVISOR)}
+    pipelined = isinstance(plan, PipePlan)
+    run.sems = {n: ctx.Semaphore(0) for n in (plan.semaphore_names if pipelined else (*plan.members, SUPERVISOR))}
     run.seg = seg = Segment.create(name, schema, run_id=run.run_dir.name, frames=scenario.frames)
     run.t_start = run.t_first = time.perf_counter()
-    log.info("run %s: segment %s (%d bytes, fingerprint %s), ring %s, %d frames", run.run_dir.name, name,
-             schema.total_nbytes, schema.fingerprint[:12], " -> ".join(plan.members), scenario.frames + 1)
+    log.info("run %s: segment %s (%d bytes, fingerprint %s), ring %s, %d frames, %s schedule (%s)", run.run_dir.name,
+             name, schema.total_nbytes, schema.fingerprint[:12], " -> ".join(plan.members), scenario.frames + 1,
+             "pipelined" if pipelined else "sequential", run.schedule_why)
     write_run_json(run.run_dir, {"segment": name, "launcher_pid": os.getpid(), "fingerprint": schema.fingerprint,
                                   "participants": list(plan.members), "ended": False})
     seg.slot(SUPERVISOR)["pid"] = os.getpid()
@@ -181,8 +184,21 @@ def _set_up(run: RunState, console_log: bool, observers: Sequence[ObserverSpec],
                          os.getpid(), scenario.timing.startup_timeout_s, scenario.timing.handoff_timeout_s + 5.0,
                          time.time())
         run.procs[spec.name] = start_process(child_main, (args,), name=f"cosim-{spec.name}")
-    run.recorder = Recorder(seg, plan.members, deferred=bool(plan.deferred))
-    run.files = RunFiles(run.run_dir, run.recorder, lag=1 if plan.deferred else 0)
+    run.recorder = Recorder(seg, plan.members, deferred=bool(plan.deferred) or pipelined,
+                            schedule="pipelined" if pipelined else "sequential")
+    # the token ring records a deferred member's row one turn late; the pipelined one records whole frames
+    run.files = RunFiles(run.run_dir, run.recorder, lag=1 if plan.deferred and not pipelined else 0)
+
+
+def _plan(scenario: Scenario, ring: list[ParticipantSpec], *, hold: bool) -> tuple[RingPlan | PipePlan, str]:
+    """(plan, why) of the run's schedule (cosim.runtime.pipeline.effective_schedule): a token ring or a pipeline
+    plan; ``hold``: sinks read the segment at each completed frame, so the pipeline keeps it until they have."""
+    deferred = tuple(s.name for s in ring if s.defers_outputs(scenario))
+    reads = {s.name: s.reads_of(scenario) for s in ring}
+    schedule, why = effective_schedule(scenario, reads)
+    if schedule == "pipelined":
+        return PipePlan.build(reads, scenario.frames, supervisor=SUPERVISOR, deferred=deferred, hold=hold), why
+    return RingPlan(tuple(s.name for s in ring), scenario.frames, SUPERVISOR, deferred), why
 
 
 def _supervise(run: RunState, progress: Progress | None) -> None:
@@ -207,6 +223,9 @@ def _supervise(run: RunState, progress: Progress | None) -> None:
                 continue
             raise child_failure(n, p, seg)
 
+    if isinstance(plan, PipePlan):
+        _supervise_pipelined(run, progress, check)
+        return
     token = Token(seg, run.sems)
     first = plan.members[0]
     t_turn = time.monotonic_ns()
@@ -247,6 +266,29 @@ def _supervise(run: RunState, progress: Progress | None) -> None:
         for sink in run.frame_sinks:
             sink(seg, plan.flush_frame)
     sup["phase"] = Phase.DONE
+
+
+def _supervise_pipelined(run: RunState, progress: Progress | None, check: Callable[[], None]) -> None:
+    """:func:`_supervise` under the pipelined schedule: each member's blocks recorded as soon as it has published
+    a frame (cosim.runtime.pipeline.supervise), the frame's rows, sinks, files and progress once all have."""
+    scenario, seg, plan, recorder, stop = run.scenario, run.seg, run.plan, run.recorder, run.stop
+    warned: set[str] = set()
+
+    def on_frame(frame: int, turn_ns: int) -> None:
+        if frame == 0:
+            run.t_first = time.perf_counter()
+        recorder.complete(frame, turn_ns if frame > 0 else None)
+        for sink in run.frame_sinks:
+            sink(seg, frame)
+        stop.check(frame)
+        run.files.maybe_append()
+        _warn_dead_observers(run.watchers, warned)
+        if progress is not None:
+            progress(frame, plan.frames, frame * scenario.timing.sensor_period_s, time.perf_counter() - run.t_start)
+
+    supervise(seg, plan, Gates(seg, plan, run.sems, SUPERVISOR, check),
+              startup_timeout_s=scenario.timing.startup_timeout_s, handoff_timeout_s=scenario.timing.handoff_timeout_s,
+              on_take=recorder.take, on_frame=on_frame)
 
 
 def _observer_main(obs: ObserverSpec, segment: str, log_path: str) -> None:

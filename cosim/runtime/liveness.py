@@ -189,12 +189,13 @@ def child_failure(name: str, proc, seg: Segment) -> RunError:
 
 
 def ring_holder(seg: Segment, members: Sequence[str]) -> str | None:
-    """The ring member that holds up the ring (the one a hand-off timeout is about): of the members starting or
-    stepping, the one at the latest frame (the later in ring order on a tie: the token has reached it); None when
-    every member waits (then no member is at fault)."""
-    busy = [(int(seg.slot(n)["frame"]), i, n) for i, n in enumerate(members)
+    """The member that holds up the run (the one a hand-off timeout is about): of the members starting or stepping
+    (a member blocked on a reader, under the pipelined schedule, says waiting), the one busy the longest (its slot's
+    ``heartbeat_ns`` is stamped when it starts a step; 0 before its first); None when every member waits (then no
+    member is at fault)."""
+    busy = [(int(seg.slot(n)["heartbeat_ns"]), n) for n in members
             if int(seg.slot(n)["phase"]) in (Phase.STARTING, Phase.STEPPING)]
-    return max(busy)[2] if busy else None
+    return min(busy)[1] if busy else None
 
 
 def stop_processes(procs: Mapping[str, object], *, graceful: bool, join_timeout_s: float, grace_s: float,

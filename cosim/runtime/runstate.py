@@ -9,6 +9,7 @@ from cosim.scenario.config import Scenario
 from shm_schema import Segment
 
 from .lockstep import RingPlan
+from .pipeline import PipePlan
 from .recorder import Recorder
 from .rundir import RunDirLock
 from .signals import StopSignals
@@ -31,7 +32,9 @@ class RunState:
     log_path: Path = Path()
     ring: list = field(default_factory=list)
     schema: object = None
-    plan: RingPlan | None = None
+    plan: RingPlan | PipePlan | None = None
+    #: why the run has its schedule (cosim.runtime.pipeline.effective_schedule)
+    schedule_why: str = ""
     name: str = ""
     sems: dict = field(default_factory=dict)
     seg: Segment | None = None

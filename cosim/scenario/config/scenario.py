@@ -13,6 +13,7 @@ from .machines import Auger, Cart, Combine, Crop, MachineSync, Tractor
 from .outcome import Outcome
 from .rendering import Render
 from .sensing import Perception, Sensor
+from .terrain import Terrain
 
 __all__ = ["Timing", "Outputs", "Scenario", "FORMAT_VERSION", "RATIO_TOLERANCE"]
 
@@ -38,6 +39,12 @@ class Timing(Model):
     #: renderer do frame m + 1 and publishes its outputs at its next turn; the results are the same either way
     #: (cosim.runtime.participant.perception_overlaps)
     overlap_perception: bool = True
+    #: how the processes of a launched run take turns (docs/architecture.md): ``sequential``, one token ring
+    #: (dynamics, renderer, perception, supervisor; perception overlapping the next frame as above), or
+    #: ``pipelined``, each process waiting only for the frames it reads, so that dynamics, the renderer and
+    #: perception work on neighbouring frames at once. Both give the same results; a run with one process (no
+    #: renderer or perception) or on one core runs ``sequential``
+    schedule: Literal["sequential", "pipelined"] = "pipelined"
     handoff_timeout_s: PosFloat = 30.0
     startup_timeout_s: PosFloat = 120.0
 
@@ -86,6 +93,7 @@ class Scenario(Model):
     tractor: Tractor = Tractor()
     cart: Cart = Cart()
     machine_sync: MachineSync = MachineSync()
+    terrain: Terrain = Terrain()
     vehicles: Vehicles = Vehicles()
     grain: Grain = Grain()
     controller: Controller = Controller()
