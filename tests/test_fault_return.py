@@ -30,7 +30,7 @@ KINDS = {
     "crash": ("crash_at", ParticipantCrashed, f"raised ValueError at frame {FAULT_FRAME}"),
     "stop": ("stop_at", ParticipantHung, f"is stopped during frame {FAULT_FRAME}"),
     "deadlock": ("deadlock_at", ParticipantHung, f"stopped beating during frame {FAULT_FRAME}"),
-    "hang": ("hang_at", HandoffTimeout, f"did not pass frame {FAULT_FRAME} on within the hand-off timeout"),
+    "hang": ("hang_at", HandoffTimeout, f"did not finish frame {FAULT_FRAME} within the hand-off timeout"),
 }
 ROLES = ("dynamics", "renderer", "perception")
 FIGURES = {"fig7_fullness.png", "fig8_heightmaps.png", "fig9_auger.png", "fig10_profile.png"}
@@ -67,7 +67,7 @@ def test_the_launcher_is_back_within_2_s_of_any_fault_naming_the_child(role, kin
     assert took < BACK_WITHIN_S, f"{role} {kind}: back {took:.2f} s after the fault"
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summary["error"]["process"] == role and summary["status"] == "failed"
-    assert summary["frames"] == FAULT_FRAME
+    assert FAULT_FRAME - 2 <= summary["frames"] <= FAULT_FRAME  # the pipelined schedule completes frames later
     assert summary["figures"] == {"status": "not_drawn", "reason": "the run failed",
                                   "command": f"python launch.py report {tmp_path / 'run'}"}
     assert not FIGURES & {p.name for p in (tmp_path / "run").iterdir()}

@@ -51,9 +51,10 @@ def at_fault(run: RunState, error: RunError) -> RunError:
     if isinstance(error, HandoffTimeout) and error.process == SUPERVISOR and run.seg is not None:
         holder = ring_holder(run.seg, run.plan.members)
         if holder is not None:
-            return HandoffTimeout(f"{holder} did not pass frame {error.frame} on within the hand-off timeout "
+            frame = int(run.seg.slot(holder)["frame"])
+            return HandoffTimeout(f"{holder} did not finish frame {frame} within the hand-off timeout "
                                   f"(timing.handoff_timeout_s = {run.scenario.timing.handoff_timeout_s:g} s): "
-                                  f"{error}", process=holder, frame=error.frame, detail=error.detail)
+                                  f"{error}", process=holder, frame=frame, detail=error.detail)
     if not error.process:
         error.process = SUPERVISOR
     return error
