@@ -323,5 +323,6 @@ def test_ctrl_c_during_a_sweep_stops_it_in_order_without_tracebacks(tmp_path):
     assert "interrupted: the runs that finished are kept; run the same command to resume" in stderr
     assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr and "leaked" not in stderr, stderr
     summaries = [json.loads(p.read_text()) for p in out.glob("runs/*/summary.json")]
-    assert summaries and all(s["status"] == "interrupted" and s["frames"] > 0 for s in summaries)
+    assert summaries and all(s["status"] == "interrupted" for s in summaries)  # one may not have begun its frames
+    assert any(s["frames"] > 0 for s in summaries)
     _assert_nothing_left(out)
