@@ -73,7 +73,7 @@ HEAD = "format_version: 1\nset: {renderer: none, feedback: ground_truth, duratio
     ("grid:\n  timing.latency_frames: [1, '2']\n", r"sweep.yaml:4:30: grid.timing.latency_frames\[1\]: Input "
      r"should be a valid integer, got '2'"),
     ("grid:\n  timing.sensor_period_s: [0.1, -0.1]\n", r"sweep.yaml:4:33: grid.timing.sensor_period_s\[1\]: Input "
-     r"should be greater than 0, got -0.1"),
+     r"should be greater than 0 s, got -0.1 s"),
     ("zip:\n  combine.speed_mps: [1.0, 1.5]\n  timing.latency_frames: [1]\n", r"sweep.yaml:5:3: "
      r"zip.timing.latency_frames: zip parameters are varied together, so their lengths must be equal: "
      r"'timing.latency_frames' has 1, 'combine.speed_mps' has 2"),

@@ -9,16 +9,26 @@ from __future__ import annotations
 import json
 from typing import Annotated, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, JsonValue
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, JsonValue, model_validator
+
+from .limits import check_limits, schema_limits
 
 __all__ = ["Model", "Vec3", "Mount", "Entity", "PosFloat", "NonNegFloat", "Fraction", "Angle", "PluginRef",
            "PluginOptions", "Options"]
 
 
 class Model(BaseModel):
-    """Frozen, strict record: unknown keys are rejected, no silent type coercion."""
+    """Frozen, strict record: unknown keys are rejected, no silent type coercion, every number finite and within
+    the limits of its unit (cosim.scenario.config.limits). A field's docstring (the string literal under it) is
+    its description in the JSON Schema."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, validate_default=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, validate_default=True, allow_inf_nan=False,
+                              use_attribute_docstrings=True, json_schema_extra=schema_limits)
+
+    @model_validator(mode="after")
+    def _within_limits(self):
+        check_limits(self)
+        return self
 
 
 PosFloat = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
