@@ -67,5 +67,9 @@ class Mount(Model):
     """
 
     parent: Entity = "combine"
+    """Entity whose body frame the pose is given in: world, combine, tractor or cart."""
     xyz_m: Vec3 = (0.0, 0.0, 0.0)
+    """Position (x forward, y left, z up) in the parent's body frame, m."""
     rpy_deg: Vec3 = (0.0, 0.0, 0.0)
+    """Roll, pitch, yaw, deg, applied as R = Rz(yaw) Ry(pitch) Rx(roll); positive pitch tips the forward axis
+    down."""
