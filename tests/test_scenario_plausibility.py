@@ -7,7 +7,8 @@ from cosim.errors import RunRefused, ScenarioError
 from cosim.runtime.capacity import check_segment_fits
 from cosim.runtime.specs import build_schema, ring_specs
 from cosim.scenario.loader import MAX_SCENARIO_BYTES, load_scenario, load_scenario_text, resolve_scenario_arg
-from cosim.scenario.plausibility import PROCESS_BYTES_PER_BEAM, SHARED_BYTES_PER_BEAM, implausible, memory_problems
+from cosim.scenario.memory import PROCESS_BYTES_PER_BEAM, SHARED_BYTES_PER_BEAM, memory_problems
+from cosim.scenario.plausibility import implausible
 from cosim.scenario.yamlmarks import MAX_VALUES
 
 DEFAULT = resolve_scenario_arg("default")

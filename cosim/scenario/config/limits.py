@@ -25,10 +25,17 @@ from pydantic import BaseModel, ValidationError
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
 __all__ = ["Unit", "UNITS", "DIMENSIONLESS_MAX", "Limit", "unit_of", "field_limits", "check_limits",
-           "schema_limits", "LIMIT_ERROR"]
+           "schema_limits", "LIMIT_ERROR", "key_error"]
 
-#: pydantic error type of a value beyond its limit (the loader shows its message as it is)
+#: pydantic error type of a value a record refuses at its own key (the loader shows its message as it is)
 LIMIT_ERROR = "value_limit"
+
+
+def key_error(record: str, loc: tuple, message: str, value: object) -> ValidationError:
+    """A ValidationError at ``loc`` inside the field or record being validated (a validator raises it, and
+    pydantic prefixes the field's own key), so that a cross-field problem is reported at the value to change."""
+    return ValidationError.from_exception_data(record, [InitErrorDetails(
+        type=PydanticCustomError(LIMIT_ERROR, message), loc=loc, input=value)])
 
 
 @dataclass(frozen=True)

@@ -9,11 +9,13 @@ from pydantic import Field, ValidationInfo, field_validator
 from .base import Model, PosFloat
 from .control import Controller, Grain, Integrator
 from .fmu import Vehicles
+from .limits import key_error
 from .machines import Auger, Cart, Combine, Crop, MachineSync, Tractor
 from .rendering import Render
 from .sensing import Perception, Sensor
 
-__all__ = ["Timing", "Outputs", "Scenario", "FORMAT_VERSION", "RATIO_TOLERANCE", "MAX_SENSOR_PERIOD_S"]
+__all__ = ["Timing", "Outputs", "Scenario", "FORMAT_VERSION", "RATIO_TOLERANCE", "MAX_SENSOR_PERIOD_S",
+           "MAX_GRID_CELLS"]
 
 FORMAT_VERSION = 1
 #: relative tolerance when checking that a rate ratio is an integer
@@ -21,6 +23,20 @@ RATIO_TOLERANCE = 1e-9
 #: longest sensor period, s: a LiDAR frame rate below 1 Hz is none this platform models (100 is milliseconds typed
 #: as seconds: 3 frames for a 200 s run)
 MAX_SENSOR_PERIOD_S = 1.0
+#: most cells of a height-map grid over the cart (grain.cell_m, controller.grid_cell_m): 2048 x 2048, a 1.5 mm
+#: cell on the default cart; each cell costs the fill model and perception several float64 arrays per frame
+MAX_GRID_CELLS = 1 << 22
+
+
+def _grid_problem(cart: Cart, cell_m: float) -> str | None:
+    """Why a grid of ``cell_m`` over ``cart``'s interior is too large to hold, None when it is not."""
+    nx, ny = cart.interior_length_m / cell_m, cart.interior_width_m / cell_m
+    if nx * ny <= MAX_GRID_CELLS:
+        return None
+    smallest = math.sqrt(cart.interior_length_m * cart.interior_width_m / MAX_GRID_CELLS)
+    return (f"{cell_m:g} m cells grid the {cart.interior_length_m:g} x {cart.interior_width_m:g} m cart interior "
+            f"into {nx:,.0f} x {ny:,.0f} cells; at most {MAX_GRID_CELLS:,} cells fit (a cell of at least "
+            f"{smallest:.2g} m on this cart)")
 
 
 def _integer_ratio(num: float, den: float) -> int | None:
@@ -147,7 +163,17 @@ class Scenario(Model):
     @classmethod
     def _grain_fits_cart(cls, grain: Grain, info: ValidationInfo) -> Grain:
         cart = info.data.get("cart")
-        if cart is not None and grain.initial_fill_m > cart.interior_depth_m:
+        if cart is None:
+            return grain
+        too_large = _grid_problem(cart, grain.cell_m)
+        if too_large:
+            raise key_error("Grain", ("cell_m",), too_large, grain.cell_m)
+        for what, extent in (("length", cart.interior_length_m), ("width", cart.interior_width_m)):
+            if _integer_ratio(extent, grain.cell_m) is None:
+                n = max(1, round(extent / grain.cell_m))
+                raise key_error("Grain", ("cell_m",), f"{grain.cell_m:g} m does not divide the cart interior {what} "
+                                f"{extent:g} m; choose a cell that divides it (e.g. {extent / n:g} m)", grain.cell_m)
+        if grain.initial_fill_m > cart.interior_depth_m:
             raise ValueError(f"initial_fill_m ({grain.initial_fill_m:g}) is above the wall top "
                              f"(cart.interior_depth_m = {cart.interior_depth_m:g}): the cart would already overflow")
         return grain
@@ -158,6 +184,9 @@ class Scenario(Model):
         cart = info.data.get("cart")
         if cart is None:
             return controller
+        too_large = _grid_problem(cart, controller.grid_cell_m)
+        if too_large:
+            raise key_error("Controller", ("grid_cell_m",), too_large, controller.grid_cell_m)
         if controller.target_fill_m > cart.interior_depth_m:
             raise ValueError(f"target_fill_m ({controller.target_fill_m:g}) is above the wall top "
                              f"(cart.interior_depth_m = {cart.interior_depth_m:g}): grain that high spills")
