@@ -98,8 +98,12 @@ def _numeric(annotation) -> tuple[bool, list]:
 
 @functools.lru_cache(maxsize=None)
 def field_limits(model: type[BaseModel]) -> dict[str, Limit]:
-    """Field name -> :class:`Limit` for every numeric field of ``model`` (its own fields, not its sub-records)."""
+    """Field name -> :class:`Limit` for every numeric field of ``model`` (its own fields, not its sub-records);
+    none for a record that sets ``__unit_limits__ = False`` (one whose numbers are in another key's unit, such as
+    a sweep's distributions)."""
     out = {}
+    if not getattr(model, "__unit_limits__", True):
+        return out
     for name, info in model.model_fields.items():
         numeric, meta = _numeric(info.annotation)
         if not numeric:
