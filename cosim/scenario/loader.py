@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import json
 import os
+import reprlib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -248,7 +249,8 @@ def _overrides_given(overrides: Sequence[str], extra: Mapping) -> list[tuple[Pro
         out.append((Problem(SET_FILE, i, len(key) + 2, "", ""), tuple(key.strip().split(".")), f"--set {text}"))
     for key, value in extra.items():
         if value is not None:
-            out.append((Problem(OPTIONS_FILE, 0, 0, "", ""), tuple(str(key).split(".")), f"option {key}={value!r}"))
+            out.append((Problem(OPTIONS_FILE, 0, 0, "", ""), tuple(str(key).split(".")),
+                        f"option {key}={reprlib.repr(value)}"))
     return out
 
 

@@ -32,7 +32,7 @@ def _control(text: str) -> tuple[int, str] | None:
     return None
 
 
-def _why(value) -> str | None:
+def _why(value, what: str = "text") -> str | None:
     """Why ``value`` (a scalar) is refused, None when it is not."""
     if isinstance(value, float) and not math.isfinite(value):
         return f"{show(value)} is not a finite number: a number here must be finite"
@@ -41,7 +41,7 @@ def _why(value) -> str | None:
     if isinstance(value, str):
         bad = _control(value)
         if bad is not None:
-            return (f"text {show(value)} holds the control character U+{ord(bad[1]):04X} at position {bad[0]}: text "
+            return (f"{what} {show(value)} holds the control character U+{ord(bad[1]):04X} at position {bad[0]}: text "
                     "may hold tabs and line breaks, no other control characters")
     return None
 
@@ -54,9 +54,9 @@ def value_problems(doc: Doc) -> set[Loc]:
         loc, node = stack.pop()
         if isinstance(node, dict):
             for key, value in node.items():
-                why = _why(key)
+                why = _why(key, "key")
                 if why is not None:
-                    doc.problem(doc.keys.get(loc + (key,), doc.values[()]), loc + (key,), "key " + why)
+                    doc.problem(doc.keys.get(loc + (key,), doc.values[()]), loc + (key,), why)
                     reported.add(loc + (key,))
                 stack.append((loc + (key,), value))
         elif isinstance(node, list):

@@ -118,8 +118,12 @@ class Doc:
 
 
 def dotted(loc: Loc) -> str:
+    """``('a', 'b', 0)`` -> ``a.b[0]``; a key that is not printable is shown escaped (``a\\x1bb``), so that a
+    message never carries a control character to the terminal."""
     out = ""
     for part in loc:
+        if isinstance(part, str) and not part.isprintable():
+            part = part.encode("unicode_escape").decode("ascii")
         out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
     return out
 
