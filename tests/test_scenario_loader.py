@@ -190,6 +190,21 @@ def test_set_paths_resolve_against_the_working_directory(tmp_path, monkeypatch):
     assert str(tmp_path / "missing.obj") in got[0].message
 
 
+def test_every_relative_path_given_on_the_command_line_resolves_against_the_working_directory(tmp_path, monkeypatch):
+    """As documented (README, docs/CONTRACTS.md): --set and options against the working directory, the file's values
+    against the file's folder; plugin_dir and sensor.pattern.csv_file included."""
+    (tmp_path / "mods").mkdir()
+    (tmp_path / "beams.csv").write_text("elevation_deg,azimuth_deg\n0,0\n")
+    monkeypatch.chdir(tmp_path)
+    s = load_scenario(resolve_scenario_arg("default"), ["plugin_dir=mods", "sensor.pattern.preset=csv",
+                                                        "sensor.pattern.csv_file=beams.csv"], check_world=False)
+    assert s.plugin_dir == str(tmp_path / "mods") and s.sensor.pattern.csv_file == tmp_path / "beams.csv"
+    s = load_scenario_text("format_version: 1\n", extra={"plugin_dir": "mods"})
+    assert s.plugin_dir == str(tmp_path / "mods")
+    s = load_scenario_text("format_version: 1\nplugin_dir: mods\n", base_dir=REPO)
+    assert s.plugin_dir == str(REPO / "mods")
+
+
 def test_a_directory_is_not_a_mesh_file(tmp_path):
     (tmp_path / "d").mkdir()
     got = problems("format_version: 1\ncart:\n  mesh_file: d\n", base_dir=tmp_path)

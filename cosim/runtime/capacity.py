@@ -29,7 +29,7 @@ def check_segment_fits(schema: Schema, extra_bytes: int = 0, free: tuple | None 
     largest = sorted(schema.blocks, key=lambda b: -b.nbytes)[:SHOWN_BLOCKS]
     shown = ", ".join(f"{b.name} {'x'.join(map(str, getattr(b, 'shape', ()))) or 'struct'} {size_text(b.nbytes)}"
                       for b in largest)
-    space = f", and a process may map {size_text(have.address_space)} more (ulimit -v)" \
+    space = f", and a process has {size_text(have.address_space)} of address space for it (ulimit -v)" \
         if have.address_space < UNLIMITED else ""
     raise RunRefused(f"the run needs {size_text(need)} of shared memory, but /dev/shm has {size_text(have.shm)} "
                      f"free and the machine {size_text(have.memory)} available{space}; largest blocks: {shown}")

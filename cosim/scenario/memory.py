@@ -4,9 +4,10 @@ Three limits, each measured here (:func:`room`):
 
 * ``shm``: free bytes of /dev/shm, where the run's segment lives;
 * ``memory``: the machine's available memory (MemAvailable);
-* ``address_space``: the address space one more process of the run may still map: the soft ``RLIMIT_AS``
-  (``ulimit -v``, inherited by the children) less this process's own mapped size (VmSize), which stands for the
-  interpreter and libraries every child maps too. Every child maps the whole segment into its address space.
+* ``address_space``: the address space a process of the run has for the segment and its arrays: the soft
+  ``RLIMIT_AS`` (``ulimit -v``, inherited by the children) less what a child maps of its own (the interpreter,
+  numpy, OpenCV, the renderer's libraries and threads: :data:`CHILD_MAPPED_BYTES`, or this process's VmSize when
+  that is larger). Every child maps the whole segment into its address space.
 
 A figure that cannot be read (no /proc, no limit) is a large number, never the reason for a refusal.
 :func:`memory_problems` compares a beam pattern's memory with them (the launcher compares the whole segment:
@@ -22,7 +23,7 @@ from typing import NamedTuple
 from cosim.scenario.config import Scenario
 
 __all__ = ["Room", "room", "size_text", "memory_problems", "SHARED_BYTES_PER_BEAM", "PROCESS_BYTES_PER_BEAM",
-           "SHM_DIR", "UNLIMITED"]
+           "SHM_DIR", "UNLIMITED", "CHILD_MAPPED_BYTES"]
 
 #: shared memory per beam, bytes: the ``lidar_points`` block, (N, 4) float32
 SHARED_BYTES_PER_BEAM = 16
@@ -32,6 +33,9 @@ PROCESS_BYTES_PER_BEAM = 2 * 40 + 24
 SHM_DIR = "/dev/shm"
 #: stands for a figure that cannot be read, or a limit that is not set, bytes
 UNLIMITED = 1 << 62
+#: address space a child maps besides the segment, bytes: measured VmPeak 0.27 GB (dynamics), 0.82 GB
+#: (perception, OpenCV) and 0.87 GB (renderer, llvmpipe GL and its threads) on the default scenario
+CHILD_MAPPED_BYTES = 1 << 30
 
 
 class Room(NamedTuple):
@@ -63,8 +67,8 @@ def room() -> Room:
     soft, _ = resource.getrlimit(resource.RLIMIT_AS)
     space = UNLIMITED
     if soft != resource.RLIM_INFINITY:
-        used = _meminfo("/proc/self/status", "VmSize")
-        space = max(0, soft - used) if used != UNLIMITED else soft
+        own = _meminfo("/proc/self/status", "VmSize")
+        space = max(0, soft - max(CHILD_MAPPED_BYTES, own if own != UNLIMITED else 0))
     return Room(shm, _meminfo("/proc/meminfo", "MemAvailable"), space)
 
 
@@ -91,7 +95,7 @@ def memory_problems(s: Scenario, free: tuple | None = None, beams: int | None = 
     if shared <= have.shm and shared + private <= have.memory and shared + private <= have.address_space:
         return []
     shape = f"{p.azimuth_count} x {p.elevation_count} = " if p.preset != "csv" else ""
-    limit = f" and a process may map {size_text(have.address_space)} more (ulimit -v)" \
+    limit = f" and a process {size_text(have.address_space)} of address space for them (ulimit -v)" \
         if have.address_space < UNLIMITED else ""
     return [(("sensor", "pattern"),
              f"{shape}{beams:,} beams need at least {size_text(shared)} of shared memory (block lidar_points) and "

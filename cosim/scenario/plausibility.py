@@ -33,7 +33,7 @@ from cosim.world.geometry import apply, body_from_camera_axes, invert, mount_tra
 from cosim.world.parts import cart_boxes
 from cosim.world.patterns import PatternError, beam_table
 
-from .memory import memory_problems
+from .memory import memory_problems, size_text
 
 __all__ = ["implausible", "FOV_BEAMS", "MAX_CSV_BYTES", "NEIGHBOURHOOD_M"]
 
@@ -124,8 +124,8 @@ def _pattern_problems(s: Scenario) -> tuple[list[tuple[Loc, str]], tuple | None]
         except OSError as exc:
             return [(_CSV_KEY, f"cannot read the beam table {str(path)!r}: {exc.strerror}")], None
         if size > MAX_CSV_BYTES:
-            return [(_CSV_KEY, f"the beam table is {size / 2**20:.1f} MiB; tables are limited to "
-                               f"{MAX_CSV_BYTES >> 20} MiB (~3 million beams)")], None
+            return [(_CSV_KEY, f"the beam table is {size_text(size)}; tables are limited to "
+                               f"{size_text(MAX_CSV_BYTES)} (~3 million beams)")], None
         try:
             table = beam_table(s.sensor.pattern)
         except PatternError as exc:
