@@ -39,14 +39,14 @@ def test_a_file_that_extends_a_packaged_scenario_is_it_but_for_what_it_states(tm
 
 
 def test_chains_merge_blocks_key_by_key_and_paths_resolve_against_their_own_file(tmp_path):
-    (tmp_path / "shared" / "cart.obj").parent.mkdir()
-    (tmp_path / "shared" / "cart.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
-    _write(tmp_path / "shared" / "base.yaml", "format_version: 1\nextends: default\ncart:\n  mesh_file: cart.obj\n"
+    (tmp_path / "common" / "cart.obj").parent.mkdir()
+    (tmp_path / "common" / "cart.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    _write(tmp_path / "common" / "base.yaml", "format_version: 1\nextends: default\ncart:\n  mesh_file: cart.obj\n"
            "timing:\n  latency_frames: 3\n")
-    child = _write(tmp_path / "runs" / "child.yaml", "format_version: 1\nextends: ../shared/base.yaml\n"
+    child = _write(tmp_path / "runs" / "child.yaml", "format_version: 1\nextends: ../common/base.yaml\n"
                    "timing:\n  sensor_period_s: 0.05\n  dynamics_dt_s: 0.005\n")
     s = load_scenario(child, check_world=False)
-    assert s.cart.mesh_file == tmp_path / "shared" / "cart.obj"           # the base's folder, not the child's
+    assert s.cart.mesh_file == tmp_path / "common" / "cart.obj"           # the base's folder, not the child's
     assert (s.timing.latency_frames, s.timing.sensor_period_s, s.duration_s) == (3, 0.05, 120.0)
     assert s.plugin_dir == str(tmp_path / "runs")                          # the loaded file's folder
 
