@@ -11,6 +11,7 @@ from typing import Annotated, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, JsonValue, model_validator
 
+from .docs import schema_docs
 from .limits import check_limits, schema_limits
 
 __all__ = ["Model", "Vec3", "Mount", "Entity", "PosFloat", "NonNegFloat", "Fraction", "Angle", "PluginRef",
@@ -20,10 +21,11 @@ __all__ = ["Model", "Vec3", "Mount", "Entity", "PosFloat", "NonNegFloat", "Fract
 class Model(BaseModel):
     """Frozen, strict record: unknown keys are rejected, no silent type coercion, every number finite and within
     the limits of its unit (cosim.scenario.config.limits). A field's docstring (the string literal under it) is
-    its description in the JSON Schema."""
+    its description in the JSON Schema (cosim.scenario.config.docs)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, strict=True, validate_default=True, allow_inf_nan=False,
-                              use_attribute_docstrings=True, json_schema_extra=schema_limits)
+                              json_schema_extra=lambda schema, model: (schema_limits(schema, model),
+                                                                       schema_docs(schema, model)))
 
     @model_validator(mode="after")
     def _within_limits(self):
