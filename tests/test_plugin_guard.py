@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 import uuid
 from pathlib import Path
 
@@ -28,17 +29,25 @@ def _scenario(tmp_path: Path, source: str, key: str = "strategy", group: str = "
     return path, name
 
 
-@pytest.mark.parametrize("source, message", [
-    ("import sys\nsys.exit(0)\n", "ends the interpreter (sys.exit or os._exit at import time, exit status 0)"),
-    ("import os\nos._exit(0)\n", "ends the interpreter (sys.exit or os._exit at import time, exit status 0)"),
-    ("raise SystemExit(3)\n", "exit status 3"),
+CASES = [
+    ("import sys\nsys.exit(0)\n", "importing module '{name}' calls sys.exit(0)"),
+    ("import os\nos._exit(0)\n", "importing module '{name}' ends the interpreter (os._exit at import time, exit "
+                                  "status 0)"),
+    ("raise SystemExit(3)\n", "calls sys.exit(3)"),
     ("import os, signal\nos.kill(os.getpid(), signal.SIGKILL)\n", "kills the interpreter (SIGKILL)"),
     ("raise RuntimeError('no licence server')\n", "failed: RuntimeError: no licence server"),
-])
-def test_an_import_that_ends_the_interpreter_is_refused_naming_the_plugin(tmp_path, capsys, source, message):
+]
+
+
+@pytest.mark.parametrize("fork", [True, False], ids=["fork", "fresh interpreter"])
+@pytest.mark.parametrize("source, message", CASES)
+def test_an_import_that_ends_the_interpreter_is_refused_naming_the_plugin(tmp_path, capsys, monkeypatch, source,
+                                                                           message, fork):
+    monkeypatch.setattr(probe, "can_fork", lambda: fork)
     path, name = _scenario(tmp_path, source)
+    message = message.format(name=name)
     out = tmp_path / "run"
-    for verb in (["validate"], ["run", "--out", str(out), "--quiet"]):
+    for verb in (["validate"], ["run", "--out", str(out), "--quiet"])[: 2 if fork else 1]:
         assert main([verb[0], str(path), *verb[1:]]) == 2
         err = capsys.readouterr().err
         assert f"{path}:5:13: controller.strategy: plug-in '{name}:f': " in err and message in err, err
@@ -46,22 +55,30 @@ def test_an_import_that_ends_the_interpreter_is_refused_naming_the_plugin(tmp_pa
     assert name not in sys.modules or message.startswith("failed")
 
 
-def test_an_import_that_hangs_is_refused_after_the_time_limit(tmp_path, capsys, monkeypatch):
+@pytest.mark.parametrize("fork", [True, False], ids=["fork", "fresh interpreter"])
+def test_an_import_that_hangs_is_refused_after_the_time_limit(tmp_path, capsys, monkeypatch, fork):
     monkeypatch.setattr(probe, "PLUGIN_IMPORT_TIMEOUT_S", 1.0)
+    monkeypatch.setattr(probe, "can_fork", lambda: fork)
     path, name = _scenario(tmp_path, "import time\ntime.sleep(600)\n")
+    t = time.monotonic()
     assert main(["validate", str(path)]) == 2
+    assert time.monotonic() - t < 30.0
     err = capsys.readouterr().err
     assert f"controller.strategy: plug-in '{name}:f': importing module '{name}' did not finish within 1 s" in err
 
 
-def test_every_module_is_probed_even_after_one_that_raises(tmp_path):
+@pytest.mark.parametrize("fork", [True, False], ids=["fork", "fresh interpreter"])
+def test_every_module_is_probed_even_after_one_that_raises(tmp_path, fork):
     bad = f"raise_{uuid.uuid4().hex[:8]}"
-    (tmp_path / f"{bad}.py").write_text("raise ValueError('x')\n")
+    (tmp_path / f"{bad}.py").write_text("print('at import')\nraise ValueError('x')\n")
     ends = f"exit_{uuid.uuid4().hex[:8]}"
     (tmp_path / f"{ends}.py").write_text("import os\nos._exit(7)\n")
-    refused = probe.probe_imports([bad, ends], [str(tmp_path), *sys.path])
+    fine = f"fine_{uuid.uuid4().hex[:8]}"
+    (tmp_path / f"{fine}.py").write_text("print('done')\n")
+    refused = probe.probe_imports([bad, ends, fine], [str(tmp_path), *sys.path], fork=fork)
     assert list(refused) == [ends] and "exit status 7" in refused[ends]
-    assert probe.probe_imports(["json", "os"]) == {}                       # imported already: not probed
+    assert fine not in sys.modules                                          # probed, not imported here
+    assert probe.probe_imports(["json", "os"], fork=fork) == {}             # imported already: not probed
 
 
 def test_the_real_command_exits_2_not_0(tmp_path):
@@ -70,7 +87,7 @@ def test_the_real_command_exits_2_not_0(tmp_path):
     r = subprocess.run([sys.executable, str(ROOT / "launch.py"), "validate", str(path)], capture_output=True,
                        text=True, timeout=120, env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert r.returncode == 2, r.stderr
-    assert f"plug-in '{name}:f': importing module '{name}' ends the interpreter" in r.stderr
+    assert f"plug-in '{name}:f': importing module '{name}' ends the interpreter (os._exit" in r.stderr
     assert "Traceback" not in r.stderr
 
 

@@ -12,6 +12,7 @@ problems are reported at the marks of the values that caused them.
 from __future__ import annotations
 
 import difflib
+import functools
 import os
 import re
 import types
@@ -55,7 +56,8 @@ def _is_path(annotation) -> bool:
     return typing.get_origin(annotation) in (typing.Union, types.UnionType) and Path in typing.get_args(annotation)
 
 
-def path_fields(model: type[BaseModel] = Scenario, prefix: Loc = ()) -> list[Loc]:
+@functools.lru_cache(maxsize=None)
+def path_fields(model: type[BaseModel] = Scenario, prefix: Loc = ()) -> tuple[Loc, ...]:
     """Every field typed ``Path`` (or ``Path | None``) under ``model``, as key tuples, e.g. ``('cart', 'mesh_file')``."""
     out: list[Loc] = []
     for name, info in model.model_fields.items():
@@ -64,7 +66,7 @@ def path_fields(model: type[BaseModel] = Scenario, prefix: Loc = ()) -> list[Loc
             out += path_fields(sub, prefix + (name,))
         elif _is_path(info.annotation):
             out.append(prefix + (name,))
-    return out
+    return tuple(out)
 
 
 def model_at(loc: Loc) -> type[BaseModel] | None:
@@ -233,7 +235,9 @@ def apply_extra(doc: Doc, extra: Mapping) -> None:
 
 
 # ----------------------------------------------------------------------------------------------- partial blocks
+@functools.lru_cache(maxsize=None)
 def _field_default(model: type[BaseModel], name: str):
+    """The default of ``model``'s field ``name`` (records are frozen: one instance serves every call)."""
     return model.model_fields[name].get_default(call_default_factory=True, validated_data={})
 
 
