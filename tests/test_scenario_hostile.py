@@ -33,7 +33,7 @@ def _numeric_fields(schema: dict) -> list[tuple[str, int | None]]:
                     walk(defs[b["$ref"].split("/")[-1]], path + ".")
             if prop.get("prefixItems") and all(i.get("type") == "number" for i in prop["prefixItems"]):
                 out.append((path, len(prop["prefixItems"])))
-            elif any(b.get("type") in ("number", "integer") and "const" not in b for b in branches):
+            elif any(b.get("type") in ("number", "integer") and not {"const", "enum"} & set(b) for b in branches):
                 out.append((path, None))
 
     walk(schema, "")

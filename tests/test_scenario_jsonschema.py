@@ -78,7 +78,7 @@ def test_every_numeric_property_is_bounded():
     """Every number a scenario holds has a lower and an upper bound in the schema (its own, or its unit's)."""
     def numeric(prop):
         branches = prop.get("prefixItems") or [b for b in prop.get("anyOf", []) if b.get("type") != "null"] or [prop]
-        return [b for b in branches if b.get("type") in ("number", "integer") and "const" not in b]
+        return [b for b in branches if b.get("type") in ("number", "integer") and not {"const", "enum"} & set(b)]
 
     unbounded = [where for where, prop in _properties(scenario_json_schema()) for b in numeric(prop)
                  if not (("minimum" in b or "exclusiveMinimum" in b) and ("maximum" in b or "exclusiveMaximum" in b))]
