@@ -3,12 +3,14 @@
 Each role lists our signals: inputs we set before each ``doStep``, outputs we read after it, and initial
 values we set before initialisation. A scenario maps each of our names to an FMU variable
 (``cosim.scenario.config.Fmu``); :func:`mapping_problems` checks that mapping against the FMU's description:
-our name known, required ones present, FMU variable present, causality and type right, parameters settable
-with a value of their type, step mode allowed.
+our name known, required ones present, FMU variable present, causality, type and shape right, parameters
+settable with a value of their type within their declared range, step mode allowed, an input clock the role
+takes.
 
 Per-section signals (``per_section``) map to one FMU variable per section: the FMU name holds ``{k}``,
 replaced by the section number 1..N (``full_{k}`` -> ``full_1`` ... ``full_9``; ``full[{k}]`` for Simulink's
-vector naming), or 0..N-1 with the record's ``index_base: 0``; or, in an FMI 3.0 FMU, to one array variable of N elements (the name without ``{k}``).
+vector naming), or 0..N-1 with the record's ``index_base: 0``; or, in an FMI 3.0 FMU, to one array variable of
+N elements (the name without ``{k}``).
 
 An FMI 3.0 FMU may declare one input clock: the run's sensor frame ticks it (:func:`clock_problems` says which
 clocks a role takes).
@@ -16,6 +18,7 @@ clocks a role takes).
 from __future__ import annotations
 
 import difflib
+import math
 from dataclasses import dataclass
 
 from cosim.scenario.config import Fmu
@@ -192,11 +195,20 @@ def _check_variable(var: Variable | None, fmu_name: str, desc: FmuDescription, c
 
 
 def _value_problem(var: Variable, value) -> str | None:
+    """Why ``value`` cannot be given to parameter ``var``: not of its type, or outside its declared range."""
     ok = {"Real": isinstance(value, (int, float)) and not isinstance(value, bool),
           "Integer": isinstance(value, int) and not isinstance(value, bool),
           "Enumeration": isinstance(value, int) and not isinstance(value, bool),
           "Boolean": isinstance(value, bool), "String": isinstance(value, str)}.get(var.kind, False)
-    return None if ok else f"FMU parameter {var.name!r} is {var.type}, got {value!r}"
+    if not ok:
+        return f"FMU parameter {var.name!r} is {var.type}, got {value!r}"
+    if var.kind in ("Real", "Integer", "Enumeration"):
+        lo = -math.inf if var.min is None else float(var.min)
+        hi = math.inf if var.max is None else float(var.max)
+        if not lo <= value <= hi:
+            return (f"FMU parameter {var.name!r} must be within [{var.min or '-inf'}, {var.max or 'inf'}] (its range "
+                    f"in the FMU's model description), got {value!r}")
+    return None
 
 
 def _per_section_problem(ours: str, theirs: str, desc: FmuDescription, sections: int, base: int) -> str | None:

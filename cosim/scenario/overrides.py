@@ -98,10 +98,11 @@ def tuple_len(loc: Loc) -> int | None:
 
 
 def _free_mapping(loc: Loc) -> bool:
-    """Whether ``loc`` names a field whose keys are free (a plug-in's ``*_options``: any key, checked later)."""
+    """Whether ``loc`` names a field whose keys are free: a mapping (a plug-in's ``*_options``, an FMU's
+    ``parameters`` or variable mapping), any key, checked later by what reads it."""
     model = model_at(loc[:-1]) if loc else None
     field = model.model_fields.get(loc[-1]) if model is not None else None
-    return field is not None and typing.get_origin(field.annotation) is dict and loc[-1].endswith("_options")
+    return field is not None and typing.get_origin(field.annotation) is dict
 
 
 def check_override_path(loc: Loc) -> str | None:

@@ -60,6 +60,7 @@ UNITS: tuple[Unit, ...] = tuple(sorted((
     Unit("_m3ps", "m^3/s", 10.0),      # 80 times a combine's unloading rate
     Unit("_kgpm3", "kg/m^3", 2e4),     # denser than lead
     Unit("_px", "px", 1e5),
+    Unit("_kg", "kg", 1e6),            # 1000 t: thirty carts of grain
 ), key=lambda u: -len(u.suffix)))
 
 #: largest |value| of a number whose key names no unit (gains, ratios, counts): no scenario needs more

@@ -11,6 +11,7 @@ from .control import Controller, Grain, Integrator
 from .fmu import Vehicles
 from .limits import key_error
 from .machines import Auger, Cart, Combine, Crop, MachineSync, Tractor
+from .outcome import Outcome
 from .rendering import Render
 from .sensing import Perception, Sensor
 
@@ -143,6 +144,8 @@ class Scenario(Model):
     """Offloading perception: resampling, height map, impact, accuracy evaluation, plug-ins."""
     outputs: Outputs = Outputs()
     """Optional outputs of a run: figures, report."""
+    outcome: Outcome = Outcome()
+    """What the run must achieve to count as done (the run's outcome)."""
     plugin_dir: str = ""
     """Folder searched first for plug-in modules named by import path; the loader sets it to the scenario file's
     folder unless given (a relative one is resolved against the file that gives it, or the working directory with
