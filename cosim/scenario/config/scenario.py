@@ -14,6 +14,7 @@ from .machines import Auger, Cart, Combine, Crop, MachineSync, Tractor
 from .outcome import Outcome
 from .rendering import Render
 from .sensing import Perception, Sensor
+from .terrain import Terrain
 
 __all__ = ["Timing", "Outputs", "Scenario", "FORMAT_VERSION", "RATIO_TOLERANCE", "MAX_SENSOR_PERIOD_S",
            "MAX_GRID_CELLS"]
@@ -60,6 +61,12 @@ class Timing(Model):
     """With latency_frames >= 1 (or ground-truth feedback) perception of frame m runs while dynamics and the
     renderer do frame m + 1 and publishes at its next turn; results are the same either way
     (cosim.runtime.participant.perception_overlaps)."""
+    schedule: Literal["sequential", "pipelined"] = "pipelined"
+    """How the processes of a launched run take turns (docs/architecture.md): sequential, one token ring
+    (dynamics, renderer, perception, supervisor; perception overlapping the next frame as above), or pipelined,
+    each process waiting only for the frames it reads, so that dynamics, the renderer and perception work on
+    neighbouring frames at once. Both give the same results; a run with one process (no renderer or perception)
+    or on one core runs sequential."""
     handoff_timeout_s: PosFloat = 30.0
     """Longest wait for one lockstep hand-off before the run stops with HandoffTimeout naming the stuck process,
     s."""
@@ -128,6 +135,8 @@ class Scenario(Model):
     """The grain cart: interior, walls, rim, tongue."""
     machine_sync: MachineSync = MachineSync()
     """Machine Sync: how the combine holds the cart beside it, and the nudges."""
+    terrain: Terrain = Terrain()
+    """The ground the machines drive on: flat, or uneven with its tilt and bumps."""
     vehicles: Vehicles = Vehicles()
     """Replaceable vehicle dynamics (an FMU for the tractor and cart)."""
     grain: Grain = Grain()
