@@ -13,6 +13,10 @@ def run_cli() -> int:
     """Run :func:`cosim.cli.main` on ``sys.argv``; the process exit status."""
     signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
+        # the ring members' fork server imports their common modules while the command line loads
+        from cosim.runtime.procstart import prestart_for
+
+        prestart_for(sys.argv[1:])
         from cosim.cli import main
 
         code = main()
