@@ -23,7 +23,7 @@ import numpy as np
 
 from cosim.scenario.config import Scenario
 from cosim.world.camera import beam_directions
-from cosim.world.geometry import apply, body_from_camera_axes, invert, mount_transform, vehicle_pose
+from cosim.world.geometry import apply, body_from_camera_axes, entity_pose, invert, mount_transform
 from cosim.world.parts import cart_boxes
 from cosim.world.patterns import PatternError, beam_table, pattern_shape
 
@@ -108,7 +108,7 @@ def _initial_state(s: Scenario) -> tuple[dict, np.ndarray]:
 def _pose(s: Scenario, state: dict, entity: str) -> np.ndarray:
     if entity == "world":
         return np.eye(4)
-    return vehicle_pose(float(state[f"{entity}_x_m"]), float(state[f"{entity}_y_m"]), float(state[f"{entity}_yaw_rad"]))
+    return entity_pose(state, entity)
 
 
 def _inside_boxes(point: np.ndarray, world_from_box: np.ndarray, half: np.ndarray) -> np.ndarray:
@@ -147,8 +147,10 @@ def implausible(s: Scenario) -> list[tuple[Loc, str]]:
     problems = memory_problems(s) + _mesh_problems(s)
     if problems:
         return problems  # the geometry below would load the same meshes, or allocate the huge pattern
+    from cosim.world.fastcast import cast_from
     from cosim.world.raycast import raycast
     from cosim.world.scene import scene_from_state
+    from cosim.world.terrain import terrain_of
 
     state, heights = _initial_state(s)
     mount = s.sensor.mount
@@ -156,8 +158,10 @@ def implausible(s: Scenario) -> list[tuple[Loc, str]]:
     origin = world_from_sensor[:3, 3]
     where = ("sensor", "mount", "xyz_m")
     at = f"at world ({origin[0]:.2f}, {origin[1]:.2f}, {origin[2]:.2f}) m at the start"
-    if origin[2] < 0.0:
-        return [(where, f"the sensor is {-origin[2]:.2f} m below the ground {at}")]
+    terrain = terrain_of(s)
+    ground = float(terrain.height(origin[0], origin[1])) if terrain is not None else 0.0
+    if origin[2] < ground:
+        return [(where, f"the sensor is {ground - origin[2]:.2f} m below the ground {at}")]
     cart_from_world = invert(_pose(s, state, "cart"))
     c = s.cart
     hl, hw = c.interior_length_m / 2.0, c.interior_width_m / 2.0
@@ -179,7 +183,8 @@ def implausible(s: Scenario) -> list[tuple[Loc, str]]:
         return []  # the pattern's own checks report it
     pick = np.linspace(0, len(elev) - 1, min(FOV_BEAMS, len(elev))).astype(np.int64)
     d = beam_directions(elev[pick], az[pick]) @ world_from_sensor[:3, :3].T
-    t = raycast(scene, np.broadcast_to(origin, d.shape), d)
+    # on uneven ground the scene holds the terrain's triangles: the Embree cast where it is installed
+    t = raycast(scene, np.broadcast_to(origin, d.shape), d) if terrain is None else cast_from(scene, origin, d)
     hit = np.isfinite(t) & (t <= s.sensor.range_max_m) & (t >= s.sensor.range_min_m)
     if not hit.any() or not _hits_cart(s, cart_from_world, origin + t[hit, None] * d[hit]):
         return [(("sensor", "mount"), f"the cart is never in the sensor's field of view at the start pose: none of "

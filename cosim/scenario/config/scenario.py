@@ -13,6 +13,7 @@ from .machines import Auger, Cart, Combine, Crop, MachineSync, Tractor
 from .outcome import Outcome
 from .rendering import Render
 from .sensing import Perception, Sensor
+from .terrain import Terrain
 
 __all__ = ["Timing", "Outputs", "Scenario", "FORMAT_VERSION", "RATIO_TOLERANCE"]
 
@@ -92,6 +93,7 @@ class Scenario(Model):
     tractor: Tractor = Tractor()
     cart: Cart = Cart()
     machine_sync: MachineSync = MachineSync()
+    terrain: Terrain = Terrain()
     vehicles: Vehicles = Vehicles()
     grain: Grain = Grain()
     controller: Controller = Controller()
