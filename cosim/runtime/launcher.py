@@ -1,9 +1,10 @@
 """Launcher and supervisor of one run (docs/architecture.md): set-up, supervision, teardown.
 
 :func:`launch` reads as the run's lifecycle. It claims and locks the run directory (cosim.runtime.rundir);
-:func:`_set_up` writes a "running" summary and scenario.yaml, creates the segment and starts the observers, the
-sinks and one named process per ring member (cosim.runtime.spawning). :func:`_supervise` closes the ring as the
-supervisor, recording each completed frame and appending the rows to disk in blocks (cosim.runtime.stream).
+:func:`_set_up` writes a "running" summary and scenario.yaml, creates the segment and starts the observers
+(spawned), the sinks and one named process per ring member (forked from a server that has imported their common
+modules, cosim.runtime.procstart; both started by cosim.runtime.spawning). :func:`_supervise` closes the ring as
+the supervisor, recording each completed frame and appending the rows to disk in blocks (cosim.runtime.stream).
 :func:`cosim.runtime.teardown.tear_down` ends every process in bounded time, writes the last rows, the maps and
 the final summary, unlinks the segment and draws the figures of a completed run. The three share one
 :class:`cosim.runtime.runstate.RunState`.
@@ -40,6 +41,7 @@ from .lockstep import RingPlan, Token
 from .logs import configure_logging
 from .outputs import default_run_dir, write_scenario
 from .pipeline import Gates, PipePlan, effective_schedule, supervise
+from .procstart import ring_context
 from .recorder import Recorder
 from .rundir import open_run_dir
 from .runstate import RunState
@@ -158,9 +160,9 @@ def _set_up(run: RunState, console_log: bool, observers: Sequence[ObserverSpec],
     write_scenario(run.run_dir, scenario)
     run.name = name = f"cosim-{os.getpid()}-{secrets.token_hex(3)}"
     stop.check(-1)
-    ctx = mp.get_context("spawn")
+    ring_ctx = ring_context()  # ring members forked from the fork server (observers are spawned)
     pipelined = isinstance(plan, PipePlan)
-    run.sems = {n: ctx.Semaphore(0) for n in (plan.semaphore_names if pipelined else (*plan.members, SUPERVISOR))}
+    run.sems = {n: ring_ctx.Semaphore(0) for n in (plan.semaphore_names if pipelined else (*plan.members, SUPERVISOR))}
     run.seg = seg = Segment.create(name, schema, run_id=run.run_dir.name, frames=scenario.frames)
     run.t_start = run.t_first = time.perf_counter()
     log.info("run %s: segment %s (%d bytes, fingerprint %s), ring %s, %d frames, %s schedule (%s)", run.run_dir.name,
@@ -183,7 +185,7 @@ def _set_up(run: RunState, console_log: bool, observers: Sequence[ObserverSpec],
         args = ChildArgs(spec, scenario_json, name, schema.fingerprint, plan, run.sems, str(run.log_path),
                          os.getpid(), scenario.timing.startup_timeout_s, scenario.timing.handoff_timeout_s + 5.0,
                          time.time())
-        run.procs[spec.name] = start_process(child_main, (args,), name=f"cosim-{spec.name}")
+        run.procs[spec.name] = start_process(child_main, (args,), name=f"cosim-{spec.name}", ctx=ring_ctx)
     run.recorder = Recorder(seg, plan.members, deferred=bool(plan.deferred) or pipelined,
                             schedule="pipelined" if pipelined else "sequential")
     # the token ring records a deferred member's row one turn late; the pipelined one records whole frames

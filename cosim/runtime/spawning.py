@@ -1,16 +1,18 @@
 """Starting a run's processes (ring children, observers, the recorder): one way, whatever starts them.
 
-:func:`start_process` spawns (a fresh interpreter: no GL or thread state inherited), with the numeric libraries'
-thread pools single-threaded (cosim.runtime.threadpools), SIGINT ignored from the first instruction
+:func:`start_process` starts a fresh process (spawned, or forked from the fork server of
+cosim.runtime.procstart: no GL or thread state of the launcher inherited), with the numeric libraries' thread
+pools single-threaded (cosim.runtime.threadpools), SIGINT ignored from the first instruction
 (cosim.runtime.signals), from a daemonic process too (a Dask or multiprocessing pool worker:
 cosim.runtime.daemonic), and without running the user's script again.
 
-multiprocessing's spawn runs the parent's main script again in each child (as ``__mp_main__``) so that what it
-defines can be unpickled there. The targets started here live in the package, so a script that calls
-``cosim.run(...)`` or ``launch(...)`` without an ``if __name__ == "__main__":`` guard would run again inside each
-child, which dies trying to start processes of its own. :func:`start_process` leaves the main script out of
-what the child prepares, unless the process's arguments name something of ``__main__`` (an import path
-``"__main__:fn"``, an object defined in the script): then the script is needed there, and so is its guard.
+multiprocessing runs the parent's main script again in each spawned child and in the fork server and each child
+it forks (as ``__mp_main__``) so that what the script defines can be unpickled there. The targets started here
+live in the package, so a script that calls ``cosim.run(...)`` or ``launch(...)`` without an ``if __name__ ==
+"__main__":`` guard would run again inside each child, which dies trying to start processes of its own.
+:func:`start_process` leaves the main script out of what the child (and a fork server it starts) prepares,
+unless the process's arguments name something of ``__main__`` (an import path ``"__main__:fn"``, an object
+defined in the script): then the script is needed there, and so is its guard.
 """
 from __future__ import annotations
 
@@ -75,9 +77,11 @@ def _without_main_script() -> Iterator[None]:
             spawn.get_preparation_data = original
 
 
-def start_process(target: Callable, args: tuple, *, name: str, daemon: bool = True) -> mp.process.BaseProcess:
-    """Spawn and start ``target(*args)`` as process ``name`` (see the module docstring); returns it."""
-    proc = mp.get_context("spawn").Process(target=target, args=args, name=name, daemon=daemon)
+def start_process(target: Callable, args: tuple, *, name: str, daemon: bool = True,
+                  ctx: mp.context.BaseContext | None = None) -> mp.process.BaseProcess:
+    """Start ``target(*args)`` as process ``name`` in ``ctx`` (default: spawn; see the module docstring); returns
+    it."""
+    proc = (ctx or mp.get_context("spawn")).Process(target=target, args=args, name=name, daemon=daemon)
     script = contextlib.nullcontext() if names_main(args) else _without_main_script()
     with single_threaded_pools(), no_sigint_in_children(), children_allowed(), script:
         proc.start()
