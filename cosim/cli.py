@@ -3,7 +3,8 @@
 Verbs: ``run [SCENARIO]`` (the default verb; no scenario runs the packaged default), ``validate SCENARIO``,
 ``schema`` (write the scenario JSON Schema), ``view RUN`` (attach the live viewer to a running run) and
 ``replay FILE.mcap`` (serve a recording to the viewer's dashboard, with play / pause / step / seek), ``list``
-(the packaged scenarios with their descriptions), ``compare`` and ``study``. Exit codes: 0 success, 1 run failure,
+(the packaged scenarios with their descriptions), ``compare``, ``study`` and ``export-fmu SCENARIO --out NAME.fmu``
+(the scenario's world, sensors and perception as an FMU, docs/fmu.md). Exit codes: 0 success, 1 run failure,
 2 invalid scenario or usage, 130 interrupted.
 """
 from __future__ import annotations
@@ -23,7 +24,7 @@ from .studies.commands import add_sweep_parser, study_command, sweep_command
 
 __all__ = ["main", "build_parser", "run_extras", "VERBS"]
 
-VERBS = ("run", "validate", "schema", "compare", "study", "view", "replay", "list", "sweep")
+VERBS = ("run", "validate", "schema", "compare", "study", "view", "replay", "list", "sweep", "export-fmu")
 EXIT_SCENARIO = 2
 EXIT_INTERRUPTED = 130
 
@@ -93,6 +94,12 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--speed", type=float, default=1.0, help="x simulated time (default %(default)s)")
     rep.add_argument("--loop", action="store_true", help="start over at the end")
     sub.add_parser("list", help="list the packaged scenarios (run them by name) with their descriptions")
+    exp = sub.add_parser("export-fmu", help="write the scenario's world, sensors and perception as a co-simulation "
+                         "FMU (docs/fmu.md)")
+    _scenario_options(exp)
+    exp.add_argument("--out", type=Path, required=True, metavar="NAME.fmu", help="the FMU file to write")
+    exp.add_argument("--fmi", choices=("2", "3"), default="2", help="FMI version (default %(default)s; 3 needs "
+                     "pythonfmu3)")
     return parser
 
 
@@ -268,6 +275,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     if args.verb == "study":
         return study_command(args, scenario)
+    if args.verb == "export-fmu":
+        from cosim.fmi.export.build import export_command
+
+        return export_command(args, scenario)
     if args.verb == "compare":
         from cosim.runtime.outputs import default_run_dir
         from cosim.studies.compare import compare
