@@ -6,7 +6,8 @@
 * with ``sensor.method: beam_native`` instead of the cameras' blocks: ``beams_depth`` (rows, cols, 4) uint8, the
   encoded range along each beam (one pixel per beam, ``cosim.world.beamtarget``), and ``beams_rgb`` when
   something consumes it;
-* ``render_state`` struct: the frame's simulation time, render wall time and valid-pixel fraction.
+* ``render_state`` struct: the frame's simulation time, render wall time and valid-pixel fraction, and for a
+  renderer that ray-casts (:func:`ray_casts`) the ray caster that ran (``renderer_proc/summary.py``).
 
 Sizes follow the renderer actually used (``plan_rig`` applies ``render.mock_scale`` for the mock).
 """
@@ -17,7 +18,7 @@ from cosim.world.beamtarget import BEAMS_DEPTH_BLOCK, BEAMS_RGB_BLOCK, beam_layo
 from cosim.world.rig import plan_rig
 from shm_schema import ArrayBlock, Block, Field, StructBlock, image_block
 
-__all__ = ["STATE_BLOCK", "WRITER", "declare_blocks", "wants_rgb"]
+__all__ = ["STATE_BLOCK", "WRITER", "declare_blocks", "ray_casts", "wants_rgb"]
 
 #: writer name of every renderer block
 WRITER = "renderer"
@@ -30,15 +31,24 @@ def wants_rgb(scenario: Scenario) -> bool:
     return scenario.render.rgb == "on" or (scenario.render.rgb == "auto" and scenario.viewer)
 
 
+def ray_casts(scenario: Scenario) -> bool:
+    """Whether the renderer is an exact ray cast: ``renderer: mock``, or beam-native GL with a CSV pattern (no
+    angle grid to draw into)."""
+    if scenario.renderer == "mock":
+        return True
+    return scenario.sensor.method == "beam_native" and not beam_layout(scenario.sensor.pattern).gridded
+
+
 def declare_blocks(scenario: Scenario) -> list[Block]:
     """The renderer's blocks for ``scenario`` (empty when the scenario runs no renderer)."""
     if not scenario.needs_renderer:
         return []
-    blocks: list[Block] = [StructBlock(STATE_BLOCK, WRITER, (
-        Field("t_s", "s", doc="simulation time of the rendered state"),
-        Field("render_ms", "ms", doc="wall time of the frame: scene update, every camera, reads"),
-        Field("valid_fraction", "", doc="fraction of depth pixels with a valid hit, all cameras"),
-    ), doc="renderer status per frame")]
+    fields = [Field("t_s", "s", doc="simulation time of the rendered state"),
+              Field("render_ms", "ms", doc="wall time of the frame: scene update, every camera, reads"),
+              Field("valid_fraction", "", doc="fraction of depth pixels with a valid hit, all cameras")]
+    if ray_casts(scenario):
+        fields.append(Field("ray_caster", "", doc="the exact ray cast that ran: index in cosim.world.fastcast.CASTERS"))
+    blocks: list[Block] = [StructBlock(STATE_BLOCK, WRITER, tuple(fields), doc="renderer status per frame")]
     rgb = wants_rgb(scenario)
     if scenario.sensor.method == "beam_native":
         h, w = beam_layout(scenario.sensor.pattern).shape

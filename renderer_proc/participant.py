@@ -7,6 +7,7 @@ straight into the shared-memory blocks under their seqlocks.
 """
 from __future__ import annotations
 
+import logging
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -15,16 +16,20 @@ import numpy as np
 from cosim.errors import FrameMismatch
 from cosim.scenario.config.scenario import Scenario
 from cosim.world.beamtarget import BEAMS_DEPTH_BLOCK, BEAMS_RGB_BLOCK, beam_layout
+from cosim.world.fastcast import CASTERS
+from cosim.world.parts import entity_parts
 from cosim.world.rig import plan_rig
 from cosim.world.scene import scene_from_state
 
-from .blocks import STATE_BLOCK, WRITER, wants_rgb
+from .blocks import STATE_BLOCK, WRITER, ray_casts, wants_rgb
 from .projection import camera_poses, world_from_sensor
 
 if TYPE_CHECKING:
     from shm_schema.segment import Segment
 
 __all__ = ["INPUT_BLOCKS", "RendererParticipant", "create", "make_backend"]
+
+log = logging.getLogger("cosim.renderer")
 
 #: blocks the renderer reads (written by dynamics)
 INPUT_BLOCKS = ("dyn_state", "heightmap_truth", "stream")
@@ -48,7 +53,7 @@ def make_backend(scenario: Scenario, rig, context: Any = None):
     if scenario.renderer == "mock":
         from .mock_backend import MockRenderer
 
-        return MockRenderer(rig, scenario.sensor.codec, **opts)
+        return MockRenderer(rig, scenario.sensor.codec, parts=entity_parts(scenario), **opts)
     raise ValueError(f"scenario.renderer is {scenario.renderer!r}: this scenario runs no renderer")
 
 
@@ -63,7 +68,7 @@ def _beam_backend(scenario: Scenario, context: Any = None):
     if scenario.renderer in ("gl", "mock"):       # a CSV table has no angle grid: its exact ray cast under gl too
         from .beam_mock import MockBeamRenderer
 
-        return MockBeamRenderer(layout, codec, rgb=rgb)
+        return MockBeamRenderer(layout, codec, rgb=rgb, parts=entity_parts(scenario))
     raise ValueError(f"scenario.renderer is {scenario.renderer!r}: this scenario runs no renderer")
 
 
@@ -103,6 +108,10 @@ class RendererParticipant:
                 segment.view(block)            # raises KeyError naming the missing block
             self._outputs.append(outs)
         self.backend = make_backend(self.scenario, self.rig)
+        caster = getattr(self.backend, "caster", None)
+        self._caster_code = CASTERS.index(caster.name) if caster is not None and ray_casts(self.scenario) else None
+        if caster is not None:
+            log.info("exact ray cast: %s", caster.name)
 
     def step(self, frame: int) -> None:
         """Render frame ``frame``: the dynamics state S(frame) into the images I(frame)."""
@@ -139,6 +148,8 @@ class RendererParticipant:
                 st.t_s = float(state.get("t_s", 0.0))
                 st.render_ms = self.last_ms
                 st.valid_fraction = valid / max(total, 1)
+                if self._caster_code is not None:
+                    st.ray_caster = self._caster_code
 
     def close(self) -> None:
         """Release the backend (the GL context). Safe to call more than once, also after a failed start."""

@@ -123,8 +123,10 @@ def test_fmu_controller_reproduces_builtin_paper_controller(tmp_path, built_fmus
     fmu = _series(path)
     builtin = _series(path, ["controller.model=section_fill", "controller.fmu=null", "controller.estimator=paper"])
     assert fmu["dyn_state.nudge_count"][-1] >= 5 and np.max(fmu["dyn_state.target_section"]) >= 5
+    # what the built-in reports of its coping (docs/field.md) the FMU does not: every other column is equal
+    coping = {f"dyn_state.{c}" for c in ("control_mode", "hold_reason", "estimate_sigma_m", "full_lead_m")}
     for k in fmu:
-        if k.startswith("dyn_state."):
+        if k.startswith("dyn_state.") and k not in coping:
             np.testing.assert_array_equal(fmu[k], builtin[k], err_msg=k)
 
 
