@@ -27,7 +27,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 FMU = HERE / "GrainWorld.fmu"
-POSES = ("combine", "tractor", "cart")
+#: a flow level this close to 0 or 1 is 0 or 1 (the ramp's float steps do not land on them exactly)
+LEVEL_EPS = 1e-9
 
 
 @dataclass
@@ -132,7 +133,8 @@ class Master:
                         math.sin(yaw), yaw]
         self.cart_off[0] += (self.setpoint - self.cart_off[0]) * (1.0 - math.exp(-self.T / m.tau_s))
         ramp = m.spool_up_s if self.auger_on else -m.run_out_s
-        self.level = min(1.0, max(0.0, self.level + self.T / ramp))
+        level = self.level + self.T / ramp
+        self.level = 1.0 if level > 1.0 - LEVEL_EPS else 0.0 if level < LEVEL_EPS else level
         return target is not None or self.level > 0.0
 
 
