@@ -13,7 +13,7 @@ the *level frame*, the sensor's parent body frame (x forward, y left, z up from 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import numpy as np
@@ -205,20 +205,27 @@ class Perception:
         return to_points(self.point_basis, ranges, out=out)
 
     def perceive(self, ranges: np.ndarray, heading_xy=(1.0, 0.0), points_out: np.ndarray | None = None,
-                 heights_out: np.ndarray | None = None, with_points: bool = True, frame: int = -1) -> FrameResult:
+                 heights_out: np.ndarray | None = None, with_points: bool = True, frame: int = -1,
+                 level_from_parent: np.ndarray | None = None) -> FrameResult:
         """Cart, height map and impact from the frame's ranges (N,) float32. ``heading_xy``: the towing
         direction in the level frame. ``points_out`` (N, 4) / ``heights_out`` (nx, ny): optional destinations.
         ``with_points`` False leaves the ``lidar_points`` record out (``FrameResult.points`` is None): a caller
-        that writes it straight into shared memory uses :meth:`points`. ``frame``: named in a plug-in's fault."""
+        that writes it straight into shared memory uses :meth:`points`. ``frame``: named in a plug-in's fault.
+        ``level_from_parent`` (4, 4): this frame's level frame on uneven ground (perception_proc.leveling; None:
+        the parent's body frame)."""
         t0 = time.perf_counter()
         pts = self.points(ranges, out=points_out) if with_points or points_out is not None else None
         lvl = self.level_points(ranges)
+        context = self.context
+        if level_from_parent is not None:
+            lvl = lvl @ level_from_parent[:3, :3].T + level_from_parent[:3, 3]
+            context = replace(context, level_from_sensor=level_from_parent @ self.level_from_sensor)
         border = border_beams(ranges, self.shape)
         t1 = time.perf_counter()
         inp = PerceptionInput(frame, ranges, lvl, border, heading_xy, heights_out)
         ref = self.scenario.perception.algorithm
         try:
-            out = check_output(self.algorithm(self.context, inp), self.grid, ref)
+            out = check_output(self.algorithm(context, inp), self.grid, ref)
         except PluginFault as e:
             raise e.at_frame(frame) from e.__cause__
         except Exception as e:  # noqa: BLE001 - the algorithm's failure ends the run with its name and cause
