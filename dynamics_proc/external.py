@@ -10,7 +10,9 @@ spout first meets a surface, computed on the frame's heights as the built-in mod
 interior or sliding over a wall top is spill. Frame 0 publishes the inputs' scene with nothing delivered.
 
 ``dyn_state`` fields that belong to the outside models (vehicle speeds and steering, Machine Sync setpoint and
-errors, the controller's Fig 9 signals and section estimates) are NaN (0 for the integer ones).
+errors, the controller's Fig 9 signals and section estimates) are NaN (0 for the integer ones). The ground is
+flat: every body stands level on it (z, roll and pitch 0); a scenario with terrain is refused
+(:func:`create`), since planar poses do not say how the bodies stand on it.
 """
 from __future__ import annotations
 
@@ -23,6 +25,7 @@ import numpy as np
 from cosim.errors import FrameMismatch
 from cosim.scenario.config import Scenario
 from cosim.world.geometry import cart_grid_from_body, invert, vehicle_pose
+from cosim.world.terrain import terrain_of
 
 from . import auger as ag
 from .blocks import SECTION_FIELD, STATE_FIELDS, WRITER, state_fields
@@ -32,8 +35,15 @@ from .vehicles import CX, CY, CYAW, VehicleParams, cart_pose, initial_state, tra
 if TYPE_CHECKING:
     from shm_schema import Segment
 
-__all__ = ["WorldInputs", "GrainWorld", "GrainParams", "grain_params", "initial_inputs", "initial_grain", "step_grain",
-           "external_signals", "ExternalDynamicsParticipant", "create"]
+__all__ = ["BODIES", "TERRAIN_REFUSED", "WorldInputs", "GrainWorld", "GrainParams", "grain_params", "initial_inputs",
+           "initial_grain", "step_grain", "external_signals", "ExternalDynamicsParticipant", "create"]
+
+
+#: why a scenario with terrain cannot be driven from outside
+TERRAIN_REFUSED = ("the world driven from outside stands on flat ground: its inputs are planar poses, which do not "
+                   "say how the machines stand on the scenario's terrain; export a scenario without terrain")
+#: the bodies whose planar poses the inputs give
+BODIES = ("combine", "tractor", "cart")
 
 
 @dataclass(frozen=True)
@@ -174,6 +184,8 @@ def external_signals(w: GrainWorld, p: GrainParams) -> dict[str, float]:
         "cart_grain_m3": w.initial_m3 + in_cart, "peak_height_m": float(w.heights.max()),
     })
     d.update({SECTION_FIELD.format(k=k): math.nan for k in range(1, p.sections + 1)})
+    for body in BODIES:                               # flat ground: every body level, on the ground
+        d.update({f"{body}_{q}": 0.0 for q in ("z_m", "roll_rad", "pitch_rad") if f"{body}_{q}" in d})
     return d
 
 
@@ -228,5 +240,7 @@ class ExternalDynamicsParticipant:
 
 
 def create(scenario: Scenario) -> ExternalDynamicsParticipant:
-    """The externally driven dynamics participant for ``scenario``."""
+    """The externally driven dynamics participant for ``scenario``; ValueError for a scenario with terrain."""
+    if terrain_of(scenario) is not None:
+        raise ValueError(TERRAIN_REFUSED)
     return ExternalDynamicsParticipant(scenario)

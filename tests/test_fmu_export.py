@@ -201,5 +201,7 @@ def test_what_an_export_refuses(tmp_path, capsys):
            "not its Python modules" in err, err
     assert main(["export-fmu", "default", "--renderer", "none", "--out", str(tmp_path / "x.fmu")]) == 2
     assert "renderer: feedback 'perception' needs a renderer ('gl' or 'mock'), not 'none'" in capsys.readouterr().err
+    assert main(["export-fmu", "default", "--out", str(tmp_path / "x.fmu"), "--set", "terrain.grade_pct=5"]) == 2
+    assert "export-fmu: the world driven from outside stands on flat ground" in capsys.readouterr().err
     assert main(["export-fmu", "default", "--out", str(tmp_path / "x.fmu"), "--set", "timing.sensor_period_s=-1"]) == 2
     assert not (tmp_path / "x.fmu").exists()

@@ -28,6 +28,8 @@ from cosim.scenario.loader import load_scenario, path_fields
 from cosim.scenario.plugins import is_import_path
 from cosim.scenario.trust import plugin_points
 from cosim.scenario.yamlmarks import Dumper
+from cosim.world.terrain import terrain_of
+from dynamics_proc.external import TERRAIN_REFUSED
 
 from .world import SCENARIO_FILE
 
@@ -67,6 +69,8 @@ def export_scenario(s: Scenario, folder: Path, renderer: str = "mock") -> Path:
     """Write the scenario the FMU carries (and the files it names) into ``folder``; return its path."""
     if renderer not in RENDERERS:
         raise ValueError(f"renderer {renderer!r}: the exported world renders with {' or '.join(RENDERERS)}")
+    if terrain_of(s) is not None:
+        raise ValueError(TERRAIN_REFUSED)
     refused = _perception_plugins(s)
     if refused:
         raise ValueError(f"{', '.join(refused)}: an exported FMU carries the scenario's files but not its Python "
