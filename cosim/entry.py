@@ -32,6 +32,10 @@ def run_cli() -> int:
     same_sys_path()
     signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
+        # the ring members' fork server imports their common modules while the command line loads
+        from cosim.runtime.procstart import prestart_for
+
+        prestart_for(sys.argv[1:])
         from cosim.cli import main
 
         code = main()

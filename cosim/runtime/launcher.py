@@ -1,8 +1,8 @@
 """Launcher and supervisor of one run (docs/architecture.md): set-up, supervision, teardown.
 
 :func:`launch` reads as the run's lifecycle. :func:`_set_up` locks the run directory, writes scenario.yaml and a
-"running" summary, creates the segment and starts the observers, the sinks and one named process per ring
-member (spawn context). :func:`_supervise` closes the ring as the supervisor, recording each completed frame and
+"running" summary, creates the segment and starts the observers (spawned), the sinks and one named process per
+ring member (forked from a server that has imported their common modules, cosim.runtime.procstart). :func:`_supervise` closes the ring as the supervisor, recording each completed frame and
 appending the rows to disk in blocks (cosim.runtime.stream). :func:`_tear_down` ends every process in bounded
 time, writes the last rows, the maps and the final summary, and unlinks the segment.
 
@@ -41,6 +41,7 @@ from .logs import configure_logging
 from .outcome import outcome_line
 from .outputs import default_run_dir, finish_outputs, write_figures, write_scenario
 from .pipeline import Gates, PipePlan, effective_schedule, supervise
+from .procstart import ring_context
 from .recorder import Recorder
 from .signals import StopSignals, no_sigint_in_children
 from .specs import SUPERVISOR, ParticipantSpec, build_schema, ring_specs
@@ -188,9 +189,9 @@ def _set_up(run: _Run, console_log: bool, observers: Sequence[ObserverSpec],
                                         "seed": scenario.seed, "frames_planned": scenario.frames + 1,
                                         "launcher_pid": os.getpid()})
     stop.check(-1)
-    ctx = mp.get_context("spawn")
+    ctx, ring_ctx = mp.get_context("spawn"), ring_context()       # observers spawned, ring members forked
     pipelined = isinstance(plan, PipePlan)
-    run.sems = {n: ctx.Semaphore(0) for n in (plan.semaphore_names if pipelined else (*plan.members, SUPERVISOR))}
+    run.sems = {n: ring_ctx.Semaphore(0) for n in (plan.semaphore_names if pipelined else (*plan.members, SUPERVISOR))}
     run.seg = seg = Segment.create(name, schema, run_id=run.run_dir.name, frames=scenario.frames)
     run.t_start = run.t_first = time.perf_counter()
     log.info("run %s: segment %s (%d bytes, fingerprint %s), ring %s, %d frames, %s schedule (%s)", run.run_dir.name,
@@ -216,7 +217,7 @@ def _set_up(run: _Run, console_log: bool, observers: Sequence[ObserverSpec],
         args = ChildArgs(spec, scenario_json, name, schema.fingerprint, plan, run.sems, str(run.log_path),
                          os.getpid(), scenario.timing.startup_timeout_s, scenario.timing.handoff_timeout_s + 5.0,
                          time.time())
-        p = ctx.Process(target=child_main, args=(args,), name=f"cosim-{spec.name}", daemon=True)
+        p = ring_ctx.Process(target=child_main, args=(args,), name=f"cosim-{spec.name}", daemon=True)
         with single_threaded_pools(), no_sigint_in_children(), children_allowed():
             p.start()
         run.procs[spec.name] = p
