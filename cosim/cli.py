@@ -4,7 +4,8 @@ Verbs: ``run [SCENARIO]`` (the default verb; no scenario runs the packaged defau
 ``schema`` (write the scenario JSON Schema), ``view RUN`` (attach the live viewer to a running run) and
 ``replay FILE.mcap`` (serve a recording to the viewer's dashboard, with play / pause / step / seek), ``report
 RUN_DIR`` (draw a run's figures, a failed run's too), ``list`` (the packaged scenarios with their descriptions),
-``compare``, ``study`` and ``sweep``. Exit codes: 0 success, 1 run failure, 2 invalid scenario or usage, 3
+``compare``, ``study``, ``sweep`` and ``export-fmu SCENARIO --out NAME.fmu`` (the scenario's world, sensors and
+perception as an FMU, docs/fmu.md). Exit codes: 0 success, 1 run failure, 2 invalid scenario or usage, 3
 (``run --require-filled``, ``sweep --require-filled``) the job was not done (the outcome is not ``filled``), 130
 interrupted.
 """
@@ -25,7 +26,8 @@ from .studies.commands import add_sweep_parser, out_options, study_command, swee
 
 __all__ = ["main", "build_parser", "run_extras", "required_exit", "VERBS", "EXIT_NOT_FILLED"]
 
-VERBS = ("run", "validate", "schema", "compare", "study", "view", "replay", "report", "list", "sweep")
+VERBS = ("run", "validate", "schema", "compare", "study", "view", "replay", "report", "list", "sweep",
+         "export-fmu")
 EXIT_RUN_ERROR = 1
 EXIT_SCENARIO = 2
 #: ``run --require-filled``: the run completed but its outcome is not ``filled`` (summary.json ``outcome``)
@@ -104,6 +106,12 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("report", help="draw a run directory's figures (a failed or stopped run's too)")
     rep.add_argument("run_dir", type=Path, help="run directory")
     sub.add_parser("list", help="list the packaged scenarios (run them by name) with their descriptions")
+    exp = sub.add_parser("export-fmu", help="write the scenario's world, sensors and perception as a co-simulation "
+                         "FMU (docs/fmu.md)")
+    _scenario_options(exp)
+    exp.add_argument("--out", type=Path, required=True, metavar="NAME.fmu", help="the FMU file to write")
+    exp.add_argument("--fmi", choices=("2", "3"), default="2", help="FMI version (default %(default)s; 3 needs "
+                     "pythonfmu3)")
     return parser
 
 
@@ -305,6 +313,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     if args.verb == "study":
         return study_command(args, scenario)
+    if args.verb == "export-fmu":
+        from cosim.fmi.export.build import export_command
+
+        return export_command(args, scenario)
     if args.verb == "compare":
         from cosim.runtime.outputs import default_run_dir
         from cosim.studies.compare import compare

@@ -19,7 +19,7 @@ from cosim.scenario.loader import describe_packaged, load_scenario, packaged_sce
 
 ROOT = Path(__file__).resolve().parent.parent
 #: a verb shown in the docs: "launch.py <verb>" or "python -m cosim <verb>"
-_VERB = re.compile(r"(?:launch\.py|python -m cosim)\s+([a-z]+)\b")
+_VERB = re.compile(r"(?:launch\.py|python -m cosim)\s+([a-z]+(?:-[a-z]+)*)\b")
 
 
 def documented_verbs() -> set[str]:
