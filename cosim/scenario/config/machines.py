@@ -10,9 +10,10 @@ import math
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from .base import Model, NonNegFloat, PosFloat
+from .field import GaussMarkov, ProfilePoint, Slip, increasing_times
 
 __all__ = ["Crop", "Combine", "Auger", "Tractor", "Cart", "MachineSync", "CROP_PRESETS"]
 
@@ -44,11 +45,15 @@ class Crop(Model):
 
 
 class Combine(Model):
-    """Combine harvester: path, speed and the box dimensions used to draw it."""
+    """Combine harvester: path, speed and the box dimensions used to draw it.
+
+    ``profile`` (docs/field.md): speed and curvature against time (slow-downs, stop-and-go, headland turns),
+    linear between its points; when given it replaces ``speed_mps`` and ``path``."""
 
     speed_mps: NonNegFloat = 2.0
     path: Literal["straight", "arc"] = "straight"
     path_radius_m: PosFloat = 400.0
+    profile: tuple[ProfilePoint, ...] = ()
     start_xy_m: tuple[float, float] = (0.0, 0.0)
     heading_deg: float = 0.0
     length_m: PosFloat = 8.5
@@ -57,9 +62,19 @@ class Combine(Model):
     header_width_m: PosFloat = 7.6
     mesh_file: Path | None = None
 
+    @field_validator("profile")
+    @classmethod
+    def _profile_in_order(cls, v: tuple[ProfilePoint, ...]) -> tuple[ProfilePoint, ...]:
+        return increasing_times(v)
+
 
 class Auger(Model):
-    """Unloading auger on the combine's left side. Geometry in the combine body frame."""
+    """Unloading auger on the combine's left side. Geometry in the combine body frame.
+
+    Field conditions (docs/field.md): ``flow_variation``, the yield-driven relative variation of the flow (a
+    Gauss-Markov process: flow = ``flow_m3ps`` x level x (1 + variation), at least 0; the flow signal the
+    controller gets measures it); ``start_surge``, the extra flow when the auger starts (the grain standing in the
+    tube), a fraction of the nominal flow decaying as exp(-t / ``start_surge_tau_s``) from each start."""
 
     pivot_xyz_m: tuple[float, float, float] = (-2.0, 1.5, 3.8)
     length_m: PosFloat = 6.0
@@ -72,6 +87,9 @@ class Auger(Model):
     exit_speed_mps: NonNegFloat = 3.0
     exit_down_deg: float = 60.0
     stream_radius_m: PosFloat = 0.15
+    flow_variation: GaussMarkov = GaussMarkov()
+    start_surge: float = Field(default=0.0, ge=0.0, le=2.0, allow_inf_nan=False)
+    start_surge_tau_s: PosFloat = 1.0
 
 
 class Tractor(Model):
@@ -80,7 +98,8 @@ class Tractor(Model):
     The tractor body origin is the centre of its drawn box; the bicycle model runs about the rear axle at body
     x = ``rear_axle_x_m``; the hitch is ``hitch_offset_m`` behind the rear axle. The drivetrain is a first-order
     lag (``drivetrain_tau_s``) with acceleration / braking limits; the steering a first-order lag
-    (``steer_tau_s``) with angle and rate limits. The tractor does not reverse (speed command >= 0).
+    (``steer_tau_s``) with angle and rate limits. The tractor does not reverse (speed command >= 0). ``slip``:
+    its wheels' longitudinal slip (docs/field.md).
     """
 
     wheelbase_m: PosFloat = 3.0
@@ -97,6 +116,7 @@ class Tractor(Model):
     width_m: PosFloat = 2.6
     height_m: PosFloat = 3.3
     mesh_file: Path | None = None
+    slip: Slip = Slip()
 
 
 class Cart(Model):
@@ -145,6 +165,13 @@ class MachineSync(Model):
     plus ``kp_long`` / ``kp_lat`` (1/s) times the position error in combine axes; the heading follows that
     velocity's direction with gain ``heading_gain_ps`` (1/s). ``initial_*_error_m`` displace the tractor from
     its setpoint at t = 0 (combine axes, m).
+
+    In a field (docs/field.md): ``gnss`` is each receiver's horizontal position error per axis (combine and
+    tractor, independent; RTK class about 0.02 m with a correlation time of tens of seconds): Machine Sync steers
+    on the measured positions and the controller aims with the relative pose they give; ``radio_latency_s`` delays
+    the combine's pose on its way to the tractor (``latency_compensation``: extrapolated over the delay with the
+    speed and yaw rate it came with); ``actuation_delay_s`` is a dead time between the tractor's commands and its
+    drivetrain and steering (on top of their lags).
     """
 
     longitudinal_offset_m: float = -4.65
@@ -156,3 +183,7 @@ class MachineSync(Model):
     nudge_min_interval_s: NonNegFloat = 1.0
     initial_long_error_m: float = 0.0
     initial_lat_error_m: float = 0.0
+    gnss: GaussMarkov = GaussMarkov(correlation_time_s=30.0)
+    radio_latency_s: float = Field(default=0.0, ge=0.0, le=2.0, allow_inf_nan=False)
+    latency_compensation: bool = True
+    actuation_delay_s: float = Field(default=0.0, ge=0.0, le=2.0, allow_inf_nan=False)
