@@ -29,6 +29,8 @@ from .heap import keep_heap
 from .liveness import Heartbeat
 from .lockstep import RingPlan, Token, member_loop
 from .logs import configure_logging
+from .pipeline import Gates, PipePlan
+from .pipeline import member_loop as pipelined_loop
 from .specs import ParticipantSpec
 
 __all__ = ["ChildArgs", "child_main"]
@@ -44,7 +46,7 @@ class ChildArgs:
     scenario_json: str
     segment: str
     fingerprint: str
-    plan: RingPlan
+    plan: RingPlan | PipePlan
     semaphores: Mapping[str, object]
     log_path: str
     parent_pid: int
@@ -103,8 +105,13 @@ def child_main(args: ChildArgs) -> None:
         log.info("started (pid %d) %.2f s after its spawn: interpreter and imports %.2f s, create %.2f s, start %.2f s",
                  os.getpid(), t_ready - args.spawned_at_s, t_main - args.spawned_at_s, t_start - t_create,
                  t_ready - t_start)
-        member_loop(name, participant, seg, Token(seg, args.semaphores), args.plan,
-                    startup_timeout_s=args.startup_timeout_s, handoff_timeout_s=args.handoff_timeout_s, check=check)
+        if isinstance(args.plan, PipePlan):
+            pipelined_loop(name, participant, seg, Gates(seg, args.plan, args.semaphores, name, check), args.plan,
+                           startup_timeout_s=args.startup_timeout_s, handoff_timeout_s=args.handoff_timeout_s)
+        else:
+            member_loop(name, participant, seg, Token(seg, args.semaphores), args.plan,
+                        startup_timeout_s=args.startup_timeout_s, handoff_timeout_s=args.handoff_timeout_s,
+                        check=check)
         log.info("finished %d frames (cpu %.2f s)", args.plan.frames + 1, time.process_time())
     except BaseException as exc:  # noqa: BLE001 - every failure must reach the launcher with its traceback
         code = 143 if isinstance(exc, SystemExit) else 1

@@ -19,7 +19,9 @@ class GaussMarkov(Model):
     stream per process. ``sigma`` 0: off."""
 
     sigma: NonNegFloat = 0.0
+    """Standard deviation of the process (0: off), in the unit of what it varies."""
     correlation_time_s: PosFloat = 10.0
+    """Time over which its autocorrelation falls to 1/e, s."""
 
 
 class Slip(Model):
@@ -27,8 +29,11 @@ class Slip(Model):
     ``mean`` plus a Gauss-Markov variation (``sigma``, ``correlation_time_s``), clipped to [0, 0.5]."""
 
     mean: float = Field(default=0.0, ge=0.0, le=0.5, allow_inf_nan=False)
+    """Mean slip, a fraction of the wheel speed."""
     sigma: NonNegFloat = Field(default=0.0, le=0.2)
+    """Standard deviation of the slip's Gauss-Markov variation about its mean."""
     correlation_time_s: PosFloat = 5.0
+    """Correlation time of that variation, s."""
 
 
 class ProfilePoint(Model):
@@ -37,8 +42,11 @@ class ProfilePoint(Model):
     both change linearly in time; before the first and after the last they hold."""
 
     t_s: NonNegFloat
+    """Time of the point, s."""
     speed_mps: NonNegFloat
+    """Combine speed at that time, m/s."""
     curvature_1pm: float = Field(default=0.0, ge=-0.2, le=0.2, allow_inf_nan=False)
+    """Path curvature at that time, 1/m (> 0 turning left, 0 straight)."""
 
 
 def increasing_times(points: tuple[ProfilePoint, ...]) -> tuple[ProfilePoint, ...]:

@@ -26,11 +26,21 @@ class Render(Model):
     """
 
     rig: Literal["auto", "fixed"] = "auto"
+    """auto: the fewest cameras (then pixels) that cover the beam pattern within sensor.max_angular_error_deg;
+    fixed: cameras x width_px x height_px with hfov_deg."""
     cameras: int = Field(default=2, ge=1, le=16)
+    """Cameras of a fixed rig, side by side in yaw (1-16)."""
     width_px: int = Field(default=640, ge=8, le=8192)
+    """Image width of a fixed rig's camera, px."""
     height_px: int = Field(default=480, ge=8, le=8192)
+    """Image height of a fixed rig's camera, px."""
     hfov_deg: float = Field(default=60.0, gt=1.0, lt=170.0)
+    """Horizontal field of view of a fixed rig's camera, deg."""
     rgb: Literal["auto", "on", "off"] = "auto"
+    """auto: render the shaded image only when something consumes it (a viewer); on: always; off: never."""
     float_depth: bool = False
+    """Also write each camera's exact float32 planar depth."""
     mock_scale: float = Field(default=0.25, gt=0.0, le=1.0, allow_inf_nan=False)
+    """Resolution factor of the rig with the mock renderer (0-1]; images and perception follow the scaled rig."""
     ground_size_m: PosFloat = 400.0
+    """Side of the square ground plane, centred under the combine, m."""

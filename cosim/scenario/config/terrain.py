@@ -29,14 +29,23 @@ class Terrain(Model):
     """
 
     grade_pct: float = Field(default=0.0, ge=-MAX_SLOPE_PCT, le=MAX_SLOPE_PCT, allow_inf_nan=False)
+    """Slope of the ground plane along world x, rise per run in per cent."""
     cross_slope_pct: float = Field(default=0.0, ge=-MAX_SLOPE_PCT, le=MAX_SLOPE_PCT, allow_inf_nan=False)
+    """Slope of the ground plane along world y, rise per run in per cent."""
     roughness_rms_m: NonNegFloat = Field(default=0.0, le=0.5)
+    """Standard deviation of the seeded random roughness (a Gaussian random field), m (0: none)."""
     correlation_length_m: PosFloat = 2.0
+    """Correlation length L of the roughness (autocorrelation rms^2 exp(-r^2 / L^2)), m."""
     cell_m: float = Field(default=0.5, ge=0.05, le=2.0, allow_inf_nan=False)
+    """Sampling step of the roughness tile and of height_map_file, m."""
     tile_m: float = Field(default=128.0, ge=16.0, le=1024.0, allow_inf_nan=False)
+    """Side of the periodic tile the roughness is drawn on, m."""
     height_map_file: Path | None = None
+    """A .npy array (nx, ny) of heights, m, sampled every cell_m from origin_xy_m; relative to the scenario file."""
     origin_xy_m: tuple[float, float] = (0.0, 0.0)
+    """World position of the height map's first sample, m."""
     render_extent_m: float = Field(default=40.0, ge=10.0, le=400.0, allow_inf_nan=False)
+    """Side of the square patch of the surface the renderer draws around the cart, m."""
 
     @model_validator(mode="after")
     def _resolvable(self) -> "Terrain":
