@@ -18,6 +18,7 @@ from cosim.runtime.specs import DEFAULT_SPECS, ring_specs
 from cosim.scenario.config import Scenario
 from cosim.scenario.loader import load_scenario, packaged_scenarios
 from cosim.testing import fakes
+from cosim.testing.processes import ring_children
 from shm_schema import Field, Schema, Segment, StructBlock
 
 ROLES = ("dynamics", "renderer", "perception")
@@ -32,10 +33,8 @@ def scenario(duration_s=1.0, handoff_timeout_s=30.0, **timing) -> Scenario:
 
 
 def children_of(pid: int) -> list[int]:
-    import subprocess
-
-    out = subprocess.run(["ps", "-o", "pid=,args=", "--ppid", str(pid)], capture_output=True, text=True).stdout
-    return [int(line.split()[0]) for line in out.splitlines() if "multiprocessing.spawn" in line]
+    """Worker processes of launcher ``pid`` (spawned, or forked by its fork server; not its resource tracker)."""
+    return ring_children(pid)
 
 
 # -- the plan ------------------------------------------------------------------------------------------------------
@@ -169,7 +168,7 @@ def test_threads_read_exactly_their_frames_and_overlap(latency):
             "perception": {"renderer": 0, "dynamics": 0}}
     reads = {**uses, "dynamics": {"perception": min(1 + latency, 2)}}
     frames = 12
-    rows, log = _run_threads(reads, uses, frames, work_s=0.01)
+    rows, log = _run_threads(reads, uses, frames, work_s=0.02)
     assert rows == _serial(uses, frames)
     busy = {}
     for name, kind, frame, t in log:
@@ -179,9 +178,10 @@ def test_threads_read_exactly_their_frames_and_overlap(latency):
     def overlap(a, b):
         return min(spans[a][1], spans[b][1]) - max(spans[a][0], spans[b][0]) > 0.0
 
-    k = 6
-    if latency >= 1:
-        assert overlap(("dynamics", k + 1), ("renderer", k)) and overlap(("renderer", k + 1), ("perception", k))
+    if latency >= 1:       # most frames (a loaded host may delay a thread past its neighbour's work now and then)
+        ks = range(2, frames - 1)
+        assert sum(overlap(("dynamics", k + 1), ("renderer", k)) for k in ks) > len(ks) / 2
+        assert sum(overlap(("renderer", k + 1), ("perception", k)) for k in ks) > len(ks) / 2
 
 
 # -- launched runs with the stand-ins --------------------------------------------------------------------------------
