@@ -13,6 +13,10 @@ rest moves or changes shape every frame and is kept as cheap to update as it can
 * a mesh that is no entity's (the terrain's patch on uneven ground, cosim.world.terrain) is a refittable
   prototype whose vertices are rewritten when the patch moves on (its name changes), placed per frame.
 
+An instance that encloses no volume (a prism of zero radius or length, a box of zero extent: :func:`has_volume`)
+is hidden for the frame, never given to Embree nor inverted: it has no surface a ray can meet except on a set of
+measure zero, and GL draws no fragment of it.
+
 Embree decides which triangle each ray hits first (float32, in the instance's frame); the range is then the
 float64 intersection of the ray with that triangle's plane, placed in the world, as in ``embree_cast``, so the
 two agree to rounding (tested beam for beam, ``tests/test_rigidcast.py``). Rays: ``origin`` (3,) and unit
@@ -31,9 +35,9 @@ from .heightfield import grid_triangles, grid_vertices, padded_heights
 from .meshes import CYLINDER_SIDES, orthonormal_frames, unit_cube, unit_cylinder
 from .parts import EntityParts
 from .raycast import T_MIN_M
-from .scene import Scene, load_mesh
+from .scene import MIN_SEGMENT_M, Scene, load_mesh
 
-__all__ = ["RigidCaster", "body_triangles"]
+__all__ = ["RigidCaster", "body_triangles", "has_volume"]
 
 #: Embree's miss marker is tfar left at its initial value (1e37); anything beyond this is a miss, m
 _MISS_M = 1e30
@@ -44,6 +48,11 @@ _NO_HIT = 1e37
 #: relative (and absolute, m) slack on the ground's range given to Embree as tfar: float32 rounding never hides
 #: a hit just before the ground (the float64 comparison after the traversal decides)
 _TFAR_SLACK = 1e-6
+#: an instance whose linear map has an axis shorter than this (a prism of zero radius or length, a box of zero
+#: extent) encloses no volume and is not cast, m (the scene's own threshold for stream segments)
+_MIN_SCALE_M = MIN_SEGMENT_M
+#: ... nor one whose axes are nearly coplanar: |det| below this share of the product of the axes' lengths
+_MIN_SHAPE = 1e-9
 
 
 def top_face_from_above(world_from_box: np.ndarray, half: np.ndarray, o: np.ndarray, d: np.ndarray
@@ -61,6 +70,18 @@ def top_face_from_above(world_from_box: np.ndarray, half: np.ndarray, o: np.ndar
         t = (half[2] - ob[2]) / db[:, 2]
     inside = (db[:, 2] < 0.0) & (np.abs(ob[0] + t * db[:, 0]) <= half[0]) & (np.abs(ob[1] + t * db[:, 1]) <= half[1])
     return np.where(inside, t, np.inf)
+
+
+def has_volume(lin: np.ndarray, trans: np.ndarray) -> np.ndarray:
+    """Which instances (K,) bool enclose a volume Embree can be given: ``lin`` (K, 3, 3) and ``trans`` (K, 3)
+    finite, each axis (column) at least ``_MIN_SCALE_M`` long and the axes not nearly coplanar. The others (a
+    stream segment of zero radius, a prism of zero length) are flat or empty: Embree would invert their
+    transforms into infinities, and they have no plane to intersect in float64."""
+    finite = np.isfinite(lin).all(axis=(1, 2)) & np.isfinite(trans).all(axis=1)
+    safe = np.where(finite[:, None, None], lin, 0.0)
+    axes = np.linalg.norm(safe, axis=1)                                 # (K, 3) the columns' lengths
+    det = np.abs(np.linalg.det(safe))
+    return finite & (axes.min(axis=1) >= _MIN_SCALE_M) & (det > _MIN_SHAPE * axes.prod(axis=1))
 
 
 def body_triangles(parts: EntityParts, cylinders: bool = True) -> tuple[np.ndarray, np.ndarray]:
@@ -306,14 +327,19 @@ class RigidCaster:
             k = self._protos.index(proto)
             lin[k], trans[k] = m[:3, :3], m[:3, 3] - o
             idx.append(k)
-        ground = None
+        ground, ground_k = None, -1
         if scene.ground_box is not None and scene.ground_box >= self._n_boxes:
             ground = top_face_from_above(b.world_from_box[scene.ground_box], b.half_extents[scene.ground_box], o, d)
-        for k in idx:
-            if ground is not None and k == self._protos.index(cubes[scene.ground_box - self._n_boxes]):
-                self._protos[k].hide()                     # the ground is the plane below: tfar, not a solid
-            else:
+            if ground is not None:                         # the ground is the plane below: tfar, not a solid
+                ground_k = self._protos.index(cubes[scene.ground_box - self._n_boxes])
+        idx = np.asarray(idx, np.int64)
+        solid = has_volume(lin[idx], trans[idx])
+        lin[idx[~solid]], trans[idx[~solid]] = np.eye(3), 0.0     # no volume: hidden, never inverted
+        for k, keep in zip(idx.tolist(), solid.tolist()):
+            if keep and k != ground_k:
                 self._protos[k].place(lin[k], trans[k])
+            else:
+                self._protos[k].hide()
         self._top_obj.is_committed = 0                     # run() commits the top scene
         tfar = None
         if ground is not None:                             # a hit before the ground is all Embree must find

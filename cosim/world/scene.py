@@ -49,7 +49,8 @@ __all__ = [
 STREAM_ROWS = 64
 #: thickness of the ground slab below z = 0, m (its top face is the ground plane)
 GROUND_THICKNESS_M = 0.5
-#: stream segments shorter than this are dropped (repeated polyline points), m
+#: stream segments shorter or thinner than this are dropped (repeated polyline points, the run-out's last
+#: frame of zero radius: no surface), m
 MIN_SEGMENT_M = 1e-9
 #: linear RGB colours of the shaded image
 GROUND_COLOUR = (0.35, 0.30, 0.18)
@@ -152,7 +153,8 @@ def _poses(state: Mapping[str, float]) -> dict[str, np.ndarray]:
 
 
 def _stream_cylinders(stream: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Segments between consecutive valid stream rows: (p0 (K, 3), p1 (K, 3), radius (K,)), K = n - 1."""
+    """Segments between consecutive valid stream rows: (p0 (K, 3), p1 (K, 3), radius (K,)), K <= n - 1 (those
+    shorter or thinner than ``MIN_SEGMENT_M`` dropped)."""
     s = np.asarray(stream, dtype=np.float64)
     if s.ndim != 2 or s.shape[1] != 4:
         raise ValueError(f"stream must be (rows, 4) [x, y, z, radius], got {s.shape}")
@@ -161,8 +163,9 @@ def _stream_cylinders(stream: np.ndarray, n_points: int) -> tuple[np.ndarray, np
         empty = np.zeros((0, 3))
         return empty, empty, np.zeros(0)
     pts = s[:n]
-    keep = np.linalg.norm(np.diff(pts[:, :3], axis=0), axis=1) > MIN_SEGMENT_M
-    return pts[:-1, :3][keep], pts[1:, :3][keep], (0.5 * (pts[:-1, 3] + pts[1:, 3]))[keep]
+    radius = 0.5 * (pts[:-1, 3] + pts[1:, 3])
+    keep = (np.linalg.norm(np.diff(pts[:, :3], axis=0), axis=1) > MIN_SEGMENT_M) & (radius > MIN_SEGMENT_M)
+    return pts[:-1, :3][keep], pts[1:, :3][keep], radius[keep]
 
 
 def scene_from_state(scenario: Scenario, state: Mapping[str, float], heightmap: np.ndarray,
