@@ -104,10 +104,12 @@ class RunInfo:
     def of(cls, scenario) -> "RunInfo":
         from cosim.world.geometry import cart_body_from_grid, mount_transform
 
-        mount, cart = scenario.sensor.mount, scenario.cart
-        return cls(scenario.name, float(scenario.timing.sensor_period_s),
-                   (("cart", "cart_grid", np.asarray(cart_body_from_grid(cart), float)),
-                    (mount.parent, "lidar", np.asarray(mount_transform(mount), float))),
+        cart = scenario.cart
+        frames = [("cart", "cart_grid", np.asarray(cart_body_from_grid(cart), float))]
+        if scenario.lidar is not None:
+            mount = scenario.lidar.mount
+            frames.append((mount.parent, "lidar", np.asarray(mount_transform(mount), float)))
+        return cls(scenario.name, float(scenario.timing.sensor_period_s), tuple(frames),
                    (float(cart.interior_length_m), float(cart.interior_width_m)))
 
 

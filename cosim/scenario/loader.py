@@ -86,6 +86,34 @@ def path_fields(model: type[BaseModel] = Scenario, prefix: Loc = ()) -> list[Loc
     return out
 
 
+def _entry_models(annotation) -> list[type[BaseModel]]:
+    """The records a free-keyed mapping of records holds (``sensors: name -> sensor``, a union picked by
+    ``kind``); [] for any other annotation."""
+    if typing.get_origin(annotation) is typing.Annotated:
+        annotation = typing.get_args(annotation)[0]
+    if typing.get_origin(annotation) is not dict:
+        return []
+    value = typing.get_args(annotation)[1]
+    if typing.get_origin(value) is typing.Annotated:
+        value = typing.get_args(value)[0]
+    members = typing.get_args(value) if typing.get_origin(value) in (typing.Union, types.UnionType) else (value,)
+    return [m for m in members if isinstance(m, type) and issubclass(m, BaseModel)]
+
+
+def _doc_path_fields(data) -> list[Loc]:
+    """:func:`path_fields` plus the ``Path`` fields inside free-keyed mappings of records, for the keys ``data``
+    (the scenario document) has there (e.g. ``('sensors', 'mast', 'pattern', 'csv_file')``)."""
+    out = path_fields()
+    for name, info in Scenario.model_fields.items():
+        models = _entry_models(info.annotation)
+        entries = data.get(name) if isinstance(data, dict) else None
+        if not models or not isinstance(entries, dict):
+            continue
+        for key in entries:
+            out += sorted({loc for m in models for loc in path_fields(m, (name, key))})
+    return out
+
+
 def _model_at(loc: Loc) -> type[BaseModel] | None:
     model: type[BaseModel] | None = Scenario
     for part in loc:
@@ -114,10 +142,14 @@ def _tuple_len(loc: Loc) -> int | None:
 
 
 def _free_mapping(loc: Loc) -> bool:
-    """Whether ``loc`` names a field whose keys are free (a plug-in's ``*_options``: any key, checked later)."""
+    """Whether ``loc`` names a field whose keys are free (a plug-in's ``*_options``, the sensors of ``sensors``:
+    any key, checked by validation)."""
     model = _model_at(loc[:-1]) if loc else None
     field = model.model_fields.get(loc[-1]) if model is not None else None
-    return field is not None and typing.get_origin(field.annotation) is dict and loc[-1].endswith("_options")
+    if field is None:
+        return False
+    return (typing.get_origin(field.annotation) is dict and loc[-1].endswith("_options")) or bool(
+        _entry_models(field.annotation))
 
 
 def _check_override_path(loc: Loc) -> str | None:
@@ -224,7 +256,7 @@ def _jsonable(value) -> bool:
 
 # ------------------------------------------------------------------------------------------------ paths
 def _resolve_paths(doc: _Doc, base_dir: Path) -> None:
-    for loc in path_fields():
+    for loc in _doc_path_fields(doc.data):
         parent = doc.data
         for part in loc[:-1]:
             parent = parent.get(part) if isinstance(parent, dict) else None
@@ -302,6 +334,8 @@ def _clean_loc(data, loc: Loc) -> Loc:
     for i, part in enumerate(loc):
         if isinstance(node, (dict, list)) and _existing(node, (part,)):
             node = node[part]
+        elif isinstance(node, dict) and part == node.get("kind"):
+            continue                                  # the tag of a union picked by kind (sensors.<name>)
         elif isinstance(part, str) and not _KEY.match(part) and i < len(loc) - 1:
             continue
         else:

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from cosim.scenario.config import Scenario
-from cosim.world.camera import beam_directions
+from cosim.world.camera import Pinhole, beam_directions
 from cosim.world.geometry import apply, body_from_camera_axes, invert, mount_transform, vehicle_pose
 from cosim.world.parts import cart_boxes
 from cosim.world.patterns import PatternError, beam_table, pattern_shape
@@ -33,6 +33,8 @@ __all__ = ["implausible", "memory_problems", "FOV_BEAMS", "SHARED_BYTES_PER_BEAM
 Loc = tuple
 #: beams cast for the field-of-view check (spread evenly over the pattern's table)
 FOV_BEAMS = 4096
+#: rays cast over a camera's image for the field-of-view check (columns; rows keep the aspect ratio)
+FOV_PIXELS = (64, 48)
 #: shared memory per beam, bytes: the ``lidar_points`` block, (N, 4) float32
 SHARED_BYTES_PER_BEAM = 16
 #: process memory per beam, at least, bytes: each of renderer and perception holds the beam table (2 float64)
@@ -74,7 +76,8 @@ def size_text(n: float) -> str:
 
 def memory_problems(s: Scenario, free: tuple[int, int] | None = None) -> list[tuple[Loc, str]]:
     """The beam pattern's memory against /dev/shm's free space and the machine's available memory."""
-    shape = pattern_shape(s.sensor.pattern)
+    lidar = s.lidar
+    shape = pattern_shape(lidar.pattern) if lidar is not None else None
     if shape is None:
         return []
     beams = shape[0] * shape[1]
@@ -82,7 +85,7 @@ def memory_problems(s: Scenario, free: tuple[int, int] | None = None) -> list[tu
     shared, private = beams * SHARED_BYTES_PER_BEAM, beams * PROCESS_BYTES_PER_BEAM
     if shared <= shm_free and shared + private <= mem_free:
         return []
-    return [(("sensor", "pattern"),
+    return [((("sensor",) if not s.sensors else ("sensors", s.lidar_name)) + ("pattern",),
              f"{shape[1]} x {shape[0]} = {beams:,} beams need at least {size_text(shared)} of shared memory (block "
              f"lidar_points) and {size_text(private)} in the processes, but {SHM_DIR} has {size_text(shm_free)} free "
              f"and the machine {size_text(mem_free)} available; lower azimuth_count or elevation_count")]
@@ -147,44 +150,94 @@ def implausible(s: Scenario) -> list[tuple[Loc, str]]:
     problems = memory_problems(s) + _mesh_problems(s)
     if problems:
         return problems  # the geometry below would load the same meshes, or allocate the huge pattern
-    from cosim.world.raycast import raycast
     from cosim.world.scene import scene_from_state
 
     state, heights = _initial_state(s)
-    mount = s.sensor.mount
-    world_from_sensor = _pose(s, state, mount.parent) @ mount_transform(mount) @ body_from_camera_axes()
-    origin = world_from_sensor[:3, 3]
-    where = ("sensor", "mount", "xyz_m")
-    at = f"at world ({origin[0]:.2f}, {origin[1]:.2f}, {origin[2]:.2f}) m at the start"
-    if origin[2] < 0.0:
-        return [(where, f"the sensor is {-origin[2]:.2f} m below the ground {at}")]
     cart_from_world = invert(_pose(s, state, "cart"))
     c = s.cart
     hl, hw = c.interior_length_m / 2.0, c.interior_width_m / 2.0
-    local = apply(cart_from_world, origin[None])[0]
-    if abs(local[0]) < hl and abs(local[1]) < hw and local[2] < c.floor_height_m + s.grain.initial_fill_m:
-        return [(where, f"the sensor is inside the cart, under the grain surface {at}")]
     combine = apply(cart_from_world, np.array([[state["combine_x_m"], state["combine_y_m"], 0.0]]))[0]
     if abs(combine[0]) < hl + c.wall_thickness_m and abs(combine[1]) < hw + c.wall_thickness_m:
+        where_first = _where(s, next(iter(s.sensor_set)), "mount", "xyz_m")
+        origin = _world_from_sensor(s, state, next(iter(s.sensor_set.values())))[:3, 3]
+        if _under_grain(s, cart_from_world, origin):
+            return [(where_first, f"the sensor is inside the cart, under the grain surface {_at(origin)}")]
         return [(("cart",), f"the combine stands inside the cart at the start pose (cart interior "
                             f"{c.interior_length_m:g} x {c.interior_width_m:g} m, machine_sync offsets "
                             f"{s.machine_sync.longitudinal_offset_m:g}, {s.machine_sync.lateral_offset_m:g} m)")]
-    inside = _solids_at(s, state, origin)
-    if inside:
-        return [(where, f"the sensor is inside the {inside} {at}")]
     scene = scene_from_state(s, state, heights, np.zeros((64, 4), np.float32))
-    try:
-        elev, az = beam_table(s.sensor.pattern)
-    except PatternError:
-        return []  # the pattern's own checks report it
-    pick = np.linspace(0, len(elev) - 1, min(FOV_BEAMS, len(elev))).astype(np.int64)
-    d = beam_directions(elev[pick], az[pick]) @ world_from_sensor[:3, :3].T
+    for name, sensor in s.sensor_set.items():
+        problems += _sensor_problems(s, name, sensor, state, scene, cart_from_world)
+    return problems
+
+
+def _where(s: Scenario, name: str, *key: str) -> Loc:
+    """The key path of sensor ``name``'s ``key``: under ``sensor`` for the shorthand LiDAR, else under
+    ``sensors.<name>``."""
+    return ("sensor", *key) if not s.sensors else ("sensors", name, *key)
+
+
+def _at(origin: np.ndarray) -> str:
+    return f"at world ({origin[0]:.2f}, {origin[1]:.2f}, {origin[2]:.2f}) m at the start"
+
+
+def _world_from_sensor(s: Scenario, state: dict, sensor) -> np.ndarray:
+    mount = sensor.mount
+    return _pose(s, state, mount.parent) @ mount_transform(mount) @ body_from_camera_axes()
+
+
+def _under_grain(s: Scenario, cart_from_world: np.ndarray, origin: np.ndarray) -> bool:
+    c = s.cart
+    local = apply(cart_from_world, origin[None])[0]
+    return bool(abs(local[0]) < c.interior_length_m / 2.0 and abs(local[1]) < c.interior_width_m / 2.0
+                and local[2] < c.floor_height_m + s.grain.initial_fill_m)
+
+
+def _sensor_problems(s: Scenario, name: str, sensor, state: dict, scene, cart_from_world: np.ndarray
+                     ) -> list[tuple[Loc, str]]:
+    """The problems of one sensor: an origin (each of a stereo pair's two) below the ground, under the grain or
+    inside a solid; the cart never in its field of view within its range."""
+    from cosim.world.raycast import raycast
+    from cosim.world.sensors import camera_views
+
+    wfs = _world_from_sensor(s, state, sensor)
+    where = _where(s, name, "mount", "xyz_m")
+    is_lidar = sensor.kind == "lidar"
+    views = [("", np.eye(4))] if is_lidar else camera_views(name, sensor)
+    for view, sensor_from_view in views:
+        origin = (wfs @ sensor_from_view)[:3, 3]
+        what = "the sensor" if is_lidar else f"camera {name!r}" + (f" ({view})" if len(views) > 1 else "")
+        if origin[2] < 0.0:
+            return [(where, f"{what} is {-origin[2]:.2f} m below the ground {_at(origin)}")]
+        if _under_grain(s, cart_from_world, origin):
+            return [(where, f"{what} is inside the cart, under the grain surface {_at(origin)}")]
+        inside = _solids_at(s, state, origin)
+        if inside:
+            return [(where, f"{what} is inside the {inside} {_at(origin)}")]
+    origin = wfs[:3, 3]
+    if is_lidar:
+        try:
+            elev, az = beam_table(sensor.pattern)
+        except PatternError:
+            return []  # the pattern's own checks report it
+        pick = np.linspace(0, len(elev) - 1, min(FOV_BEAMS, len(elev))).astype(np.int64)
+        d = beam_directions(elev[pick], az[pick]) @ wfs[:3, :3].T
+        along = np.ones(len(d))
+        rays = f"{len(pick)} beams spread over the pattern"
+    else:
+        pin = Pinhole(FOV_PIXELS[0], max(1, round(FOV_PIXELS[0] * sensor.height_px / sensor.width_px)),
+                      float(np.radians(sensor.hfov_deg)))
+        dc = pin.ray_directions().reshape(-1, 3)
+        d, along = dc @ wfs[:3, :3].T, dc[:, 2]
+        rays = f"{len(d)} rays spread over the image"
     t = raycast(scene, np.broadcast_to(origin, d.shape), d)
-    hit = np.isfinite(t) & (t <= s.sensor.range_max_m) & (t >= s.sensor.range_min_m)
+    depth = t * along                                   # range for the LiDAR, planar depth for a camera
+    hit = np.isfinite(t) & (depth <= sensor.range_max_m) & (depth >= sensor.range_min_m)
     if not hit.any() or not _hits_cart(s, cart_from_world, origin + t[hit, None] * d[hit]):
-        return [(("sensor", "mount"), f"the cart is never in the sensor's field of view at the start pose: none of "
-                                      f"{len(pick)} beams spread over the pattern hits it within range_max_m "
-                                      f"{s.sensor.range_max_m:g} m (sensor {at})")]
+        what = "the sensor's" if is_lidar else f"camera {name!r}'s"
+        return [(_where(s, name, "mount"), f"the cart is never in {what} field of view at the start pose: none of "
+                                           f"{rays} hits it within range_max_m {sensor.range_max_m:g} m "
+                                           f"({'sensor' if is_lidar else 'camera'} {_at(origin)})")]
     return []
 
 

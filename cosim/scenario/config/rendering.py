@@ -5,9 +5,37 @@ from typing import Literal
 
 from pydantic import Field
 
-from .base import Model, PosFloat
+from .base import Fraction, Model, Mount, PosFloat
 
-__all__ = ["Render"]
+__all__ = ["Render", "Lighting", "WorkLight"]
+
+
+class WorkLight(Model):
+    """A work light on a machine: a point light at ``mount`` (its position is what counts) whose irradiance
+    falls off as 1 / r^2; ``intensity`` is the irradiance it gives at 1 m, in units of the full sun's (after
+    the cameras' exposure: at night a camera exposes for its work light)."""
+
+    mount: Mount = Mount(parent="combine", xyz_m=(-2.0, 5.5, 4.9))
+    intensity: PosFloat = 12.0
+
+
+class Lighting(Model):
+    """Light for the cameras' colour images (docs/cameras.md): the sun at ``sun_elevation_deg`` above the
+    horizon and ``sun_azimuth_deg`` from world +x (the harvest direction) towards +y (left); ``ambient`` is the
+    sky's share of the light on a surface facing up. With the sun at or below the horizon it is night: no sun,
+    ``night_ambient`` of sky glow, and the ``work_light`` (when given) is the light there is. The depth
+    images and the LiDAR do not depend on it."""
+
+    sun_elevation_deg: float = Field(default=60.0, ge=-90.0, le=90.0, allow_inf_nan=False)
+    sun_azimuth_deg: float = Field(default=53.13, ge=-360.0, le=360.0, allow_inf_nan=False)
+    ambient: Fraction = 0.35
+    night_ambient: Fraction = 0.02
+    work_light: WorkLight | None = None
+
+    @property
+    def night(self) -> bool:
+        """Whether the sun is at or below the horizon."""
+        return self.sun_elevation_deg <= 0.0
 
 
 class Render(Model):
@@ -23,6 +51,7 @@ class Render(Model):
       about 5 us per pixel: the default rig at full size would take seconds per frame). The image blocks and
       perception follow the scaled rig.
     * ``ground_size_m``: side of the square ground plane, centred under the combine.
+    * ``lighting``: the sun (or night and a work light) for the cameras' colour images (:class:`Lighting`).
     """
 
     rig: Literal["auto", "fixed"] = "auto"
@@ -34,3 +63,4 @@ class Render(Model):
     float_depth: bool = False
     mock_scale: float = Field(default=0.25, gt=0.0, le=1.0, allow_inf_nan=False)
     ground_size_m: PosFloat = 400.0
+    lighting: Lighting = Lighting()
