@@ -9,7 +9,7 @@ the module, e.g. a saved copy of an older one) prints one Markdown table of rang
   :data:`OFFSET_M` (sensor frame) away from the LiDAR origin; truth is the renderer's exact ray cast of the
   same beams from the LiDAR origin (``perception_proc.accuracy.exact_ranges``).
 * ``bench 640x480`` / ``bench 1024x768``: the scene and rig of ``bench/perception_bench.py`` (floor and two
-  boxes, two stitched 60 deg cameras, 240 x 160 grid), truth from ``perception_proc.synthetic.raycast``.
+  boxes, two stitched 60 deg cameras, 240 x 160 grid), truth from ``cosim.testing.synthetic.raycast``.
 
 Statistics follow ``perception_proc.accuracy.range_error_stats`` (beams whose exact range lies within the
 sensor's range limits; missing = truth valid but no return, spurious = a return where truth has none), plus
@@ -29,10 +29,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from cosim.scenario.config import Codec, Pattern, Scenario  # noqa: E402
+from cosim.testing.synthetic import Box, Plane, encode_linear, raycast, render_depth, stitched_rig  # noqa: E402
 from cosim.world.camera import Rig, RigCamera, beam_directions  # noqa: E402
 from cosim.world.patterns import beam_table, pattern_shape  # noqa: E402
 from perception_proc.accuracy import exact_ranges, range_error_stats  # noqa: E402
-from perception_proc.synthetic import Box, Plane, encode_linear, raycast, render_depth, stitched_rig  # noqa: E402
 
 #: LiDAR-to-camera offset of the study, sensor frame, m (as in bench/perception_bench.py)
 OFFSET_M = (0.2, 0.0, 0.0)

@@ -24,6 +24,7 @@ default_to_single_threaded_pools()      # before numpy and cv2 load: one-thread 
 import numpy as np  # noqa: E402
 
 from cosim.scenario.config import Codec, Pattern, Scenario  # noqa: E402
+from cosim.testing.synthetic import Box, Plane, cart_shapes, encode_linear, render_depth, stitched_rig  # noqa: E402
 from cosim.world.camera import beam_directions  # noqa: E402
 from cosim.world.geometry import vehicle_pose  # noqa: E402
 from cosim.world.patterns import beam_table, pattern_shape  # noqa: E402
@@ -31,7 +32,6 @@ from perception_proc.codec import decode_depth  # noqa: E402
 from perception_proc.pipeline import Perception  # noqa: E402
 from perception_proc.resample import build_table, resample  # noqa: E402
 from perception_proc.resample_offset import build_offset_table, resample_offset  # noqa: E402
-from perception_proc.synthetic import Box, Plane, cart_shapes, encode_linear, render_depth, stitched_rig  # noqa: E402
 
 CODEC = Codec()
 PATTERN = Pattern(preset="grid", elevation_min_deg=-23.0, elevation_max_deg=23.0, azimuth_min_deg=-55.0,

@@ -5,7 +5,7 @@ streaming the outputs costs the ground-truth ring.
     python bench/reliability.py kill9 [--reps 5]       # frames lost when the launcher is SIGKILLed
     python bench/reliability.py stream --main /work/main [--reps 5]   # A/B wall time, ground-truth 120 s run
 
-``detect``: stand-ins of tests/fakes.py stop (SIGSTOP) or deadlock (a C sleep holding the GIL) themselves and
+``detect``: stand-ins of cosim/testing/fakes.py stop (SIGSTOP) or deadlock (a C sleep holding the GIL) themselves and
 stamp CLOCK_MONOTONIC; the figure is the time from that stamp to the launcher's return (named, every child
 ended, outputs written). ``kill9``: a ground-truth run (renderer none) is SIGKILLed 2.5-4.5 s into its frames;
 frames lost = the supervisor's last frame (read from the segment just before the kill) + 1 - rows in
@@ -32,7 +32,7 @@ REPO = Path(__file__).resolve().parent.parent
 DETECT = textwrap.dedent("""
     import sys, time
     sys.path[:0] = [{repo!r}, {tests!r}]
-    import fakes
+    from cosim.testing import fakes
     from cosim.scenario.config import Scenario
     from cosim.runtime.launcher import launch
     if __name__ == "__main__":

@@ -83,10 +83,9 @@ def bare_ring(frames: int, payload: bool) -> np.ndarray:
 
 
 def launcher_ring(frames: int) -> dict:
-    import fakes
-
     from cosim.runtime.launcher import launch
     from cosim.scenario.config import Scenario
+    from cosim.testing import fakes
 
     period = 0.01
     sc = Scenario(format_version=1, duration_s=frames * period, renderer="mock")

@@ -162,15 +162,15 @@ class Simulation:
         return self._advance(1)
 
     def step(self, n: int = 1) -> FrameState:
-        """Run the next ``n`` frames (fewer if the run ends first) and return the state of the last one."""
+        """Run the next ``n`` frames (fewer if the run ends first) and return the state of the last one.
+
+        Before any :meth:`reset` it resets first (frame 0, t = 0) and then runs ``n`` frames, so a fresh
+        simulation's ``step(50)`` ends at frame 50, t = 50 * ``timing.sensor_period_s``."""
         self._check_open()
         if n < 1:
             raise ValueError(f"step(n): n must be >= 1, got {n}")
         if self._session is None and self._result is None:
             self.reset()
-            n -= 1
-            if n == 0:
-                return self._state
         self._check_running("step")
         return self._advance(n)
 

@@ -32,6 +32,9 @@ identical coverage and error statistics (``bench/offset_accuracy.py``). Then an 
 (:func:`_nearest_per_beam`: repeated scatter, no sort, no ``ufunc.at``) and the plane refinement of the
 winners in float32 (:func:`_refine`; at the image border with the left / upper neighbour).
 
+The readable reference of the whole method, with none of these speed-ups, is
+:func:`perception_proc.resample_offset_reference.resample_offset_reference`; a test holds the two together.
+
 Validity: points nearer than :data:`NEAR_RANGE_M` (camera depth) may fall outside the window, the row band
 and the column bound and are then ignored (a beam whose nearest surface is that close reports the next
 surface behind it or nothing); a pattern given as a CSV table (not separable) uses a k-d tree on every

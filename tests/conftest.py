@@ -1,4 +1,5 @@
-"""Shared fixtures. ``tests/`` is put on sys.path so spawned children can import the stand-ins in fakes.py."""
+"""Shared fixtures. ``tests/`` is put on sys.path so spawned children can import test-only modules (sweep runners,
+plug-ins written by a test); the stand-in participants live in cosim/testing/fakes.py."""
 from __future__ import annotations
 
 import os

@@ -164,6 +164,15 @@ def test_target_fill_change_changes_time_to_target_as_an_override_does():
     assert math.isfinite(t_base) and t_low < t_base - 5.0
 
 
+def test_a_fresh_simulations_step_n_runs_n_frames_after_frame_0():
+    """README's ``sim.step(50)  # 5 s``: the implicit reset's frame 0 is not one of the n."""
+    with Simulation("default", **{**GT, "duration": 6.0}) as sim:
+        o = sim.step(50)
+        assert o.frame == 50 and o["dyn_state.t_s"] == pytest.approx(5.0, abs=1e-12)
+    with Simulation("default", **GT) as sim:
+        assert sim.step().frame == 1
+
+
 def test_combine_speed_change_moves_the_combine_at_the_new_speed():
     with Simulation("default", **GT) as sim:
         sim.step(10)

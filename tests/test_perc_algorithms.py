@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from cosim.scenario.config import Cart, Mount, Noise, Pattern, Sensor
+from cosim.testing.synthetic import Box, cart_shapes, raycast
 from cosim.world.camera import beam_directions
 from cosim.world.geometry import apply, body_from_camera_axes, cart_body_from_grid, mount_transform, vehicle_pose
 from cosim.world.patterns import beam_table, pattern_shape
@@ -14,7 +15,6 @@ from perception_proc.heightmap import grid_shape, height_map
 from perception_proc.impact import blank_under_stream, find_impact
 from perception_proc.lidar import apply_noise_and_limits, frame_generator
 from perception_proc.rim import border_beams, find_cart
-from perception_proc.synthetic import Box, cart_shapes, raycast
 
 CART = Cart()
 CELL = 0.1
@@ -175,8 +175,8 @@ def test_height_map_rejects_bad_pose_input_shapes():
 
 def test_returns_on_the_sensors_own_vehicle_are_masked():
     from cosim.scenario.config import Scenario
+    from cosim.testing.synthetic import stitched_rig
     from perception_proc.pipeline import OWN_BOX_MARGIN_M, Perception
-    from perception_proc.synthetic import stitched_rig
 
     # a sensor on a mast above the combine's right half, looking left and down across its own roof
     sc = Scenario(format_version=1, sensor=Sensor(mount=Mount(parent="combine", xyz_m=(0.0, -1.0, 5.0),
@@ -200,8 +200,8 @@ OWN_BOX_MOUNTS = [((0.0, -1.0, 5.0), (0.0, 45.0, 90.0)), ((3.0, 0.0, 4.0), (0.0,
 def _own_mask_case(xyz, rpy) -> tuple[int, int, int]:
     """Check level_points' own-vehicle mask against the box test of every point; returns the axis order."""
     from cosim.scenario.config import Scenario
+    from cosim.testing.synthetic import stitched_rig
     from perception_proc.pipeline import Perception, own_vehicle_box
-    from perception_proc.synthetic import stitched_rig
 
     sc = Scenario(format_version=1, sensor=Sensor(mount=Mount(parent="combine", xyz_m=xyz, rpy_deg=rpy)))
     p = Perception(sc, stitched_rig(1, 48, 48, 90.0))

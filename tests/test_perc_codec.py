@@ -7,8 +7,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cosim.scenario.config import Codec
-from perception_proc.codec import decode_depth
-from perception_proc.synthetic import encode_linear
+from cosim.testing.synthetic import encode_linear
+from perception_proc.codec import decode_bytes, decode_depth, decode_lut, decode_words, lut_key
 
 
 def encode_reference(d_m: np.ndarray, alpha_cm: float, beta_cm: float, gamma: float = 2.2,
@@ -105,3 +105,21 @@ def test_synthetic_encoder_matches_reference():
 def test_decode_rejects_bad_shape():
     with pytest.raises(ValueError, match=r"\(H, W, 4\) uint8"):
         decode_depth(np.zeros((4, 4, 3), np.uint8), Codec())
+
+
+@pytest.mark.parametrize("gamma_mode", ["linear", "mishandled"])
+def test_table_decode_equals_the_per_channel_decode_for_every_word(gamma_mode):
+    """The decode table (``decode_lut`` indexed by ``lut_key`` of the RGBA word) against Eq 3 on the channels
+    (``decode_bytes``), bit for bit, over every (R, B) pair with G arbitrary and A = 0 or 255."""
+    codec = Codec(gamma_mode=gamma_mode)
+    r, b = (c.astype(np.uint8).ravel() for c in np.meshgrid(np.arange(256), np.arange(256), indexing="ij"))
+    g = np.random.default_rng(3).integers(0, 256, r.size).astype(np.uint8)   # the key must ignore G
+    lut = decode_lut(codec)
+    for a_val in (0, 255):
+        a = np.full(r.size, a_val, np.uint8)
+        words = np.stack([r, g, b, a], axis=1).copy().view("<u4").ravel()
+        got = decode_words(words, lut)
+        want = decode_bytes(r, b, a, codec)
+        np.testing.assert_array_equal(got, want)
+        assert np.isnan(got).all() if a_val == 0 else np.isnan(got).sum() == 256   # R = 255 saturates
+    assert lut_key(np.array([0xFF_AB_CD_EF], np.uint32))[0] == (0xEF | 0xAB << 8 | 1 << 16)

@@ -11,6 +11,7 @@ from hypothesis import strategies as hst
 
 from cosim.errors import FrameMismatch
 from cosim.scenario.config import Scenario
+from cosim.testing.synthetic import encode_linear, stitched_rig
 from cosim.world.geometry import vehicle_pose
 from cosim.world.raycast import raycast
 from cosim.world.scene import scene_from_state
@@ -20,7 +21,6 @@ from perception_proc.blocks import declare_blocks
 from perception_proc.orderstats import median_sorted, percentile_sorted, percentiles
 from perception_proc.participant import PerceptionParticipant, create
 from perception_proc.summary import summarize
-from perception_proc.synthetic import encode_linear, stitched_rig
 from shm_schema import Schema, Segment, image_block
 
 SCENARIO = Scenario.model_validate_json(json.dumps({

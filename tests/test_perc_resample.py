@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from cosim.scenario.config import Codec, Pattern
+from cosim.testing.synthetic import Box, Plane, encode_linear, raycast, render_depth, stitched_rig
 from cosim.world.camera import Pinhole, Rig, RigCamera, beam_directions, paper_angles
 from cosim.world.patterns import beam_table, pattern_shape
 from perception_proc.resample import beam_pixels, build_table, paper_pixel, resample
 from perception_proc.resample_offset import build_offset_table, is_offset, resample_offset
-from perception_proc.synthetic import Box, Plane, encode_linear, raycast, render_depth, stitched_rig
 
 CODEC = Codec()
 BOUND = CODEC.bound_m

@@ -1,5 +1,5 @@
 """Run faults beyond crashes: stopped and deadlocked children, a stopped recorder, a killed launcher,
-full disks, unusable run directories, determinism. Real launched runs with the stand-ins of fakes.py."""
+full disks, unusable run directories, determinism. Real launched runs with the stand-ins of cosim/testing/fakes.py."""
 from __future__ import annotations
 
 import errno
@@ -13,7 +13,6 @@ import textwrap
 import time
 from pathlib import Path
 
-import fakes
 import numpy as np
 import pytest
 
@@ -24,6 +23,7 @@ from cosim.runtime.files import LOCK_NAME, RunDirError
 from cosim.runtime.launcher import EXIT_RUN_ERROR, launch
 from cosim.runtime.liveness import STALL_S, process_state
 from cosim.scenario.config import Scenario
+from cosim.testing import fakes
 
 REPO = Path(__file__).resolve().parent.parent
 #: the promise: a stopped or deadlocked child is named, and the launcher has returned, within this long
@@ -110,8 +110,8 @@ def test_a_stopped_viewer_is_ended_with_the_run(tmp_path, shm_clean):
 
     t0 = time.monotonic()
     res = launch(scenario(), tmp_path / "run", specs=fakes.specs(), console_log=False,
-                 observers=[ObserverSpec("stopped", "fakes:observe", {"stop_self": True}),
-                            ObserverSpec("idle", "fakes:observe")])
+                 observers=[ObserverSpec("stopped", "cosim.testing.fakes:observe", {"stop_self": True}),
+                            ObserverSpec("idle", "cosim.testing.fakes:observe")])
     assert res.completed and time.monotonic() - t0 < 15
     from test_runtime_ring import children_of
 
@@ -143,7 +143,7 @@ def test_a_killed_recorder_is_one_line_not_a_traceback(tmp_path, shm_clean, capf
 KILL_SCRIPT = textwrap.dedent("""
     import sys
     sys.path[:0] = [{repo!r}, {tests!r}]
-    import fakes
+    from cosim.testing import fakes
     from cosim.scenario.config import Scenario
     from cosim.runtime.launcher import launch
     if __name__ == "__main__":

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-import fakes
 import numpy as np
 import pytest
 
@@ -12,6 +11,7 @@ from cosim.runtime.launcher import launch
 from cosim.runtime.lockstep import RingPlan
 from cosim.runtime.participant import perception_overlaps
 from cosim.scenario.config import Scenario
+from cosim.testing import fakes
 
 ROLES = ("dynamics", "renderer", "perception")
 

@@ -1,7 +1,6 @@
 """Who takes part in a run, and the two transports giving the same results."""
 from __future__ import annotations
 
-import fakes
 import numpy as np
 import pytest
 
@@ -10,6 +9,7 @@ from cosim.runtime.launcher import launch
 from cosim.runtime.lockstep import RingPlan
 from cosim.runtime.specs import DEFAULT_SPECS, SUPERVISOR, ring_specs
 from cosim.scenario.config import Scenario
+from cosim.testing import fakes
 
 
 @pytest.mark.parametrize("feedback, renderer, viewer, ring", [

@@ -9,7 +9,6 @@ import textwrap
 import time
 from pathlib import Path
 
-import fakes
 import numpy as np
 import pytest
 
@@ -18,6 +17,7 @@ from cosim.runtime.inprocess import simulate
 from cosim.runtime.launcher import EXIT_INTERRUPTED, EXIT_RUN_ERROR, launch
 from cosim.runtime.lockstep import RingPlan, Token
 from cosim.scenario.config import Scenario
+from cosim.testing import fakes
 from shm_schema import Field, Schema, Segment, StructBlock
 
 ROLES = ("dynamics", "renderer", "perception")
@@ -176,7 +176,7 @@ def test_same_scenario_and_seed_give_identical_timeseries(tmp_path, shm_clean):
 SIGNAL_SCRIPT = textwrap.dedent("""
     import sys
     sys.path[:0] = [{repo!r}, {tests!r}]  # this checkout's code, not an installed copy
-    import fakes
+    from cosim.testing import fakes
     from cosim.scenario.config import Scenario
     from cosim.runtime.launcher import launch
     if __name__ == "__main__":

@@ -167,8 +167,8 @@ def specs(**faults_by_role):
     out = {}
     for role in ("dynamics", "renderer", "perception"):
         kw = faults_by_role.get(role, {})
-        out[role] = ParticipantSpec(role, "fakes:make", f"fakes:blocks_{role}", kwargs={"role": role, **kw},
-                                    defers="fakes:always" if kw.get("defer") else None)
+        out[role] = ParticipantSpec(role, "cosim.testing.fakes:make", f"cosim.testing.fakes:blocks_{role}", kwargs={"role": role, **kw},
+                                    defers="cosim.testing.fakes:always" if kw.get("defer") else None)
     return out
 
 
