@@ -17,12 +17,15 @@ import numpy as np
 
 from cosim.scenario.config.cameras import StereoCamera
 
-__all__ = ["FIXED_POINT", "make_matcher", "grey", "disparity", "depth_from_disparity", "stereo_depth"]
+__all__ = ["FIXED_POINT", "SGBM_MODES", "make_matcher", "grey", "disparity", "depth_from_disparity", "stereo_depth"]
 
 #: OpenCV's disparity fixed point: 16 steps per pixel
 FIXED_POINT = 16.0
 #: SGBM's smoothness penalties per unit of cn b^2 (OpenCV's documentation: 8 and 32)
 P1_PER_AREA, P2_PER_AREA = 8, 32
+#: ``sgbm_mode`` -> OpenCV's StereoSGBM mode
+SGBM_MODES = {"sgbm": cv2.STEREO_SGBM_MODE_SGBM, "3way": cv2.STEREO_SGBM_MODE_SGBM_3WAY,
+              "hh": cv2.STEREO_SGBM_MODE_HH}
 
 
 def make_matcher(cam: StereoCamera):
@@ -40,7 +43,7 @@ def make_matcher(cam: StereoCamera):
                                  blockSize=cam.block_size, P1=P1_PER_AREA * area, P2=P2_PER_AREA * area,
                                  disp12MaxDiff=cam.disp12_max_diff_px, uniquenessRatio=cam.uniqueness_ratio,
                                  speckleWindowSize=cam.speckle_window_px, speckleRange=cam.speckle_range_px,
-                                 mode=cv2.STEREO_SGBM_MODE_SGBM)
+                                 mode=SGBM_MODES[cam.sgbm_mode])
 
 
 def grey(rgba: np.ndarray) -> np.ndarray:

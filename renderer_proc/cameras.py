@@ -46,9 +46,7 @@ def camera_backend(scenario: Scenario, views: list[View], context: Any = None):
     if scenario.renderer == "gl":
         from .camera_gl import GLCameraRenderer
 
-        return GLCameraRenderer(pins, scenario.render.lighting, context=context,
-                                depth=["depth" in v.parts for v in views],
-                                labels=["labels" in v.parts for v in views])
+        return GLCameraRenderer(pins, scenario.render.lighting, context=context)
     if scenario.renderer == "mock":
         from .camera_mock import MockCameraRenderer
 

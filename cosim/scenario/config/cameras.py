@@ -134,7 +134,10 @@ class StereoCamera(Camera):
     """A stereo pair: the left camera at the mount, the right one ``baseline_m`` to its right (camera +X), the
     same pinhole, parallel axes (rectified by construction). Disparity from OpenCV's ``sgbm`` (StereoSGBM, the
     default) or ``bm`` (StereoBM) on the grey images, depth Z = f B / d, invalid where the matcher gives no
-    disparity. ``num_disparities`` (a multiple of 16) and ``min_disparity_px`` bound the search; ``block_size``
+    disparity. ``sgbm_mode``: OpenCV's SGBM variant, ``sgbm`` (one pass, five path directions, OpenCV's
+    default), ``3way`` (OpenCV's faster three-way variant) or ``hh`` (two passes, eight directions: the full
+    Hirschmuller method, about three times the time); the one-pass modes prefer the disparity of the rows above
+    on surfaces that slant in the image's vertical (docs/cameras.md gives the measured bias). ``num_disparities`` (a multiple of 16) and ``min_disparity_px`` bound the search; ``block_size``
     (odd; BM needs >= 5), ``uniqueness_ratio``, ``speckle_window_px``, ``speckle_range_px`` and
     ``disp12_max_diff_px`` are OpenCV's parameters of the same names. It needs the GL renderer's textured
     images: the mock renderer's plain shading has nothing to match."""
@@ -142,6 +145,7 @@ class StereoCamera(Camera):
     kind: Literal["stereo_camera"]
     baseline_m: PosFloat = 0.12
     matcher: Literal["sgbm", "bm"] = "sgbm"
+    sgbm_mode: Literal["sgbm", "3way", "hh"] = "sgbm"
     num_disparities: int = Field(default=128, ge=16, le=512)
     min_disparity_px: int = Field(default=0, ge=0, le=512)
     block_size: int = Field(default=5, ge=3, le=51)
