@@ -15,8 +15,8 @@ On top of it, as the device class does: a pixel whose 3 x 3 neighbourhood of exa
 ``flying_edge_m`` straddles a depth edge and reports a mixture of its nearest and farthest neighbour, a
 uniform draw between them ("flying pixels", the mixed returns of a pixel footprint across an edge); pixels
 beyond ``max_incidence_deg``, outside ``range_min_m`` .. ``range_max_m`` or with no hit are invalid (NaN).
-The incidence comes from the exact depth image (normals of its back-projected points), so it is the
-renderer's geometry, not an estimate from the noisy data. ``noise: false`` keeps the exact depth and applies
+The incidence comes from the exact depth image (normals of its back-projected points, each tangent taken on
+the pixel's own side of a depth edge), so it is the renderer's geometry, not an estimate from the noisy data. ``noise: false`` keeps the exact depth and applies
 only the range limits.
 """
 from __future__ import annotations
@@ -41,13 +41,30 @@ def frame_generator(seed: int, frame: int, sensor_index: int) -> np.random.Gener
     return np.random.default_rng([int(seed), int(frame), TOF_STREAM, int(sensor_index)])
 
 
+def _smooth_side(p: np.ndarray, axis: int) -> np.ndarray:
+    """The difference of neighbouring points (H, W, 3) along ``axis`` taken on the side whose depth changes
+    least (forward or backward): at a depth edge each pixel keeps its own surface's tangent."""
+    fwd = np.diff(p, axis=axis, append=np.take(p, [-1], axis=axis))
+    bwd = np.diff(p, axis=axis, prepend=np.take(p, [0], axis=axis))
+    first = [slice(None)] * 3
+    first[axis] = 0
+    last = list(first)
+    last[axis] = -1
+    fwd[tuple(last)] = bwd[tuple(last)]                 # the border pixels have one side only
+    bwd[tuple(first)] = fwd[tuple(first)]
+    with np.errstate(invalid="ignore"):
+        use_fwd = np.abs(fwd[..., 2]) <= np.abs(bwd[..., 2])
+    return np.where(use_fwd[..., None], fwd, bwd)
+
+
 def incidence(pin: Pinhole, z: np.ndarray) -> np.ndarray:
     """Incidence angle (H, W) float64 rad between each pixel's ray and the surface normal, from planar depth
-    ``z`` (H, W) m (normals of the back-projected points by central differences); NaN where ``z`` or a
-    neighbour is not finite."""
+    ``z`` (H, W) m: the normal of the back-projected points' tangents, each taken towards the neighbour on the
+    pixel's own side of a depth edge (:func:`_smooth_side`); NaN where ``z`` or both neighbours are not
+    finite."""
     uu, vv = pin.pixel_centres()
     p = pin.backproject(uu, vv, z)
-    n = np.cross(np.gradient(p, axis=1), np.gradient(p, axis=0))
+    n = np.cross(_smooth_side(p, 1), _smooth_side(p, 0))
     ray = p / np.linalg.norm(p, axis=2, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
         cos = np.abs(np.einsum("hwi,hwi->hw", n, ray)) / np.linalg.norm(n, axis=2)
