@@ -19,7 +19,7 @@ from __future__ import annotations
 from cosim.scenario.config import Scenario
 from cosim.scenario.config.cameras import DEPTH_KINDS
 from cosim.world.patterns import beam_table
-from cosim.world.sensors import camera_block, camera_pinhole
+from cosim.world.sensors import camera_block, camera_pinhole, points_stride
 from shm_schema import ArrayBlock, Block, Field, StructBlock
 
 __all__ = ["WRITER", "STATE_BLOCK", "HEIGHTS_BLOCK", "POINTS_BLOCK", "RANGE_BANDS_M", "band_name",
@@ -129,7 +129,7 @@ def camera_output_blocks(scenario: Scenario, name: str) -> dict[str, tuple[str, 
     back-projected, x y z (camera frame) and range m (NaN rows invalid)."""
     cam = scenario.cameras[name]
     pin = camera_pinhole(cam, scenario)
-    s = cam.points_stride
+    s = points_stride(cam, scenario)
     rows, cols = len(range(s // 2, pin.height, s)), len(range(s // 2, pin.width, s))
     return {"measured": (camera_block(name, "measured"), (pin.height, pin.width)),
             "points": (camera_block(name, "points"), (rows * cols, 4))}

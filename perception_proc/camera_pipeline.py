@@ -12,8 +12,9 @@ its stride cell). Per frame:
    matcher (``perception_proc.stereo``), nothing for an RGB camera;
 4. the effects' ``depth`` stage on the measured depth;
 5. ``points``: the strided pixels back-projected (Eq 5), mapped into the level frame, with their ranges and
-   border flags (``perception_proc.rim.border_beams`` on the strided grid: outer rows and columns, pixels next
-   to a nearer one).
+   border flags (``perception_proc.rim.border_beams`` on the strided grid: pixels next to a nearer one; and a
+   band of :data:`EDGE_BAND_RAD` along the edge of the camera's field, which for a stereo pair begins right of
+   the columns its matcher cannot search).
 """
 from __future__ import annotations
 
@@ -29,10 +30,11 @@ from cosim.world.sensors import (
     camera_pinhole,
     intrinsics_matrix,
     level_from_sensor,
+    points_stride,
 )
 
 from .camera_effects import camera_effects
-from .rim import border_beams
+from .rim import FOV_EDGE, border_beams
 from .stereo import make_matcher, stereo_depth
 from .tof import frame_generator, tof_depth
 
@@ -43,6 +45,10 @@ __all__ = ["CameraImages", "CameraPipeline", "SIGMA_DISTANCE_M", "STEREO_DISPARI
 SIGMA_DISTANCE_M = 3.0
 #: disparity 1-sigma assumed for that typical figure, px (a matcher on textured images does about this well)
 STEREO_DISPARITY_SIGMA_PX = 0.25
+#: angular width of the band along the edge of a camera's field whose points are flagged as on the field's edge
+#: (``rim.FOV_EDGE``), rad: a camera's points are far denser than a LiDAR's beams, so the rim finder's test of an
+#: end cut by the field (a share of its end strip on the edge) needs a band, not one row of points
+EDGE_BAND_RAD = 0.02
 
 
 @dataclass
@@ -71,7 +77,7 @@ class CameraPipeline:
         self.parent_from_camera = level_from_sensor(spec)
         self.blocks = {part: camera_block(name, part) for _, part in camera_parts(spec)}
         self.depth_giving = self.kind in ("depth_camera", "stereo_camera")
-        s = spec.points_stride
+        s = points_stride(spec, scenario)
         h, w = self.pin.height, self.pin.width
         self.rows = np.arange(s // 2, h, s)
         self.cols = np.arange(s // 2, w, s)
@@ -80,7 +86,22 @@ class CameraPipeline:
         self.unit_points = np.stack([(uu - w / 2.0) / self.pin.f, (h / 2.0 - vv) / self.pin.f,
                                      np.ones_like(uu)], axis=-1).reshape(-1, 3)
         self._matcher = make_matcher(spec) if isinstance(spec, StereoCamera) else None
+        self.edge = self._edge_band()
         self.effects = camera_effects(scenario, name)
+
+    def _edge_band(self) -> np.ndarray:
+        """(M,) bool: the strided pixels within :data:`EDGE_BAND_RAD` of the edge of the camera's field (for a
+        stereo pair the field starts right of the left band the matcher cannot search, ``min_disparity_px +
+        num_disparities`` columns)."""
+        band = self.pin.f * EDGE_BAND_RAD
+        left = 0.0
+        if isinstance(self.spec, StereoCamera):
+            left = float(self.spec.min_disparity_px + self.spec.num_disparities)
+        h, w = self.pin.height, self.pin.width
+        u, v = self.cols + 0.5, self.rows + 0.5
+        cols = (u < left + band) | (u > w - band)
+        rows = (v < band) | (v > h - band)
+        return (rows[:, None] | cols[None, :]).reshape(-1)
 
     @property
     def grid_shape(self) -> tuple[int, int]:
@@ -138,4 +159,5 @@ class CameraPipeline:
         record[:, :3] = cam
         record[:, 3] = rng
         flags = border_beams(rng.astype(np.float32), self.grid_shape)
+        flags[self.edge] |= FOV_EDGE
         return level, rng.astype(np.float32), flags, record

@@ -2,6 +2,11 @@
 camera's record against the exact ray cast, the plug-in input's sensors (docs/cameras.md)."""
 from __future__ import annotations
 
+import csv
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -44,3 +49,32 @@ def test_a_depth_camera_alone_finds_the_cart_and_reports_its_error(noise):
         assert np.all(err > ser["sensor_tof.depth_err_median_m"])
     arrays = run.recorder.arrays
     assert "cam_tof_depth" not in arrays or arrays["cam_tof_depth"].dtype == np.float32
+
+
+EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "own_camera_perception"
+
+
+def test_a_plugin_reads_camera_images_in_simulation_and_launched(tmp_path, shm_clean):
+    """examples/own_camera_perception: the algorithm maps the grain from inp.sensors["rgbd"].rgb (grain by
+    colour) and .depth_m: within a few cm of the truth in cosim.Simulation; without the colour image
+    (``rgb: false``) it has nothing to map; and the same in a launched run."""
+    from cosim import Simulation
+    from perception_proc.accuracy import heightmap_error, truth_on_grid
+
+    with Simulation(EXAMPLE / "scenario.yaml", duration=0.5) as sim:
+        state = sim.step(4)
+        perceived, truth = state["heightmap_perceived"], state["heightmap_truth"]
+        s = sim.scenario
+        rmse, bias, coverage = heightmap_error(perceived, truth_on_grid(truth, s.grain.cell_m, perceived.shape,
+                                                                        s.cart))
+        assert coverage > 0.5 and rmse < 0.05 and abs(bias) < 0.02, (rmse, bias, coverage)
+    with Simulation(EXAMPLE / "scenario.yaml", duration=0.5, set=["sensors.rgbd.rgb=false"]) as sim:
+        state = sim.step(4)
+        assert state["perc_state.cart_valid"] == 1 and np.all(np.isnan(state["heightmap_perceived"]))
+    out = tmp_path / "run"
+    done = subprocess.run([sys.executable, "launch.py", "run", str(EXAMPLE / "scenario.yaml"), "--duration", "0.5",
+                           "--quiet", "--out", str(out)], cwd=EXAMPLE.parent.parent, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    rows = list(csv.DictReader((out / "timeseries.csv").open()))
+    assert float(rows[-1]["perc_state.coverage"]) > 0.5

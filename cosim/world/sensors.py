@@ -23,7 +23,7 @@ from cosim.scenario.config.scenario import Scenario
 from cosim.world.camera import Pinhole
 from cosim.world.geometry import body_from_camera_axes, make_transform, mount_transform, vehicle_pose
 
-__all__ = ["MIN_SIDE_PX", "BLOCK_PREFIX", "camera_pinhole", "intrinsics_matrix", "level_from_sensor",
+__all__ = ["MIN_SIDE_PX", "BLOCK_PREFIX", "camera_pinhole", "points_stride", "intrinsics_matrix", "level_from_sensor",
            "world_from_parent", "world_from_sensor", "left_from_right", "camera_block", "camera_views", "camera_parts"]
 
 #: smallest image side after the mock's scaling, px
@@ -40,6 +40,14 @@ def camera_pinhole(cam: Camera, scenario: Scenario) -> Pinhole:
         k = scenario.render.mock_scale
         w, h = max(MIN_SIDE_PX, round(w * k)), max(MIN_SIDE_PX, round(h * k))
     return Pinhole(w, h, float(np.radians(cam.hfov_deg)))
+
+
+def points_stride(cam: Camera, scenario: Scenario) -> int:
+    """The pixel stride of the camera's points for perception: ``points_stride``, scaled like the image under the
+    mock renderer (at least 1), so that a camera gives about the same points whichever renderer draws it."""
+    if scenario.renderer == "mock":
+        return max(1, round(cam.points_stride * scenario.render.mock_scale))
+    return cam.points_stride
 
 
 def intrinsics_matrix(pin: Pinhole) -> np.ndarray:

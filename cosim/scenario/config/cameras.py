@@ -65,7 +65,8 @@ class Camera(Model):
     (``range_min_m`` .. ``range_max_m``, planar depth Z), ``labels`` (also render the per-pixel label image,
     docs/cameras.md), ``every_frames`` (it takes an image every that many ring frames; between them perception
     keeps its last image) and ``points_stride`` (perception back-projects every that many pixels along each image
-    axis into the level-frame points the built-in algorithm uses)."""
+    axis into the level-frame points the built-in algorithm uses; under the mock renderer it scales with the
+    image, at least 1)."""
 
     profile: str | None = None
     mount: Mount
