@@ -1,12 +1,17 @@
-"""The beam-native mock renderer's cost per frame: Embree against the numpy ray cast.
+"""The beam-native mock renderer's cost per frame against the GL renderer's, on the same frames.
 
 For ``--frames`` sample frames of the default scene (``renderer_proc.sample.sample_frame`` spread over
-``--span`` s), interleaved per frame (A B, B A, ...), one mock frame = ``draw`` (the exact cast of every beam)
-+ ``read_depth`` (Eqs 1-2) of :class:`renderer_proc.beam_mock.MockBeamRenderer` with ``backend`` numpy and
-embree. CPU is process CPU time (every thread, Embree's BVH build included); medians. Also checks that the two
-backends' bytes agree. Prints Markdown. Usage::
+``--span`` s), interleaved per frame (the arms' order rotating), one frame = ``set_scene`` + ``draw`` +
+``read_depth`` of a renderer made once: the mock (:class:`renderer_proc.beam_mock.MockBeamRenderer`) with
+each ray caster (``cosim.world.fastcast.CASTERS``: ``numpy``; ``embree``, the scene's triangles built every
+frame; ``embree-static``, the rigid bodies built once per run, ``cosim.world.rigidcast``) and the GL beam-native
+renderer (:class:`renderer_proc.beam_gl.GLBeamRenderer`, when a context can be made). CPU is process CPU time
+(every thread: llvmpipe's, Embree's); medians. The heap is kept as in a run's processes
+(``cosim.runtime.heap``). Also checks that every arm's bytes agree with the numpy ray cast. Prints Markdown and
+returns the figures. Usage::
 
     python bench/mock_cast.py --frames 30
+    python bench/mock_cast.py --frames 10 --arms embree-static,gl
 """
 from __future__ import annotations
 
@@ -22,49 +27,93 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
+from cosim.runtime.heap import keep_heap  # noqa: E402
 from cosim.scenario.config import Scenario  # noqa: E402
 from cosim.world.beamtarget import beam_layout  # noqa: E402
+from cosim.world.parts import entity_parts  # noqa: E402
 from cosim.world.scene import scene_from_state  # noqa: E402
 from renderer_proc.beam_mock import MockBeamRenderer  # noqa: E402
 from renderer_proc.projection import world_from_sensor  # noqa: E402
 from renderer_proc.sample import sample_frame  # noqa: E402
 
-BACKENDS = ("numpy", "embree")
+ARMS = ("numpy", "embree", "embree-static", "gl")
+
+
+def renderers(sc: Scenario, arms: list[str]) -> dict:
+    """One renderer per arm (GL left out where no context can be made)."""
+    lay, codec = beam_layout(sc.sensor.pattern), sc.sensor.codec
+    out = {}
+    for arm in arms:
+        if arm == "gl":
+            from cosim.errors import RendererUnavailable
+            from renderer_proc.beam_gl import GLBeamRenderer
+
+            try:
+                out[arm] = GLBeamRenderer(lay, codec)
+            except RendererUnavailable as exc:
+                print(f"gl left out: {exc}")
+        else:
+            backend = "numpy" if arm == "numpy" else "embree"
+            r = MockBeamRenderer(lay, codec, backend=backend, parts=entity_parts(sc) if arm == "embree-static" else None)
+            if r.caster.name != arm:
+                raise RuntimeError(f"arm {arm} runs the {r.caster.name} ray cast")
+            out[arm] = r
+    return out
+
+
+def measure(frames: int, span: float, arms: list[str]) -> dict:
+    """CPU and wall ms per frame (medians) of each arm, and the worst frame's share of beams whose bytes equal
+    the numpy cast's (the first arm's when numpy is not measured)."""
+    keep_heap()
+    sc = Scenario(format_version=1)
+    lay = beam_layout(sc.sensor.pattern)
+    rend = renderers(sc, arms)
+    names = list(rend)
+    img = {a: np.zeros(lay.shape + (4,), np.uint8) for a in names}
+    cpu = {a: [] for a in names}
+    wall = {a: [] for a in names}
+    same = {a: [] for a in names}
+    for i, t in enumerate(np.linspace(0.0, span, frames)):
+        state, heights, stream = sample_frame(sc, float(t))
+        pose = world_from_sensor(sc, state)
+        scene = scene_from_state(sc, state, heights, stream)
+        for a in names[i % len(names):] + names[:i % len(names)]:
+            c0, w0 = time.process_time(), time.perf_counter()
+            rend[a].set_scene(scene)
+            rend[a].draw(0, pose)
+            rend[a].read_depth(0, img[a])
+            cpu[a].append(1e3 * (time.process_time() - c0))
+            wall[a].append(1e3 * (time.perf_counter() - w0))
+        ref = img["numpy" if "numpy" in img else names[0]]
+        for a in names:
+            same[a].append(float(np.all(img[a] == ref, axis=-1).reshape(-1)[:lay.n_beams].mean()))
+    for r in rend.values():
+        r.close()
+    return {a: {"cpu_ms": statistics.median(cpu[a]), "wall_ms": statistics.median(wall[a]),
+                "bytes_equal_min": min(same[a])} for a in names}
 
 
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--span", type=float, default=8.0, help="simulated seconds the sample frames spread over")
+    ap.add_argument("--arms", default=",".join(ARMS), help=f"comma-separated, of {', '.join(ARMS)}")
     a = ap.parse_args(argv)
-    sc = Scenario(format_version=1)
-    lay = beam_layout(sc.sensor.pattern)
-    rend = {b: MockBeamRenderer(lay, sc.sensor.codec, backend=b) for b in BACKENDS}
-    img = {b: np.zeros(lay.shape + (4,), np.uint8) for b in BACKENDS}
-    cpu = {b: [] for b in BACKENDS}
-    wall = {b: [] for b in BACKENDS}
-    same = []
-    for i, t in enumerate(np.linspace(0.0, a.span, a.frames)):
-        state, heights, stream = sample_frame(sc, float(t))
-        scene = scene_from_state(sc, state, heights, stream)
-        pose = world_from_sensor(sc, state)
-        for b in (BACKENDS if i % 2 == 0 else BACKENDS[::-1]):
-            c0, w0 = time.process_time(), time.perf_counter()
-            rend[b].set_scene(scene)
-            rend[b].draw(0, pose)
-            rend[b].read_depth(0, img[b])
-            cpu[b].append(1e3 * (time.process_time() - c0))
-            wall[b].append(1e3 * (time.perf_counter() - w0))
-        same.append(float(np.all(img["numpy"] == img["embree"], axis=-1).reshape(-1)[:lay.n_beams].mean()))
-    res = {b: (statistics.median(cpu[b]), statistics.median(wall[b])) for b in BACKENDS}
-    print(f"Beam mock, default scene, {a.frames} frames x {lay.n_beams} beams, interleaved; {os.cpu_count()} cores, "
-          f"{datetime.now():%Y-%m-%d %H:%M}; medians.\n")
-    print("| ray cast | CPU ms/frame | wall ms/frame |\n|---|---:|---:|")
-    for b in BACKENDS:
-        print(f"| {b} | {res[b][0]:.1f} | {res[b][1]:.1f} |")
-    print(f"\nembree / numpy = {res['embree'][0] / res['numpy'][0]:.3f}x CPU; encoded bytes equal on "
-          f"{100 * min(same):.3f} % of the beams (worst frame)")
-    return {"cpu_ms": {b: res[b][0] for b in BACKENDS}, "bytes_equal_min": min(same)}
+    arms = [x for x in a.arms.split(",") if x]
+    unknown = set(arms) - set(ARMS)
+    if unknown:
+        ap.error(f"unknown arms {sorted(unknown)}")
+    res = measure(a.frames, a.span, arms)
+    n = beam_layout(Scenario(format_version=1).sensor.pattern).n_beams
+    print(f"Beam renderers, default scene, {a.frames} frames x {n} beams, interleaved; {os.cpu_count()} cores, "
+          f"load {os.getloadavg()[0]:.1f}, {datetime.now():%Y-%m-%d %H:%M}; medians.\n")
+    gl = res.get("gl", {}).get("cpu_ms")
+    print("| renderer | CPU ms/frame | wall ms/frame | CPU / GL | bytes equal to numpy's (worst frame) |")
+    print("|---|---:|---:|---:|---:|")
+    for arm, r in res.items():
+        ratio = f"{r['cpu_ms'] / gl:.2f}x" if gl else "-"
+        print(f"| {arm} | {r['cpu_ms']:.2f} | {r['wall_ms']:.2f} | {ratio} | {100 * r['bytes_equal_min']:.3f} % |")
+    return res
 
 
 if __name__ == "__main__":

@@ -4,7 +4,8 @@ Verbs: ``run [SCENARIO]`` (the default verb; no scenario runs the packaged defau
 ``schema`` (write the scenario JSON Schema), ``view RUN`` (attach the live viewer to a running run) and
 ``replay FILE.mcap`` (serve a recording to the viewer's dashboard, with play / pause / step / seek), ``list``
 (the packaged scenarios with their descriptions), ``compare`` and ``study``. Exit codes: 0 success, 1 run failure,
-2 invalid scenario or usage, 130 interrupted.
+2 invalid scenario or usage, 3 (``run --require-filled``, ``sweep --require-filled``) the job was not done (the
+outcome is not ``filled``), 130 interrupted.
 """
 from __future__ import annotations
 
@@ -21,10 +22,12 @@ from cosim.runtime.threadpools import default_to_single_threaded_pools
 from .errors import RunRefused, ScenarioError
 from .studies.commands import add_sweep_parser, study_command, sweep_command
 
-__all__ = ["main", "build_parser", "run_extras", "VERBS"]
+__all__ = ["main", "build_parser", "run_extras", "required_exit", "VERBS", "EXIT_NOT_FILLED"]
 
 VERBS = ("run", "validate", "schema", "compare", "study", "view", "replay", "list", "sweep")
 EXIT_SCENARIO = 2
+#: ``run --require-filled``: the run completed but its outcome is not ``filled`` (summary.json ``outcome``)
+EXIT_NOT_FILLED = 3
 EXIT_INTERRUPTED = 130
 
 
@@ -62,6 +65,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--foxglove-port", type=int, default=8766, metavar="PORT",
                      help="port of the --foxglove server (default %(default)s)")
     run.add_argument("--quiet", action="store_true", help="no progress output")
+    run.add_argument("--require-filled", action="store_true",
+                     help="exit 3 when the run completed but did not fill the cart (outcome stopped_safe or "
+                     "job_failed in summary.json)")
     val = sub.add_parser("validate", help="validate a scenario and print the resolved result")
     _scenario_options(val)
     val.add_argument("--print", action="store_true", help="print the fully resolved scenario as YAML")
@@ -180,6 +186,9 @@ def _print_summary(result, stream) -> None:
                                                             if v is not None))
     if result.error is not None:
         lines.append(f"error: {result.error}")
+    from .runtime.outcome import outcome_line
+
+    lines.append(outcome_line(s.get("outcome")))
     stream.write("\n".join(lines) + "\n")
 
 
@@ -303,4 +312,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         if progress is not None:
             progress.close()
     _print_summary(result, sys.stdout)
-    return result.exit_code
+    return required_exit(result.exit_code, result.summary, args.require_filled)
+
+
+def required_exit(code: int, summary: dict, require_filled: bool) -> int:
+    """The exit status of ``run``: the run's own (0, 1, 130), or EXIT_NOT_FILLED when it completed (0) with
+    ``--require-filled`` and an outcome other than ``filled``."""
+    from .runtime.outcome import FILLED
+
+    if code == 0 and require_filled and (summary.get("outcome") or {}).get("status") != FILLED:
+        return EXIT_NOT_FILLED
+    return code

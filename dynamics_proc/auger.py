@@ -77,15 +77,17 @@ def exit_velocity_world(cyaw: float, a: AugerParams) -> np.ndarray:
     return a.exit_speed_mps * np.array([c * ex - s * ey, s * ex + c * ey, ez])
 
 
-def flow_advance(level: float, on: bool, dt: float, a: AugerParams) -> tuple[float, float]:
-    """Advance the flow level (0..1, fraction of ``flow_m3ps``) over ``dt`` s: a linear ramp up over
-    ``spool_up_s`` while on, down over ``run_out_s`` while off. Returns (new level, delivered volume m^3),
-    the volume being the exact integral of flow_m3ps * level(t) over the step."""
-    ramp = a.spool_up_s if on else a.run_out_s
-    bound = 1.0 if on else 0.0
+def flow_advance(level: float, on: bool, dt: float, a: AugerParams, command: float = 1.0) -> tuple[float, float]:
+    """Advance the flow level (0..1, fraction of ``flow_m3ps``) over ``dt`` s towards ``command`` (0..1, the
+    commanded fraction: 1 full flow, less a slowed auger) while on, towards 0 while off: a linear ramp, up at
+    1 / ``spool_up_s`` and down at 1 / ``run_out_s``. Returns (new level, delivered volume m^3), the volume
+    being the exact integral of flow_m3ps * level(t) over the step."""
+    bound = command if on else 0.0
+    up = level <= bound
+    ramp = a.spool_up_s if up else a.run_out_s
     if ramp <= MIN_RAMP_S:
         return bound, a.flow_m3ps * bound * dt
-    rate = (1.0 if on else -1.0) / ramp
+    rate = (1.0 if up else -1.0) / ramp
     t_b = min(dt, (bound - level) / rate)                    # time to reach the bound (>= 0)
     integral = level * t_b + 0.5 * rate * t_b * t_b + bound * (dt - t_b)
     new = bound if t_b < dt else min(max(level + rate * dt, 0.0), 1.0)

@@ -28,7 +28,7 @@ target outside -1..N-1 or a fullness of the wrong shape ends the run with a
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Protocol, runtime_checkable
 
 import numpy as np
@@ -68,7 +68,13 @@ class ControllerInput:
     * ``nudge_signal_m``: the spout grid x the current Machine Sync setpoint implies, m;
     * ``delivery``: the flow signal and spout kinematics (:class:`Delivery`);
     * ``target_fill_m``: the operator's target grain height above the cart floor, m (``controller.target_fill_m``;
-      it may change during a run: ``cosim.Simulation.set``).
+      it may change during a run: ``cosim.Simulation.set``);
+    * ``turn_shift_m``: (now, ahead) the steady-state shift of the spout along grid x, m, that the combine's yaw
+      rate now and ``controller.coping.feedforward_lead_s`` ahead cause as the cart off-tracks in the turn
+      (dynamics_proc.feedforward; (0, 0) on a straight path): the spout sits at ``nudge_signal_m`` plus it
+      once the lateral correction below is applied;
+    * ``lateral_correction_m``: the correction of Machine Sync's lateral setpoint that keeps the spout over the
+      same line of the cart in the turn ``feedforward_lead_s`` ahead (the cart off-tracks sideways), m.
     """
 
     t_s: float
@@ -80,6 +86,8 @@ class ControllerInput:
     nudge_signal_m: float
     delivery: Delivery
     target_fill_m: float
+    turn_shift_m: tuple[float, float] = (0.0, 0.0)
+    lateral_correction_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -89,7 +97,11 @@ class ControllerCommand:
     Acting on the plant:
 
     * ``nudge``: -1, 0 or +1, move the Machine Sync longitudinal setpoint by that many ``nudge_m`` along grid x;
-    * ``auger_on``: run the auger (the flow ramps with the auger's time constant).
+    * ``auger_on``: run the auger (the flow ramps with the auger's time constant);
+    * ``lateral_m``: move Machine Sync's lateral setpoint by this much from the operator's (cart to the left > 0),
+      m (0: leave it);
+    * ``flow``: the commanded flow while on, a fraction of the auger's nominal flow in (0, 1] (1: full flow; less
+      slows the auger, as variable-speed unloading augers can).
 
     Reported only (``dyn_state``: desired_auger_x_m, control_effort_m, target_section, section_<k>_fullness,
     all_full, measurement_seen, control_bias_m):
@@ -99,7 +111,11 @@ class ControllerCommand:
     * ``target``: 0-based section being filled, -1 none;
     * ``fullness``: (N,) float, estimated height / target fill per section, NaN unknown (None: all unknown);
     * ``all_full``: the controller considers the cart full (a closed loop may stop early on it);
-    * ``seen``: a measurement has been used; ``bias_m``: a learnt steady-state offset, m.
+    * ``seen``: a measurement has been used; ``bias_m``: a learnt steady-state offset, m;
+    * ``mode``: 0 measured, 1 dead reckoning, 2 holding (dynamics_proc.coping); ``hold_reason``: why it holds, a
+      code of ``cosim.runtime.outcome.HOLD_REASONS`` (0 not holding): the run's outcome names it, so a controller
+      that stops on purpose should say why; ``sigma_m``: the stated 1-sigma of its estimate of the target
+      section, m (NaN unknown); ``lead_m``: the lead added to the target section's level, m.
     """
 
     nudge: int
@@ -111,6 +127,12 @@ class ControllerCommand:
     all_full: bool = False
     seen: bool = True
     bias_m: float = 0.0
+    mode: int = 0
+    hold_reason: int = 0
+    sigma_m: float = math.nan
+    lead_m: float = 0.0
+    flow: float = 1.0
+    lateral_m: float = 0.0
 
 
 @runtime_checkable
@@ -143,6 +165,12 @@ def check_command(cmd: object, sections: int, ref: str) -> ControllerCommand:
                           f"got {cmd.target!r}")
     if not isinstance(cmd.desired_m, (float, int)) or not math.isfinite(cmd.desired_m):
         raise PluginFault(ref, CONTROLLER_POINT, f"desired_m must be a finite number (m), got {cmd.desired_m!r}")
+    if not isinstance(cmd.flow, (float, int)) or isinstance(cmd.flow, bool) or not 0.0 < cmd.flow <= 1.0:
+        raise PluginFault(ref, CONTROLLER_POINT, f"flow must be a fraction in (0, 1], got {cmd.flow!r}")
+    if not isinstance(cmd.lateral_m, (float, int)) or isinstance(cmd.lateral_m, bool) or not math.isfinite(cmd.lateral_m):
+        raise PluginFault(ref, CONTROLLER_POINT, f"lateral_m must be a finite number (m), got {cmd.lateral_m!r}")
+    if not isinstance(cmd.hold_reason, (int, np.integer)) or isinstance(cmd.hold_reason, bool) or cmd.hold_reason < 0:
+        raise PluginFault(ref, CONTROLLER_POINT, f"hold_reason must be a code >= 0, got {cmd.hold_reason!r}")
     if cmd.fullness is None:
         return _with_fullness(cmd, np.full(sections, np.nan))
     f = cmd.fullness
@@ -153,5 +181,4 @@ def check_command(cmd: object, sections: int, ref: str) -> ControllerCommand:
 
 
 def _with_fullness(cmd: ControllerCommand, fullness: np.ndarray) -> ControllerCommand:
-    return ControllerCommand(cmd.nudge, cmd.auger_on, cmd.desired_m, cmd.effort_m, cmd.target, fullness,
-                             cmd.all_full, cmd.seen, cmd.bias_m)
+    return replace(cmd, fullness=fullness)

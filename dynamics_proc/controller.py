@@ -1,5 +1,5 @@
 """Offloading controller: section fullness from a (possibly perceived) height map, target section, desired
-auger location, nudges of the Machine Sync setpoint, auger on/off.
+auger location, nudges of the Machine Sync setpoint, auger on/off and flow.
 
 Runs once per sensor frame on the measurement the latency rule gives it (or none). Positions are along the
 cart grid x axis (m from the front inner wall, increasing to the rear). The four signals of the paper's
@@ -8,7 +8,8 @@ Fig 9, all in that coordinate:
 * desired auger location: the target section's centre, less the predicted ballistic drift of the impact
   along x, clipped to the safe range;
 * control effort (continuous): desired + b, where b is the slowly filtered steady-state difference between
-  where the setpoint should put the spout and where it is (zero on a straight path; compensates off-tracking);
+  where the setpoint should put the spout and where it is (zero on a straight path; compensates off-tracking),
+  less the turn's predicted shift with ``controller.coping.feedforward``;
 * nudge (actuating) signal: the spout location the nudged setpoint implies; it moves in steps of ``nudge_m``
   no more often than ``nudge_min_interval_s``, towards the control effort, never into the unsafe range;
 * actual auger location: the spout, measured.
@@ -16,10 +17,21 @@ Fig 9, all in that coordinate:
 Measurements: a height map (nxc, nyc) m on the controller grid, NaN where invalid, or None (an all-NaN map
 counts as none). Section heights are the highest NaN-ignoring 2 x 2 block minimum (a robust peak: one noisy
 cell cannot fake it); sections without a valid cell keep their last value. A section counts as full once its
-estimate reaches the full level, and stays full (latched: noise must not send the auger back). A target
-section without a valid cell for ``stale_timeout_s`` while the auger runs is given up as full. The auger
+estimate reaches the full level, and stays full (latched: noise must not send the auger back). With the
+paper's estimator a target section without a valid cell for ``stale_timeout_s`` while the auger runs is given
+up as full; the fused estimator instead fills on by dead reckoning while its stated confidence lasts. The auger
 runs only while there is a target within TRAVEL_ON_SECTIONS section lengths of the predicted impact (it
-travels farther with the auger off), the predicted impact is safely inside the cart, and a measurement has been seen.
+travels farther with the auger off), the predicted impact is safely inside the cart, a measurement has been
+seen and the controller is not holding.
+
+Coping with field conditions (``controller.coping``, dynamics_proc.coping): the auger is slowed to
+``slow_flow`` once a section's level plus its measured rise over ``full_lead_s`` reaches the full level while
+that rise exceeds ``lead_allowance_m`` (a high flow), and stays slowed until the impact has travelled into the
+next target; when the target section is not seen the fused estimate carries on while its 1-sigma stays within
+``fallback_sigma_m``, beyond it the auger is switched off and the controller holds, saying why
+(``hold_reason``); the spout keeps moving to the target meanwhile (with the auger off that is safe, and it may
+bring the cart back into view); with ``feedforward`` the lateral setpoint and the auger target anticipate the
+cart's off-tracking in a turn (dynamics_proc.feedforward).
 """
 from __future__ import annotations
 
@@ -31,10 +43,12 @@ from pathlib import Path
 import numpy as np
 
 from cosim.errors import PluginFault
+from cosim.runtime.outcome import HOLD_NO_MEASUREMENT
 from cosim.scenario.config import Scenario
 from cosim.scenario.plugins import load_plugin
 
 from .control_protocol import ControllerCommand, ControllerInput, Delivery
+from .coping import mode, peak_sigma, rise_rate, slowed_section
 from .estimator import FillEstimate, FusionParams, initial_estimate, landing_on, predict, update
 from .grainfill import GrainGrid, section_rows
 from .strategies import Strategy
@@ -83,6 +97,12 @@ class ControllerParams:
     frame_dt_s: float
     fusion: FusionParams | None      # the fused estimator's constants (estimator "fused"), else None
     strategy_ref: str = ""           # controller.strategy as the scenario names it
+    full_lead_s: float = 0.0         # controller.coping: lead on the full level (0: none), s
+    rise_tau_s: float = 0.5          # time constant of the rise-rate filter, s
+    fallback_sigma_m: float = math.inf  # dead reckoning goes on while the target's 1-sigma stays at most this, m
+    feedforward: bool = False        # add the turn's predicted spout shift (ControllerInput.turn_shift_m)
+    slow_flow: float = 1.0           # commanded flow fraction once a section is near full (1: never slowed)
+    lead_allowance_m: float = 0.0    # a rise over the lead up to this needs no slowing, m
 
     @classmethod
     def from_scenario(cls, s: Scenario, strategy: Strategy | None = None) -> "ControllerParams":
@@ -105,7 +125,9 @@ class ControllerParams:
                    tuple((i + 0.5) * sl for i in range(c.sections)), c.safe_margin_m,
                    max(c.safe_margin_m - c.safety_hysteresis_m, 0.0), s.machine_sync.nudge_m,
                    s.machine_sync.nudge_min_interval_s, c.stale_timeout_s, c.estimator, strategy,
-                   s.timing.sensor_period_s, _fusion(s, nx, ny) if c.estimator == "fused" else None, c.strategy)
+                   s.timing.sensor_period_s, _fusion(s, nx, ny) if c.estimator == "fused" else None, c.strategy,
+                   c.coping.full_lead_s, c.coping.rise_tau_s, c.coping.fallback_sigma_m, c.coping.feedforward,
+                   c.coping.slow_flow, c.coping.lead_allowance_m)
 
 
 def plugin_dir(s: Scenario) -> Path | None:
@@ -144,6 +166,9 @@ class ControllerState:
     seen: bool                   # a measurement has arrived
     all_full: bool
     nudges: int
+    rate: np.ndarray | None = None  # (N,) m/s, filtered rise rate of each section's peak (coping)
+    hold: int = 0                # hold reason code (cosim.runtime.outcome.HOLD_*), 0 not holding
+    slowed: int = -1             # 0-based section the auger is slowed for (near full), -1 none
 
 
 def min2x2(m: np.ndarray, next_row: np.ndarray | None = None) -> np.ndarray:
@@ -207,7 +232,7 @@ def initial_controller(p: ControllerParams) -> ControllerState:
     n = p.sections
     est = initial_estimate(p.fusion) if p.fusion is not None else None
     return ControllerState(np.full(n, np.nan), np.full(n, -np.inf), np.zeros(n, bool), np.zeros(n, bool), est,
-                           0.0, -1, -np.inf, 0.0, False, False, False, 0)
+                           0.0, -1, -np.inf, 0.0, False, False, False, 0, np.zeros(n), HOLD_NO_MEASUREMENT)
 
 
 def _inside(x: float, y: float, margin: float, p: ControllerParams) -> bool:
@@ -216,13 +241,19 @@ def _inside(x: float, y: float, margin: float, p: ControllerParams) -> bool:
 
 def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np.ndarray | None,
                     actual_x: float, impacts: tuple[tuple[float, float], ...], drift_x: float,
-                    nudge_signal: float, delivery: Delivery | None = None) -> tuple[ControllerState, ControllerCommand]:
+                    nudge_signal: float, delivery: Delivery | None = None,
+                    turn_shift_m: tuple[float, float] = (0.0, 0.0),
+                    lateral_correction_m: float = 0.0) -> tuple[ControllerState, ControllerCommand]:
     """One controller decision at time ``t`` s.
 
     ``meas`` (nx, ny) m or None; ``actual_x`` spout grid x m; ``impacts`` predicted impact points (grid
     x, y m, from the known geometry; the auger runs only while all are safely inside); ``drift_x`` predicted
     impact x minus spout x m; ``nudge_signal`` the spout grid x m
-    the current setpoint implies; ``delivery`` what the fused estimator needs (required with it).
+    the current setpoint implies; ``delivery`` what the fused estimator needs (required with it);
+    ``turn_shift_m`` (now, ahead): the steady-state shift of the spout along grid x that the combine's yaw rate
+    now and ``controller.coping.feedforward_lead_s`` ahead would cause (dynamics_proc.feedforward), m, and
+    ``lateral_correction_m`` the lateral setpoint correction for the turn ahead, m: both used with
+    ``controller.coping.feedforward``.
     """
     heights, last_valid, seen = st.heights, st.last_valid_t, st.seen
     est, delivered = st.estimate, st.delivered_m3
@@ -236,6 +267,7 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
             est = predict(est, vol, gx, gy, p.fusion)
         else:
             est = predict(est, 0.0, 0.0, 0.0, p.fusion)
+    ok = None
     if meas is not None:
         m = np.asarray(meas, dtype=np.float64)
         if est is None:
@@ -249,8 +281,13 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
         seen = seen or bool(ok.any())                          # an all-NaN map is no measurement
     if est is not None and est.started:
         heights = section_heights(est.height, p)
+    rate = st.rate if st.rate is not None else np.zeros(p.sections)
+    if p.full_lead_s > 0.0:
+        rate = rise_rate(rate, st.heights, heights, p.frame_dt_s, p.rise_tau_s)
     forced = st.forced_full
-    if (seen and st.target >= 0 and st.auger_cmd and t - last_valid[st.target] > p.stale_timeout_s
+    # the paper's estimator has nothing to go on without a view: a target stale for long is given up as full.
+    # The fused one carries on by dead reckoning while its confidence lasts (below)
+    if (est is None and seen and st.target >= 0 and st.auger_cmd and t - last_valid[st.target] > p.stale_timeout_s
             and not forced[st.target]):
         forced = forced.copy()
         forced[st.target] = True
@@ -259,20 +296,26 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
     full |= st.full                                       # latched: grain does not leave the cart
     target = _pick(p, full, heights, st.target) if seen else -1
     all_full = seen and target < 0
+    slowed = slowed_section(target, st.slowed, full, heights, rate, actual_x + drift_x, p.full_lead_s,
+                            p.lead_allowance_m, p.full_level_m, p.centres_m, p.length_m / p.sections)
+    mode, hold, sigma = _mode(p, seen, target, ok, est)
     lo, hi = p.safe_margin_m, p.length_m - p.safe_margin_m
     if target >= 0:
         desired = min(max(p.centres_m[target] - drift_x, lo - drift_x), hi - drift_x)
     else:
         desired = actual_x
+    now_shift, ahead_shift = turn_shift_m if p.feedforward else (0.0, 0.0)
     bias = st.bias_m
     if t - st.last_nudge_t >= SETTLE_S:
-        bias += (p.frame_dt_s / BIAS_TAU_S) * ((nudge_signal - actual_x) - bias)
-    effort = desired + bias
+        bias += (p.frame_dt_s / BIAS_TAU_S) * ((nudge_signal - actual_x + now_shift) - bias)
+    total_bias = bias - ahead_shift
+    effort = desired + total_bias
     nudge, last_nudge, count = 0, st.last_nudge_t, st.nudges
     err = effort - nudge_signal
-    if target >= 0 and t - st.last_nudge_t >= p.nudge_interval_s and abs(err) >= 0.5 * p.nudge_m - NUDGE_SLACK_M:
+    if (target >= 0 and t - st.last_nudge_t >= p.nudge_interval_s
+            and abs(err) >= 0.5 * p.nudge_m - NUDGE_SLACK_M):
         step = 1 if err > 0 else -1
-        landing = nudge_signal + step * p.nudge_m - bias + drift_x        # predicted impact x after the nudge
+        landing = nudge_signal + step * p.nudge_m - total_bias + drift_x  # predicted impact x after the nudge
         if lo <= landing <= hi:
             nudge, last_nudge, count = step, t, count + 1
     margin = p.off_margin_m if st.auger_cmd else p.safe_margin_m
@@ -280,13 +323,29 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
     # travel with the auger off: grain dropped far from the target lands on sections that may be full
     reach = TRAVEL_ON_SECTIONS * p.length_m / p.sections
     near = target >= 0 and abs(actual_x + drift_x - p.centres_m[target]) <= reach
-    auger = bool(seen and target >= 0 and safe and near)
+    auger = bool(seen and target >= 0 and safe and near and not hold)
     with np.errstate(invalid="ignore"):
         fullness = heights / p.target_m
+    lead = max(float(rate[target]), 0.0) * p.full_lead_s if target >= 0 else 0.0
     new_state = ControllerState(heights=heights, last_valid_t=last_valid, forced_full=forced, full=full, estimate=est,
                                 delivered_m3=delivered, target=target, last_nudge_t=last_nudge, bias_m=bias,
-                                auger_cmd=auger, seen=seen, all_full=all_full, nudges=count)
-    return new_state, ControllerCommand(nudge, auger, desired, effort, target, fullness, all_full, seen, bias)
+                                auger_cmd=auger, seen=seen, all_full=all_full, nudges=count, rate=rate, hold=hold,
+                                slowed=slowed)
+    return new_state, ControllerCommand(nudge, auger, desired, effort, target, fullness, all_full, seen, total_bias,
+                                        mode, hold, sigma, lead, p.slow_flow if slowed >= 0 else 1.0,
+                                        lateral_correction_m if p.feedforward else 0.0)
+
+
+def _mode(p: ControllerParams, seen: bool, target: int, ok: np.ndarray | None,
+          est: FillEstimate | None) -> tuple[int, int, float]:
+    """(mode, hold reason, target section's 1-sigma m) of a decision (:func:`dynamics_proc.coping.mode`)."""
+    sigma = math.nan
+    if seen and target >= 0 and est is not None and est.started:
+        starts, nxt = _section_pairing(p.nx, p.section_start_rows)
+        rows = slice(int(starts[target]), int(starts[target + 1]) if target + 1 < p.sections else p.nx)
+        sigma = peak_sigma(min2x2(_inner(est.height, p), nxt), est.var, rows)
+    seen_target = ok is not None and target >= 0 and bool(ok[target])
+    return (*mode(seen, target, seen_target, est is not None, sigma, p.fallback_sigma_m), sigma)
 
 
 def _pick(p: ControllerParams, full: np.ndarray, heights: np.ndarray, current: int) -> int:
@@ -322,4 +381,4 @@ class SectionFillController:
             self.params = replace(self.params, target_m=inp.target_fill_m,
                                   full_level_m=self.full_fraction * inp.target_fill_m)
         return controller_step(state, self.params, inp.t_s, inp.heights, inp.spout_x_m, inp.impacts, inp.drift_x_m,
-                               inp.nudge_signal_m, inp.delivery)
+                               inp.nudge_signal_m, inp.delivery, inp.turn_shift_m, inp.lateral_correction_m)

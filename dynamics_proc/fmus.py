@@ -21,6 +21,10 @@ Stepping (lockstep with the dynamics):
   measurement the latency rule gives that frame (NaN without one).
 * strategy: whenever the controller asks for a section (every frame from the first measurement on), the
   inputs are set and one ``doStep`` runs from the end of the previous one to the end of the current frame.
+
+An FMI 3.0 controller or strategy with an input clock (cosim.fmi.roles.frame_clock) is ticked at the decision
+time, the start of the frame, and answers at the tick (cosim.fmi.slave); a clocked strategy is first stepped up
+to that time with its inputs held.
 """
 from __future__ import annotations
 
@@ -30,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cosim.fmi.describe import describe
-from cosim.fmi.roles import CONTROLLER, STRATEGY, VEHICLE, expand, step_mode
+from cosim.fmi.roles import CONTROLLER, STRATEGY, VEHICLE, expand, frame_clock, step_mode
 from cosim.fmi.slave import PROCESS, FmuSlave, FmuStepError
 from cosim.scenario.config import FMU_REF, Fmu, Scenario
 
@@ -55,12 +59,14 @@ def _open(fmu: Fmu, role, sections: int, label: str, initial: dict[str, float]) 
     names = {}
     for kind in ("inputs", "outputs"):
         names[kind] = [n for s in role.signals(kind) if s.name in getattr(fmu, kind)
-                       for n in expand(s, getattr(fmu, kind)[s.name], sections)]
+                       for n in expand(s, getattr(fmu, kind)[s.name], sections, fmu.index_base)]
     nan_ok = [n for s in role.outputs if s.nan_ok and s.name in fmu.outputs
-              for n in expand(s, fmu.outputs[s.name], sections)]
+              for n in expand(s, fmu.outputs[s.name], sections, fmu.index_base)]
     start = dict(fmu.parameters)
     start.update({fmu.initial[ours]: value for ours, value in initial.items() if ours in fmu.initial})
-    return FmuSlave(desc, names["inputs"], names["outputs"], start, label, 0.0, fmu.instance_name, nan_ok)
+    clock = frame_clock(desc) if role.clocks else None
+    return FmuSlave(desc, names["inputs"], names["outputs"], start, label, 0.0, fmu.instance_name, nan_ok,
+                    None if clock is None else clock.name)
 
 
 class FmuVehicle:
@@ -91,21 +97,26 @@ def _fault(slave: FmuSlave, frame: int, cause: str) -> FmuStepError:
                         frame=frame)
 
 
-def _section(slave: FmuSlave, value: float, sections: int, name: str, frame: int) -> int:
-    """An FMU's section output (1..N, 0 none) as a 0-based index (-1 none); FmuStepError when out of range."""
-    if value != math.floor(value) or not 0 <= value <= sections:
-        raise _fault(slave, frame, f"output {name!r} is {value:g}, not a section 1..{sections} or 0 (none)")
-    return int(value) - 1
+def _section(slave: FmuSlave, value: float, sections: int, name: str, frame: int, base: int) -> int:
+    """An FMU's section output (base .. base + N - 1, base - 1 none) as a 0-based index (-1 none); FmuStepError when
+    out of range."""
+    if value != math.floor(value) or not base - 1 <= value <= sections - 1 + base:
+        raise _fault(slave, frame, f"output {name!r} is {value:g}, not a section {base}..{sections - 1 + base} or "
+                                   f"{base - 1} (none)")
+    return int(value) - base
 
 
 class FmuStrategy:
     """A fill strategy from an FMU, with the strategy signature ``(full (N,) bool, height (N,) m, current
-    0-based or -1) -> 0-based section or -1``; the FMU sees sections numbered 1..N (0: none)."""
+    0-based or -1) -> 0-based section or -1``; the FMU sees sections numbered from its ``index_base`` (1: 1..N,
+    0 none; 0: 0..N-1, -1 none)."""
 
     def __init__(self, slave: FmuSlave, fmu: Fmu, sections: int, frame_dt_s: float):
         self.slave, self.sections, self.frame_dt_s = slave, sections, frame_dt_s
+        self.base = fmu.index_base
         self._height = "height_m" in fmu.inputs
         self._current = "current_section" in fmu.inputs
+        self.clocked = slave.clocked
         self.frame, self._t_end = 0, 0.0
 
     def begin_frame(self, frame: int) -> None:
@@ -117,11 +128,17 @@ class FmuStrategy:
         if self._height:
             u += height.tolist()
         if self._current:
-            u.append(float(current + 1))
+            u.append(float(current + self.base))
         t_end = self.frame * self.frame_dt_s
-        out = self.slave.step(u, self._t_end, t_end - self._t_end, self.frame)
+        if self.clocked:                    # the tick is the decision, at the frame's start
+            t = t_end - self.frame_dt_s
+            if t > self._t_end:
+                self.slave.advance(self._t_end, t - self._t_end, self.frame)
+            out = self.slave.step(u, t, self.frame_dt_s, self.frame)
+        else:
+            out = self.slave.step(u, self._t_end, t_end - self._t_end, self.frame)
         self._t_end = t_end
-        return _section(self.slave, out[0], self.sections, "section", self.frame)
+        return _section(self.slave, out[0], self.sections, "section", self.frame, self.base)
 
 
 #: ControllerInput -> value of each optional scalar controller input, in CONTROLLER.inputs order
@@ -139,7 +156,7 @@ class FmuController:
     state is None). Stepped once per frame at the decision time (see the module docstring)."""
 
     def __init__(self, slave: FmuSlave, fmu: Fmu, params: ControllerParams):
-        self.slave, self.params = slave, params
+        self.slave, self.params, self.base = slave, params, fmu.index_base
         self._inputs = [(n, f) for n, f in _CONTROLLER_INPUTS.items() if n in fmu.inputs]
         self._outputs = [s.name for s in CONTROLLER.outputs if s.name in fmu.outputs]
         self._seen = False
@@ -159,7 +176,8 @@ class FmuController:
         nudge = got["nudge"]
         if nudge not in (-1.0, 0.0, 1.0):
             raise _fault(self.slave, frame, f"output 'nudge' is {nudge:g}, not -1, 0 or +1")
-        target = _section(self.slave, got.get("target_section", 0.0), n, "target_section", frame)
+        target = _section(self.slave, got.get("target_section", self.base - 1.0), n, "target_section", frame,
+                          self.base)
         fullness = np.array(out[-n:]) if "fullness" in got else np.full(n, np.nan)
         return None, ControllerCommand(int(nudge), got["auger_on"] != 0.0, got.get("desired_x_m", inp.spout_x_m),
                                        got.get("effort_m", math.nan), target, fullness,

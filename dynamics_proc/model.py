@@ -30,6 +30,7 @@ from .control_protocol import (
     check_command,
 )
 from .controller import ControllerParams, plugin_dir
+from .feedforward import turn_compensation
 from .fmus import Fmus
 from .grainfill import GrainGrid, deposit, initial_heights, resample, volume
 from .integrators import integrate, step_exponential_values
@@ -67,6 +68,7 @@ class ModelParams:
     controller: OffloadingController  # controller.model, made by its factory
     controller_ref: str              # controller.model as the scenario names it
     fmus: Fmus | None = None         # FMUs in place of built-in models (dynamics_proc.fmus)
+    feedforward_lead_s: float = 0.0  # controller.coping.feedforward_lead_s: the turn anticipated this far ahead, s
 
     @classmethod
     def from_scenario(cls, s: Scenario, fmus: Fmus | None = None) -> "ModelParams":
@@ -87,7 +89,8 @@ class ModelParams:
                    s.integrator.method, s.integrator.rtol, s.integrator.atol, s.timing.dynamics_dt_s,
                    s.timing.steps_per_frame, s.timing.sensor_period_s, s.machine_sync.lateral_offset_m,
                    s.cart.interior_length_m / 2.0 - spout_x, s.crop.density, s.controller.fusion.flow_meter_bias,
-                   controller, s.controller.model, fmus if fmus.vehicle or fmus.strategy else None)
+                   controller, s.controller.model, fmus if fmus.vehicle or fmus.strategy else None,
+                   s.controller.coping.feedforward_lead_s)
 
 
 def _make_controller(factory, control: ControllerParams, s: Scenario) -> OffloadingController:
@@ -194,14 +197,15 @@ def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
     signal = w.setpoint[0] + p.signal_offset_m
     delivery = Delivery(w.delivered_m3 * (1.0 + p.flow_meter_bias), spg, vg)
     # the stream lands between these two points: both must be safely inside
+    shifts, lateral = _turn_feedforward(w, p)
     inp = ControllerInput(w.t_s, w.frame, meas, float(spg[0]), (top, floor), drift, signal, delivery,
-                          p.control.target_m)
+                          p.control.target_m, shifts, lateral)
     ctrl, out = _decide(w, inp, p)
     setpoint = (w.setpoint[0] + out.nudge * p.control.nudge_m, w.setpoint[1])
-    x = _advance_vehicles(x, setpoint, p, w.frame + 1)
+    x = _advance_vehicles(x, (setpoint[0], setpoint[1] + out.lateral_m), p, w.frame + 1)
     level, vol = w.flow_level, 0.0
     for _ in range(p.steps):
-        level, dv = ag.flow_advance(level, out.auger_on, p.dt_s, p.auger)
+        level, dv = ag.flow_advance(level, out.auger_on, p.dt_s, p.auger, out.flow)
         vol += dv
     spout = spout_grid(x, p)
     imp, rows, n = _stream(spout, w.heights, level, vol > 0.0 or level > 0.0, p)
@@ -214,6 +218,17 @@ def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
     return World(w.frame + 1, (w.frame + 1) * p.frame_dt_s, x, level, h, w.initial_m3, w.delivered_m3 + vol,
                  w.spilled_m3 + spill + spill_outside, w.spilled_outside_m3 + spill_outside, setpoint, ctrl, out, imp,
                  rows, n, spout, w.nudges + (out.nudge != 0))
+
+
+def _turn_feedforward(w: World, p: ModelParams) -> tuple[tuple[float, float], float]:
+    """((now, ahead) spout shifts along grid x m, lateral setpoint correction m ahead) of the combine's turn at
+    ``w.t_s`` and ``feedforward_lead_s`` later (dynamics_proc.feedforward); ((0, 0), 0) on a straight path."""
+    rate = p.vehicles.combine_yaw_rate_radps
+    if rate == 0.0:
+        return (0.0, 0.0), 0.0
+    spout = np.add(p.auger.pivot, p.auger.arm)
+    lateral, shift = turn_compensation(rate, w.setpoint, p.vehicles, spout, p.grid_from_cart_body)
+    return (shift, shift), lateral
 
 
 def _decide(w: World, inp: ControllerInput, p: ModelParams) -> tuple[object, ControllerCommand]:
@@ -282,6 +297,8 @@ def signals(w: World, p: ModelParams) -> dict[str, float]:
         "offset_long_err_m": long_m - w.setpoint[0], "offset_lat_err_m": lat_m - w.setpoint[1],
         "target_section": w.out.target + 1, "all_full": int(w.out.all_full),
         "measurement_seen": int(w.out.seen), "control_bias_m": w.out.bias_m, "target_fill_m": p.control.target_m,
+        "control_mode": w.out.mode, "hold_reason": w.out.hold_reason, "estimate_sigma_m": w.out.sigma_m,
+        "full_lead_m": w.out.lead_m, "lateral_feedforward_m": w.out.lateral_m,
         "delivered_m3": w.delivered_m3, "in_cart_m3": in_cart, "spilled_m3": w.spilled_m3,
         "spilled_outside_m3": w.spilled_outside_m3, "cart_grain_m3": w.initial_m3 + in_cart,
         "peak_height_m": float(w.heights.max()),

@@ -19,7 +19,7 @@ from . import accuracy as acc
 from . import camera_accuracy as cacc
 from .blocks import RANGE_BANDS_M, SENSOR_FIELDS, band_name, sensor_state_block
 
-__all__ = ["summarize", "clean_json", "evaluation_note", "sensor_blocks"]
+__all__ = ["summarize", "clean_json", "evaluation_caster", "evaluation_note", "sensor_blocks"]
 
 _P = "perc_state."
 
@@ -52,6 +52,14 @@ def _weighted(values: np.ndarray, weights: np.ndarray) -> float:
 def _median(values: np.ndarray) -> float:
     v = values[np.isfinite(values)]
     return float(np.median(v)) if v.size else math.nan
+
+
+def evaluation_caster(scenario: Scenario) -> str | None:
+    """The exact ray cast the accuracy evaluation ran (``perception_proc.accuracy.exact_ranges``: Embree where
+    embreex imports, else the numpy ray cast; one of ``cosim.world.fastcast.CASTERS``), None when it is off."""
+    from cosim.world.fastcast import embree_available
+
+    return None if scenario.perception.accuracy_every_frames == 0 else "embree" if embree_available() else "numpy"
 
 
 def evaluation_note(scenario: Scenario) -> str:
@@ -95,6 +103,7 @@ def summarize(scenario: Scenario, series: Mapping[str, np.ndarray], heightmap_tr
     maxes = _col(series, "range_err_max_m")
     range_error = {
         "evaluation": evaluation_note(scenario),
+        "ray_caster": evaluation_caster(scenario),
         "frames_evaluated": int(np.nansum(evaluated)) if evaluated.size else 0,
         "beams_per_frame": scenario.perception.accuracy_beams or "all",
         "beams": float(np.nansum(n)) if n.size else 0.0,

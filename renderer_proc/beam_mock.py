@@ -17,7 +17,7 @@ import numpy as np
 
 from cosim.scenario.config.sensing import Codec
 from cosim.world.beamtarget import BeamLayout
-from cosim.world.fastcast import Backend, cast_from
+from cosim.world.fastcast import Backend, cast_from, make_caster
 from cosim.world.scene import SKY_RGBA, SUN_WORLD, Scene
 
 from .codec import encode_depth
@@ -46,10 +46,13 @@ class MockBeamRenderer:
     """The beam-native renderer interface (as :class:`renderer_proc.beam_gl.GLBeamRenderer`): ``set_scene``,
     ``draw(0, world_from_sensor)``, ``read_depth(0, out)``, ``read_rgb(0, out)``, ``close``: the camera
     renderers' interface with a single target, number 0. ``backend``: the ray cast's (``cosim.world.fastcast``;
-    ``auto``: Embree when installed)."""
+    ``auto``: Embree when installed). ``parts`` (``cosim.world.parts.entity_parts(scenario)``): the scenes'
+    rigid bodies, built once for the run when Embree allows (``caster.name`` says which ray caster runs)."""
 
-    def __init__(self, layout: BeamLayout, codec: Codec, *, rgb: bool = False, backend: Backend = "auto"):
+    def __init__(self, layout: BeamLayout, codec: Codec, *, rgb: bool = False, backend: Backend = "auto",
+                 parts=None):
         self.layout, self.codec, self.rgb, self.backend = layout, codec, rgb, backend
+        self.caster = make_caster(parts, backend)
         self._scene: Scene | None = None
         self._range: np.ndarray | None = None
         self._pose: np.ndarray | None = None
@@ -63,7 +66,8 @@ class MockBeamRenderer:
         if self._scene is None:
             raise RuntimeError("set_scene must be called before draw")
         check_target(k)
-        self._range = beam_ranges(self._scene, world_from_sensor, self.layout.directions, self.backend)
+        d_world = self.layout.directions @ np.asarray(world_from_sensor, np.float64)[:3, :3].T
+        self._range = self.caster.cast(self._scene, world_from_sensor[:3, 3], d_world)
         self._pose = np.array(world_from_sensor, np.float64)
 
     def ranges(self) -> np.ndarray:
@@ -101,5 +105,6 @@ class MockBeamRenderer:
         out[..., 3] = 255
 
     def close(self) -> None:
-        """Nothing to release."""
+        """Release the ray caster's scenes."""
         self._scene = None
+        self.caster.close()

@@ -6,7 +6,8 @@
 * with ``sensor.method: beam_native`` instead of the cameras' blocks: ``beams_depth`` (rows, cols, 4) uint8, the
   encoded range along each beam (one pixel per beam, ``cosim.world.beamtarget``), and ``beams_rgb`` when
   something consumes it;
-* ``render_state`` struct: the frame's simulation time, render wall time and valid-pixel fraction;
+* ``render_state`` struct: the frame's simulation time, render wall time and valid-pixel fraction, and for a
+  renderer that ray-casts the LiDAR (:func:`ray_casts`) the ray caster that ran (``renderer_proc/summary.py``);
 * per camera sensor (``sensors:``, docs/cameras.md), named ``cam_<name>_<part>`` (cosim.world.sensors):
   ``rgb`` (H, W, 4) uint8 the colour image (a stereo pair's left), ``right`` (H, W, 4) uint8 a stereo pair's
   right image, ``depth`` (H, W) float32 exact planar depth m (NaN no hit; a depth camera's input), ``labels``
@@ -24,7 +25,7 @@ from cosim.world.rig import plan_rig
 from cosim.world.sensors import camera_block, camera_parts, camera_pinhole
 from shm_schema import ArrayBlock, Block, Field, StructBlock, image_block
 
-__all__ = ["STATE_BLOCK", "WRITER", "declare_blocks", "camera_blocks", "wants_rgb"]
+__all__ = ["STATE_BLOCK", "WRITER", "declare_blocks", "camera_blocks", "ray_casts", "wants_rgb"]
 
 #: writer name of every renderer block
 WRITER = "renderer"
@@ -37,15 +38,27 @@ def wants_rgb(scenario: Scenario) -> bool:
     return scenario.render.rgb == "on" or (scenario.render.rgb == "auto" and scenario.viewer)
 
 
+def ray_casts(scenario: Scenario) -> bool:
+    """Whether the LiDAR's renderer is an exact ray cast: ``renderer: mock``, or beam-native GL with a CSV pattern
+    (no angle grid to draw into); False without a LiDAR."""
+    lidar = scenario.lidar
+    if lidar is None:
+        return False
+    if scenario.renderer == "mock":
+        return True
+    return lidar.method == "beam_native" and not beam_layout(lidar.pattern).gridded
+
+
 def declare_blocks(scenario: Scenario) -> list[Block]:
     """The renderer's blocks for ``scenario`` (empty when the scenario runs no renderer)."""
     if not scenario.needs_renderer:
         return []
-    blocks: list[Block] = [StructBlock(STATE_BLOCK, WRITER, (
-        Field("t_s", "s", doc="simulation time of the rendered state"),
-        Field("render_ms", "ms", doc="wall time of the frame: scene update, every camera, reads"),
-        Field("valid_fraction", "", doc="fraction of depth pixels with a valid hit, all cameras"),
-    ), doc="renderer status per frame")]
+    fields = [Field("t_s", "s", doc="simulation time of the rendered state"),
+              Field("render_ms", "ms", doc="wall time of the frame: scene update, every camera, reads"),
+              Field("valid_fraction", "", doc="fraction of depth pixels with a valid hit, all cameras")]
+    if ray_casts(scenario):
+        fields.append(Field("ray_caster", "", doc="the exact ray cast that ran: index in cosim.world.fastcast.CASTERS"))
+    blocks: list[Block] = [StructBlock(STATE_BLOCK, WRITER, tuple(fields), doc="renderer status per frame")]
     return blocks + _lidar_blocks(scenario) + camera_blocks(scenario)
 
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from cosim.scenario.config.sensing import Codec
 from cosim.world.camera import Rig
-from cosim.world.fastcast import cast_from
+from cosim.world.fastcast import make_caster
 from cosim.world.scene import SKY_RGBA, SUN_WORLD, Scene
 
 from .codec import encode_depth, valid_depth_mask
@@ -28,10 +28,13 @@ AMBIENT, DIFFUSE = 0.35, 0.65
 
 
 class MockRenderer:
-    """Same interface as :class:`renderer_proc.gl_backend.GLRenderer`: ``set_scene``, ``draw``, ``read_*``."""
+    """Same interface as :class:`renderer_proc.gl_backend.GLRenderer`: ``set_scene``, ``draw``, ``read_*``.
+    ``parts`` (``cosim.world.parts.entity_parts(scenario)``): the scenes' rigid bodies, built once for the run
+    when Embree allows (``caster.name`` says which ray caster runs)."""
 
-    def __init__(self, rig: Rig, codec: Codec, *, rgb: bool = False, float_depth: bool = False):
+    def __init__(self, rig: Rig, codec: Codec, *, rgb: bool = False, float_depth: bool = False, parts=None):
         self.rig, self.codec, self.rgb, self.float_depth = rig, codec, rgb, float_depth
+        self.caster = make_caster(parts)
         self._far = far_plane_m(codec.max_depth_m)
         self._scene: Scene | None = None
         self._z: list[np.ndarray | None] = [None] * len(rig)
@@ -47,7 +50,7 @@ class MockRenderer:
             raise RuntimeError("set_scene must be called before draw")
         cam = self.rig.cameras[k].intrinsics
         origin, dirs, cos = pixel_rays(cam, world_from_camera)
-        t = cast_from(self._scene, origin, dirs.reshape(-1, 3))
+        t = self.caster.cast(self._scene, origin, dirs.reshape(-1, 3))
         z = t.reshape(cos.shape) * cos
         self._z[k] = np.where((z >= NEAR_M) & (z <= self._far), z, np.inf)
         self._pose[k] = world_from_camera
@@ -82,5 +85,6 @@ class MockRenderer:
         out[..., 3] = 255
 
     def close(self) -> None:
-        """Nothing to release."""
+        """Release the ray caster's scenes."""
         self._scene = None
+        self.caster.close()

@@ -9,6 +9,7 @@ camera sensor view draws and reads straight into the shared-memory blocks under 
 """
 from __future__ import annotations
 
+import logging
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -17,10 +18,12 @@ import numpy as np
 from cosim.errors import FrameMismatch
 from cosim.scenario.config.scenario import Scenario
 from cosim.world.beamtarget import BEAMS_DEPTH_BLOCK, BEAMS_RGB_BLOCK, beam_layout
+from cosim.world.fastcast import CASTERS
+from cosim.world.parts import entity_parts
 from cosim.world.rig import plan_rig
 from cosim.world.scene import scene_from_state
 
-from .blocks import STATE_BLOCK, WRITER, wants_rgb
+from .blocks import STATE_BLOCK, WRITER, ray_casts, wants_rgb
 from .cameras import CameraSet
 from .projection import camera_poses, world_from_sensor
 
@@ -28,6 +31,8 @@ if TYPE_CHECKING:
     from shm_schema.segment import Segment
 
 __all__ = ["INPUT_BLOCKS", "RendererParticipant", "create", "make_backend"]
+
+log = logging.getLogger("cosim.renderer")
 
 #: blocks the renderer reads (written by dynamics)
 INPUT_BLOCKS = ("dyn_state", "heightmap_truth", "stream")
@@ -51,7 +56,7 @@ def make_backend(scenario: Scenario, rig, context: Any = None):
     if scenario.renderer == "mock":
         from .mock_backend import MockRenderer
 
-        return MockRenderer(rig, scenario.lidar.codec, **opts)
+        return MockRenderer(rig, scenario.lidar.codec, parts=entity_parts(scenario), **opts)
     raise ValueError(f"scenario.renderer is {scenario.renderer!r}: this scenario runs no renderer")
 
 
@@ -66,7 +71,7 @@ def _beam_backend(scenario: Scenario, context: Any = None):
     if scenario.renderer in ("gl", "mock"):       # a CSV table has no angle grid: its exact ray cast under gl too
         from .beam_mock import MockBeamRenderer
 
-        return MockBeamRenderer(layout, codec, rgb=rgb)
+        return MockBeamRenderer(layout, codec, rgb=rgb, parts=entity_parts(scenario))
     raise ValueError(f"scenario.renderer is {scenario.renderer!r}: this scenario runs no renderer")
 
 
@@ -107,8 +112,14 @@ class RendererParticipant:
             for block in outs.values():
                 segment.view(block)            # raises KeyError naming the missing block
             self._outputs.append(outs)
+        self._caster_code = None
         if self.has_lidar:
             self.backend = make_backend(self.scenario, self.rig)
+            caster = getattr(self.backend, "caster", None)
+            self._caster_code = CASTERS.index(caster.name) if caster is not None and ray_casts(self.scenario) \
+                else None
+            if caster is not None:
+                log.info("exact ray cast: %s", caster.name)
         if len(self.cameras):
             self.cameras.start(segment, context=getattr(self.backend, "ctx", None))
 
@@ -152,6 +163,8 @@ class RendererParticipant:
                 st.t_s = float(state.get("t_s", 0.0))
                 st.render_ms = self.last_ms
                 st.valid_fraction = valid / total if total else float("nan")
+                if self._caster_code is not None:
+                    st.ray_caster = self._caster_code
 
     def close(self) -> None:
         """Release the backends (the GL context). Safe to call more than once, also after a failed start."""

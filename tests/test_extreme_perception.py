@@ -35,7 +35,7 @@ def run(name: str, duration: float | None):
 
 def check(series: dict, summary: dict) -> None:
     for col, values in series.items():
-        assert np.all(np.isfinite(values) | col.endswith("_fullness") | col.startswith("perc_state.")), col
+        assert np.all(np.isfinite(values) | col.endswith(("_fullness", "_sigma_m")) | col.startswith("perc_state.")), col
     mb = summary["mass_balance"]
     assert abs(mb["delivered_m3"] - mb["in_cart_m3"] - mb["spilled_m3"]) <= 1e-9 * max(mb["delivered_m3"], 1.0)
     assert summary["spill"]["mass_kg"] == pytest.approx(0.0, abs=1e-9)

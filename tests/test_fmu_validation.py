@@ -90,8 +90,8 @@ def test_missing_file(tmp_path, built_fmus):
 @pytest.mark.parametrize("edit, message", [
     (lambda t: t.replace("<CoSimulation", "<ModelExchange"), "is a model-exchange FMU; graincosim steps "
                                                              "co-simulation FMUs only"),
-    (lambda t: t.replace('fmiVersion="2.0"', 'fmiVersion="3.0"'), "is an FMI 3.0 FMU: FMI 3.0 FMUs are not "
-                                                                  "supported yet; export it as FMI 2.0"),
+    (lambda t: t.replace('fmiVersion="2.0"', 'fmiVersion="4.0"'), "is an FMI 4.0 FMU: FMI 4.0 is not supported; "
+                                                                  "export it as FMI 2.0 or 3.0 co-simulation"),
     (lambda t: t.replace('fmiVersion="2.0"', 'fmiVersion="1.0"'), "is an FMI 1.0 FMU: FMI 1.0 is not supported"),
 ])
 def test_wrong_kind_of_fmu(tmp_path, built_fmus, edit, message):

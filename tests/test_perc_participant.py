@@ -12,6 +12,7 @@ from hypothesis import strategies as hst
 from cosim.errors import FrameMismatch
 from cosim.scenario.config import Scenario
 from cosim.testing.synthetic import encode_linear, stitched_rig
+from cosim.world.fastcast import embree_available
 from cosim.world.geometry import vehicle_pose
 from cosim.world.raycast import raycast
 from cosim.world.scene import scene_from_state
@@ -176,6 +177,9 @@ def test_summary_and_report(stepped, tmp_path):
     assert p["impact_error_m"] is None
     assert p["range_error"]["mean_m"] == pytest.approx(st["range_err_mean_m"])
     assert p["range_error"]["beams"] == 2 * st["range_beams"]
+    assert p["range_error"]["ray_caster"] == ("embree" if embree_available() else "numpy")
+    off = SCENARIO.model_copy(update={"perception": SCENARIO.perception.model_copy(update={"accuracy_every_frames": 0})})
+    assert summarize(off, series, None, None)["perception"]["range_error"]["ray_caster"] is None
     assert 0 < p["coverage"] <= 1
     json.dumps(out, allow_nan=False)
     md, js = write_report(p, tmp_path)

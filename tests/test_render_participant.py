@@ -9,6 +9,7 @@ import pytest
 
 from cosim.errors import FrameMismatch, RendererUnavailable
 from cosim.scenario.config import Scenario
+from cosim.world.fastcast import CASTERS, embree_available
 from cosim.world.rig import plan_rig
 from renderer_proc.blocks import declare_blocks
 from renderer_proc.codec import decode_depth
@@ -89,6 +90,12 @@ def test_participant_renders_into_blocks(backend):
         assert st.render_ms > 0 and 0.5 < st.valid_fraction <= 1.0
         alpha = [views[n][..., 3] for n in ("cam0_depth", "cam1_depth")]
         assert st.valid_fraction == sum(np.count_nonzero(a) for a in alpha) / sum(a.size for a in alpha)
+        if backend == "mock":                           # the ray caster that ran, for summary.json
+            assert CASTERS[int(st.ray_caster)] == p.backend.caster.name
+            if embree_available():
+                assert p.backend.caster.name == "embree-static"
+        else:
+            assert "ray_caster" not in st.array.dtype.names
         with pytest.raises(FrameMismatch, match="expected dyn_state of frame 1, found frame 0"):
             p.step(1)
     finally:

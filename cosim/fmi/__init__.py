@@ -1,4 +1,4 @@
-"""FMUs in the loop (FMI 2.0 co-simulation through fmpy; docs/fmu.md).
+"""FMUs in the loop (FMI 2.0 and 3.0 co-simulation through fmpy; docs/fmu.md).
 
 * :mod:`.describe`: what an FMU file is (version, kind, model, variables), read without running it;
 * :mod:`.roles`: the roles an FMU can play (vehicle, controller, strategy), their signals, the mapping check;

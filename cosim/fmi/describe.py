@@ -1,8 +1,12 @@
 """What an FMU file is, read without running it: FMI version, kind, model, variables (through fmpy).
 
 :func:`describe` opens the ``.fmu`` (a zip archive), reads ``modelDescription.xml`` with fmpy and refuses what
-graincosim cannot step: not an FMU, model exchange only, an FMI version other than 2.0, no binary for this
+graincosim cannot step: not an FMU, model exchange only, an FMI version other than 2.0 or 3.0, no binary for this
 platform. fmpy is optional (``pip install "graincosim[fmi]"``): :func:`require_fmpy` says so when it is missing.
+
+FMI 2.0 and 3.0 name their types differently; :attr:`Variable.kind` puts both in one vocabulary (``Real``,
+``Integer``, ``Boolean``, ``String``, ``Enumeration``) for the types graincosim maps, and is None for the others
+(FMI 3.0 ``Float32``, ``Int8`` ... ``UInt64``, ``Binary``, ``Clock``), which a mapping refuses by name.
 """
 from __future__ import annotations
 
@@ -15,11 +19,19 @@ from types import MappingProxyType, ModuleType
 from typing import Mapping
 from xml.etree import ElementTree
 
-__all__ = ["FMI_VERSIONS", "FmiUnavailable", "FmuInvalid", "Variable", "FmuDescription", "require_fmpy",
-           "describe"]
+__all__ = ["FMI_VERSIONS", "KINDS", "KIND_NAMES", "FmiUnavailable", "FmuInvalid", "Clock", "Variable",
+           "FmuDescription", "require_fmpy", "describe"]
 
-#: FMI versions graincosim steps (FMI 3.0: fmpy reads it, but no tool here builds a test FMU; see docs/fmu.md)
-FMI_VERSIONS = ("2.0",)
+#: FMI versions graincosim steps
+FMI_VERSIONS = ("2.0", "3.0")
+#: FMU variable type -> the kind graincosim maps it as (FMI 2.0 and FMI 3.0 names); a type not here is not mapped
+KINDS = {"Real": "Real", "Float64": "Real", "Integer": "Integer", "Int32": "Integer", "Int64": "Integer",
+         "Boolean": "Boolean", "String": "String", "Enumeration": "Enumeration"}
+#: how each kind is written in an FMI version (messages speak the FMU's own vocabulary)
+KIND_NAMES = {"2.0": {"Real": "Real", "Integer": "Integer", "Boolean": "Boolean", "String": "String",
+                      "Enumeration": "Enumeration"},
+              "3.0": {"Real": "Float64", "Integer": "Int32 or Int64", "Boolean": "Boolean", "String": "String",
+                      "Enumeration": "Enumeration"}}
 
 
 class FmiUnavailable(ImportError):
@@ -31,9 +43,22 @@ class FmuInvalid(ValueError):
 
 
 @dataclass(frozen=True)
+class Clock:
+    """What an FMI 3.0 ``Clock`` variable declares: ``interval_variability`` (``triggered``, ``constant``,
+    ``fixed``, ...) and, for a constant clock, its ``interval_s`` and ``shift_s`` (``intervalDecimal``,
+    ``shiftDecimal``; None where not given)."""
+
+    interval_variability: str
+    interval_s: float | None = None
+    shift_s: float | None = None
+
+
+@dataclass(frozen=True)
 class Variable:
-    """One scalar variable of an FMU: ``type`` is ``Real``, ``Integer``, ``Boolean``, ``String`` or
-    ``Enumeration``; ``causality`` ``parameter``, ``input``, ``output``, ``local``, ...; ``start`` as text or None."""
+    """One variable of an FMU: ``type`` as the FMU declares it (FMI 2.0 ``Real``, ``Integer``, ...; FMI 3.0
+    ``Float64``, ``Int32``, ...; see :attr:`kind`); ``causality`` ``parameter``, ``input``, ``output``, ``local``,
+    ...; ``start`` as text or None; ``shape`` () for a scalar, (n,) ... for an FMI 3.0 array; ``min`` / ``max`` the
+    declared range as text (None: unbounded); ``clock`` what a Clock variable declares (None for other types)."""
 
     name: str
     value_reference: int
@@ -41,6 +66,24 @@ class Variable:
     causality: str
     variability: str
     start: str | None
+    shape: tuple[int, ...] = ()
+    min: str | None = None
+    max: str | None = None
+    clock: Clock | None = None
+
+    @property
+    def kind(self) -> str | None:
+        """``Real``, ``Integer``, ``Boolean``, ``String`` or ``Enumeration`` for the types graincosim maps, else
+        None."""
+        return KINDS.get(self.type)
+
+    @property
+    def size(self) -> int:
+        """Number of values: 1 for a scalar, the product of the shape for an array."""
+        n = 1
+        for d in self.shape:
+            n *= d
+        return n
 
 
 @dataclass(frozen=True)
@@ -56,6 +99,11 @@ class FmuDescription:
     platforms: tuple[str, ...]
     variables: Mapping[str, Variable]
     can_vary_step: bool
+    has_event_mode: bool = False
+
+    def input_clocks(self) -> list[Variable]:
+        """The FMU's input clocks (FMI 3.0 ``Clock`` variables of causality ``input``)."""
+        return [v for v in self.variables.values() if v.type == "Clock" and v.causality == "input"]
 
     def summary(self) -> str:
         """One line for ``validate``: file, FMI version, model, tool, GUID."""
@@ -81,10 +129,10 @@ def describe(path: str | os.PathLike) -> FmuDescription:
     return _describe(str(p), st.st_size, st.st_mtime_ns)
 
 
-def _fmi_version(path: str) -> str:
-    """The ``fmiVersion`` attribute of the FMU's model description, read without fmpy's full parse."""
+def _read_root(path: str) -> ElementTree.Element:
+    """The root element of the FMU's model description, read without fmpy's full parse."""
     if not zipfile.is_zipfile(path):
-        raise FmuInvalid("is not an FMU (not a zip archive); export the model as an FMU (FMI 2.0 co-simulation)")
+        raise FmuInvalid("is not an FMU (not a zip archive); export the model as an FMU (FMI 2.0 or 3.0 co-simulation)")
     with zipfile.ZipFile(path) as zf:
         if "modelDescription.xml" not in zf.namelist():
             raise FmuInvalid("is not an FMU: the archive has no modelDescription.xml")
@@ -92,7 +140,17 @@ def _fmi_version(path: str) -> str:
             root = ElementTree.fromstring(zf.read("modelDescription.xml"))
         except ElementTree.ParseError as e:
             raise FmuInvalid(f"has a model description that is not XML: {e}") from None
-    return root.get("fmiVersion", "?")
+    return root
+
+
+def _clocks(root: ElementTree.Element) -> dict[str, Clock]:
+    """name -> Clock of every FMI 3.0 ``Clock`` variable (fmpy does not read the interval)."""
+    def num(text):
+        return None if text is None else float(text)
+
+    return {e.get("name"): Clock(e.get("intervalVariability", ""), num(e.get("intervalDecimal")),
+                                 num(e.get("shiftDecimal")))
+            for e in root.iterfind("ModelVariables/Clock")}
 
 
 @lru_cache(maxsize=16)
@@ -100,25 +158,28 @@ def _describe(path: str, size: int, mtime_ns: int) -> FmuDescription:
     fmpy = require_fmpy()
     from fmpy.model_description import read_model_description
 
-    version = _fmi_version(path)
+    root = _read_root(path)
+    version = root.get("fmiVersion", "?")
     if version not in FMI_VERSIONS:
-        hint = ("FMI 3.0 FMUs are not supported yet" if version.startswith("3") else
-                f"FMI {version} is not supported")
-        raise FmuInvalid(f"is an FMI {version} FMU: {hint}; export it as FMI 2.0 co-simulation")
+        raise FmuInvalid(f"is an FMI {version} FMU: FMI {version} is not supported; export it as FMI 2.0 or 3.0 "
+                         "co-simulation")
     try:
         md = read_model_description(path, validate=False)
     except Exception as e:  # noqa: BLE001 - fmpy raises plain Exception / lxml errors for a broken description
         raise FmuInvalid(f"has a model description fmpy cannot read: {e}") from None
     if md.coSimulation is None:
-        raise FmuInvalid("is a model-exchange FMU; graincosim steps co-simulation FMUs only (export it as FMI 2.0 "
-                         "co-simulation, with the solver inside the FMU)")
+        raise FmuInvalid(f"is a model-exchange FMU; graincosim steps co-simulation FMUs only (export it as FMI "
+                         f"{version} co-simulation, with the solver inside the FMU)")
     platforms = tuple(fmpy.supported_platforms(path))
     if fmpy.platform not in platforms:
         raise FmuInvalid(f"has no binary for this platform ({fmpy.platform}); it has "
                          f"{', '.join(platforms) or 'none'}: export it on or for {fmpy.platform}")
+    clocks = _clocks(root)
     variables = {v.name: Variable(v.name, int(v.valueReference), v.type, v.causality or "local",
-                                  v.variability or "continuous", None if v.start is None else str(v.start))
+                                  v.variability or "continuous", None if v.start is None else str(v.start),
+                                  tuple(v.shape or ()), v.min, v.max, clocks.get(v.name))
                  for v in md.modelVariables}
     return FmuDescription(Path(path), md.fmiVersion, md.modelName or "", md.coSimulation.modelIdentifier,
                           md.generationTool or "", md.guid or "", platforms, MappingProxyType(variables),
-                          bool(md.coSimulation.canHandleVariableCommunicationStepSize))
+                          bool(md.coSimulation.canHandleVariableCommunicationStepSize),
+                          bool(md.coSimulation.hasEventMode))

@@ -3,7 +3,8 @@
 The child ignores SIGINT (the launcher coordinates a clean stop), turns SIGTERM into SystemExit so that
 ``close`` runs, asks the kernel to SIGTERM it if the launcher dies (PR_SET_PDEATHSIG), and appends its logs and
 stray stdout/stderr to the run's log.txt. From its attach on, a thread beats in its header slot
-(cosim.runtime.liveness.Heartbeat), so the launcher tells a stopped or deadlocked child from a slow one. Any
+(cosim.runtime.liveness.Heartbeat), so the launcher tells a stopped or deadlocked child from a slow one. Freed
+memory stays in the heap (cosim.runtime.heap), so per-frame arrays reuse warm pages. Any
 exception is written with its traceback into the process's error slot in the segment header before the process
 exits with status 1. A clean child exits with status 0
 right after closing, without the interpreter's module teardown.
@@ -24,6 +25,7 @@ from cosim.errors import RunError
 from cosim.scenario.config import Scenario
 from shm_schema import Phase, Segment
 
+from .heap import keep_heap
 from .liveness import Heartbeat
 from .lockstep import RingPlan, Token, member_loop
 from .logs import configure_logging
@@ -67,6 +69,7 @@ def _on_sigterm(signum, frame) -> None:
 def child_main(args: ChildArgs) -> None:
     """Run one participant in this process until the last frame, a failure or a stop."""
     t_main = time.time()
+    keep_heap()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _on_sigterm)
     _die_with_parent()

@@ -38,6 +38,7 @@ from .files import RunDirLock, atomic_write, open_run_dir
 from .liveness import Watch, child_failure, stop_processes
 from .lockstep import RingPlan, Token
 from .logs import configure_logging
+from .outcome import outcome_line
 from .outputs import default_run_dir, finish_outputs, write_figures, write_scenario
 from .recorder import Recorder
 from .signals import StopSignals, no_sigint_in_children
@@ -318,6 +319,7 @@ def _tear_down(run: _Run, error: RunError | None) -> RunResult:
     if failure is not None:
         log.error("%s", failure)
         error = error or failure
+    log.info("%s", outcome_line(summary.get("outcome")))
     t_outputs = time.perf_counter()
     if run.schema is not None and failure is None:
         _write_figures(run, summary)

@@ -23,6 +23,7 @@ from cosim.errors import OutputError, RunError, RunInterrupted
 from cosim.scenario.config import Scenario
 
 from .files import atomic_write
+from .outcome import judge
 from .recorder import Recorder
 from .specs import ParticipantSpec, load_callable
 
@@ -73,7 +74,8 @@ def clean_json(obj):
 
 def compose_summary(scenario: Scenario, recorder: Recorder | None, ring: Sequence[ParticipantSpec], *,
                     wall_time_s: float, error: RunError | None) -> dict:
-    """summary.json's content (docs/architecture.md) from what the recorder holds."""
+    """summary.json's content (docs/architecture.md) from what the recorder holds, with the job's ``outcome``
+    (cosim.runtime.outcome)."""
     completed_frames = len(recorder.frames) if recorder else 0
     last = recorder.frames[-1] if recorder and recorder.frames else -1
     sim_time = max(0, last) * scenario.timing.sensor_period_s
@@ -99,6 +101,7 @@ def compose_summary(scenario: Scenario, recorder: Recorder | None, ring: Sequenc
         summary["error"] = {"type": type(error).__name__, "message": str(error), "process": error.process,
                             "frame": error.frame, "traceback": error.detail}
     if recorder is None:
+        summary["outcome"] = judge(scenario, summary, {})
         return summary
     med = recorder.timing_medians_ms()
     summary["timing_ms"] = {STAGE_KEYS.get(m, m): med[m] for m in members}
@@ -112,8 +115,8 @@ def compose_summary(scenario: Scenario, recorder: Recorder | None, ring: Sequenc
                            "overlapped": recorder.deferred}
         if not recorder.deferred:
             summary["ring"]["handoff_median_ms"] = med["handoff"]
+    series = recorder.series() if recorder.frames else {}
     if recorder.frames:
-        series = recorder.series()
         for spec in ring:
             if not spec.summary:
                 continue
@@ -124,6 +127,7 @@ def compose_summary(scenario: Scenario, recorder: Recorder | None, ring: Sequenc
             except Exception as exc:  # noqa: BLE001 - a summary bug must not lose the run's other outputs
                 log.exception("summary of %s failed", spec.name)
                 summary.setdefault("summary_errors", {})[spec.name] = f"{type(exc).__name__}: {exc}"
+    summary["outcome"] = judge(scenario, summary, series)
     return summary
 
 

@@ -41,7 +41,8 @@ class ParticipantSpec:
 DEFAULT_SPECS: dict[str, ParticipantSpec] = {
     "dynamics": ParticipantSpec("dynamics", "dynamics_proc.participant:create", "dynamics_proc.blocks:declare_blocks",
                                 "dynamics_proc.summary:summarize"),
-    "renderer": ParticipantSpec("renderer", "renderer_proc.participant:create", "renderer_proc.blocks:declare_blocks"),
+    "renderer": ParticipantSpec("renderer", "renderer_proc.participant:create", "renderer_proc.blocks:declare_blocks",
+                                "renderer_proc.summary:summarize"),
     "perception": ParticipantSpec("perception", "perception_proc.participant:create",
                                   "perception_proc.blocks:declare_blocks", "perception_proc.summary:summarize",
                                   defers="cosim.runtime.participant:perception_overlaps"),

@@ -142,14 +142,12 @@ def _tuple_len(loc: Loc) -> int | None:
 
 
 def _free_mapping(loc: Loc) -> bool:
-    """Whether ``loc`` names a field whose keys are free (a plug-in's ``*_options``, the sensors of ``sensors``:
-    any key, checked by validation)."""
+    """Whether ``loc`` names a field whose keys are free: a mapping (a plug-in's ``*_options``, an FMU's
+    ``parameters`` or variable mapping, the named sensors of ``sensors``), any key, checked later by what reads
+    it."""
     model = _model_at(loc[:-1]) if loc else None
     field = model.model_fields.get(loc[-1]) if model is not None else None
-    if field is None:
-        return False
-    return (typing.get_origin(field.annotation) is dict and loc[-1].endswith("_options")) or bool(
-        _entry_models(field.annotation))
+    return field is not None and typing.get_origin(field.annotation) is dict
 
 
 def _check_override_path(loc: Loc) -> str | None:

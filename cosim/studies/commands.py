@@ -8,9 +8,12 @@ from pathlib import Path
 from cosim.errors import ScenarioError
 
 __all__ = ["add_sweep_parser", "sweep_command", "study_command", "EXIT_OK", "EXIT_FAILED", "EXIT_USAGE",
-           "EXIT_INTERRUPTED"]
+           "EXIT_INTERRUPTED",
+           "EXIT_NOT_FILLED"]
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+#: ``sweep --require-filled``: every run completed, but not every one filled the cart
+EXIT_NOT_FILLED = 3
 
 
 def add_sweep_parser(sub) -> None:
@@ -22,15 +25,22 @@ def add_sweep_parser(sub) -> None:
                     "tcp://10.0.0.5:8786 (workers need graincosim installed; GL runs need --resources EGL=1)")
     sw.add_argument("--out", type=Path, help="sweep directory (default runs/sweep-<name>; run again to resume)")
     sw.add_argument("--quiet", action="store_true", help="no progress bar")
+    sw.add_argument("--require-filled", action="store_true",
+                    help="exit 3 when every run completed but some did not fill the cart (outcome column)")
 
 
-def _report(outcome, out: Path) -> int:
+def _report(outcome, out: Path, require_filled: bool = False) -> int:
+    jobs = ", ".join(f"{n} {status}" for status, n in outcome.outcomes.items()) or "none"
     sys.stdout.write(f"sweep {out}: {outcome.completed}/{outcome.total} runs completed, {outcome.failed} failed, "
-                     f"{outcome.skipped} finished before; results: {outcome.results}\n")
+                     f"{outcome.skipped} finished before; outcomes: {jobs}; results: {outcome.results}\n")
     if outcome.interrupted:
         sys.stderr.write("interrupted: the runs that finished are kept; run the same command to resume\n")
         return EXIT_INTERRUPTED
-    return EXIT_OK if outcome.completed == outcome.total else EXIT_FAILED
+    if outcome.completed != outcome.total:
+        return EXIT_FAILED
+    if require_filled and outcome.outcomes.get("filled", 0) != outcome.total:
+        return EXIT_NOT_FILLED
+    return EXIT_OK
 
 
 def _missing_engine() -> bool:
@@ -73,7 +83,7 @@ def sweep_command(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:  # a second Ctrl-C while the cluster closes
         sys.stderr.write(f"interrupted: the runs that finished are in {out}; run the same command to resume\n")
         return EXIT_INTERRUPTED
-    return _report(outcome, out)
+    return _report(outcome, out, args.require_filled)
 
 
 def study_command(args: argparse.Namespace, scenario) -> int:

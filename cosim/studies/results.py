@@ -1,7 +1,8 @@
 """The sweep's results table: one row per run, rewritten atomically as runs finish (docs/sweeps.md).
 
 Columns, in order: ``id``; the labels (a study's ``knob``, ``setting``); the varied parameters (dotted scenario
-paths); ``seed``, ``completed``, ``error``, ``attempts``; the metrics of :data:`METRICS` (from the run's
+paths); ``seed``, ``completed``, ``error``, ``attempts``; ``outcome`` and ``outcome_reason`` (whether the job was
+done: summary.json's ``outcome``, ``filled`` / ``stopped_safe`` / ``job_failed``, and why); the metrics of :data:`METRICS` (from the run's
 summary.json, empty where the run has none, e.g. perception metrics of a ground-truth run); ``worker`` (the
 Dask worker's address, or ``local``) and ``run_dir`` (relative to the sweep's directory). ``results.csv``
 always, ``results.parquet`` too where pyarrow is importable.
@@ -15,7 +16,7 @@ import math
 import os
 from pathlib import Path
 
-__all__ = ["METRICS", "metrics_of", "read_summary", "read_table", "ResultsTable"]
+__all__ = ["METRICS", "OUTCOME_COLUMNS", "metrics_of", "outcome_of", "read_summary", "read_table", "ResultsTable"]
 
 log = logging.getLogger("cosim.studies.results")
 
@@ -33,6 +34,16 @@ METRICS: dict[str, tuple[str, ...]] = {
     "sim_time_s": ("sim_time_s",),
     "wall_time_s": ("wall_time_s",),
 }
+
+
+#: table column -> key of summary.json's ``outcome`` (cosim.runtime.outcome)
+OUTCOME_COLUMNS: dict[str, str] = {"outcome": "status", "outcome_reason": "reason"}
+
+
+def outcome_of(summary: dict) -> dict:
+    """The :data:`OUTCOME_COLUMNS` of one summary (None where the run wrote no outcome)."""
+    out = summary.get("outcome") if isinstance(summary.get("outcome"), dict) else {}
+    return {col: out.get(key) for col, key in OUTCOME_COLUMNS.items()}
 
 
 def metrics_of(summary: dict) -> dict:
@@ -78,15 +89,15 @@ class ResultsTable:
     def __init__(self, out: Path, labels: tuple[str, ...], parameters: tuple[str, ...], order: list[str]):
         self.out = Path(out)
         self.rank = {rid: i for i, rid in enumerate(order)}
-        self.columns = ["id", *labels, *parameters, "seed", "completed", "error", "attempts", *METRICS,
-                        "worker", "run_dir"]
+        self.columns = ["id", *labels, *parameters, "seed", "completed", "error", "attempts", *OUTCOME_COLUMNS,
+                        *METRICS, "worker", "run_dir"]
         self.rows: dict[str, dict] = {}
 
     def set(self, run, *, summary: dict | None, error: str, attempts: int, worker: str) -> dict:
         """Record run ``run`` (a RunSpec) with its summary (None if it produced none)."""
         row = {"id": run.id, **run.labels, **run.params, "seed": run.seed,
                "completed": bool(summary and summary.get("completed")), "error": error, "attempts": attempts,
-               **metrics_of(summary or {}), "worker": worker, "run_dir": f"runs/{run.id}"}
+               **outcome_of(summary or {}), **metrics_of(summary or {}), "worker": worker, "run_dir": f"runs/{run.id}"}
         self.rows[run.id] = row
         self.rows = dict(sorted(self.rows.items(), key=lambda kv: self.rank.get(kv[0], len(self.rank))))
         return row

@@ -15,7 +15,8 @@ import logging
 import os
 import shutil
 import sys
-from dataclasses import dataclass
+from collections import Counter
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterator
 
@@ -50,6 +51,8 @@ class SweepOutcome:
     skipped: int
     interrupted: bool
     results: Path
+    #: runs per job outcome (``filled``, ``stopped_safe``, ``job_failed``; summary.json ``outcome``)
+    outcomes: dict = field(default_factory=dict)
 
 
 def execute_run(run_dir: str, scenario_json: str) -> dict:
@@ -148,7 +151,9 @@ def run_sweep(sweep: Sweep, out: Path, *, scheduler: str | None = None, jobs: in
 
         write_sweep_figures(out, list(table.rows.values()), sweep.parameters)
     completed = sum(1 for r in table.rows.values() if r["completed"])
-    return SweepOutcome(len(sweep.runs), completed, failed, skipped, interrupted, out / "results.csv")
+    outcomes = Counter(r["outcome"] for r in table.rows.values() if r.get("outcome"))
+    return SweepOutcome(len(sweep.runs), completed, failed, skipped, interrupted, out / "results.csv",
+                        dict(sorted(outcomes.items())))
 
 
 def _drive(client, pending: list[RunSpec], out: Path, table: ResultsTable, bar, retries: int,

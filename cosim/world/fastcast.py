@@ -16,7 +16,8 @@ distance to the first hit, ``inf`` on a miss, as :func:`cosim.world.raycast.rayc
 from __future__ import annotations
 
 import importlib.util
-from typing import Literal
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -24,7 +25,10 @@ from .raycast import T_MIN_M, raycast
 from .scene import Scene
 from .triangles import scene_triangles
 
-__all__ = ["BACKENDS", "Backend", "cast_from", "embree_available", "embree_cast"]
+if TYPE_CHECKING:
+    from .parts import EntityParts
+
+__all__ = ["BACKENDS", "CASTERS", "Backend", "Caster", "cast_from", "embree_available", "embree_cast", "make_caster"]
 
 Backend = Literal["auto", "embree", "numpy"]
 #: the accepted backend names: auto is Embree when it is installed, else numpy
@@ -33,6 +37,10 @@ BACKENDS = ("auto", "embree", "numpy")
 _MISS_M = 1e30
 #: the float64 re-intersection is used unless the ray grazes the plane (|n . d| below this times |n|)
 _GRAZE = 1e-9
+#: the ray casters a run can use, by name (their index is the code a renderer records): ``numpy``
+#: (``cosim.world.raycast``), ``embree`` (the scene's triangles built every frame, :func:`embree_cast`),
+#: ``embree-static`` (the rigid bodies built once per run, ``cosim.world.rigidcast``)
+CASTERS = ("none", "numpy", "embree", "embree-static")
 
 
 def embree_available() -> bool:
@@ -83,3 +91,44 @@ def cast_from(scene: Scene, origin: np.ndarray, directions: np.ndarray, backend:
         return embree_cast(scene, origin, directions)
     d = np.asarray(directions, np.float64).reshape(-1, 3)
     return raycast(scene, np.broadcast_to(np.asarray(origin, np.float64).reshape(3), d.shape), d)
+
+
+class Caster:
+    """A run's exact ray cast: ``cast(scene, origin, directions)`` as :func:`cast_from`; ``name`` (one of
+    :data:`CASTERS`) says which ray caster runs. Made by :func:`make_caster`; :meth:`close` when done."""
+
+    def __init__(self, backend: Backend, static=None):
+        self._backend, self._static = backend, static
+        if static is not None:
+            self.name = "embree-static"
+        else:
+            self.name = "embree" if backend == "embree" or (backend == "auto" and embree_available()) else "numpy"
+
+    def cast(self, scene: Scene, origin: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """Exact ranges (N,) float64 m, inf on a miss (see :func:`cast_from`); a scene without entity poses
+        (not from ``scene_from_state``) goes through :func:`cast_from`."""
+        if self._static is not None and scene.poses is not None:
+            return self._static.cast(scene, origin, directions)
+        return cast_from(scene, origin, directions, "embree" if self._static is not None else self._backend)
+
+    def close(self) -> None:
+        if self._static is not None:
+            self._static.close()
+            self._static = None
+
+
+def make_caster(parts: Mapping[str, "EntityParts"] | None = None, backend: Backend = "auto") -> Caster:
+    """The fastest exact ray cast available for a run of scenes with these entity ``parts``
+    (``cosim.world.parts.entity_parts``): the rigid bodies built once (``cosim.world.rigidcast``) where
+    Embree's library can be used so, else :func:`cast_from` with ``backend``. ``parts`` None: :func:`cast_from`."""
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+    if parts is not None and (backend == "embree" or (backend == "auto" and embree_available())):
+        from .embree_api import EmbreeUnavailable
+        from .rigidcast import RigidCaster
+
+        try:
+            return Caster(backend, RigidCaster(parts))
+        except EmbreeUnavailable:
+            pass
+    return Caster(backend)

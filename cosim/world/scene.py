@@ -125,13 +125,17 @@ class MeshInstance:
 class Scene:
     """Everything the renderers draw for one frame (world frame). ``ground_box``: index in ``boxes`` of the
     ground slab (its top face is the ground plane), or None; the GL renderer keeps a per-camera image of it
-    while the camera's pose relative to the slab's plane does not change (``renderer_proc.gl_backend``)."""
+    while the camera's pose relative to the slab's plane does not change (``renderer_proc.gl_backend``).
+    ``poses``: world_from_body (4, 4) float64 of each entity the scene was built from (:func:`scene_from_state`),
+    or None; with it the exact ray cast keeps each entity's parts in its body frame across frames
+    (``cosim.world.rigidcast``)."""
 
     boxes: Boxes
     cylinders: Cylinders
     heightfield: HeightField
     meshes: tuple[MeshInstance, ...] = ()
     ground_box: int | None = None
+    poses: Mapping[str, np.ndarray] | None = None
 
 
 @functools.lru_cache(maxsize=8)
@@ -239,5 +243,5 @@ def scene_from_state(scenario: Scenario, state: Mapping[str, float], heightmap: 
               np.concatenate(hidden), box_labels, np.where(box_labels == GROUND, STUBBLE, STEEL).astype(np.uint8)),
         Cylinders(np.concatenate(c0), np.concatenate(c1), np.concatenate(rad),
                   np.concatenate(ccol).astype(np.float32), np.concatenate(clabel), np.concatenate(cmat)),
-        hf, tuple(meshes), ground_box,
+        hf, tuple(meshes), ground_box, poses,
     )

@@ -12,7 +12,7 @@ from pydantic import Field, model_validator
 from .base import Fraction, Model, NonNegFloat, Options, PluginRef, PosFloat
 from .fmu import FMU_REF, Fmu
 
-__all__ = ["Grain", "Fusion", "Controller", "Integrator"]
+__all__ = ["Grain", "Fusion", "Coping", "Controller", "Integrator"]
 
 
 class Grain(Model):
@@ -46,6 +46,33 @@ class Fusion(Model):
     flow_meter_bias: float = Field(default=0.0, ge=-0.9, le=10.0, allow_inf_nan=False)
 
 
+class Coping(Model):
+    """How the built-in controller (``section_fill``) copes with field conditions (dynamics_proc.coping;
+    docs/field.md).
+
+    * ``full_lead_s``: lead on the full level. A section counts as full once its estimated peak plus its measured
+      rise rate times this lead reaches the full level, so that the grain still arriving after the decision (the
+      nudge to the next section, the auger's run-out) does not overfill it at a high flow; 0 switches the lead
+      off;
+    * ``rise_tau_s``: time constant of the filter on each section's measured rise rate, s;
+    * ``fallback_sigma_m``: with the fused estimator, the controller fills on its dead-reckoned estimate (the
+      delivered volume placed at the impact predicted from Machine Sync's relative pose) while the target
+      section's 1-sigma stays at most this; beyond it the auger is switched off and the controller holds (no
+      nudges) until a measurement brings the confidence back, and says why (``dyn_state.hold_reason``);
+    * ``feedforward``: feed the steady-state off-tracking of the cart in a turn forward into the auger target
+      (from the combine's known yaw rate ``feedforward_lead_s`` ahead), instead of waiting for the learnt bias;
+    * ``feedforward_lead_s``: how far ahead the turn is anticipated, s.
+    """
+
+    full_lead_s: NonNegFloat = 1.0
+    slow_flow: float = Field(default=0.3, gt=0.0, le=1.0, allow_inf_nan=False)
+    lead_allowance_m: NonNegFloat = 0.06
+    rise_tau_s: PosFloat = 2.0
+    fallback_sigma_m: PosFloat = 0.05
+    feedforward: bool = True
+    feedforward_lead_s: NonNegFloat = 2.0
+
+
 class Controller(Model):
     """Offloading controller: operator inputs and the section grid.
 
@@ -66,6 +93,7 @@ class Controller(Model):
     dynamics_proc.controller) or a plug-in implementing dynamics_proc.control_protocol. ``fmu`` (for either)
     names the FMU ``fmu`` (docs/fmu.md). ``strategy_options`` / ``model_options``: keyword arguments the
     plug-in is called with (a strategy) or made with (a controller factory), checked against its signature.
+    ``coping``: how the built-in controller copes with field conditions (:class:`Coping`).
     """
 
     target_fill_m: PosFloat = 1.9
@@ -83,6 +111,7 @@ class Controller(Model):
     edge_margin_m: NonNegFloat = 0.2
     min_section_cells: int = Field(default=4, ge=1)
     fusion: Fusion = Fusion()
+    coping: Coping = Coping()
     fmu: Fmu | None = None
 
     @model_validator(mode="after")

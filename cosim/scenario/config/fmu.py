@@ -8,7 +8,7 @@ Where it is used:
 * ``controller.fmu`` with ``controller.model: fmu``: the offloading controller; with ``controller.strategy:
   fmu``: the fill strategy.
 
-Whether the file is an FMI 2.0 co-simulation FMU and whether every mapped variable exists with the right
+Whether the file is an FMI 2.0 or 3.0 co-simulation FMU and whether every mapped variable exists with the right
 causality is checked when the scenario is loaded (``cosim.fmi.check``), each problem at its YAML line.
 """
 from __future__ import annotations
@@ -38,7 +38,11 @@ class Fmu(Model):
 
     * ``path``: the ``.fmu`` file, relative to the scenario file;
     * ``inputs`` / ``outputs``: our signal name -> FMU variable name (causality ``input`` / ``output``); for
-      per-section signals the FMU name holds ``{k}``, replaced by the section number 1..N;
+      per-section signals the FMU name holds ``{k}``, replaced by the section number (1..N; 0..N-1 with
+      ``index_base: 0``), or, in an FMI 3.0 FMU, names an array of N elements;
+    * ``index_base``: how the FMU numbers sections, in its per-section names and in its section values (the
+      strategy's ``section`` and ``current_section``, the controller's ``target_section``): 1 (1..N, 0 for none)
+      or 0 (0..N-1, -1 for none, as the Python strategy protocol does);
     * ``initial``: our initial value -> FMU variable (causality ``parameter`` or ``input``) set before the
       FMU is initialised, so that it starts where the built-in model starts;
     * ``parameters``: FMU variable (causality ``parameter``) -> value, set before initialisation;
@@ -54,12 +58,13 @@ class Fmu(Model):
     parameters: dict[str, ParameterValue] = {}
     step: FmuStep | None = None
     instance_name: str = Field(default="graincosim", pattern=_NAME, max_length=64)
+    index_base: Literal[0, 1] = 1
 
     def __hash__(self) -> int:
         # frozen records are hashable (the scenario is a cache key); the mappings hash as their items
         return hash((self.path, *(tuple(getattr(self, k).items()) for k in ("inputs", "outputs", "initial",
                                                                               "parameters")),
-                     self.step, self.instance_name))
+                     self.step, self.instance_name, self.index_base))
 
 
 class TractorCart(Model):

@@ -11,6 +11,7 @@ from .cameras import DEPTH_KINDS, Camera, LidarSensor, SensorMap, Sensors, Stere
 from .control import Controller, Grain, Integrator
 from .fmu import Vehicles
 from .machines import Auger, Cart, Combine, Crop, MachineSync, Tractor
+from .outcome import Outcome
 from .rendering import Render
 from .sensing import Perception, Sensor
 
@@ -97,6 +98,7 @@ class Scenario(Model):
     render: Render = Render()
     perception: Perception = Perception()
     outputs: Outputs = Outputs()
+    outcome: Outcome = Outcome()
     #: folder searched first for plug-in modules named by import path (the loader sets it to the scenario
     #: file's folder; '' only sys.path); carried to the run's processes so that they import the same code
     plugin_dir: str = ""
