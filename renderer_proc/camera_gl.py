@@ -34,6 +34,10 @@ __all__ = ["FAR_M", "GLCameraRenderer", "camera_fragment_source"]
 FAR_M = 400.0
 #: floats per camera instance record: the LiDAR renderer's 19 (mat4, rgb) and (label, material)
 CAMERA_INSTANCE_FLOATS = 21
+#: a view is drawn in horizontal strips of at most this many pixels, each finished before the next: a GL call
+#: holds the Python GIL until llvmpipe is done, and a whole textured 1024 x 544 view on a loaded machine can
+#: take longer than the run's liveness limit (a child's heartbeat thread needs the GIL every 0.1 s)
+STRIP_PIXELS = 1 << 17
 _NAN = float("nan")
 
 
@@ -173,6 +177,16 @@ class GLCameraRenderer(GLResources):
         for fbo, colour in v.clears:
             fbo.clear(*colour, depth=1.0)
         v.draw.use()
+        w, h = v.size
+        rows = max(1, STRIP_PIXELS // w)
+        for y0 in range(0, h, rows):
+            v.draw.scissor = (0, y0, w, min(rows, h - y0))
+            self._draw_parts()
+            self.ctx.finish()                           # the strip done: the GIL is free between strips
+        v.draw.scissor = None
+
+    def _draw_parts(self) -> None:
+        """Draw every part into the framebuffer in use (solids culled, meshes two-sided)."""
         self.ctx.enable(self._cull)
         vao, _, n = self._unit["cyl"]
         if n:
