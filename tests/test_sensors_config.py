@@ -129,3 +129,16 @@ def test_the_mock_scales_camera_images_and_keeps_the_field_of_view():
     assert (pin.width, pin.height) == (160, 120) and pin.hfov_rad == pytest.approx(1.0471975511965976)
     gl = Scenario.model_validate_json(s.model_copy(update={"renderer": "gl"}).model_dump_json())
     assert (camera_pinhole(gl.cameras["tof"], gl).width, camera_pinhole(gl.cameras["tof"], gl).height) == (640, 480)
+
+
+def test_compare_sets_the_method_of_a_named_lidar_and_keeps_cameras():
+    """launch.py compare's paper-style run uses the camera rig: on the LiDAR of sensors: too; a camera-only
+    scenario keeps its cameras; a stereo scenario given no renderer compares under GL (the mock has no texture)."""
+    from cosim.studies.compare import variants
+
+    s = load_scenario_text(text(f"  mast:\n    kind: lidar\n    method: beam_native\n  spout:\n    kind: "
+                                f"stereo_camera\n    mount: {MOUNT}\n", "renderer: none\nfeedback: ground_truth\n"))
+    v = variants(s)
+    assert v["perception_paper"].lidar.method == "camera_rig" and v["perception_fused"].lidar.method == "beam_native"
+    assert v["perception_paper"].sensor == s.sensor and set(v["perception_paper"].sensors) == {"mast", "spout"}
+    assert {x.renderer for x in v.values()} == {"gl"}
