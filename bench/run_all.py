@@ -4,9 +4,12 @@ What it measures (each figure names its source in the Markdown):
 
 * the default run (``python launch.py run default``: GL, perception feedback) and the same scenario's
   ground-truth-only run (``--feedback ground_truth --renderer none``), ``--rounds`` of each, interleaved
-  (A B, B A, ...): whole-process wall time and the ring's real-time factor (medians), and their ratio, the
-  perception run's cost over ground truth: the ratio of the medians, and the median (and range) of each
-  round's own ratio, which cancels the VM's speed drifting between rounds (it drifts by up to 2x within an hour);
+  (A B, B A, ...): whole-process wall time, the CPU time of the whole process tree (the launcher, its children
+  and theirs, reaped by this script as their subreaper, so a process that outlives its parent is counted too)
+  and the ring's real-time factor (medians), and the perception run's cost over ground truth in wall time and
+  in CPU time: the ratio of the medians, and the median (and range) of each round's own ratio, which cancels
+  the VM's speed drifting between rounds (it drifts by up to 2x within an hour); the targets (at most
+  :data:`TARGET_WALL` and :data:`TARGET_CPU`, medians of the rounds' own ratios) are checked;
 * from the first default run's summary: fill (section peaks, max overfill, profile RMSE, time to target),
   spill, mass balance, and the LiDAR range error against the exact ray cast (mean, median, p99, max, share
   above 5 cm and p99 in 2-15 m); the ground-truth run's section peaks;
@@ -25,6 +28,7 @@ import argparse
 import json
 import os
 import platform
+import resource
 import statistics
 import subprocess
 import sys
@@ -40,24 +44,66 @@ __all__ = ["RUNS", "launch", "main", "render_markdown", "step_ratio"]
 
 #: the two runs whose wall times are compared: label -> extra launch.py arguments
 RUNS = {"perception": [], "ground_truth": ["--feedback", "ground_truth", "--renderer", "none"]}
+#: the perception run's cost over the ground-truth run that the project aims at (medians of the rounds' own ratios)
+TARGET_WALL, TARGET_CPU = 2.0, 3.0
+#: how long the reaping waits for the processes that outlive a run's launcher (its resource tracker), s
+REAP_S = 5.0
+#: prctl option that makes this process the subreaper of its descendants
+_PR_SET_CHILD_SUBREAPER = 36
 #: full and quick settings: simulated seconds per run, interleaved rounds, sample frames of the step ratio
 FULL = {"duration": 120.0, "rounds": 5, "frames": 40}
 QUICK = {"duration": 3.0, "rounds": 1, "frames": 2}
 
 
+def become_subreaper() -> bool:
+    """Make this process the subreaper of its descendants (Linux), so that the CPU time of a process that
+    outlives its parent (reparented here, reaped by :func:`reap`) is counted; False where it cannot."""
+    try:
+        import ctypes
+
+        return ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+def reap(timeout_s: float = REAP_S) -> None:
+    """Wait for every remaining child (orphans reparented here included), up to ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            pid, _ = os.waitpid(-1, os.WNOHANG)
+        except ChildProcessError:
+            return
+        if pid == 0:
+            if time.monotonic() > deadline:
+                return
+            time.sleep(0.01)
+
+
+def tree_cpu_s() -> float:
+    """CPU time (user + system, s) of every child this process has reaped so far, and of their reaped children."""
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
 def launch(scenario: str, duration: float, extra: list[str]) -> dict:
-    """One ``launch.py run`` from this tree: {"wall_s": whole process, "summary": summary.json}."""
+    """One ``launch.py run`` from this tree: {"wall_s": whole process, "cpu_s": its whole process tree's CPU,
+    "summary": summary.json}."""
     with tempfile.TemporaryDirectory(prefix="run-all-") as tmp:
         out = Path(tmp) / "run"
         cmd = [sys.executable, "launch.py", "run", scenario, "--duration", str(duration), "--out", str(out),
                "--quiet", *extra]
+        reap(0.0)
+        c0 = tree_cpu_s()
         t0 = time.perf_counter()
         proc = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         wall = time.perf_counter() - t0
+        reap()
+        cpu = tree_cpu_s() - c0
         if proc.returncode != 0:
             raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}): {proc.stderr[-2000:]}")
         summary = json.loads((out / "summary.json").read_text())
-    return {"wall_s": wall, "summary": summary}
+    return {"wall_s": wall, "cpu_s": cpu, "summary": summary}
 
 
 def _fill(summary: dict) -> dict:
@@ -114,15 +160,20 @@ def measure(scenario: str, duration: float, rounds: int, frames: int, renderer: 
             print(f"round {r + 1} {lab}: {runs[lab][-1]['wall_s']:.1f} s", file=sys.stderr, flush=True)
     out = {}
     for lab, rs in runs.items():
-        out[lab] = {"wall_s": _med(rs, lambda x: x["wall_s"]),
+        out[lab] = {"wall_s": _med(rs, lambda x: x["wall_s"]), "cpu_s": _med(rs, lambda x: x["cpu_s"]),
                     "ring_wall_s": _med(rs, lambda x: x["summary"]["wall_time_s"]),
                     "real_time_factor": _med(rs, lambda x: x["summary"]["real_time_factor"]),
                     "fill": _fill(rs[0]["summary"])}
     out["perception"]["range_error"] = _range_error(runs["perception"][0]["summary"])
-    paired = [a["wall_s"] / b["wall_s"] for a, b in zip(runs["perception"], runs["ground_truth"])]
+    pairs = list(zip(runs["perception"], runs["ground_truth"]))
+    paired = {k: [a[k] / b[k] for a, b in pairs] for k in ("wall_s", "cpu_s")}
     out["ratio"] = {"wall": out["perception"]["wall_s"] / out["ground_truth"]["wall_s"],
+                    "cpu": out["perception"]["cpu_s"] / out["ground_truth"]["cpu_s"],
                     "ring_wall": out["perception"]["ring_wall_s"] / out["ground_truth"]["ring_wall_s"],
-                    "wall_paired": {"median": statistics.median(paired), "min": min(paired), "max": max(paired)}}
+                    "wall_paired": _spread(paired["wall_s"]), "cpu_paired": _spread(paired["cpu_s"])}
+    out["targets"] = {"wall": TARGET_WALL, "cpu": TARGET_CPU,
+                      "wall_met": out["ratio"]["wall_paired"]["median"] <= TARGET_WALL,
+                      "cpu_met": out["ratio"]["cpu_paired"]["median"] <= TARGET_CPU}
     out["lidar_step"] = step_ratio(frames, renderer)
     out["meta"] = {"scenario": scenario, "duration_s": duration, "rounds": rounds, "renderer": renderer,
                    "written_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
@@ -130,6 +181,10 @@ def measure(scenario: str, duration: float, rounds: int, frames: int, renderer: 
                    "python": platform.python_version(), "load_average": [load0, os.getloadavg()[0]],
                    "commit": _commit()}
     return out
+
+
+def _spread(values: list[float]) -> dict:
+    return {"median": statistics.median(values), "min": min(values), "max": max(values)}
 
 
 def _commit() -> str | None:
@@ -160,16 +215,21 @@ def render_markdown(res: dict, quick: bool = False) -> str:
     ]
     if quick:
         lines += ["**Quick mode: short runs, a check of the script, not the headline figures.**", ""]
+    r, t = res["ratio"], res["targets"]
     lines += [
-        "| run | wall s (whole process) | ring wall s | real-time factor (ring) |", "|---|---:|---:|---:|",
-        f"| default (perception feedback, renderer {m['renderer']}) | {p['wall_s']:.2f} | {p['ring_wall_s']:.2f} "
-        f"| {p['real_time_factor']:.2f} |",
-        f"| ground truth (`--feedback ground_truth --renderer none`) | {g['wall_s']:.2f} | {g['ring_wall_s']:.2f} "
-        f"| {g['real_time_factor']:.2f} |", "",
-        f"Perception run over ground-truth run: **{res['ratio']['wall']:.2f}x** whole-process wall time (ratio of "
-        f"the medians; each round's own ratio: median {res['ratio']['wall_paired']['median']:.2f}x, "
-        f"{res['ratio']['wall_paired']['min']:.2f}-{res['ratio']['wall_paired']['max']:.2f}x), "
-        f"{res['ratio']['ring_wall']:.2f}x ring wall time.", "",
+        "| run | wall s (whole process) | CPU s (process tree) | ring wall s | real-time factor (ring) |",
+        "|---|---:|---:|---:|---:|",
+        f"| default (perception feedback, renderer {m['renderer']}) | {p['wall_s']:.2f} | {p['cpu_s']:.2f} | "
+        f"{p['ring_wall_s']:.2f} | {p['real_time_factor']:.2f} |",
+        f"| ground truth (`--feedback ground_truth --renderer none`) | {g['wall_s']:.2f} | {g['cpu_s']:.2f} | "
+        f"{g['ring_wall_s']:.2f} | {g['real_time_factor']:.2f} |", "",
+        f"Perception run over ground-truth run, each round's own ratio: **{r['wall_paired']['median']:.2f}x** "
+        f"whole-process wall time (median; {r['wall_paired']['min']:.2f}-{r['wall_paired']['max']:.2f}x; ratio of "
+        f"the medians {r['wall']:.2f}x), **{r['cpu_paired']['median']:.2f}x** CPU time of the process tree "
+        f"({r['cpu_paired']['min']:.2f}-{r['cpu_paired']['max']:.2f}x; ratio of the medians {r['cpu']:.2f}x); "
+        f"{r['ring_wall']:.2f}x ring wall time. Targets: wall at most {t['wall']:.1f}x "
+        f"({'met' if t['wall_met'] else 'NOT met'}), CPU at most {t['cpu']:.1f}x "
+        f"({'met' if t['cpu_met'] else 'NOT met'}).", "",
         "| fill | default | ground truth |", "|---|---:|---:|",
     ]
     for key, label in (("section_peak_min_m", "lowest section peak (m)"), ("section_peak_max_m",
@@ -199,6 +259,7 @@ def main(argv: list[str] | None = None) -> dict:
     a = ap.parse_args(argv)
     sys.path.insert(0, str(ROOT / "bench"))                     # beam_native's methods for the step ratio
     cfg = QUICK if a.quick else FULL
+    become_subreaper()
     res = measure(a.scenario, cfg["duration"], cfg["rounds"], cfg["frames"], a.renderer)
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / "results.json").write_text(json.dumps(res, indent=2) + "\n")

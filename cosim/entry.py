@@ -1,18 +1,41 @@
-"""The command-line entry shared by ``python launch.py`` and ``python -m cosim``: imports the CLI inside a guard so
-that Ctrl-C or SIGTERM while it is still importing exits 130 without a traceback, like any later moment."""
+"""The command-line entry shared by ``python launch.py``, ``python -m cosim`` and the ``graincosim`` command: imports
+the CLI inside a guard so that Ctrl-C or SIGTERM while it is still importing exits 130 without a traceback, like any
+later moment, and makes the three resolve modules alike (:func:`same_sys_path`)."""
+import os
 import signal
 import sys
 
-__all__ = ["run_cli"]
+__all__ = ["run_cli", "same_sys_path", "package_root"]
 
 #: exit status of a run stopped by Ctrl-C or SIGTERM (cosim.cli.EXIT_INTERRUPTED, which may not be imported yet)
 EXIT_INTERRUPTED = 130
 
 
+def package_root() -> str:
+    """The folder holding the ``cosim`` package (a checkout's root, or site-packages)."""
+    return os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def same_sys_path() -> None:
+    """Replace ``sys.path[0]``, the entry's own folder (launch.py's folder, the working directory for ``python -m``,
+    the scripts folder for ``graincosim``), by :func:`package_root`, so that plug-in modules (and everything else)
+    are found the same way whichever entry started the run: the scenario's ``plugin_dir`` first, then the
+    package's root, ``PYTHONPATH`` and site-packages; the working directory only when it is one of them."""
+    if sys.path and not sys.flags.safe_path:         # python -P prepends nothing: then sys.path[0] is not ours
+        sys.path[0] = package_root()
+    elif package_root() not in sys.path:
+        sys.path.insert(0, package_root())
+
+
 def run_cli() -> int:
     """Run :func:`cosim.cli.main` on ``sys.argv``; the process exit status."""
+    same_sys_path()
     signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
+        # the ring members' fork server imports their common modules while the command line loads
+        from cosim.runtime.procstart import prestart_for
+
+        prestart_for(sys.argv[1:])
         from cosim.cli import main
 
         code = main()

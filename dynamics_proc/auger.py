@@ -131,31 +131,39 @@ def _surface_at(x: float, y: float, h: np.ndarray, cell: float, a: AugerParams) 
     return -a.floor_height_m, SURFACE_GROUND
 
 
-def _points(spout: np.ndarray, vel: np.ndarray, s: np.ndarray) -> np.ndarray:
+def _points(spout: np.ndarray, vel: np.ndarray, s: np.ndarray, gravity: np.ndarray | None = None) -> np.ndarray:
+    """Points (n, 3) of the parabola at times ``s`` (n,): gravity along -z, or the vector ``gravity`` (3,) m/s^2."""
     p = spout + vel * s[:, None]
-    p[:, 2] -= (0.5 * GRAVITY_MPS2) * s * s
+    if gravity is None:
+        p[:, 2] -= (0.5 * GRAVITY_MPS2) * s * s
+    else:
+        p += (0.5 * gravity) * (s * s)[:, None]
     return p
 
 
 def first_surface(spout: np.ndarray, vel: np.ndarray, grid_from_world: np.ndarray, h: np.ndarray, cell: float,
-                  a: AugerParams) -> Impact:
+                  a: AugerParams, tilted: bool = False) -> Impact:
     """First crossing of the parabola spout + vel s + g s^2/2 (world, m, m/s) with the surfaces.
 
     ``grid_from_world`` (4, 4): cart grid frame from world. ``h`` (nx, ny) grain heights m. The crossing is
     bracketed on a coarse sampling from where the stream falls through the highest surface down to the ground
-    and refined once (time resolution ~4e-4 of that interval, sub-millimetre).
+    and refined once (time resolution ~4e-4 of that interval, sub-millimetre). ``tilted``: the cart grid frame
+    is not level (a cart on the terrain), so gravity has components along the floor: the parabola is built with
+    gravity rotated into the grid frame (the vertical fall times then use its z component).
     """
     r, t = grid_from_world[:3, :3], grid_from_world[:3, 3]
-    sg, vg = r @ spout + t, r @ vel                  # the cart grid frame is the world turned about z: g stays -z
+    sg, vg = r @ spout + t, r @ vel                  # level, the grid frame is the world turned about z: g stays -z
+    grav = r @ np.array([0.0, 0.0, -GRAVITY_MPS2]) if tilted else None
+    g_fall = -float(grav[2]) if tilted else GRAVITY_MPS2
     vz, z0 = float(vg[2]), float(sg[2])
-    t_ground = _fall_time(z0, vz, -a.floor_height_m) * 1.0001
+    t_ground = _fall_time(z0, vz, -a.floor_height_m, g_fall) * 1.0001
     # nothing can be hit above the highest surface: start the search where the stream falls through it
     z_top = max(a.rim_top_m, float(h.max()))
-    lo, hi = _fall_time(z0, vz, z_top) if z0 > z_top else 0.0, t_ground
+    lo, hi = _fall_time(z0, vz, z_top, g_fall) if z0 > z_top else 0.0, t_ground
     d_lo = d_hi = 0.0
     for n in (_COARSE, _FINE):
         s = np.linspace(lo, hi, n)
-        g = _points(sg, vg, s)
+        g = _points(sg, vg, s, grav)
         z = _surface(g, h, cell, a)
         d = g[:, 2] - z                               # height above the surface below, m
         below = np.flatnonzero(d <= 0.0)
@@ -171,15 +179,17 @@ def first_surface(spout: np.ndarray, vel: np.ndarray, grid_from_world: np.ndarra
     sx, sy, _ = sg.tolist()
     vx, vy, _ = vg.tolist()
     gx, gy = sx + vx * s_hit, sy + vy * s_hit         # _points' arithmetic for one point
+    if tilted:
+        gx, gy = gx + 0.5 * float(grav[0]) * s_hit * s_hit, gy + 0.5 * float(grav[1]) * s_hit * s_hit
     z, code = _surface_at(gx, gy, h, cell, a)
     g = np.array([gx, gy, z])                          # on the surface it crossed (sub-millimetre correction)
     w = (g - t) @ r
     return Impact(world=w, grid=g, time_s=s_hit, surface=code)
 
 
-def _fall_time(z0: float, vz: float, z: float) -> float:
-    """Time s for z0 + vz s - g s^2 / 2 to come down to z (<= z0), m, m/s."""
-    return (vz + math.sqrt(vz * vz + 2.0 * GRAVITY_MPS2 * max(z0 - z, 0.0))) / GRAVITY_MPS2
+def _fall_time(z0: float, vz: float, z: float, g: float = GRAVITY_MPS2) -> float:
+    """Time s for z0 + vz s - g s^2 / 2 to come down to z (<= z0), m, m/s (``g`` m/s^2: the vertical part)."""
+    return (vz + math.sqrt(vz * vz + 2.0 * g * max(z0 - z, 0.0))) / g
 
 
 def stream_rows(spout: np.ndarray, vel: np.ndarray, t_impact: float, radius_m: float,
@@ -193,14 +203,20 @@ def stream_rows(spout: np.ndarray, vel: np.ndarray, t_impact: float, radius_m: f
     return out
 
 
-def landing_xy(spout: np.ndarray, vel: np.ndarray, z_plane: float) -> tuple[float, float]:
-    """x and y of :func:`landing_point` (same arithmetic on Python floats, so the same bits), m."""
+def landing_xy(spout: np.ndarray, vel: np.ndarray, z_plane: float,
+               gravity: np.ndarray | None = None) -> tuple[float, float]:
+    """x and y of :func:`landing_point` (same arithmetic on Python floats, so the same bits), m. ``gravity`` (3,)
+    m/s^2 in the inputs' frame (a tilted cart's grid frame); None: -z."""
     sx, sy, sz = spout.tolist()
     if sz <= z_plane:
         return sx, sy
     vx, vy, vz = vel.tolist()
-    s = _fall_time(sz, vz, z_plane)
-    return sx + vx * s, sy + vy * s
+    if gravity is None:
+        s = _fall_time(sz, vz, z_plane)
+        return sx + vx * s, sy + vy * s
+    gx, gy, gz = gravity.tolist()
+    s = _fall_time(sz, vz, z_plane, -gz)
+    return sx + vx * s + 0.5 * gx * s * s, sy + vy * s + 0.5 * gy * s * s
 
 
 def landing_point(spout: np.ndarray, vel: np.ndarray, z_plane: float) -> np.ndarray:

@@ -46,11 +46,13 @@ CONTROLLER_POINT = "controller.model"
 class Delivery:
     """What the machine knows of the grain it has delivered: the flow signal integrated since the start (m^3,
     with the scenario's ``controller.fusion.flow_meter_bias``), and the spout position and exit velocity in
-    the cart grid frame (m, m/s), from which the impact is predicted."""
+    the cart grid frame (m, m/s), from which the impact is predicted; on tilted ground also gravity in that frame
+    (the cart's tilt, as its inclination sensor knows it; None: level)."""
 
     delivered_m3: float
     spout: np.ndarray            # (3,) m, cart grid frame
     velocity: np.ndarray         # (3,) m/s, cart grid frame
+    gravity: np.ndarray | None = None  # (3,) m/s^2, cart grid frame; None: -z
 
 
 @dataclass(frozen=True)

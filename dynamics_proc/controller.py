@@ -263,7 +263,7 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
         vol = max(delivery.delivered_m3 - delivered, 0.0)
         delivered = delivery.delivered_m3
         if vol > 0.0 and est.started:
-            gx, gy = landing_on(est.height, delivery.spout, delivery.velocity, p.fusion.grid)
+            gx, gy = landing_on(est.height, delivery.spout, delivery.velocity, p.fusion.grid, delivery.gravity)
             est = predict(est, vol, gx, gy, p.fusion)
         else:
             est = predict(est, 0.0, 0.0, 0.0, p.fusion)

@@ -79,15 +79,16 @@ def initial_estimate(p: FusionParams) -> FillEstimate:
     return FillEstimate(np.full(shape, np.nan), np.full(shape, np.inf), ())
 
 
-def landing_on(h: np.ndarray, spout: np.ndarray, vel: np.ndarray, grid: GrainGrid) -> tuple[float, float]:
+def landing_on(h: np.ndarray, spout: np.ndarray, vel: np.ndarray, grid: GrainGrid,
+               gravity: np.ndarray | None = None) -> tuple[float, float]:
     """Where the stream from ``spout`` (3,) m with exit velocity ``vel`` (3,) m/s (cart grid frame, gravity
     along -z) lands on the height map ``h`` (nx, ny) m: the fixed point of "land on the plane at the height of
     the cell below the landing point", started from the highest cell. Returns grid (x, y) m (may lie outside
-    the grid: the stream then misses the cart)."""
+    the grid: the stream then misses the cart). ``gravity`` (3,) m/s^2 in that frame on a tilted cart (None: -z)."""
     z = float(np.max(h))
     x = y = 0.0
     for _ in range(LANDING_ITERATIONS):
-        x, y = landing_xy(spout, vel, z)
+        x, y = landing_xy(spout, vel, z, gravity)
         i, j = int(x // grid.cell_m), int(y // grid.cell_m)
         if not (0 <= i < grid.nx and 0 <= j < grid.ny):
             break

@@ -17,7 +17,7 @@ import numpy as np
 from cosim.errors import PluginFault
 from cosim.scenario.config import FMU_REF, Scenario
 from cosim.scenario.plugins import load_plugin
-from cosim.world.geometry import cart_grid_from_body, invert, vehicle_pose
+from cosim.world.geometry import POSE_3D_FIELDS, cart_grid_from_body, invert, vehicle_pose
 
 from . import auger as ag
 from .blocks import SECTION_FIELD
@@ -33,8 +33,10 @@ from .controller import ControllerParams, plugin_dir
 from .feedforward import turn_compensation
 from .fmus import Fmus
 from .grainfill import GrainGrid, deposit, initial_heights, resample, volume
+from .ground import Stance, machine_poses, planar_poses, spout_on_terrain, stance_of
 from .integrators import integrate, step_exponential_values
 from .machine_sync import SyncGains, cart_offset, sync_command
+from .tilt import Tilt, deposit_tilted, settle, tilt_of, tilted_cap
 from .vehicles import CX, CY, CYAW, DELTA, V, VehicleParams, cart_pose, initial_state, tractor_pose
 
 __all__ = ["ModelParams", "World", "SpoutGeometry", "initial_world", "step_frame", "truth_measurement", "signals",
@@ -69,6 +71,7 @@ class ModelParams:
     controller_ref: str              # controller.model as the scenario names it
     fmus: Fmus | None = None         # FMUs in place of built-in models (dynamics_proc.fmus)
     feedforward_lead_s: float = 0.0  # controller.coping.feedforward_lead_s: the turn anticipated this far ahead, s
+    stance: Stance | None = None     # the machines on the terrain (dynamics_proc.ground), None on flat ground
 
     @classmethod
     def from_scenario(cls, s: Scenario, fmus: Fmus | None = None) -> "ModelParams":
@@ -90,7 +93,8 @@ class ModelParams:
                    s.timing.steps_per_frame, s.timing.sensor_period_s, s.machine_sync.lateral_offset_m,
                    s.cart.interior_length_m / 2.0 - spout_x, s.crop.density, s.controller.fusion.flow_meter_bias,
                    controller, s.controller.model, fmus if fmus.vehicle or fmus.strategy else None,
-                   s.controller.coping.feedforward_lead_s)
+                   s.controller.coping.feedforward_lead_s,
+                   stance_of(s, s.tractor.rear_axle_x_m - s.tractor.hitch_offset_m))
 
 
 def _make_controller(factory, control: ControllerParams, s: Scenario) -> OffloadingController:
@@ -137,7 +141,10 @@ def _grid_from_world(x: np.ndarray, p: ModelParams) -> np.ndarray:
 
 
 def spout_grid(x: np.ndarray, p: ModelParams) -> SpoutGeometry:
-    """(spout world (3,), exit velocity world (3,), spout grid (3,), grid_from_world (4, 4)) for state x."""
+    """(spout world (3,), exit velocity world (3,), spout grid (3,), grid_from_world (4, 4)) for state x (on the
+    terrain: dynamics_proc.ground.spout_on_terrain)."""
+    if p.stance is not None:
+        return spout_on_terrain(x, p.vehicles, p.auger, p.grid_from_cart_body, p.stance)
     sp = ag.spout_world(float(x[CX]), float(x[CY]), float(x[CYAW]), p.auger)
     vel = ag.exit_velocity_world(float(x[CYAW]), p.auger)
     g = _grid_from_world(x, p)
@@ -147,7 +154,7 @@ def spout_grid(x: np.ndarray, p: ModelParams) -> SpoutGeometry:
 def _stream(spout: SpoutGeometry, h: np.ndarray, level: float, active: bool,
             p: ModelParams) -> tuple[ag.Impact, np.ndarray, int]:
     sp, vel, _, g = spout
-    imp = ag.first_surface(sp, vel, g, h, p.grid.cell_m, p.auger)
+    imp = ag.first_surface(sp, vel, g, h, p.grid.cell_m, p.auger, tilted=_tilt(spout) is not None)
     rows = ag.stream_rows(sp, vel, imp.time_s, p.auger.stream_radius_m * math.sqrt(max(level, 0.0)))
     return imp, rows, (ag.STREAM_ROWS if active else 0)
 
@@ -176,12 +183,24 @@ def truth_measurement(h: np.ndarray, p: ModelParams) -> np.ndarray:
     return resample(h, p.grid.cell_m, p.control.grid_cell_m, p.grid.length_m, p.grid.width_m)
 
 
-def _predicted_impacts(spg: np.ndarray, vg: np.ndarray,
-                       p: ModelParams) -> tuple[float, tuple[float, float], tuple[float, float]]:
-    """From the known geometry, the spout ``spg`` (3,) m and exit velocity ``vg`` (3,) m/s in the cart grid frame:
-    (drift along grid x m, landing grid xy at the target height, on the floor)."""
-    top = ag.landing_xy(spg, vg, p.control.target_m)
-    floor = ag.landing_xy(spg, vg, 0.0)
+def _tilt(spout: SpoutGeometry) -> Tilt | None:
+    """The cart's tilt (dynamics_proc.tilt) from the grid_from_world of ``spout``, None when level."""
+    g = spout[3]
+    return tilt_of(invert(g)) if g[2, 0] != 0.0 or g[2, 1] != 0.0 else None
+
+
+def _gravity_grid(spout: SpoutGeometry) -> np.ndarray | None:
+    """Gravity (3,) m/s^2 in the cart grid frame when the cart is tilted (its IMU knows it), else None."""
+    return spout[3][:3, :3] @ np.array([0.0, 0.0, -ag.GRAVITY_MPS2]) if _tilt(spout) is not None else None
+
+
+def _predicted_impacts(spg: np.ndarray, vg: np.ndarray, p: ModelParams,
+                       gravity: np.ndarray | None = None) -> tuple[float, tuple[float, float], tuple[float, float]]:
+    """From the known geometry, the spout ``spg`` (3,) m and exit velocity ``vg`` (3,) m/s in the cart grid frame
+    (``gravity`` (3,) there when the cart is tilted): (drift along grid x m, landing grid xy at the target height,
+    on the floor)."""
+    top = ag.landing_xy(spg, vg, p.control.target_m, gravity)
+    floor = ag.landing_xy(spg, vg, 0.0, gravity)
     drift = 0.5 * (top[0] + floor[0]) - float(spg[0])
     return drift, top, floor
 
@@ -193,9 +212,10 @@ def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
         p.fmus.begin_frame(w.frame + 1)
     _, vel, spg, g = w.spout
     vg = g[:3, :3] @ vel
-    drift, top, floor = _predicted_impacts(spg, vg, p)
+    gravity = _gravity_grid(w.spout)
+    drift, top, floor = _predicted_impacts(spg, vg, p, gravity)
     signal = w.setpoint[0] + p.signal_offset_m
-    delivery = Delivery(w.delivered_m3 * (1.0 + p.flow_meter_bias), spg, vg)
+    delivery = Delivery(w.delivered_m3 * (1.0 + p.flow_meter_bias), spg, vg, gravity)
     # the stream lands between these two points: both must be safely inside
     shifts, lateral = _turn_feedforward(w, p)
     inp = ControllerInput(w.t_s, w.frame, meas, float(spg[0]), (top, floor), drift, signal, delivery,
@@ -208,13 +228,20 @@ def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
         level, dv = ag.flow_advance(level, out.auger_on, p.dt_s, p.auger, out.flow)
         vol += dv
     spout = spout_grid(x, p)
-    imp, rows, n = _stream(spout, w.heights, level, vol > 0.0 or level > 0.0, p)
     h, spill, spill_outside = w.heights, 0.0, 0.0
+    tilt = _tilt(spout)
+    if tilt is not None:                             # the cart moved to a new tilt: the pile settles first
+        cap = tilted_cap(p.grid, tilt)
+        h, spill = settle(h, p.grid, tilt, cap)
+    imp, rows, n = _stream(spout, h, level, vol > 0.0 or level > 0.0, p)
     if vol > 0.0:
-        if imp.surface == ag.SURFACE_GRAIN:
+        if imp.surface != ag.SURFACE_GRAIN:
+            spill_outside = vol
+        elif tilt is None:
             h, spill = deposit(h, float(imp.grid[0]), float(imp.grid[1]), vol, p.grid, p.cap)
         else:
-            spill_outside = vol
+            h, deposit_spill = deposit_tilted(h, float(imp.grid[0]), float(imp.grid[1]), vol, p.grid, tilt, cap)
+            spill += deposit_spill
     return World(w.frame + 1, (w.frame + 1) * p.frame_dt_s, x, level, h, w.initial_m3, w.delivered_m3 + vol,
                  w.spilled_m3 + spill + spill_outside, w.spilled_outside_m3 + spill_outside, setpoint, ctrl, out, imp,
                  rows, n, spout, w.nudges + (out.nudge != 0))
@@ -282,6 +309,7 @@ def signals(w: World, p: ModelParams) -> dict[str, float]:
         "tractor_x_m": tx, "tractor_y_m": ty, "tractor_yaw_rad": tyaw, "tractor_speed_mps": float(x[V]),
         "tractor_steer_rad": float(x[DELTA]),
         "cart_x_m": px, "cart_y_m": py, "cart_yaw_rad": pyaw,
+        **_ground_fields(x, p),
         "spout_x_m": float(sp[0]), "spout_y_m": float(sp[1]), "spout_z_m": float(sp[2]),
         "auger_on": int(w.out.auger_on), "flow_level": w.flow_level,
         "flow_m3ps": w.flow_level * p.auger.flow_m3ps,
@@ -305,6 +333,19 @@ def signals(w: World, p: ModelParams) -> dict[str, float]:
     }
     d.update(zip(_section_names(p.control.sections), w.out.fullness.tolist()))
     return d
+
+
+#: the terrain fields of dyn_state on flat ground
+_LEVEL = {f"{n}_{f}": 0.0 for n in ("combine", "tractor", "cart") for f in POSE_3D_FIELDS}
+
+
+def _ground_fields(x: np.ndarray, p: ModelParams) -> dict[str, float]:
+    """``<body>_{z_m, roll_rad, pitch_rad}`` of the three bodies on the terrain (all 0.0 on flat ground)."""
+    if p.stance is None:
+        return _LEVEL
+    poses = machine_poses(p.stance, *planar_poses(x, p.vehicles))
+    return {f"{n}_{f}": v for n, pose in zip(("combine", "tractor", "cart"), poses)
+            for f, v in zip(POSE_3D_FIELDS, pose[3:])}
 
 
 @lru_cache(maxsize=4)

@@ -3,8 +3,9 @@
 ``start`` binds the views, ``step(frame)`` runs one frame and publishes ``dyn_state``, ``stream`` and
 ``heightmap_truth``; frame 0 publishes the initial state without integrating. Feedback (CONTRACTS.md): with
 ``feedback: perception`` the controller reads ``heightmap_perceived`` and acts on P(m - 1 - L) at frame m
-(L = ``timing.latency_frames``; a copy of each perception output is kept until used, read from the blocks as
-soon as published, which is one frame later when perception overlaps; a missing or stale
+(L = ``timing.latency_frames``; a copy of each perception output is kept under its frame stamp until used, read
+from the blocks at each frame: one frame later when perception overlaps, exactly P(m - 1 - L) under the
+pipelined schedule; a missing or stale
 output, or ``perc_state.cart_valid == 0``, is "no measurement"). With ``ground_truth`` it acts on the truth
 height map of frame m - 1 - L resampled to the controller grid. The participant also keeps its own record
 (``rows``, ``heights``) for in-process use. In-process, :meth:`DynamicsParticipant.set_input` changes a run-time
@@ -17,7 +18,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from cosim.errors import FrameMismatch
-from cosim.runtime.participant import perception_overlaps
 from cosim.scenario.config import Scenario
 
 from .blocks import WRITER, state_fields
@@ -43,8 +43,6 @@ class DynamicsParticipant:
         self.params = ModelParams.from_scenario(scenario)
         self.latency = scenario.timing.latency_frames
         self.perception = scenario.feedback == "perception"
-        #: perception publishes one turn late (cosim.runtime.participant): the block holds P(m - 2) at frame m
-        self._lag = 1 if perception_overlaps(scenario) else 0
         self.world: World | None = None
         self.rows: list[dict[str, float]] = []
         self._names = tuple(f.name for f in state_fields(scenario.controller.sections))
@@ -93,9 +91,11 @@ class DynamicsParticipant:
             self.world = initial_world(self.scenario, self.params)
         else:
             if self.perception:
-                # the freshest published output: P(frame - 1), or P(frame - 2) when perception overlaps
-                newest = frame - 1 - self._lag
-                self._history[newest] = self._read_perception(newest)
+                # the freshest published output, kept under its own frame until used: P(frame - 1), P(frame - 2)
+                # when perception overlaps, P(frame - 1 - L) under the pipelined schedule (cosim.runtime.pipeline)
+                got = self._read_perception()
+                if got is not None:
+                    self._history[got[0]] = got[1]
             meas = self._history.pop(frame - 1 - self.latency, None)
             for k in [k for k in self._history if k < frame - 1 - self.latency]:
                 del self._history[k]
@@ -133,14 +133,16 @@ class DynamicsParticipant:
         return {f"dyn_state.{k}": np.array([r[k] for r in self.rows], dtype=np.float64) for k in self._names}
 
     # -- internals ---------------------------------------------------------------------------------------
-    def _read_perception(self, want: int) -> np.ndarray | None:
+    def _read_perception(self) -> tuple[int, np.ndarray | None] | None:
+        """(frame, copy of the perceived map, or None for "no measurement") of the published perception output;
+        None before the first."""
         seg = self._seg
-        if want < 0 or self._perceived is None or seg.frame_of("heightmap_perceived") != want:
+        stamp = seg.frame_of("heightmap_perceived") if self._perceived is not None else -1
+        if stamp < 0:
             return None
-        if self._cart_valid is not None and (seg.frame_of("perc_state") != want
-                                             or not self._cart_valid.cart_valid):
-            return None
-        return np.array(self._perceived, dtype=np.float64)
+        if self._cart_valid is not None and (seg.frame_of("perc_state") != stamp or not self._cart_valid.cart_valid):
+            return stamp, None
+        return stamp, np.array(self._perceived, dtype=np.float64)
 
     def _apply_pending(self) -> None:
         w, p = self.world, self.params

@@ -21,7 +21,7 @@ from typing import Mapping
 import numpy as np
 
 from cosim.scenario.config import Cart, Scenario
-from cosim.world.geometry import apply, cart_body_from_grid, invert, vehicle_pose
+from cosim.world.geometry import apply, cart_body_from_grid, entity_pose, invert
 
 from .blocks import RANGE_BANDS_M, band_name
 from .orderstats import median_sorted, percentile_sorted
@@ -98,8 +98,7 @@ def world_from_parent(scenario: Scenario, state: Mapping[str, float]) -> np.ndar
     parent = scenario.lidar.mount.parent
     if parent == "world":
         return np.eye(4)
-    return vehicle_pose(float(state[f"{parent}_x_m"]), float(state[f"{parent}_y_m"]),
-                        float(state[f"{parent}_yaw_rad"]))
+    return entity_pose(state, parent)
 
 
 def exact_ranges(scenario: Scenario, state: Mapping[str, float], heightmap_truth: np.ndarray,
@@ -120,8 +119,7 @@ def true_corners_sensor(cart: Cart, state: Mapping[str, float], world_from_senso
     L, W = cart.interior_length_m, cart.interior_width_m
     zr = cart.interior_depth_m + cart.rim_height_m
     g = np.array([[0, 0, zr], [L, 0, zr], [L, W, zr], [0, W, zr]], dtype=np.float64)
-    world_from_grid = vehicle_pose(float(state["cart_x_m"]), float(state["cart_y_m"]),
-                                   float(state["cart_yaw_rad"])) @ cart_body_from_grid(cart)
+    world_from_grid = entity_pose(state, "cart") @ cart_body_from_grid(cart)
     return apply(invert(world_from_sensor) @ world_from_grid, g)
 
 

@@ -11,7 +11,9 @@ stratified sample, ``accuracy.sample_beams``; 0: all); that happens after the ou
 never feeds an estimate.
 
 The sensor's parent pose (the combine's GNSS) comes from ``dyn_state``; it places the perceived cart in the
-world and orients the towing direction. The cart itself is found from the points alone.
+world and orients the towing direction. The cart itself is found from the points alone; on uneven ground the
+points are first put in a level frame on the cart's ground plane from both machines' attitude and height
+(perception_proc.leveling).
 
 Overlap (``cosim.runtime.participant.perception_overlaps``, on by default when the latency allows): ``step(frame)``
 publishes the outputs kept from the previous frame, copies what it reads from the dynamics blocks and the
@@ -39,6 +41,7 @@ from cosim.world.sensors import world_from_parent
 from . import accuracy as acc
 from .blocks import ACCURACY_FIELDS, HEIGHTS_BLOCK, POINTS_BLOCK, STATE_BLOCK, WRITER, sensor_state_block
 from .cameras import PerceptionCameras
+from .leveling import level_from_parent
 from .pipeline import FrameResult, Perception
 from .sensor_report import record_of, sensor_values
 
@@ -171,8 +174,11 @@ class PerceptionParticipant:
         t1 = time.perf_counter()
         cams = self.cameras.frames(cam_images, state)
         wfp = world_from_parent(pipe.level_parent, state) if state else np.eye(4)
+        lfp = level_from_parent(self.scenario, state, pipe.level_parent)
+        if lfp is not None:                               # uneven ground: the level frame on the cart's plane
+            wfp = wfp @ invert(lfp)
         heading = self._heading(state, wfp)
-        res = pipe.perceive(ranges, heading, with_points=False, frame=frame, cameras=cams)
+        res = pipe.perceive(ranges, heading, with_points=False, frame=frame, cameras=cams, level_from_parent=lfp)
         self.last = res
         pipe.points(ranges, out=out.points)
         t2 = time.perf_counter()
@@ -180,7 +186,8 @@ class PerceptionParticipant:
             out.heights.fill(np.nan)
         else:
             out.heights[...] = res.heightmap.heights
-        values = self._outputs(frame, state, ranges, res, wfp)
+        lfs = pipe.level_from_sensor if lfp is None else lfp @ pipe.level_from_sensor
+        values = self._outputs(frame, state, ranges, res, wfp, lfs)
         values["lidar_ms"] = _MS_PER_S * (t1 - t0)
         values["perception_ms"] = _MS_PER_S * (t2 - t0)
         values.update({n: (0 if d == "i8" else math.nan) for n, _, d, _ in ACCURACY_FIELDS})
@@ -188,7 +195,7 @@ class PerceptionParticipant:
         lidar_acc = None
         if truth is not None:
             t3 = time.perf_counter()
-            values.update(self._accuracy(state, beams, clean_sample, res, wfp, *truth))
+            values.update(self._accuracy(state, beams, clean_sample, res, wfp, lfs, *truth))
             lidar_acc = values if pipe.n_beams else None
             values["acc_evaluated"] = 1
             values["accuracy_ms"] = _MS_PER_S * (time.perf_counter() - t3)
@@ -198,7 +205,8 @@ class PerceptionParticipant:
             if r is not None:
                 out.extra[blocks["measured"]], out.extra[blocks["points"]] = r.measured, r.record
         if self._sensor_blocks:
-            per = sensor_values(pipe, self.cameras, frame, state, ranges, values["lidar_ms"], res, lidar_acc, truth)
+            per = sensor_values(pipe, self.cameras, frame, state, ranges, values["lidar_ms"], res, lidar_acc, truth,
+                                lfp)
             out.records = {block: record_of(per[n], self.segment.view(block).array.dtype)
                            for n, block in self._sensor_blocks.items() if n in per}
         out.frame, out.values = frame, values
@@ -229,13 +237,13 @@ class PerceptionParticipant:
         d = invert(wfp)[:2, :2] @ np.array([math.cos(yaw), math.sin(yaw)])
         return float(d[0]), float(d[1])
 
-    def _outputs(self, frame: int, state: dict, ranges: np.ndarray, res: FrameResult, wfp: np.ndarray) -> dict:
-        pipe = self.pipeline
+    def _outputs(self, frame: int, state: dict, ranges: np.ndarray, res: FrameResult, wfp: np.ndarray,
+                 lfs: np.ndarray) -> dict:
         v: dict[str, float] = {"t_s": float(state.get("t_s", math.nan)), "frame": frame,
                                "valid_beams": int(np.count_nonzero(np.isfinite(ranges)))}
         cart = res.cart
         v["cart_valid"], v["cart_partial"] = int(cart.valid), int(cart.partial)
-        corners = (np.asarray(cart.corners) - pipe.level_from_sensor[:3, 3]) @ pipe.level_from_sensor[:3, :3]
+        corners = (np.asarray(cart.corners) - lfs[:3, 3]) @ lfs[:3, :3]
         for k in range(4):
             for i, a in enumerate("xyz"):
                 v[f"corner{k}_{a}_m"] = float(corners[k, i])
@@ -254,11 +262,11 @@ class PerceptionParticipant:
         return v
 
     def _accuracy(self, state: dict, beams: np.ndarray, clean: np.ndarray, res: FrameResult, wfp: np.ndarray,
-                  truth_h: np.ndarray, stream: np.ndarray) -> dict:
+                  lfs: np.ndarray, truth_h: np.ndarray, stream: np.ndarray) -> dict:
         """Accuracy fields of the frame: ``clean`` (K,) float32 m, the noise-free ranges of ``beams`` (K,);
         ``truth_h`` and ``stream``: copies of the frame's ``heightmap_truth`` and ``stream`` blocks."""
         sc, pipe = self.scenario, self.pipeline
-        wfs = wfp @ pipe.level_from_sensor
+        wfs = wfp @ lfs                                   # world_from_level @ level_from_sensor
         out = {}
         if pipe.n_beams:
             exact = acc.exact_ranges(sc, state, truth_h, stream, wfs, pipe.directions[beams])
@@ -268,7 +276,7 @@ class PerceptionParticipant:
         heights = res.heightmap.heights if res.heightmap is not None else np.full(pipe.grid, np.nan)
         out["heightmap_rmse_m"], out["heightmap_bias_m"], _ = acc.heightmap_error(heights, truth_grid)
         truth_corners = acc.true_corners_sensor(sc.cart, state, wfs)
-        est = (np.asarray(res.cart.corners) - pipe.level_from_sensor[:3, 3]) @ pipe.level_from_sensor[:3, :3]
+        est = (np.asarray(res.cart.corners) - lfs[:3, 3]) @ lfs[:3, :3]
         out["corner_error_m"] = acc.corner_error(est, truth_corners)
         out["impact_error_m"] = acc.impact_error(res.impact.xyz, state)
         return out

@@ -13,7 +13,7 @@ the *level frame*, the sensor's parent body frame (x forward, y left, z up from 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import numpy as np
@@ -225,33 +225,45 @@ class Perception:
 
     def perceive(self, ranges: np.ndarray, heading_xy=(1.0, 0.0), points_out: np.ndarray | None = None,
                  heights_out: np.ndarray | None = None, with_points: bool = True, frame: int = -1,
-                 cameras: Sequence[tuple[SensorFrame, np.ndarray]] = ()) -> FrameResult:
+                 cameras: Sequence[tuple[SensorFrame, np.ndarray]] = (),
+                 level_from_parent: np.ndarray | None = None) -> FrameResult:
         """Cart, height map and impact from the frame's ranges (N,) float32 (the LiDAR's; (0,) without one) and
         the ``cameras``' frames with their border flags [(SensorFrame, (M,) uint8)], merged in the level frame.
         ``heading_xy``: the towing direction in the level frame. ``points_out`` (N, 4) / ``heights_out``
         (nx, ny): optional destinations. ``with_points`` False leaves the ``lidar_points`` record out
         (``FrameResult.points`` is None): a caller that writes it straight into shared memory uses
-        :meth:`points`. ``frame``: named in a plug-in's fault."""
+        :meth:`points`. ``frame``: named in a plug-in's fault. ``level_from_parent`` (4, 4): this frame's level
+        frame on uneven ground (perception_proc.leveling; None: the parent's body frame)."""
         t0 = time.perf_counter()
         pts = self.points(ranges, out=points_out) if with_points or points_out is not None else None
         lvl = self.level_points(ranges)
         border = border_beams(ranges, self.shape)
+        frames = {f.name: f for f, _ in cameras}
+        depth = [(f, b) for f, b in cameras if len(f.points)]
+        merged, all_ranges = lvl, ranges
+        if depth:                                   # in the parent's body frame, where the own-vehicle box is
+            merged, all_ranges, border = merge([lvl] + [f.points for f, _ in depth],
+                                               [ranges] + [f.ranges for f, _ in depth],
+                                               [border] + [b for _, b in depth], self.own_box)
+        context = self.context
+        if level_from_parent is not None:
+            rot, shift = level_from_parent[:3, :3], level_from_parent[:3, 3]
+            lvl = lvl @ rot.T + shift
+            merged = merged @ rot.T + shift if depth else lvl
+            context = replace(context, level_from_sensor=level_from_parent @ self.level_from_sensor)
+            frames = {n: replace(f, points=f.points @ rot.T + shift, level_from_camera=None
+                                 if f.level_from_camera is None else level_from_parent @ f.level_from_camera)
+                      for n, f in frames.items()}
         sensors: dict[str, SensorFrame] = {}
         lidar_name = self.scenario.lidar_name
         if lidar_name is not None:
             sensors[lidar_name] = SensorFrame(lidar_name, "lidar", frame, lvl, ranges)
-        sensors.update({f.name: f for f, _ in cameras})
-        depth = [(f, b) for f, b in cameras if len(f.points)]
-        all_ranges = ranges
-        if depth:
-            lvl, all_ranges, border = merge([lvl] + [f.points for f, _ in depth],
-                                            [ranges] + [f.ranges for f, _ in depth],
-                                            [border] + [b for _, b in depth], self.own_box)
+        sensors.update(frames)
         t1 = time.perf_counter()
-        inp = PerceptionInput(frame, all_ranges, lvl, border, heading_xy, heights_out, sensors)
+        inp = PerceptionInput(frame, all_ranges, merged, border, heading_xy, heights_out, sensors)
         ref = self.scenario.perception.algorithm
         try:
-            out = check_output(self.algorithm(self.context, inp), self.grid, ref)
+            out = check_output(self.algorithm(context, inp), self.grid, ref)
         except PluginFault as e:
             raise e.at_frame(frame) from e.__cause__
         except Exception as e:  # noqa: BLE001 - the algorithm's failure ends the run with its name and cause

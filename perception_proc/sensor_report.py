@@ -33,12 +33,17 @@ def _own_map(pipe: Perception, points: np.ndarray, res: FrameResult) -> np.ndarr
                       sc.perception.min_points_per_cell, pipe.context.noise_sigma_m).heights
 
 
+def _levelled(points: np.ndarray, lfp: np.ndarray | None) -> np.ndarray:
+    return points if lfp is None else points @ lfp[:3, :3].T + lfp[:3, 3]
+
+
 def sensor_values(pipe: Perception, cams: PerceptionCameras, frame: int, state: Mapping[str, float],
                   ranges: np.ndarray, lidar_ms: float, res: FrameResult, lidar_acc: dict | None,
-                  truth: tuple[np.ndarray, np.ndarray] | None) -> dict[str, dict]:
+                  truth: tuple[np.ndarray, np.ndarray] | None, lfp: np.ndarray | None = None) -> dict[str, dict]:
     """Field values of every depth-giving sensor's record, by sensor name. ``ranges``: the LiDAR's (N,) m;
     ``lidar_acc``: its accuracy fields of ``perc_state`` on an evaluated frame, else None; ``truth``: copies of
-    (``heightmap_truth``, ``stream``) on an evaluated frame, else None."""
+    (``heightmap_truth``, ``stream``) on an evaluated frame, else None; ``lfp``: the frame's level_from_parent
+    on uneven ground (perception_proc.leveling), None on flat ground."""
     sc = pipe.scenario
     out: dict[str, dict] = {}
     nan_acc = {**cacc.NAN_STATS, **cacc.NAN_FILL, "acc_evaluated": 0}
@@ -62,7 +67,7 @@ def sensor_values(pipe: Perception, cams: PerceptionCameras, frame: int, state: 
                       "frac_above_5cm": lidar_acc["frac_above_5cm_2_15"],
                       "coverage": 1.0 - lidar_acc["beam_missing_frac"],
                       "spurious_frac": lidar_acc["beam_spurious_frac"]})
-            own = _own_map(pipe, level, res)
+            own = _own_map(pipe, _levelled(level, lfp), res)
             if own is not None:
                 v.update(cacc.fill_error(own, truth_grid))
         out[name] = v
@@ -73,8 +78,7 @@ def sensor_values(pipe: Perception, cams: PerceptionCameras, frame: int, state: 
         if scene is not None and cams.latest[p.name].frame.frame == frame:
             v.update(cams.depth_accuracy(p.name, scene, state, frame))
             v["acc_evaluated"] = 1
-            pts = cams.latest[p.name].frame.points.copy()
-            own = _own_map(pipe, pts, res)
+            own = _own_map(pipe, _levelled(cams.latest[p.name].frame.points, lfp), res)
             if own is not None:
                 v.update(cacc.fill_error(own, truth_grid))
         out[p.name] = v

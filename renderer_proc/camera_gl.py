@@ -19,7 +19,7 @@ import numpy as np
 
 from cosim.scenario.config.rendering import Lighting
 from cosim.world.camera import Pinhole
-from cosim.world.labels import ENTITY_LABEL, GRAIN, GRAIN_MAT, NONE, STEEL
+from cosim.world.labels import GRAIN, GRAIN_MAT, NONE, STEEL, mesh_label, mesh_material
 from cosim.world.lighting import sun_direction
 from cosim.world.meshes import box_instances, cylinder_instances, pack_instances, unit_cube, unit_cylinder
 from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, Scene
@@ -149,7 +149,7 @@ class GLCameraRenderer(GLResources):
             if mesh.name not in self._meshes:
                 self._meshes[mesh.name] = self._vao(mesh.vertices, mesh.faces, reserve=1)
             rec = _records(pack_instances(mesh.world_from_mesh[None], np.array([mesh.colour]), self._origin),
-                           np.array([ENTITY_LABEL.get(mesh.name, NONE)]), None)
+                           np.array([mesh_label(mesh.name)]), np.array([mesh_material(mesh.name)]))
             self._meshes[mesh.name][1].write(rec.tobytes())
             self._meshes[mesh.name][2] = 1
         self._mesh_names = [m.name for m in scene.meshes]

@@ -98,6 +98,7 @@ class RendererParticipant:
                 raise KeyError(f"renderer needs block {name!r} (written by dynamics), absent from this run")
         self.segment = segment
         self._state = segment.view("dyn_state")
+        self._state_names = self._state.array.dtype.names
         self._heights = segment.view("heightmap_truth")
         self._stream = segment.view("stream")
         self._outputs = []
@@ -133,8 +134,10 @@ class RendererParticipant:
             raise FrameMismatch(f"renderer expected dyn_state of frame {frame}, found frame {got}",
                                 process=WRITER, frame=frame)
         t0 = time.perf_counter()
-        state = self._state.as_dict()
-        scene = scene_from_state(self.scenario, state, self._heights, self._stream)
+        # the inputs copied first (the whole record in one read, the arrays a few KiB): under the pipelined
+        # schedule dynamics may write the next frame once this member writes its first output
+        state = dict(zip(self._state_names, self._state.array.item()))
+        scene = scene_from_state(self.scenario, state, self._heights.copy(), self._stream.copy())
         valid = total = 0
         if self.backend is not None:
             self.backend.set_scene(scene)

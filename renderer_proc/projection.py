@@ -14,7 +14,7 @@ import numpy as np
 
 from cosim.scenario.config.scenario import Scenario
 from cosim.world.camera import Pinhole, Rig
-from cosim.world.geometry import body_from_camera_axes, invert, mount_transform, vehicle_pose
+from cosim.world.geometry import body_from_camera_axes, entity_pose, invert, mount_transform
 
 __all__ = [
     "FAR_MARGIN",
@@ -47,8 +47,7 @@ def world_from_sensor(scenario: Scenario, state: Mapping[str, float]) -> np.ndar
     if m.parent == "world":
         parent = np.eye(4)
     else:
-        parent = vehicle_pose(float(state[f"{m.parent}_x_m"]), float(state[f"{m.parent}_y_m"]),
-                              float(state[f"{m.parent}_yaw_rad"]))
+        parent = entity_pose(state, m.parent)
     return parent @ mount_transform(m) @ body_from_camera_axes()
 
 

@@ -142,6 +142,9 @@ class Segment:
         self._owner = owner
         self._buf = buf
         self.header = np.ndarray((), HEADER_DTYPE, buffer=buf, offset=0)
+        #: called with no arguments before every :meth:`write` while set: the pipelined schedule
+        #: (cosim.runtime.pipeline) holds a member's first write of a frame until its readers have read the last
+        self.write_gate = None
         self._views: dict[str, object] = {}
         self._words: list[memoryview] = []
         #: each block header as int64 words [seq, frame, t_ns] (BLOCK_WORD): a word store is ~10x cheaper than a
@@ -250,7 +253,10 @@ class Segment:
 
     def write(self, name: str, frame: int) -> "BlockWrite":
         """``with seg.write(name, frame) as view:`` writes block ``name`` for ``frame`` under its seqlock (odd
-        while writing), then stamps the frame; a write that raises leaves the stamp as it was."""
+        while writing), then stamps the frame; a write that raises leaves the stamp as it was. The
+        :attr:`write_gate`, when set, runs first."""
+        if self.write_gate is not None:
+            self.write_gate()
         return BlockWrite(self._bwords[name], self._views[name], frame)
 
     def frame_of(self, name: str) -> int:

@@ -34,14 +34,15 @@ def test_figures_and_markdown_from_runs(monkeypatch):
     ra = _module()
     walls = {"perception": iter([(30.0, 12.0), (40.0, 14.0), (35.0, 13.0)]),
              "ground_truth": iter([(10.0, 2.0), (6.0, 3.0), (8.0, 4.0)])}
+    cpus = {"perception": iter([9.0, 12.0, 10.0]), "ground_truth": iter([3.0, 3.0, 5.0])}
     order = []
 
     def fake_launch(scenario, duration, extra):
         lab = "ground_truth" if "ground_truth" in extra else "perception"
         order.append(lab)
         wall, ring = next(walls[lab])
-        return {"wall_s": wall, "summary": _summary(ring, duration / ring, [1.894, 1.909] if lab == "perception"
-                                                    else [1.892, 1.903])}
+        return {"wall_s": wall, "cpu_s": next(cpus[lab]),
+                "summary": _summary(ring, duration / ring, [1.894, 1.909] if lab == "perception" else [1.892, 1.903])}
 
     monkeypatch.setattr(ra, "launch", fake_launch)
     monkeypatch.setattr(ra, "step_ratio", lambda frames, renderer: {
@@ -53,13 +54,19 @@ def test_figures_and_markdown_from_runs(monkeypatch):
     assert res["ratio"]["ring_wall"] == pytest.approx(13.0 / 3.0)
     # each round's own ratio (30/10, 40/6, 35/8): median 35/8, range 3.0 to 40/6
     assert res["ratio"]["wall_paired"] == pytest.approx({"median": 35.0 / 8.0, "min": 3.0, "max": 40.0 / 6.0})
+    # CPU: 9/3, 12/3, 10/5 -> median 3.0 (the target, met), ratio of the medians 10/3
+    assert res["ratio"]["cpu_paired"] == pytest.approx({"median": 3.0, "min": 2.0, "max": 4.0})
+    assert res["ratio"]["cpu"] == pytest.approx(10.0 / 3.0)
+    assert res["targets"] == {"wall": 2.0, "cpu": 3.0, "wall_met": False, "cpu_met": True}
     assert res["perception"]["real_time_factor"] == pytest.approx(120.0 / 13.0)
     assert res["perception"]["fill"]["section_peak_max_m"] == 1.909
     assert res["ground_truth"]["fill"]["section_peak_min_m"] == 1.892
     assert res["perception"]["range_error"]["median_m"] == 0.00097
     json.dumps(res, allow_nan=False)
     md = ra.render_markdown(res)
-    for text in ("**4.38x** whole-process wall time", "median 4.38x, 3.00-6.67x", "4.33x ring wall time", "| highest section peak (m) | 1.909 | 1.903 |",
+    for text in ("**4.38x** whole-process wall time", "3.00-6.67x; ratio of the medians 4.38x", "4.33x ring wall time",
+                 "**3.00x** CPU time of the process tree", "wall at most 2.0x (NOT met)", "CPU at most 3.0x (met)",
+                 "| highest section peak (m) | 1.909 | 1.903 |",
                  "median 0.97 mm", "p99 1.94 mm", "0.000 % of beams above 5 cm", "**0.50x**", "bench/HISTORY.md"):
         assert text in md
 
@@ -71,8 +78,8 @@ def test_quick_mode_writes_both_files(tmp_path):
     ra = _module()
     res = ra.main(["--quick", "--renderer", "mock", "--out", str(tmp_path)])
     on_disk = json.loads((tmp_path / "results.json").read_text())
-    assert on_disk["ratio"].keys() == {"wall", "ring_wall", "wall_paired"}
-    for v in (res["ratio"]["wall"], res["ratio"]["ring_wall"], res["lidar_step"]["ratio_cpu"],
+    assert on_disk["ratio"].keys() == {"wall", "cpu", "ring_wall", "wall_paired", "cpu_paired"}
+    for v in (res["ratio"]["wall"], res["ratio"]["cpu"], res["ratio"]["ring_wall"], res["lidar_step"]["ratio_cpu"],
               res["perception"]["real_time_factor"], res["ground_truth"]["real_time_factor"]):
         assert math.isfinite(v) and v > 0
     assert res["perception"]["range_error"]["frames_evaluated"] >= 1

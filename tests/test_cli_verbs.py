@@ -60,7 +60,7 @@ def test_view_and_replay_help_through_launch_py_and_python_m(how):
 
 def test_the_console_script_is_the_same_entry_point():
     scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
-    assert scripts["graincosim"] == "cosim.cli:main"
+    assert scripts["graincosim"] == "cosim.entry:run_cli"
 
 
 def test_list_prints_every_packaged_scenario_with_its_description():

@@ -32,7 +32,9 @@ def test_grid_from_scenario_and_bad_cell():
     g = GrainGrid.from_scenario(s)
     assert (g.nx, g.ny, g.cell_m) == (60, 30, 0.1)
     assert g.tan_repose == pytest.approx(math.tan(math.radians(23.0)))
-    bad = Scenario.model_validate({"format_version": 1, "grain": {"cell_m": 0.07}})
+    with pytest.raises(ValueError, match="does not divide the cart interior length"):   # the record refuses it
+        Scenario.model_validate({"format_version": 1, "grain": {"cell_m": 0.07}})
+    bad = s.model_copy(update={"grain": s.grain.model_copy(update={"cell_m": 0.07})})   # and so does the grid
     with pytest.raises(ValueError, match="does not divide the cart interior length"):
         GrainGrid.from_scenario(bad)
 

@@ -18,6 +18,7 @@ from cosim.runtime.launcher import EXIT_INTERRUPTED, EXIT_RUN_ERROR, launch
 from cosim.runtime.lockstep import RingPlan, Token
 from cosim.scenario.config import Scenario
 from cosim.testing import fakes
+from cosim.testing.processes import ring_children
 from shm_schema import Field, Schema, Segment, StructBlock
 
 ROLES = ("dynamics", "renderer", "perception")
@@ -31,9 +32,8 @@ def scenario(duration_s=1.0, handoff_timeout_s=30.0) -> Scenario:
 
 
 def children_of(pid: int) -> list[int]:
-    """Spawned worker processes of ``pid`` (not its resource tracker)."""
-    out = subprocess.run(["ps", "-o", "pid=,args=", "--ppid", str(pid)], capture_output=True, text=True).stdout
-    return [int(line.split()[0]) for line in out.splitlines() if "multiprocessing.spawn" in line]
+    """Worker processes of launcher ``pid`` (spawned, or forked by its fork server; not its resource tracker)."""
+    return ring_children(pid)
 
 
 def test_ring_order_is_the_recorded_trace(tmp_path, shm_clean):

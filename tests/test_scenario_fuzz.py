@@ -10,7 +10,8 @@ from hypothesis import strategies as st
 
 from cosim.errors import ScenarioError
 from cosim.scenario.config import Scenario
-from cosim.scenario.loader import _model_of, load_scenario_text
+from cosim.scenario.loader import load_scenario_text
+from cosim.scenario.overrides import model_of as _model_of
 
 
 def _known_keys(model=Scenario) -> list[str]:

@@ -57,3 +57,38 @@ def test_schema_rejects_bad_documents(doc, path, fragment):
     jsonschema = pytest.importorskip("jsonschema")
     errors = list(jsonschema.Draft202012Validator(scenario_json_schema()).iter_errors(doc))
     assert [(list(e.absolute_path), fragment in e.message) for e in errors] == [(path, True)], errors
+
+
+def _properties(schema: dict):
+    """(where, property schema) of every property of the schema and its definitions."""
+    for name, body in [("<root>", schema), *schema["$defs"].items()]:
+        for key, prop in body.get("properties", {}).items():
+            yield f"{name}.{key}", prop
+
+
+def test_every_property_has_a_description():
+    """Editors explain each key from the schema: every property carries a description (a field's docstring)."""
+    props = list(_properties(scenario_json_schema()))
+    assert len(props) > 150
+    missing = [where for where, prop in props if not str(prop.get("description", "")).strip()]
+    assert missing == [], f"{len(missing)} of {len(props)} properties have no description: {missing}"
+
+
+def test_every_numeric_property_is_bounded():
+    """Every number a scenario holds has a lower and an upper bound in the schema (its own, or its unit's)."""
+    def numeric(prop):
+        branches = prop.get("prefixItems") or [b for b in prop.get("anyOf", []) if b.get("type") != "null"] or [prop]
+        return [b for b in branches if b.get("type") in ("number", "integer") and not {"const", "enum"} & set(b)]
+
+    unbounded = [where for where, prop in _properties(scenario_json_schema()) for b in numeric(prop)
+                 if not (("minimum" in b or "exclusiveMinimum" in b) and ("maximum" in b or "exclusiveMaximum" in b))]
+    assert unbounded == []
+    timing = scenario_json_schema()["$defs"]["Timing"]["properties"]
+    assert timing["sensor_period_s"]["maximum"] == 1.0 and timing["handoff_timeout_s"]["maximum"] == 1e5
+
+
+def test_schema_describes_extends():
+    jsonschema = pytest.importorskip("jsonschema")
+    schema = scenario_json_schema()
+    assert "packaged scenario" in schema["properties"]["extends"]["description"]
+    assert list(jsonschema.Draft202012Validator(schema).iter_errors({"format_version": 1, "extends": "default"})) == []

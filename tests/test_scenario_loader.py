@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from cosim.errors import Problem, ScenarioError
-from cosim.scenario.config import Scenario
+from cosim.scenario.config import Scenario, Sensor
 from cosim.scenario.loader import (
     OPTIONS_FILE,
     SET_FILE,
@@ -33,7 +33,7 @@ def problems(text: str, overrides=(), **kw) -> list[Problem]:
 def test_problem_format_is_file_line_col_path_message():
     with pytest.raises(ScenarioError) as info:
         load_scenario_text("format_version: 1\ntiming:\n  sensor_period_s: -0.1\n", "dir/s.yaml")
-    assert str(info.value) == "dir/s.yaml:3:20: timing.sensor_period_s: Input should be greater than 0, got -0.1"
+    assert str(info.value) == "dir/s.yaml:3:20: timing.sensor_period_s: Input should be greater than 0 s, got -0.1 s"
 
 
 def test_problems_are_sorted_by_line_then_overrides():
@@ -115,7 +115,8 @@ def test_set_overrides_from_the_issue():
             "timing.sensor_period_s=0.05", "sensor.mount.xyz_m=[1,2,3]", "controller.strategy=lowest_first",
         ])
     assert s.timing.sensor_period_s == 0.05 and s.timing.latency_frames == 2  # sparse: the rest of timing stays
-    assert s.sensor.mount.xyz_m == (1.0, 2.0, 3.0) and s.sensor.mount.rpy_deg == (0.0, 0.0, 0.0)
+    # one field of a nested block: its siblings keep the block's default (the mast's orientation), not Mount()'s
+    assert s.sensor.mount.xyz_m == (1.0, 2.0, 3.0) and s.sensor.mount.rpy_deg == Sensor().mount.rpy_deg != (0, 0, 0)
     assert s.controller.strategy == "lowest_first"
 
 
@@ -189,6 +190,21 @@ def test_set_paths_resolve_against_the_working_directory(tmp_path, monkeypatch):
     assert str(tmp_path / "missing.obj") in got[0].message
 
 
+def test_every_relative_path_given_on_the_command_line_resolves_against_the_working_directory(tmp_path, monkeypatch):
+    """As documented (README, docs/CONTRACTS.md): --set and options against the working directory, the file's values
+    against the file's folder; plugin_dir and sensor.pattern.csv_file included."""
+    (tmp_path / "mods").mkdir()
+    (tmp_path / "beams.csv").write_text("elevation_deg,azimuth_deg\n0,0\n")
+    monkeypatch.chdir(tmp_path)
+    s = load_scenario(resolve_scenario_arg("default"), ["plugin_dir=mods", "sensor.pattern.preset=csv",
+                                                        "sensor.pattern.csv_file=beams.csv"], check_world=False)
+    assert s.plugin_dir == str(tmp_path / "mods") and s.sensor.pattern.csv_file == tmp_path / "beams.csv"
+    s = load_scenario_text("format_version: 1\n", extra={"plugin_dir": "mods"})
+    assert s.plugin_dir == str(tmp_path / "mods")
+    s = load_scenario_text("format_version: 1\nplugin_dir: mods\n", base_dir=REPO)
+    assert s.plugin_dir == str(REPO / "mods")
+
+
 def test_a_directory_is_not_a_mesh_file(tmp_path):
     (tmp_path / "d").mkdir()
     got = problems("format_version: 1\ncart:\n  mesh_file: d\n", base_dir=tmp_path)
@@ -231,5 +247,5 @@ def test_invalid_scenario_exits_2_without_traceback():
     assert run.returncode == 2 and run.stdout == ""
     assert "Traceback" not in run.stderr
     lines = run.stderr.splitlines()
-    assert lines[0] == f"{bad}:3:13: duration_s: Input should be greater than 0, got 0"
+    assert lines[0] == f"{bad}:3:13: duration_s: Input should be greater than 0 s, got 0 s"
     assert "<--set>:1:6: seed: Input should be greater than or equal to 0, got -1" in lines

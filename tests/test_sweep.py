@@ -73,7 +73,7 @@ HEAD = "format_version: 1\nset: {renderer: none, feedback: ground_truth, duratio
     ("grid:\n  timing.latency_frames: [1, '2']\n", r"sweep.yaml:4:30: grid.timing.latency_frames\[1\]: Input "
      r"should be a valid integer, got '2'"),
     ("grid:\n  timing.sensor_period_s: [0.1, -0.1]\n", r"sweep.yaml:4:33: grid.timing.sensor_period_s\[1\]: Input "
-     r"should be greater than 0, got -0.1"),
+     r"should be greater than 0 s, got -0.1 s"),
     ("zip:\n  combine.speed_mps: [1.0, 1.5]\n  timing.latency_frames: [1]\n", r"sweep.yaml:5:3: "
      r"zip.timing.latency_frames: zip parameters are varied together, so their lengths must be equal: "
      r"'timing.latency_frames' has 1, 'combine.speed_mps' has 2"),
@@ -87,6 +87,39 @@ HEAD = "format_version: 1\nset: {renderer: none, feedback: ground_truth, duratio
 def test_bad_sweep_files_are_rejected_with_their_lines(tmp_path, body, where):
     with pytest.raises(ScenarioError, match=where):
         load_sweep(_write(tmp_path, HEAD + body))
+
+
+@pytest.mark.parametrize("body, where", [
+    ("seeds: 1000000000000\n", r"sweep.yaml:3:1: seeds: 1,000,000,000,000 seeds: a sweep has at most 100,000 runs"),
+    ("grid:\n  combine.speed_mps: [{v}]\n  timing.latency_frames: [{v}]\n",
+     r"sweep.yaml:1:1: <root>: 1,000,000 runs: a sweep has at most 100,000"),
+    ("random:\n  combine.speed_mps: {{distribution: uniform, low: 1, high: 2, count: 1000000000000}}\n",
+     r"random.combine.speed_mps.count: Input should be less than or equal to 100000"),
+    ("grid:\n  combine.heading_deg: [.nan, 3]\n", r"sweep.yaml:4:25: grid.combine.heading_deg\[0\]: NaN is not a "
+                                                r"finite number"),
+    ("grid:\n  combine.heading_deg: [1e308, 3]\n", r"sweep.yaml:4:25: grid.combine.heading_deg\[0\]: 1e\+308 deg "
+                                                 r"is above 360 deg"),
+    ('name: "a\\eb"\n', r"sweep.yaml:3:7: name: text 'a\\x1bb' holds the control character U\+001B"),
+])
+def test_sizes_and_hostile_values_are_refused_before_anything_is_expanded(tmp_path, body, where):
+    """A count of 10^12 seeds or draws, or a grid of a million points, is refused before a list of that size is
+    built; NaN and control characters at their line."""
+    t = time.perf_counter()
+    with pytest.raises(ScenarioError, match=where):
+        load_sweep(_write(tmp_path, HEAD + body.format(v=", ".join(map(str, range(1, 1001))))))
+    assert time.perf_counter() - t < 30.0
+
+
+def test_plugin_modules_beside_the_sweep_file_are_found_with_a_packaged_base(tmp_path):
+    (tmp_path / "fill_here.py").write_text("def f(full, height, current):\n    return 0\n")
+    runs = load_sweep(_write(tmp_path, HEAD + "base: default\ngrid:\n  controller.strategy: [fill_here:f, "
+                                       "front_to_back]\n")).runs
+    assert [r.scenario.plugin_dir for r in runs] == [str(tmp_path)] * 2
+    # a base file keeps its own folder (its plug-ins live there), unless the sweep sets plugin_dir
+    (tmp_path / "scen").mkdir()
+    (tmp_path / "scen" / "base.yaml").write_text("format_version: 1\n")
+    [run] = load_sweep(_write(tmp_path, HEAD + "base: scen/base.yaml\n")).runs
+    assert run.scenario.plugin_dir == str(tmp_path / "scen")
 
 
 def test_every_problem_is_reported_at_once_and_the_cli_starts_nothing(tmp_path, capsys):

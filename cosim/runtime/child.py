@@ -1,7 +1,8 @@
 """Entry point of a participant's OS process (spawn context): attach, start, run the ring, report failures.
 
 The child ignores SIGINT (the launcher coordinates a clean stop), turns SIGTERM into SystemExit so that
-``close`` runs, asks the kernel to SIGTERM it if the launcher dies (PR_SET_PDEATHSIG), and appends its logs and
+``close`` runs, asks the kernel to SIGTERM it if its parent (the launcher, or the fork server that exits with the
+launcher: cosim.runtime.procstart) dies (PR_SET_PDEATHSIG), and appends its logs and
 stray stdout/stderr to the run's log.txt. From its attach on, a thread beats in its header slot
 (cosim.runtime.liveness.Heartbeat), so the launcher tells a stopped or deadlocked child from a slow one. Freed
 memory stays in the heap (cosim.runtime.heap), so per-frame arrays reuse warm pages. Any
@@ -29,6 +30,8 @@ from .heap import keep_heap
 from .liveness import Heartbeat
 from .lockstep import RingPlan, Token, member_loop
 from .logs import configure_logging
+from .pipeline import Gates, PipePlan
+from .pipeline import member_loop as pipelined_loop
 from .specs import ParticipantSpec
 
 __all__ = ["ChildArgs", "child_main"]
@@ -44,7 +47,7 @@ class ChildArgs:
     scenario_json: str
     segment: str
     fingerprint: str
-    plan: RingPlan
+    plan: RingPlan | PipePlan
     semaphores: Mapping[str, object]
     log_path: str
     parent_pid: int
@@ -62,6 +65,23 @@ def _die_with_parent() -> None:
         pass
 
 
+def _drop_fork_server_link() -> None:
+    """Close this process's copy of the launcher's end of the pipe the fork server watches (a forked child gets
+    one, so that it could fork more through the same server; cosim.runtime.procstart): with it closed the server
+    sees the launcher die, exits, and the kernel sends this process SIGTERM (PR_SET_PDEATHSIG). Nothing to do in a
+    spawned child."""
+    from multiprocessing import forkserver
+
+    server = getattr(forkserver, "_forkserver", None)
+    fd = getattr(server, "_forkserver_alive_fd", None)
+    if fd is not None:
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+        server._forkserver_alive_fd = None
+
+
 def _on_sigterm(signum, frame) -> None:
     raise SystemExit(143)
 
@@ -69,10 +89,14 @@ def _on_sigterm(signum, frame) -> None:
 def child_main(args: ChildArgs) -> None:
     """Run one participant in this process until the last frame, a failure or a stop."""
     t_main = time.time()
+    # the launcher, or the fork server it started its ring members from (cosim.runtime.procstart), which exits
+    # with it: either way a new parent means the launcher is gone
+    parent = os.getppid()
     keep_heap()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _on_sigterm)
     _die_with_parent()
+    _drop_fork_server_link()
     name = args.spec.name
     fd = os.open(args.log_path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
     os.dup2(fd, 1)
@@ -89,7 +113,7 @@ def child_main(args: ChildArgs) -> None:
     code = 0
 
     def check() -> None:
-        if os.getppid() != args.parent_pid:
+        if os.getppid() != parent:
             raise RunError(f"{name}: the launcher (pid {args.parent_pid}) is gone", process=name,
                            frame=int(slot["frame"]))
 
@@ -103,8 +127,13 @@ def child_main(args: ChildArgs) -> None:
         log.info("started (pid %d) %.2f s after its spawn: interpreter and imports %.2f s, create %.2f s, start %.2f s",
                  os.getpid(), t_ready - args.spawned_at_s, t_main - args.spawned_at_s, t_start - t_create,
                  t_ready - t_start)
-        member_loop(name, participant, seg, Token(seg, args.semaphores), args.plan,
-                    startup_timeout_s=args.startup_timeout_s, handoff_timeout_s=args.handoff_timeout_s, check=check)
+        if isinstance(args.plan, PipePlan):
+            pipelined_loop(name, participant, seg, Gates(seg, args.plan, args.semaphores, name, check), args.plan,
+                           startup_timeout_s=args.startup_timeout_s, handoff_timeout_s=args.handoff_timeout_s)
+        else:
+            member_loop(name, participant, seg, Token(seg, args.semaphores), args.plan,
+                        startup_timeout_s=args.startup_timeout_s, handoff_timeout_s=args.handoff_timeout_s,
+                        check=check)
         log.info("finished %d frames (cpu %.2f s)", args.plan.frames + 1, time.process_time())
     except BaseException as exc:  # noqa: BLE001 - every failure must reach the launcher with its traceback
         code = 143 if isinstance(exc, SystemExit) else 1

@@ -1,8 +1,8 @@
 """Launcher and supervisor of one run (docs/architecture.md): set-up, supervision, teardown.
 
 :func:`launch` reads as the run's lifecycle. :func:`_set_up` locks the run directory, writes scenario.yaml and a
-"running" summary, creates the segment and starts the observers, the sinks and one named process per ring
-member (spawn context). :func:`_supervise` closes the ring as the supervisor, recording each completed frame and
+"running" summary, creates the segment and starts the observers (spawned), the sinks and one named process per
+ring member (forked from a server that has imported their common modules, cosim.runtime.procstart). :func:`_supervise` closes the ring as the supervisor, recording each completed frame and
 appending the rows to disk in blocks (cosim.runtime.stream). :func:`_tear_down` ends every process in bounded
 time, writes the last rows, the maps and the final summary, and unlinks the segment.
 
@@ -40,6 +40,8 @@ from .lockstep import RingPlan, Token
 from .logs import configure_logging
 from .outcome import outcome_line
 from .outputs import default_run_dir, finish_outputs, write_figures, write_scenario
+from .pipeline import Gates, PipePlan, effective_schedule, supervise
+from .procstart import ring_context
 from .recorder import Recorder
 from .signals import StopSignals, no_sigint_in_children
 from .specs import SUPERVISOR, ParticipantSpec, build_schema, ring_specs
@@ -113,7 +115,8 @@ class _Run:
     log_path: Path = Path()
     ring: list = field(default_factory=list)
     schema: object = None
-    plan: RingPlan | None = None
+    plan: RingPlan | PipePlan | None = None
+    schedule_why: str = ""
     name: str = ""
     sems: dict = field(default_factory=dict)
     seg: Segment | None = None
@@ -179,19 +182,21 @@ def _set_up(run: _Run, console_log: bool, observers: Sequence[ObserverSpec],
     configure_logging(str(run.log_path), console=console_log)
     write_scenario(run.run_dir, scenario)
     schema = run.schema
-    run.plan = plan = RingPlan(tuple(s.name for s in run.ring), scenario.frames, SUPERVISOR,
-                               tuple(s.name for s in run.ring if s.defers_outputs(scenario)))
+    run.plan, run.schedule_why = _plan(scenario, run.ring, hold=bool(sinks))
+    plan = run.plan
     run.name = name = f"cosim-{os.getpid()}-{secrets.token_hex(3)}"
     write_running_summary(run.run_dir, {"scenario": scenario.name, "participants": list(plan.members),
                                         "seed": scenario.seed, "frames_planned": scenario.frames + 1,
                                         "launcher_pid": os.getpid()})
     stop.check(-1)
-    ctx = mp.get_context("spawn")
-    run.sems = {n: ctx.Semaphore(0) for n in (*plan.members, SUPERVISOR)}
+    ctx, ring_ctx = mp.get_context("spawn"), ring_context()       # observers spawned, ring members forked
+    pipelined = isinstance(plan, PipePlan)
+    run.sems = {n: ring_ctx.Semaphore(0) for n in (plan.semaphore_names if pipelined else (*plan.members, SUPERVISOR))}
     run.seg = seg = Segment.create(name, schema, run_id=run.run_dir.name, frames=scenario.frames)
     run.t_start = run.t_first = time.perf_counter()
-    log.info("run %s: segment %s (%d bytes, fingerprint %s), ring %s, %d frames", run.run_dir.name, name,
-             schema.total_nbytes, schema.fingerprint[:12], " -> ".join(plan.members), scenario.frames + 1)
+    log.info("run %s: segment %s (%d bytes, fingerprint %s), ring %s, %d frames, %s schedule (%s)", run.run_dir.name,
+             name, schema.total_nbytes, schema.fingerprint[:12], " -> ".join(plan.members), scenario.frames + 1,
+             "pipelined" if pipelined else "sequential", run.schedule_why)
     _write_run_json(run.run_dir, {"segment": name, "launcher_pid": os.getpid(), "fingerprint": schema.fingerprint,
                                   "participants": list(plan.members), "ended": False})
     seg.slot(SUPERVISOR)["pid"] = os.getpid()
@@ -212,12 +217,25 @@ def _set_up(run: _Run, console_log: bool, observers: Sequence[ObserverSpec],
         args = ChildArgs(spec, scenario_json, name, schema.fingerprint, plan, run.sems, str(run.log_path),
                          os.getpid(), scenario.timing.startup_timeout_s, scenario.timing.handoff_timeout_s + 5.0,
                          time.time())
-        p = ctx.Process(target=child_main, args=(args,), name=f"cosim-{spec.name}", daemon=True)
+        p = ring_ctx.Process(target=child_main, args=(args,), name=f"cosim-{spec.name}", daemon=True)
         with single_threaded_pools(), no_sigint_in_children(), children_allowed():
             p.start()
         run.procs[spec.name] = p
-    run.recorder = Recorder(seg, plan.members, deferred=bool(plan.deferred))
-    run.files = RunFiles(run.run_dir, run.recorder, lag=1 if plan.deferred else 0)
+    run.recorder = Recorder(seg, plan.members, deferred=bool(plan.deferred) or pipelined,
+                            schedule="pipelined" if pipelined else "sequential")
+    # the token ring records a deferred member's row one turn late; the pipelined one records whole frames
+    run.files = RunFiles(run.run_dir, run.recorder, lag=1 if plan.deferred and not pipelined else 0)
+
+
+def _plan(scenario: Scenario, ring: list[ParticipantSpec], *, hold: bool) -> tuple[RingPlan | PipePlan, str]:
+    """(plan, why) of the run's schedule (cosim.runtime.pipeline.effective_schedule): a token ring or a pipeline
+    plan; ``hold``: sinks read the segment at each completed frame, so the pipeline keeps it until they have."""
+    deferred = tuple(s.name for s in ring if s.defers_outputs(scenario))
+    reads = {s.name: s.reads_of(scenario) for s in ring}
+    schedule, why = effective_schedule(scenario, reads)
+    if schedule == "pipelined":
+        return PipePlan.build(reads, scenario.frames, supervisor=SUPERVISOR, deferred=deferred, hold=hold), why
+    return RingPlan(tuple(s.name for s in ring), scenario.frames, SUPERVISOR, deferred), why
 
 
 def _supervise(run: _Run, progress: Progress | None) -> None:
@@ -242,6 +260,9 @@ def _supervise(run: _Run, progress: Progress | None) -> None:
                 continue
             raise child_failure(n, p, seg)
 
+    if isinstance(plan, PipePlan):
+        _supervise_pipelined(run, progress, check)
+        return
     token = Token(seg, run.sems)
     first = plan.members[0]
     t_turn = time.monotonic_ns()
@@ -282,6 +303,29 @@ def _supervise(run: _Run, progress: Progress | None) -> None:
         for sink in run.frame_sinks:
             sink(seg, plan.flush_frame)
     sup["phase"] = Phase.DONE
+
+
+def _supervise_pipelined(run: _Run, progress: Progress | None, check: Callable[[], None]) -> None:
+    """:func:`_supervise` under the pipelined schedule: each member's blocks recorded as soon as it has published
+    a frame (cosim.runtime.pipeline.supervise), the frame's rows, sinks, files and progress once all have."""
+    scenario, seg, plan, recorder, stop = run.scenario, run.seg, run.plan, run.recorder, run.stop
+    warned: set[str] = set()
+
+    def on_frame(frame: int, turn_ns: int) -> None:
+        if frame == 0:
+            run.t_first = time.perf_counter()
+        recorder.complete(frame, turn_ns if frame > 0 else None)
+        for sink in run.frame_sinks:
+            sink(seg, frame)
+        stop.check(frame)
+        run.files.maybe_append()
+        _warn_dead_observers(run.watchers, warned)
+        if progress is not None:
+            progress(frame, plan.frames, frame * scenario.timing.sensor_period_s, time.perf_counter() - run.t_start)
+
+    supervise(seg, plan, Gates(seg, plan, run.sems, SUPERVISOR, check),
+              startup_timeout_s=scenario.timing.startup_timeout_s, handoff_timeout_s=scenario.timing.handoff_timeout_s,
+              on_take=recorder.take, on_frame=on_frame)
 
 
 def _tear_down(run: _Run, error: RunError | None) -> RunResult:

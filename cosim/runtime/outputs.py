@@ -112,7 +112,7 @@ def compose_summary(scenario: Scenario, recorder: Recorder | None, ring: Sequenc
         turns = np.asarray(recorder.turn_ms)
         summary["ring"] = {"turn_median_ms": float(np.median(turns)),
                            "turn_p99_ms": float(np.percentile(turns, 99)),
-                           "overlapped": recorder.deferred}
+                           "overlapped": recorder.deferred, "schedule": recorder.schedule}
         if not recorder.deferred:
             summary["ring"]["handoff_median_ms"] = med["handoff"]
     series = recorder.series() if recorder.frames else {}

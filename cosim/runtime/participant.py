@@ -19,6 +19,12 @@ and a last turn, after frame N, runs only ``flush()`` (publish P(N)) and the sup
 and written at the same point of the token order in a process ring and in-process, so the results are
 identical, and identical to the serial ring.
 
+Pipelined schedule (``timing.schedule: pipelined``, ``cosim.runtime.pipeline``): each member waits only for the
+(member, frame) pairs it reads, declared by its spec's ``reads(scenario) -> {producer: lag}`` (at frame m it reads
+the producer's frame m - lag; :func:`dynamics_reads`, :func:`renderer_reads`, :func:`perception_reads`). A member
+must read every input of a frame before it writes its first output of that frame (a producer may then write its
+next frame over them), and an overlapping member must have read them when ``step`` returns its rest.
+
 Each package exposes ``declare_blocks(scenario) -> list[Block]`` (``<pkg>/blocks.py``) and
 ``create(scenario) -> Participant`` (``<pkg>/participant.py``).
 """
@@ -29,7 +35,8 @@ from typing import TYPE_CHECKING, Callable, Protocol, runtime_checkable
 if TYPE_CHECKING:
     from shm_schema.segment import Segment
 
-__all__ = ["Participant", "PARTICIPANTS", "perception_overlaps"]
+__all__ = ["Participant", "PARTICIPANTS", "PERCEPTION_TAKEN_FRAMES_BACK", "dynamics_reads", "perception_overlaps",
+           "perception_reads", "renderer_reads"]
 
 #: every participant name, in ring order
 PARTICIPANTS: tuple[str, ...] = ("dynamics", "renderer", "perception")
@@ -59,3 +66,31 @@ def perception_overlaps(scenario) -> bool:
     a frame of slack, and ground-truth feedback reads no perception output at all."""
     t = scenario.timing
     return bool(t.overlap_perception) and (scenario.feedback != "perception" or t.latency_frames >= 1)
+
+
+#: the most frames back dynamics takes perception's outputs under the pipelined schedule: it acts on
+#: P(m - 1 - L) and keeps each output from the frame it takes it (its own copy) until then. Taking P(m - 2) at frame
+#: m lets dynamics of frame k + 2 wait for no more than perception of frame k, and perception publish P(k + 1) as
+#: soon as dynamics of k + 2 has taken P(k); from three frames back, perception's next output would wait for a
+#: dynamics frame that waits for perception to read the state of a later frame (a deadlock: every block holds one
+#: frame; cosim.runtime.pipeline)
+PERCEPTION_TAKEN_FRAMES_BACK = 2
+
+
+def dynamics_reads(scenario) -> dict[str, int]:
+    """Dynamics at frame m takes perception's P(m - min(1 + L, 2)) (only with perception feedback) and acts on
+    P(m - 1 - L) from its copies (:data:`PERCEPTION_TAKEN_FRAMES_BACK`)."""
+    if scenario.feedback != "perception" or "perception" not in scenario.participants:
+        return {}
+    return {"perception": min(1 + scenario.timing.latency_frames, PERCEPTION_TAKEN_FRAMES_BACK)}
+
+
+def renderer_reads(scenario) -> dict[str, int]:
+    """The renderer at frame m draws the dynamics state S(m)."""
+    return {"dynamics": 0}
+
+
+def perception_reads(scenario) -> dict[str, int]:
+    """Perception at frame m reads the renderer's images I(m) and the dynamics state S(m) (the sensor's parent
+    pose, and the truth on accuracy frames)."""
+    return {"renderer": 0, "dynamics": 0} if "renderer" in scenario.participants else {"dynamics": 0}

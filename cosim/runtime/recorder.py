@@ -39,13 +39,16 @@ WALL_CLOCK_UNIT = "ms"
 class Recorder:
     """Collects struct rows and last-frame array copies from a segment, plus per-stage step times."""
 
-    def __init__(self, seg: Segment, members: tuple[str, ...], *, deferred: bool = False):
+    def __init__(self, seg: Segment, members: tuple[str, ...], *, deferred: bool = False,
+                 schedule: str = "sequential"):
         self._seg = seg
         #: names of the segment's blocks
         self.blocks = frozenset(b.name for b in seg.schema.blocks)
         self.members = members
         #: whether a member publishes one turn late: the hand-off time is then not turn minus steps
         self.deferred = deferred
+        #: the schedule the run's members took turns by (cosim.runtime.pipeline): "sequential" or "pipelined"
+        self.schedule = schedule
         #: (name, the block's bytes as a uint8 view, block): a row is kept as bytes (one memcpy; copying the
         #: structured array field by field cost ~9 us per block per frame)
         self._structs = [(b.name, seg.view(b.name).array.reshape(1).view(np.uint8), b) for b in seg.schema.blocks
@@ -70,15 +73,32 @@ class Recorder:
         self.array_frames: dict[str, int] = {n: -1 for n in self.arrays}
         self.step_ms: dict[str, list[float]] = {m: [] for m in members}
         self._step_words = [(m, seg.slot_words(m)) for m in members]
+        self._slot_of = dict(self._step_words)
+        #: each member's step time (ns) last taken, for the frame being recorded
+        self._steps: dict[str, int] = {}
+        #: the blocks each member writes (:meth:`take`)
+        self._writers = {m: frozenset(b.name for b in seg.schema.blocks if b.writer == m) for m in members}
         self.turn_ms: list[float] = []
 
     def record(self, frame: int, turn_ns: int | None = None) -> None:
         """Copy frame ``frame``'s struct rows (each to its stamp's frame), small arrays and step times."""
-        self.frames.append(frame)
         self._take()
         step = SLOT_WORD["step_ns"]
         for m, words in self._step_words:
-            self.step_ms[m].append(words[step] / 1e6)
+            self._steps[m] = words[step]
+        self.complete(frame, turn_ns)
+
+    def take(self, writer: str, frame: int) -> None:
+        """Copy the blocks of one ``writer`` and its step time, as soon as it has published ``frame`` (the
+        pipelined schedule, cosim.runtime.pipeline); :meth:`complete` closes the frame."""
+        self._take(writer)
+        self._steps[writer] = self._slot_of[writer][SLOT_WORD["step_ns"]]
+
+    def complete(self, frame: int, turn_ns: int | None = None) -> None:
+        """Frame ``frame`` is recorded: its step times (each member's last taken) and the turn's."""
+        self.frames.append(frame)
+        for m, _ in self._step_words:
+            self.step_ms[m].append(self._steps.get(m, 0) / 1e6)
         if turn_ns is not None:
             self.turn_ms.append(turn_ns / 1e6)
 
@@ -95,17 +115,21 @@ class Recorder:
                 np.copyto(self.arrays[name], seg.view(name))
                 self.array_frames[name] = stamp
 
-    def _take(self) -> None:
-        seg = self._seg
+    def _take(self, writer: str | None = None) -> None:
+        """Copy the struct rows and small arrays (and note the large arrays' seqlocks) of every block, or of
+        ``writer``'s."""
+        seg, mine = self._seg, self._writers.get(writer) if writer is not None else None
         for name, raw, _ in self._structs:
             stamp = seg.frame_of(name)
-            if stamp >= 0:
+            if stamp >= 0 and (mine is None or name in mine):
                 self._rows[name][stamp] = raw.tobytes()
         for name, view in self._array_views.items():
-            np.copyto(self.arrays[name], view)
-            self.array_frames[name] = seg.frame_of(name)
+            if mine is None or name in mine:
+                np.copyto(self.arrays[name], view)
+                self.array_frames[name] = seg.frame_of(name)
         for name in self._late:
-            self._late[name] = (seg.seq_of(name), seg.frame_of(name))
+            if mine is None or name in mine:
+                self._late[name] = (seg.seq_of(name), seg.frame_of(name))
 
     def _unit(self, column: str) -> str:
         block, field = column.split(".", 1)

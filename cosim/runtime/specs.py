@@ -25,6 +25,9 @@ class ParticipantSpec:
     summary: str | None = None
     #: ``predicate(scenario) -> bool``: whether this member publishes one turn late (cosim.runtime.participant)
     defers: str | None = None
+    #: ``reads(scenario) -> {producer: lag}``: the members whose outputs this one reads, and how many frames back
+    #: (the pipelined schedule, cosim.runtime.pipeline); None: the member cannot be pipelined
+    reads: str | None = None
     kwargs: Mapping[str, Any] = field(default_factory=dict)
 
     def create(self, scenario: Scenario):
@@ -34,18 +37,23 @@ class ParticipantSpec:
         """Whether this member overlaps the next frame and publishes its outputs at its next turn."""
         return self.defers is not None and bool(load_callable(self.defers)(scenario))
 
+    def reads_of(self, scenario: Scenario) -> dict[str, int] | None:
+        """{producer: lag} of what this member reads at frame m (the producer's frame m - lag), or None."""
+        return None if self.reads is None else dict(load_callable(self.reads)(scenario))
+
     def declare_blocks(self, scenario: Scenario) -> list:
         return list(load_callable(self.blocks)(scenario))
 
 
 DEFAULT_SPECS: dict[str, ParticipantSpec] = {
     "dynamics": ParticipantSpec("dynamics", "dynamics_proc.participant:create", "dynamics_proc.blocks:declare_blocks",
-                                "dynamics_proc.summary:summarize"),
+                                "dynamics_proc.summary:summarize", reads="cosim.runtime.participant:dynamics_reads"),
     "renderer": ParticipantSpec("renderer", "renderer_proc.participant:create", "renderer_proc.blocks:declare_blocks",
-                                "renderer_proc.summary:summarize"),
+                                "renderer_proc.summary:summarize", reads="cosim.runtime.participant:renderer_reads"),
     "perception": ParticipantSpec("perception", "perception_proc.participant:create",
                                   "perception_proc.blocks:declare_blocks", "perception_proc.summary:summarize",
-                                  defers="cosim.runtime.participant:perception_overlaps"),
+                                  defers="cosim.runtime.participant:perception_overlaps",
+                                  reads="cosim.runtime.participant:perception_reads"),
 }
 
 

@@ -6,8 +6,10 @@ in an editor with the YAML language server, start a scenario file with::
 
     # yaml-language-server: $schema=<path to>/cosim/schema/scenario.schema.json
 
-The schema checks keys, types, enums and ranges field by field; cross-field rules (integer rate ratios, codec
-alpha/beta, ...) are checked only by the loader (``cosim.scenario.loader``).
+The schema checks keys, types, enums and ranges field by field (the ranges include the limits of each key's unit,
+cosim.scenario.config.limits), and describes every key (a field's docstring); cross-field rules (integer rate
+ratios, codec alpha/beta, ...) are checked only by the loader (``cosim.scenario.loader``). ``extends`` (the
+loader's, cosim.scenario.extends) is a key of the file, not of the record, and is added here.
 """
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ import sys
 from pathlib import Path
 
 from .config import Scenario
+from .extends import EXTENDS_DESCRIPTION, EXTENDS_KEY
 
 __all__ = ["SCHEMA_PATH", "SCHEMA_DIALECT", "scenario_json_schema", "schema_text", "write_json_schema"]
 
@@ -35,11 +38,13 @@ def scenario_json_schema() -> dict:
             "A co-simulation scenario for perception-in-the-loop grain offloading (combine -> tractor-pulled "
             "grain cart, simulated LiDAR). Only format_version is required; every other key overrides a default. "
             "Units are in the key names (_m, _s, _deg, ...); relative paths are resolved against the scenario "
-            "file's directory."
+            "file's directory. `extends` starts from another scenario."
         ),
     }
     body.pop("title", None)
     body.pop("description", None)
+    body["properties"][EXTENDS_KEY] = {"type": "string", "minLength": 1, "title": "Extends",
+                                       "description": EXTENDS_DESCRIPTION}
     return {**head, **body}
 
 

@@ -5,17 +5,24 @@ into ``file:line:col: path: message`` problems (exit 2). They use the same geome
 world of ``dynamics_proc.model.initial_world``, the scene of ``cosim.world.scene`` and its exact ray caster), so
 what they refuse is what the run would have got wrong:
 
-* the sensor below the ground (z < 0), or inside a solid of the scene (a cart wall, a vehicle body, a wheel, the
-  auger tube), or inside the cart's walls below its rim (in the grain);
+* each sensor (``sensor:``, or every entry of ``sensors:``; each eye of a stereo pair) below the ground, or inside
+  the solids of the scene (a cart wall, a vehicle body, a wheel, the
+  auger tube; a point on the face two solids share, e.g. where two cart walls meet, is inside their union), or
+  inside the cart's walls below its rim (in the grain);
 * the combine standing inside the cart (a cart far larger than the machines);
-* the cart never in the sensor's field of view at the start pose: no beam (of at most ``FOV_BEAMS``, spread over
-  the pattern) hits the cart within ``range_max_m``;
+* the cart never in a sensor's field of view at the start pose: no beam (of at most ``FOV_BEAMS``, spread over
+  the pattern) or camera ray (``FOV_PIXELS`` over the image) hits the cart within ``range_max_m``;
 * a ``mesh_file`` that trimesh cannot load (or that holds no triangles);
-* a beam pattern whose memory (at least ``SHARED_BYTES_PER_BEAM`` of shared memory and
-  ``PROCESS_BYTES_PER_BEAM`` in the processes per beam) exceeds what /dev/shm and the machine have free.
+* a CSV beam table that cannot be read, holds a non-finite or out-of-range angle, or is larger than
+  ``MAX_CSV_BYTES``;
+* a beam pattern whose memory exceeds what /dev/shm, the machine and the address space allow
+  (cosim.scenario.memory).
+
+A frame-0 world that cannot be built at all is a problem too (named, never a traceback).
 """
 from __future__ import annotations
 
+import itertools
 import os
 from pathlib import Path
 
@@ -23,72 +30,29 @@ import numpy as np
 
 from cosim.scenario.config import Scenario
 from cosim.world.camera import Pinhole, beam_directions
-from cosim.world.geometry import apply, body_from_camera_axes, invert, mount_transform, vehicle_pose
+from cosim.world.geometry import apply, body_from_camera_axes, entity_pose, invert, mount_transform
 from cosim.world.parts import cart_boxes
-from cosim.world.patterns import PatternError, beam_table, pattern_shape
+from cosim.world.patterns import PatternError, beam_table
 
-__all__ = ["implausible", "memory_problems", "FOV_BEAMS", "SHARED_BYTES_PER_BEAM", "PROCESS_BYTES_PER_BEAM",
-           "available_bytes", "size_text"]
+from .memory import memory_problems, size_text
+
+__all__ = ["implausible", "FOV_BEAMS", "MAX_CSV_BYTES", "NEIGHBOURHOOD_M"]
 
 Loc = tuple
 #: beams cast for the field-of-view check (spread evenly over the pattern's table)
 FOV_BEAMS = 4096
 #: rays cast over a camera's image for the field-of-view check (columns; rows keep the aspect ratio)
 FOV_PIXELS = (64, 48)
-#: shared memory per beam, bytes: the ``lidar_points`` block, (N, 4) float32
-SHARED_BYTES_PER_BEAM = 16
-#: process memory per beam, at least, bytes: each of renderer and perception holds the beam table (2 float64)
-#: and the unit directions (3 float64) = 40 B, plus perception's points (16 B) and ranges (8 B)
-PROCESS_BYTES_PER_BEAM = 2 * 40 + 24
-SHM_DIR = "/dev/shm"
-#: a point this close to a surface counts as on it, not inside, m
-_EPS_M = 1e-6
-
-
-def available_bytes() -> tuple[int, int]:
-    """(free bytes of /dev/shm, MemAvailable bytes of the machine); a figure that cannot be read is a large
-    number (never the reason for a refusal)."""
-    big = 1 << 62
-    try:
-        st = os.statvfs(SHM_DIR)
-        shm = st.f_bavail * st.f_frsize
-    except OSError:
-        shm = big
-    mem = big
-    try:
-        for line in Path("/proc/meminfo").read_text().splitlines():
-            if line.startswith("MemAvailable:"):
-                mem = int(line.split()[1]) * 1024
-                break
-    except (OSError, ValueError, IndexError):
-        pass
-    return shm, mem
-
-
-def size_text(n: float) -> str:
-    """``n`` bytes for a message: "614.4 KiB"."""
-    for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
-        if n < 1024 or unit == "TiB":
-            return f"{n:.1f} {unit}" if unit != "B" else f"{int(n)} B"
-        n /= 1024
-    return f"{n:.1f} TiB"
-
-
-def memory_problems(s: Scenario, free: tuple[int, int] | None = None) -> list[tuple[Loc, str]]:
-    """The beam pattern's memory against /dev/shm's free space and the machine's available memory."""
-    lidar = s.lidar
-    shape = pattern_shape(lidar.pattern) if lidar is not None else None
-    if shape is None:
-        return []
-    beams = shape[0] * shape[1]
-    shm_free, mem_free = free or available_bytes()
-    shared, private = beams * SHARED_BYTES_PER_BEAM, beams * PROCESS_BYTES_PER_BEAM
-    if shared <= shm_free and shared + private <= mem_free:
-        return []
-    return [((("sensor",) if not s.sensors else ("sensors", s.lidar_name)) + ("pattern",),
-             f"{shape[1]} x {shape[0]} = {beams:,} beams need at least {size_text(shared)} of shared memory (block "
-             f"lidar_points) and {size_text(private)} in the processes, but {SHM_DIR} has {size_text(shm_free)} free "
-             f"and the machine {size_text(mem_free)} available; lower azimuth_count or elevation_count")]
+#: largest CSV beam table read, bytes (~3 million beams; larger is refused unread)
+MAX_CSV_BYTES = 64 << 20
+#: a point is inside the union of the solids when every point of its neighbourhood (the 26 points at this
+#: distance along the axes and diagonals, and itself) lies in some solid: a point closer than this to the surface
+#: of the union counts as on it, m
+NEIGHBOURHOOD_M = 2e-6
+#: the neighbourhood's offsets (27, 3), m
+_OFFSETS = NEIGHBOURHOOD_M * np.array(list(itertools.product((-1.0, 0.0, 1.0), repeat=3)))
+#: slack of the closed containment tests (rounding of the transforms), m
+_TOL_M = 1e-9
 
 
 def _initial_state(s: Scenario) -> tuple[dict, np.ndarray]:
@@ -111,23 +75,30 @@ def _initial_state(s: Scenario) -> tuple[dict, np.ndarray]:
 def _pose(s: Scenario, state: dict, entity: str) -> np.ndarray:
     if entity == "world":
         return np.eye(4)
-    return vehicle_pose(float(state[f"{entity}_x_m"]), float(state[f"{entity}_y_m"]), float(state[f"{entity}_yaw_rad"]))
+    return entity_pose(state, entity)
 
 
-def _inside_boxes(point: np.ndarray, world_from_box: np.ndarray, half: np.ndarray) -> np.ndarray:
-    """(N,) bool: ``point`` (3,) strictly inside each of N oriented boxes."""
-    local = np.einsum("nij,nj->ni", np.linalg.inv(world_from_box)[:, :3, :3],
-                      point[None] - world_from_box[:, :3, 3])
-    return np.all(np.abs(local) < half - _EPS_M, axis=1)
+def _in_boxes(points: np.ndarray, world_from_box: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """(K,) bool: each of ``points`` (K, 3) in (or on) any of N oriented boxes (N, 4, 4), half extents (N, 3)."""
+    if len(half) == 0:
+        return np.zeros(len(points), dtype=bool)
+    rot, origin = world_from_box[:, :3, :3], world_from_box[:, :3, 3]
+    local = np.einsum("nji,knj->kni", rot, points[:, None, :] - origin[None])     # R^T (p - o), (K, N, 3)
+    return np.any(np.all(np.abs(local) <= half[None] + _TOL_M, axis=2), axis=1)
 
 
-def _inside_cylinders(point: np.ndarray, p0: np.ndarray, p1: np.ndarray, radius: np.ndarray) -> np.ndarray:
+def _in_cylinders(points: np.ndarray, p0: np.ndarray, p1: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """(K,) bool: each of ``points`` (K, 3) in (or on) any of M cylinders (axis p0 -> p1 (M, 3), radius (M,))."""
+    if len(radius) == 0:
+        return np.zeros(len(points), dtype=bool)
     axis = p1 - p0
     length = np.linalg.norm(axis, axis=1)
     u = axis / np.maximum(length, 1e-12)[:, None]
-    t = np.einsum("ni,ni->n", point[None] - p0, u)
-    radial = np.linalg.norm(point[None] - p0 - t[:, None] * u, axis=1)
-    return (t > _EPS_M) & (t < length - _EPS_M) & (radial < radius - _EPS_M)
+    rel = points[:, None, :] - p0[None]                                            # (K, M, 3)
+    t = np.einsum("kmi,mi->km", rel, u)
+    radial = np.linalg.norm(rel - t[..., None] * u[None], axis=2)
+    inside = (t >= -_TOL_M) & (t <= length + _TOL_M) & (radial <= radius + _TOL_M)
+    return inside.any(axis=1)
 
 
 def _mesh_problems(s: Scenario) -> list[tuple[Loc, str]]:
@@ -145,12 +116,58 @@ def _mesh_problems(s: Scenario) -> list[tuple[Loc, str]]:
     return out
 
 
+def _lidar_key(s: Scenario) -> tuple:
+    """The key path of the LiDAR: ``sensor`` for the shorthand, else ``sensors.<name>``."""
+    return ("sensor",) if not s.sensors else ("sensors", s.lidar_name)
+
+
+def _pattern_problems(s: Scenario) -> tuple[list[tuple[Loc, str]], tuple | None]:
+    """The beam table's problems (an unreadable or malformed CSV table, too many beams for the memory) and the
+    table (elevation, azimuth) when it could be built without them (None without a LiDAR)."""
+    lidar = s.lidar
+    if lidar is None:
+        return [], None
+    key = _lidar_key(s) + ("pattern",)
+    if lidar.pattern.preset == "csv":
+        path = lidar.pattern.csv_file
+        csv_key = key + ("csv_file",)
+        try:
+            size = os.stat(path).st_size
+        except OSError as exc:
+            return [(csv_key, f"cannot read the beam table {str(path)!r}: {exc.strerror}")], None
+        if size > MAX_CSV_BYTES:
+            return [(csv_key, f"the beam table is {size_text(size)}; tables are limited to "
+                              f"{size_text(MAX_CSV_BYTES)} (~3 million beams)")], None
+        try:
+            table = beam_table(lidar.pattern)
+        except PatternError as exc:
+            return [(csv_key, str(exc))], None
+        return memory_problems(s, beams=len(table[0])), table
+    problems = memory_problems(s)
+    if problems:
+        return problems, None                  # the table itself would not fit
+    try:
+        return [], beam_table(lidar.pattern)
+    except PatternError as exc:
+        return [(key, str(exc))], None
+
+
 def implausible(s: Scenario) -> list[tuple[Loc, str]]:
     """Every plausibility problem of ``s`` as (loc, message); [] when the world at frame 0 makes sense."""
-    problems = memory_problems(s) + _mesh_problems(s)
+    problems, table = _pattern_problems(s)
+    problems += _mesh_problems(s)
     if problems:
-        return problems  # the geometry below would load the same meshes, or allocate the huge pattern
+        return problems  # the geometry below would load the same meshes, or use the pattern
+    try:
+        return _world_problems(s, table)
+    except (ArithmeticError, ValueError, MemoryError) as exc:  # a world this far off cannot even be built
+        return [((), f"the world at frame 0 cannot be built from this scenario ({type(exc).__name__}: {exc})")]
+
+
+def _world_problems(s: Scenario, table: tuple | None) -> list[tuple[Loc, str]]:
+    """The geometry checks of the frame-0 world (the module docstring's list), with the LiDAR's beam ``table``."""
     from cosim.world.scene import scene_from_state
+    from cosim.world.terrain import terrain_of
 
     state, heights = _initial_state(s)
     cart_from_world = invert(_pose(s, state, "cart"))
@@ -158,16 +175,19 @@ def implausible(s: Scenario) -> list[tuple[Loc, str]]:
     hl, hw = c.interior_length_m / 2.0, c.interior_width_m / 2.0
     combine = apply(cart_from_world, np.array([[state["combine_x_m"], state["combine_y_m"], 0.0]]))[0]
     if abs(combine[0]) < hl + c.wall_thickness_m and abs(combine[1]) < hw + c.wall_thickness_m:
-        where_first = _where(s, next(iter(s.sensor_set)), "mount", "xyz_m")
-        origin = _world_from_sensor(s, state, next(iter(s.sensor_set.values())))[:3, 3]
+        name, first = next(iter(s.sensor_set.items()))
+        origin = _world_from_sensor(s, state, first)[:3, 3]
         if _under_grain(s, cart_from_world, origin):
-            return [(where_first, f"the sensor is inside the cart, under the grain surface {_at(origin)}")]
+            return [(_where(s, name, "mount", "xyz_m"), f"the sensor is inside the cart, under the grain surface "
+                                                        f"{_at(origin)}")]
         return [(("cart",), f"the combine stands inside the cart at the start pose (cart interior "
                             f"{c.interior_length_m:g} x {c.interior_width_m:g} m, machine_sync offsets "
                             f"{s.machine_sync.longitudinal_offset_m:g}, {s.machine_sync.lateral_offset_m:g} m)")]
+    terrain = terrain_of(s)
     scene = scene_from_state(s, state, heights, np.zeros((64, 4), np.float32))
+    problems: list[tuple[Loc, str]] = []
     for name, sensor in s.sensor_set.items():
-        problems += _sensor_problems(s, name, sensor, state, scene, cart_from_world)
+        problems += _sensor_problems(s, name, sensor, state, scene, cart_from_world, terrain, table)
     return problems
 
 
@@ -193,10 +213,11 @@ def _under_grain(s: Scenario, cart_from_world: np.ndarray, origin: np.ndarray) -
                 and local[2] < c.floor_height_m + s.grain.initial_fill_m)
 
 
-def _sensor_problems(s: Scenario, name: str, sensor, state: dict, scene, cart_from_world: np.ndarray
-                     ) -> list[tuple[Loc, str]]:
+def _sensor_problems(s: Scenario, name: str, sensor, state: dict, scene, cart_from_world: np.ndarray, terrain,
+                     table: tuple | None) -> list[tuple[Loc, str]]:
     """The problems of one sensor: an origin (each of a stereo pair's two) below the ground, under the grain or
     inside a solid; the cart never in its field of view within its range."""
+    from cosim.world.fastcast import cast_from
     from cosim.world.raycast import raycast
     from cosim.world.sensors import camera_views
 
@@ -207,8 +228,9 @@ def _sensor_problems(s: Scenario, name: str, sensor, state: dict, scene, cart_fr
     for view, sensor_from_view in views:
         origin = (wfs @ sensor_from_view)[:3, 3]
         what = "the sensor" if is_lidar else f"camera {name!r}" + (f" ({view})" if len(views) > 1 else "")
-        if origin[2] < 0.0:
-            return [(where, f"{what} is {-origin[2]:.2f} m below the ground {_at(origin)}")]
+        ground = float(terrain.height(origin[0], origin[1])) if terrain is not None else 0.0
+        if origin[2] < ground:
+            return [(where, f"{what} is {ground - origin[2]:.2f} m below the ground {_at(origin)}")]
         if _under_grain(s, cart_from_world, origin):
             return [(where, f"{what} is inside the cart, under the grain surface {_at(origin)}")]
         inside = _solids_at(s, state, origin)
@@ -216,10 +238,9 @@ def _sensor_problems(s: Scenario, name: str, sensor, state: dict, scene, cart_fr
             return [(where, f"{what} is inside the {inside} {_at(origin)}")]
     origin = wfs[:3, 3]
     if is_lidar:
-        try:
-            elev, az = beam_table(sensor.pattern)
-        except PatternError:
-            return []  # the pattern's own checks report it
+        if table is None:
+            return []                                  # the pattern's own checks report it
+        elev, az = table
         pick = np.linspace(0, len(elev) - 1, min(FOV_BEAMS, len(elev))).astype(np.int64)
         d = beam_directions(elev[pick], az[pick]) @ wfs[:3, :3].T
         along = np.ones(len(d))
@@ -230,7 +251,8 @@ def _sensor_problems(s: Scenario, name: str, sensor, state: dict, scene, cart_fr
         dc = pin.ray_directions().reshape(-1, 3)
         d, along = dc @ wfs[:3, :3].T, dc[:, 2]
         rays = f"{len(d)} rays spread over the image"
-    t = raycast(scene, np.broadcast_to(origin, d.shape), d)
+    # on uneven ground the scene holds the terrain's triangles: the Embree cast where it is installed
+    t = raycast(scene, np.broadcast_to(origin, d.shape), d) if terrain is None else cast_from(scene, origin, d)
     depth = t * along                                   # range for the LiDAR, planar depth for a camera
     hit = np.isfinite(t) & (depth <= sensor.range_max_m) & (depth >= sensor.range_min_m)
     if not hit.any() or not _hits_cart(s, cart_from_world, origin + t[hit, None] * d[hit]):
@@ -242,16 +264,25 @@ def _sensor_problems(s: Scenario, name: str, sensor, state: dict, scene, cart_fr
 
 
 def _solids_at(s: Scenario, state: dict, point: np.ndarray) -> str:
-    """Which entity's solid (box or cylinder, its body frame) holds world ``point`` strictly inside: "cart's
-    solid parts (...)" or "", from the parts the scene is built of (cosim.world.parts)."""
+    """Which entity's solid holds world ``point`` inside the union of all the scene's solids (boxes and
+    cylinders, each entity's body frame): "cart's walls", "tractor's wheels or auger", ...; "" when the point
+    is outside or on the surface of the union. Inside the union: every point of its neighbourhood
+    (NEIGHBOURHOOD_M) lies in some solid, so a point on a face two solids share counts as inside."""
     from cosim.world.parts import entity_parts
 
+    around = point[None] + _OFFSETS                                   # (27, 3), the point itself at index 13
+    covered = np.zeros(len(around), dtype=bool)
+    holder = ""
     for entity, p in entity_parts(s).items():
-        body = apply(invert(_pose(s, state, entity)), point[None])[0]
-        boxes = p.mesh_file is None and _inside_boxes(body, p.body_from_box, p.half_extents).any()
-        if boxes or _inside_cylinders(body, p.cyl_p0, p.cyl_p1, p.cyl_radius).any():
-            return f"{entity}'s {'body' if entity != 'cart' else 'walls'}" if boxes else f"{entity}'s wheels or auger"
-    return ""
+        body = apply(invert(_pose(s, state, entity)), around)
+        boxes = _in_boxes(body, p.body_from_box, p.half_extents) if p.mesh_file is None else \
+            np.zeros(len(body), dtype=bool)
+        cyls = _in_cylinders(body, p.cyl_p0, p.cyl_p1, p.cyl_radius)
+        covered |= boxes | cyls
+        if not holder and (boxes[13] or cyls[13]):
+            holder = f"{entity}'s {'body' if entity != 'cart' else 'walls'}" if boxes[13] else \
+                f"{entity}'s wheels or auger"
+    return holder if covered.all() else ""
 
 
 def _hits_cart(s: Scenario, cart_from_world: np.ndarray, points: np.ndarray) -> bool:

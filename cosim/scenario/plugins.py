@@ -41,7 +41,7 @@ from pathlib import Path
 from typing import Mapping
 
 __all__ = ["BUILTINS", "ENTRY_POINT_GROUPS", "ARITY", "PluginError", "PluginOptionsError", "PluginInfo",
-           "load_plugin", "resolve_plugin", "check_options", "is_import_path", "distribution_of"]
+           "load_plugin", "resolve_plugin", "check_options", "is_import_path", "distribution_of", "external_module"]
 
 #: plug-in group -> built-in short name -> import path (the same as the package's entry points)
 BUILTINS: dict[str, dict[str, str]] = {
@@ -109,6 +109,17 @@ def _entry_point(group: str, name: str):
     return found[0] if found else None
 
 
+def external_module(group: str, ref: str) -> str | None:
+    """The module plug-in ``ref`` of ``group`` would import when it is not built in (its import path's module,
+    or its entry point's), None for a built-in or a name that resolves to nothing; nothing is imported."""
+    if group not in BUILTINS or ref in BUILTINS[group]:
+        return None
+    if is_import_path(ref):
+        return ref.partition(":")[0] or None
+    ep = _entry_point(group, ref)
+    return ep.value.partition(":")[0] if ep is not None else None
+
+
 def _import(target: str, ref: str, base_dir: Path | None):
     module_name, _, attr = target.partition(":")
     if not module_name or not attr:
@@ -126,6 +137,9 @@ def _import(target: str, ref: str, base_dir: Path | None):
         raise PluginError(f"plug-in {ref!r}: importing {module_name!r} failed: {type(e).__name__}: {e}") from None
     except Exception as e:  # noqa: BLE001 - any error in the user's module is a problem of this reference
         raise PluginError(f"plug-in {ref!r}: importing {module_name!r} failed: {type(e).__name__}: {e}") from None
+    except SystemExit as e:  # the child-process probe (cosim.scenario.probe) normally finds it first
+        raise PluginError(f"plug-in {ref!r}: importing {module_name!r} ends the interpreter (sys.exit({e.code!r}) "
+                          "at import time)") from None
     for part in attr.split("."):
         if not hasattr(obj, part):
             raise PluginError(f"plug-in {ref!r}: module {module_name!r} has no attribute {attr!r}")

@@ -15,6 +15,7 @@ kind of external model adds its function there.
 from __future__ import annotations
 
 import json
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -22,7 +23,8 @@ from typing import Callable
 from cosim.fmi import check as fmi_check
 
 from .config import FMU_REF, Scenario
-from .plugins import PluginError, PluginOptionsError, check_options, distribution_of, resolve_plugin
+from .plugins import PluginError, PluginOptionsError, check_options, distribution_of, external_module, resolve_plugin
+from .probe import probe_imports
 
 __all__ = ["Loaded", "Issue", "Check", "PLUGIN_POINTS", "options_key", "plugin_points", "check_plugin_refs",
            "check_plugins", "check_fmus", "CHECKS", "inspect_scenario", "format_inventory"]
@@ -88,11 +90,19 @@ def plugin_points(s: Scenario) -> list[tuple[tuple[str, ...], str, str, dict]]:
 def check_plugin_refs(refs: list[tuple[tuple[str, ...], str, str, dict]], plugin_dir: str, *,
                       allow_plugins: bool = True, versions: bool = False) -> tuple[list[Loaded], list[Issue]]:
     """Import and signature-check each (scenario key, group, reference, options), looked for in ``plugin_dir``
-    first ('' none); the options are checked against the plug-in's signature at their own key. The loader runs
+    first ('' none); the options are checked against the plug-in's signature at their own key. Modules not yet
+    imported are imported in a child process first (cosim.scenario.probe): one that ends, kills or hangs the
+    interpreter is refused at its key instead of ending this process. The loader runs
     this on the raw values too, so that a bad plug-in is reported together with the scenario's other problems."""
     base = Path(plugin_dir) if plugin_dir else None
     loaded, issues = [], []
+    modules = {} if not allow_plugins else {loc: external_module(group, ref) for loc, group, ref, _ in refs}
+    path = ([str(base.resolve())] if base is not None else []) + sys.path
+    refused = probe_imports([m for m in modules.values() if m], path)
     for loc, group, ref, options in refs:
+        if modules.get(loc) in refused:
+            issues.append(Issue(loc, f"plug-in {ref!r}: {refused[modules[loc]]}"))
+            continue
         if ref == FMU_REF and loc[0] == "controller":
             if options:
                 issues.append(Issue(options_key(loc), "options are for Python plug-ins; an FMU takes its "

@@ -15,13 +15,16 @@ import yaml
 
 from cosim.errors import Problem
 
-__all__ = ["Loader", "Dumper", "Mark", "Doc", "Loc", "INVALID", "MAX_VALUES", "parse", "build", "dotted", "show",
-           "INT_12", "FLOAT_12", "BOOL_12"]
+__all__ = ["Loader", "Dumper", "Mark", "Doc", "Loc", "INVALID", "MAX_VALUES", "MAX_DEPTH", "parse", "build", "dotted",
+           "show", "INT_12", "FLOAT_12", "BOOL_12"]
 
 MAX_SHOWN = 60  # characters of an offending input value quoted in a message
 #: most values (scalars, lists, mappings) a document may expand to, aliases counted each time they are used: a
 #: scenario has a few hundred; an alias bomb ("billion laughs") is refused after this many, in milliseconds
 MAX_VALUES = 20_000
+#: deepest nesting of mappings and lists a document may have: a scenario nests 5 deep (plug-in options a few more);
+#: deeper input (a YAML nested 20,000 deep) is refused as soon as the composer reaches this depth
+MAX_DEPTH = 32
 
 BOOL_12 = re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$")
 INT_12 = re.compile(r"^(?:[-+]?(?:0|[1-9][0-9]*)|0x[0-9a-fA-F]+|0o[0-7]+)$")
@@ -32,8 +35,25 @@ _REPLACED = {"tag:yaml.org,2002:bool", "tag:yaml.org,2002:int", "tag:yaml.org,20
              "tag:yaml.org,2002:timestamp"}
 
 
+class TooDeep(yaml.MarkedYAMLError):
+    """Raised by :class:`Loader` when a document nests deeper than MAX_DEPTH."""
+
+
 class Loader(yaml.SafeLoader):
-    """SafeLoader with YAML 1.2 core-schema scalars (no yes/no/on/off booleans, no dates, 1e-8 is a float)."""
+    """SafeLoader with YAML 1.2 core-schema scalars (no yes/no/on/off booleans, no dates, 1e-8 is a float) and
+    a nesting limit (MAX_DEPTH), so that a deeply nested document is refused instead of exhausting the stack."""
+
+    _depth = 0
+
+    def compose_node(self, parent, index):
+        self._depth += 1
+        try:
+            if self._depth > MAX_DEPTH:
+                raise TooDeep(None, None, f"the document nests deeper than {MAX_DEPTH} levels (mappings and lists); "
+                              "nothing else was checked", self.peek_event().start_mark)
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
 
 
 Loader.yaml_implicit_resolvers = {
@@ -98,8 +118,12 @@ class Doc:
 
 
 def dotted(loc: Loc) -> str:
+    """``('a', 'b', 0)`` -> ``a.b[0]``; a key that is not printable is shown escaped (``a\\x1bb``), so that a
+    message never carries a control character to the terminal."""
     out = ""
     for part in loc:
+        if isinstance(part, str) and not part.isprintable():
+            part = part.encode("unicode_escape").decode("ascii")
         out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
     return out
 
@@ -116,10 +140,19 @@ def parse(text: str, file: str, line0: int = 0, col0: int = 0) -> Doc:
     def mark(m: yaml.Mark) -> Mark:  # 1-based; an override is one line: its position in the list of overrides
         return Mark(file, line0 or m.line + 1, col0 + m.column + 1)
 
-    loader = Loader(text)
+    try:
+        loader = Loader(text)
+    except yaml.reader.ReaderError as e:  # a control character (NUL, ESC, ...) anywhere in the text
+        return _reader_problem(doc, e, text, file, line0, col0)
     try:
         try:
             node = loader.get_single_node()
+        except TooDeep as e:
+            at = mark(e.problem_mark)
+            doc.problems.append(Problem(file, at.line, at.col, "", e.problem))
+            return doc
+        except yaml.reader.ReaderError as e:
+            return _reader_problem(doc, e, text, file, line0, col0)
         except yaml.MarkedYAMLError as e:
             m, cm = e.problem_mark or e.context_mark, e.context_mark
             what = e.problem or e.context or "invalid YAML"
@@ -136,6 +169,17 @@ def parse(text: str, file: str, line0: int = 0, col0: int = 0) -> Doc:
         doc.data = None if doc.data is INVALID else doc.data
     finally:
         loader.dispose()
+    return doc
+
+
+def _reader_problem(doc: Doc, e: yaml.reader.ReaderError, text: str, file: str, line0: int, col0: int) -> Doc:
+    """The one problem of a text holding a character YAML does not accept (a control character, NUL)."""
+    before = text[: max(0, e.position)]
+    line = line0 or before.count("\n") + 1
+    col = col0 + e.position - (before.rfind("\n") + 1) + 1
+    what = f"U+{e.character:04X}" if isinstance(e.character, int) else repr(e.character)
+    doc.problems.append(Problem(file, line, col, "", f"control character {what} in the text: a scenario holds "
+                                "printable text only (tabs and line breaks allowed); nothing else was checked"))
     return doc
 
 

@@ -26,7 +26,9 @@ from pydantic import ValidationError
 from cosim.errors import Problem, ScenarioError
 from cosim.scenario.config import Scenario
 from cosim.scenario.config.sweep import MAX_RUNS, SWEEP_FORMAT_VERSION, Distribution, SweepFile
+from cosim.scenario.files import MAX_SCENARIO_BYTES, packaged_scenarios, read_scenario
 from cosim.scenario.loader import SET_FILE, load_scenario_text, path_fields, resolve_scenario_arg
+from cosim.scenario.values import value_problems
 from cosim.scenario.yamlmarks import Doc, Mark, dotted, parse, show
 
 __all__ = ["Override", "RunSpec", "Sweep", "load_sweep", "build_runs", "run_id", "sample"]
@@ -144,6 +146,9 @@ def _check_lengths(doc: Doc, section: str, lengths: dict[str, int], what: str) -
 
 
 def _parse_structure(text: str, filename: str) -> tuple[Doc, SweepFile | None]:
+    if len(text) > MAX_SCENARIO_BYTES:
+        raise ScenarioError([Problem(filename, 1, 1, "", f"the sweep file is {len(text) / 2**20:.1f} MiB; sweep "
+                                     f"files are limited to {MAX_SCENARIO_BYTES >> 20} MiB")])
     doc = parse(text, filename)
     if doc.problems and not doc.values:
         raise ScenarioError(doc.problems)
@@ -156,10 +161,12 @@ def _parse_structure(text: str, filename: str) -> tuple[Doc, SweepFile | None]:
         doc.problem(mark, ("format_version",), f"unsupported or missing format_version {show(version)}; this "
                     f"version of graincosim reads sweep files with format_version: {SWEEP_FORMAT_VERSION}")
         raise ScenarioError(doc.problems)
+    refused = {dotted(loc) for loc in value_problems(doc)}       # NaN, huge integers, control characters
     try:
         spec = SweepFile.model_validate_json(json.dumps(doc.data))
     except ValidationError as e:
-        doc.problems += [_structure_problem(err, doc) for err in e.errors(include_url=False)]
+        found = [_structure_problem(err, doc) for err in e.errors(include_url=False)]
+        doc.problems += [p for p in found if p.path not in refused]
         spec = None
     if spec is not None:
         _check_lengths(doc, "zip", {k: len(v) for k, v in spec.zip.items()}, "lengths")
@@ -204,11 +211,24 @@ def _as_set(o: Override, base_dir: Path) -> str:
     return f"{o.path}={json.dumps(value)}"
 
 
+def _run_count(spec: SweepFile) -> int:
+    """Runs the sweep expands to: grid lengths x zip length x random count x seeds (an empty section counts 1)."""
+    total = len(spec.seeds) if isinstance(spec.seeds, list) else spec.seeds
+    for values in spec.grid.values():
+        total *= len(values)
+    if spec.zip:
+        total *= min(len(v) for v in spec.zip.values())
+    if spec.random:
+        total *= min(d.count for d in spec.random.values())
+    return total
+
+
 def build_runs(base_text: str, base_file: str, base_label: str, fixed: list[Override],
                points: list[list[Override]], seeds: list[Override], sweep_dir: Path,
-               labels: list[dict] | None = None) -> tuple[list[RunSpec], list[Problem]]:
+               labels: list[dict] | None = None, plugin_dir: str | None = None) -> tuple[list[RunSpec], list[Problem]]:
     """Validate every run's scenario (base + fixed + point + seed) with the scenario loader; problems in an
-    override are reported at its sweep-file mark. Returns (runs, problems)."""
+    override are reported at its sweep-file mark. ``plugin_dir``: where the runs' plug-in modules are looked for
+    first (default: the base file's folder). Returns (runs, problems)."""
     runs, problems = [], set()
     fixed_plain = {o.path: o.value for o in fixed}
     base_dir = Path(base_file).resolve().parent
@@ -217,7 +237,7 @@ def build_runs(base_text: str, base_file: str, base_label: str, fixed: list[Over
             items = [*fixed, *point, seed]
             try:
                 scenario = load_scenario_text(base_text, base_file, [_as_set(o, sweep_dir) for o in items],
-                                              base_dir=base_dir)
+                                              base_dir=base_dir, extra={"plugin_dir": plugin_dir})
             except ScenarioError as exc:
                 for p in exc.problems:
                     if p.file == SET_FILE and 1 <= p.line <= len(items):
@@ -238,6 +258,10 @@ def load_sweep(path: str | os.PathLike) -> Sweep:
     """Read, validate and expand the sweep file ``path``; raise ScenarioError with every problem found."""
     path = Path(path)
     try:
+        size = os.stat(path).st_size
+        if size > MAX_SCENARIO_BYTES:
+            raise ScenarioError([Problem(str(path), 1, 1, "", f"the sweep file is {size / 2**20:.1f} MiB; sweep "
+                                         f"files are limited to {MAX_SCENARIO_BYTES >> 20} MiB")])
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:
         raise ScenarioError([Problem(str(path), 0, 0, "", f"cannot read sweep file: {e}")]) from None
@@ -253,17 +277,24 @@ def load_sweep(path: str | os.PathLike) -> Sweep:
                                      f"{spec.base!r} (a path is relative to the sweep file)")]) from None
     fixed = [Override(k, v, doc.values[("set", k)], f"set.{k}", doc.keys[("set", k)], f"set.{k}")
              for k, v in spec.set.items()]
+    total = _run_count(spec)
+    if total > MAX_RUNS:                     # counted before anything is expanded or drawn
+        m = doc.values[()]
+        raise ScenarioError([Problem(m.file, m.line, m.col, "", f"{total:,} runs: a sweep has at most "
+                                     f"{MAX_RUNS:,} (grid lengths x zip length x random count x seeds)")])
     points = _points(doc, spec)
     seed_loc = lambda i: ("seeds", i) if isinstance(spec.seeds, list) else ("seeds",)  # noqa: E731
     seeds = [Override("seed", s, doc.values.get(seed_loc(i), doc.values[()]), dotted(seed_loc(i)))
              for i, s in enumerate(spec.seed_list)]
-    total = len(points) * len(seeds)
-    if total > MAX_RUNS:
-        m = doc.values[()]
-        raise ScenarioError([Problem(m.file, m.line, m.col, "", f"{total} runs: more than {MAX_RUNS}")])
-    runs, problems = build_runs(base.read_text(encoding="utf-8"), str(base), spec.base, fixed, points, seeds,
-                                path.parent.resolve())
-    problems = sorted(set(doc.problems) | set(problems), key=lambda p: (p.file != str(path), p.file, p.line, p.col))
+    # plug-in modules beside the sweep file are found when the base is a packaged scenario (a base file's own
+    # folder is searched for its plug-ins otherwise), unless the sweep sets plugin_dir itself
+    packaged = base.resolve() in {p.resolve() for p in packaged_scenarios().values()}
+    plugin_dir = str(path.parent.resolve()) if packaged and "plugin_dir" not in spec.set else None
+    runs, problems = build_runs(read_scenario(base), str(base), spec.base, fixed, points, seeds,
+                                path.parent.resolve(), plugin_dir=plugin_dir)
+    seen = {(p.file, p.line, p.col) for p in doc.problems}      # a value refused as such is reported once
+    problems = sorted(set(doc.problems) | {p for p in problems if (p.file, p.line, p.col) not in seen},
+                      key=lambda p: (p.file != str(path), p.file, p.line, p.col))
     ids = [r.id for r in runs]
     if not problems and len(set(ids)) != len(ids):
         dup = next(i for i in ids if ids.count(i) > 1)

@@ -14,6 +14,7 @@ import os
 import signal
 import threading
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -95,32 +96,36 @@ class Fake:
     def step(self, frame):
         self._faults(frame)
         seg = self.seg
+        started = time.monotonic_ns()
+        # every input is read before the first write (the pipelined schedule hands the inputs back at that write)
+        if self.name == "dynamics":
+            perc_frame = seg.frame_of("fake_perc") if seg.has("fake_perc") else -1
+        elif self.name == "renderer":
+            x, dyn_frame = seg.view("fake_dyn").x_m, seg.frame_of("fake_dyn")
+        else:
+            self.flush()
+            img, img_frame = seg.view("cam0_depth")[..., 0].copy(), seg.frame_of("cam0_depth")
         with seg.write(f"trace_{self.name}", frame) as tr:
-            tr[frame] = (frame, time.monotonic_ns())
+            tr[frame] = (frame, started)
         dt = self.scenario.timing.sensor_period_s
         if self.name == "dynamics":
             with seg.write("fake_dyn", frame) as v:
                 v.t_s = frame * dt
                 v.x_m = 2.0 * frame * dt + 0.1 * np.sin(frame)
-                v.perc_frame = seg.frame_of("fake_perc") if seg.has("fake_perc") else -1
+                v.perc_frame = perc_frame
             with seg.write("heightmap_truth", frame) as h:
                 h[...] = frame * 0.01
         elif self.name == "renderer":
-            x = seg.view("fake_dyn").x_m
             with seg.write("cam0_depth", frame) as img:
                 img[...] = frame % 251
             with seg.write("fake_ren", frame) as v:
-                v.dyn_frame = seg.frame_of("fake_dyn")
+                v.dyn_frame = dyn_frame
                 v.x_seen_m = x
         elif not self.defer:
-            img = seg.view("cam0_depth")
             with seg.write("fake_perc", frame) as v:
-                v.img_frame = seg.frame_of("cam0_depth")
-                v.checksum = float(img[..., 0].astype(np.int64).sum())
+                v.img_frame = img_frame
+                v.checksum = float(img.astype(np.int64).sum())
         else:
-            self.flush()
-            img, img_frame = seg.view("cam0_depth")[..., 0].copy(), seg.frame_of("cam0_depth")
-
             def rest():
                 if self.rest_s:
                     time.sleep(self.rest_s)
@@ -170,6 +175,24 @@ def specs(**faults_by_role):
         out[role] = ParticipantSpec(role, "cosim.testing.fakes:make", f"cosim.testing.fakes:blocks_{role}", kwargs={"role": role, **kw},
                                     defers="cosim.testing.fakes:always" if kw.get("defer") else None)
     return out
+
+
+def reads_dynamics(scenario):
+    return {}
+
+
+def reads_renderer(scenario):
+    return {"dynamics": 0}
+
+
+def reads_perception(scenario):
+    return {"renderer": 0}
+
+
+def pipelined_specs(**faults_by_role):
+    """:func:`specs` with each role's reads declared, so that a launched run can use the pipelined schedule
+    (cosim.runtime.pipeline): the renderer reads dynamics' frame, perception the renderer's."""
+    return {role: replace(spec, reads=f"cosim.testing.fakes:reads_{role}") for role, spec in specs(**faults_by_role).items()}
 
 
 def observe(segment, stop_self=False):

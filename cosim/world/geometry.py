@@ -21,7 +21,7 @@ from cosim.scenario.config.machines import Cart
 
 __all__ = [
     "rot_x", "rot_y", "rot_z", "rpy_matrix", "make_transform", "invert", "apply",
-    "vehicle_pose", "mount_transform", "BODY_FROM_CAMERA", "body_from_camera_axes",
+    "vehicle_pose", "body_pose", "entity_pose", "POSE_3D_FIELDS", "mount_transform", "BODY_FROM_CAMERA", "body_from_camera_axes",
     "cart_body_from_grid", "cart_grid_from_body",
 ]
 
@@ -83,6 +83,28 @@ def apply(t: np.ndarray, points: np.ndarray) -> np.ndarray:
 def vehicle_pose(x_m: float, y_m: float, yaw_rad: float, z_m: float = 0.0) -> np.ndarray:
     """world_from_body for a vehicle on flat ground at (x, y) with heading ``yaw`` (rad from world +x)."""
     return make_transform(rot_z(yaw_rad), (x_m, y_m, z_m))
+
+
+def body_pose(x_m: float, y_m: float, yaw_rad: float, z_m: float = 0.0, roll_rad: float = 0.0,
+              pitch_rad: float = 0.0) -> np.ndarray:
+    """world_from_body of a vehicle standing on the terrain: R = Rz(yaw) Ry(pitch) Rx(roll), origin (x, y, z).
+    Level (roll = pitch = 0) it is :func:`vehicle_pose` to the bit."""
+    if roll_rad == 0.0 and pitch_rad == 0.0:
+        return vehicle_pose(x_m, y_m, yaw_rad, z_m)
+    return make_transform(rpy_matrix(roll_rad, pitch_rad, yaw_rad), (x_m, y_m, z_m))
+
+
+#: the dyn_state fields of an entity's pose beyond the planar (x, y, yaw) (docs/CONTRACTS.md)
+POSE_3D_FIELDS = ("z_m", "roll_rad", "pitch_rad")
+
+
+def entity_pose(state, name: str) -> np.ndarray:
+    """world_from_body (4 x 4) of entity ``name`` (combine, tractor, cart) from the ``dyn_state`` fields
+    ``<name>_{x_m, y_m, yaw_rad}`` and, where the state has them, ``<name>_{z_m, roll_rad, pitch_rad}`` (a
+    mapping of field names to numbers)."""
+    extra = [float(state[f"{name}_{f}"]) if f"{name}_{f}" in state else 0.0 for f in POSE_3D_FIELDS]
+    return body_pose(float(state[f"{name}_x_m"]), float(state[f"{name}_y_m"]), float(state[f"{name}_yaw_rad"]),
+                     *extra)
 
 
 def mount_transform(mount: Mount) -> np.ndarray:

@@ -2,7 +2,7 @@
 label images, and the mock renderer's labels.
 
 The scene's primitives are grouped by label (``Boxes.label``, ``Cylinders.label``, the grain surface is
-``GRAIN``, a mesh its entity's label) and each group is cast with the numpy ray caster's exact intersectors
+``GRAIN``, a mesh its entity's label or, the terrain's patch, the ground) and each group is cast with the numpy ray caster's exact intersectors
 (``cosim.world.raycast``), the best hit so far bounding the next group's search: the nearest hit wins and
 carries its group's label. The distances are those of :func:`cosim.world.raycast.raycast` (the same
 intersectors, the same minimum), so depth and label always agree.
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .labels import ENTITY_LABEL, GRAIN, NONE
+from .labels import GRAIN, NONE, mesh_label
 from .raycast import ray_boxes, ray_cylinders, ray_heightfield, ray_mesh
 from .scene import Boxes, Cylinders, Scene
 
@@ -48,5 +48,5 @@ def cast_labels(scene: Scene, origin: np.ndarray, directions: np.ndarray) -> tup
     for code in np.unique(codes):
         merge(ray_boxes(o, d, _take_boxes(boxes, codes == code), t_max=best), int(code))
     for mesh in scene.meshes:
-        merge(ray_mesh(o, d, mesh), ENTITY_LABEL.get(mesh.name, NONE))
+        merge(ray_mesh(o, d, mesh), mesh_label(mesh.name))
     return best, label

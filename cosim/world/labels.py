@@ -11,7 +11,8 @@ bodies, cart, auger tube), tyres (wheels), grain (the surface and the stream) an
 from __future__ import annotations
 
 __all__ = ["LABELS", "NONE", "GROUND", "CART_WALL", "CART_RIM", "GRAIN", "STREAM", "COMBINE", "TRACTOR", "AUGER",
-           "MATERIALS", "STEEL", "TYRE", "GRAIN_MAT", "STUBBLE", "ENTITY_LABEL", "label_names"]
+           "MATERIALS", "STEEL", "TYRE", "GRAIN_MAT", "STUBBLE", "ENTITY_LABEL", "TERRAIN_MESH_PREFIX", "mesh_label",
+           "mesh_material", "label_names"]
 
 #: label code -> name; the code is the index
 LABELS = ("none", "ground", "cart_wall", "cart_rim", "grain", "grain_stream", "combine", "tractor", "auger")
@@ -21,6 +22,23 @@ MATERIALS = ("steel", "tyre", "grain", "stubble")
 STEEL, TYRE, GRAIN_MAT, STUBBLE = range(len(MATERIALS))
 #: the label of an entity's body (its boxes, meshes and wheels): the cart's body is its walls
 ENTITY_LABEL = {"combine": COMBINE, "tractor": TRACTOR, "cart": CART_WALL}
+
+
+#: a scene mesh whose name starts so is the ground (the terrain's patch, cosim.world.terrain)
+TERRAIN_MESH_PREFIX = "terrain"
+
+
+def mesh_label(name: str) -> int:
+    """The label of a scene mesh: its entity's body (``combine``, ``tractor``, ``cart``), or the ground for the
+    terrain's patch; ``NONE`` for any other."""
+    if name.startswith(TERRAIN_MESH_PREFIX):
+        return GROUND
+    return ENTITY_LABEL.get(name, NONE)
+
+
+def mesh_material(name: str) -> int:
+    """The material of a scene mesh: stubble for the terrain's patch, painted steel otherwise."""
+    return STUBBLE if name.startswith(TERRAIN_MESH_PREFIX) else STEEL
 
 
 def label_names() -> dict[int, str]:

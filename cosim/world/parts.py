@@ -17,7 +17,8 @@ from cosim.scenario.config.scenario import Scenario
 from cosim.world.geometry import make_transform
 from cosim.world.labels import CART_RIM, CART_WALL, COMBINE, TRACTOR, TYRE
 
-__all__ = ["CART_FLOOR_BOX", "CART_WALL_BOXES", "CART_RIM_BOXES", "EntityParts", "box_from_bounds", "cart_boxes", "entity_parts"]
+__all__ = ["CART_FLOOR_BOX", "CART_WALL_BOXES", "CART_RIM_BOXES", "HITCH_HEIGHT_M", "EntityParts", "box_from_bounds",
+           "cart_boxes", "entity_parts", "wheel_contacts"]
 
 #: combine: ground clearance of the body, header depth / bottom / top, cab height and width (m)
 COMBINE_CLEARANCE_M = 0.5
@@ -192,3 +193,28 @@ def entity_parts(scenario: Scenario) -> dict[str, EntityParts]:
     if _last[0] is not scenario:
         _last[:] = [scenario, _entity_parts(scenario)]
     return _last[1]
+
+
+#: combine wheels: front axle behind the header, rear axle, and the track inset from the body's side (m)
+COMBINE_FRONT_AXLE_BEHIND_HEADER_M = 1.0
+COMBINE_REAR_AXLE_FROM_BACK_M = 1.0
+COMBINE_TRACK_INSET_M = 0.3
+#: height of the tractor's hitch above the ground (its drawbar), and so of the cart's tongue tip, level (m)
+HITCH_HEIGHT_M = 0.6
+
+
+def wheel_contacts(s: Scenario) -> dict[str, np.ndarray]:
+    """Where each machine stands on the ground: (K, 2) body-frame (x, y) m of its wheels' contact points
+    (combine and tractor: four; cart: its two wheels and, third, the tongue tip, which rests on the tractor's
+    hitch at ``HITCH_HEIGHT_M``)."""
+    c, t, k = s.combine, s.tractor, s.cart
+    fx = c.length_m / 2.0 - HEADER_DEPTH_M - COMBINE_FRONT_AXLE_BEHIND_HEADER_M
+    rx = -c.length_m / 2.0 + COMBINE_REAR_AXLE_FROM_BACK_M
+    cy = c.width_m / 2.0 - COMBINE_TRACK_INSET_M
+    hl, hw = t.length_m / 2.0, t.width_m / 2.0
+    tr, tf = -hl + TRACTOR_REAR_WHEEL_RADIUS_M, hl - TRACTOR_FRONT_WHEEL_RADIUS_M
+    track = k.interior_width_m / 2.0 + k.wall_thickness_m + CART_WHEEL_GAP_M + CART_WHEEL_WIDTH_M / 2.0
+    tongue = k.interior_length_m / 2.0 + k.wall_thickness_m + k.tongue_length_m
+    return {"combine": np.array([[fx, cy], [fx, -cy], [rx, cy], [rx, -cy]]),
+            "tractor": np.array([[tf, hw], [tf, -hw], [tr, hw], [tr, -hw]]),
+            "cart": np.array([[0.0, track], [0.0, -track], [tongue, 0.0]])}

@@ -114,10 +114,15 @@ def load_csv_table(path: Path | str) -> tuple[np.ndarray, np.ndarray]:
     """Read a CSV beam table (header line, then ``elevation_deg, azimuth_deg`` rows); (N,) float64 rad each."""
     p = Path(path)
     try:
-        text = p.read_text()
+        text = p.read_text(encoding="utf-8")
     except OSError as exc:
         raise PatternError(f"{p}: cannot read the beam table ({exc.strerror})") from exc
-    rows = list(csv.reader(text.splitlines()))
+    except UnicodeDecodeError as exc:
+        raise PatternError(f"{p}: the beam table is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    try:
+        rows = list(csv.reader(text.splitlines()))
+    except csv.Error as exc:                       # a NUL byte, a broken quote
+        raise PatternError(f"{p}: not a CSV table: {exc}") from None
     if not rows:
         raise PatternError(f"{p}: empty file, expected a header line and elevation_deg, azimuth_deg rows")
     header = [h.strip().lower() for h in rows[0]]

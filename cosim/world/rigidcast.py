@@ -9,7 +9,9 @@ rest moves or changes shape every frame and is kept as cheap to update as it can
 * the grain surface is a height field on a fixed grid (``cosim.world.heightfield``): its vertex heights are
   written into the shared vertex buffer and the BVH is refitted, placed by ``world_from_grid``;
 * the other boxes (the ground slab) and cylinders (the auger tube, the grain stream) are instances of the unit
-  cube and the unit prism, each scaled and placed per frame (a pool of instances that grows as needed).
+  cube and the unit prism, each scaled and placed per frame (a pool of instances that grows as needed);
+* a mesh that is no entity's (the terrain's patch on uneven ground, cosim.world.terrain) is a refittable
+  prototype whose vertices are rewritten when the patch moves on (its name changes), placed per frame.
 
 Embree decides which triangle each ray hits first (float32, in the instance's frame); the range is then the
 float64 intersection of the ray with that triangle's plane, placed in the world, as in ``embree_cast``, so the
@@ -60,9 +62,9 @@ def top_face_from_above(world_from_box: np.ndarray, half: np.ndarray, o: np.ndar
     return np.where(inside, t, np.inf)
 
 
-def body_triangles(parts: EntityParts) -> tuple[np.ndarray, np.ndarray]:
+def body_triangles(parts: EntityParts, cylinders: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """One entity's surfaces in its body frame, as ``scene_from_state`` places them: its mesh file (or its
-    boxes) then its cylinders as prisms. (vertices (V, 3) float64 m, faces (F, 3) int64)."""
+    boxes) then (``cylinders``) its cylinders as prisms. (vertices (V, 3) float64 m, faces (F, 3) int64)."""
     cv, cf = unit_cube()
     yv, yf = unit_cylinder(CYLINDER_SIDES, np.float64)
     pieces = []
@@ -72,7 +74,7 @@ def body_triangles(parts: EntityParts) -> tuple[np.ndarray, np.ndarray]:
         for m, h in zip(parts.body_from_box, parts.half_extents):
             pieces.append((cv.astype(np.float64) * h @ m[:3, :3].T + m[:3, 3], cf))
     axis = parts.cyl_p1 - parts.cyl_p0
-    if len(axis):
+    if len(axis) and cylinders:
         lin = orthonormal_frames(axis) * np.stack([parts.cyl_radius, parts.cyl_radius,
                                                     np.linalg.norm(axis, axis=1)], axis=1)[:, None, :]
         for a, p0 in zip(lin, parts.cyl_p0):
@@ -152,9 +154,18 @@ class RigidCaster:
         self._unit = {"cube": (cv.astype(np.float64), cf), "prism": unit_cylinder(CYLINDER_SIDES, np.float64)}
         self._hf: _Proto | None = None                      # made on first use
         self._hf_key: tuple | None = None
+        #: scene meshes that are not an entity's (the terrain's patch): (vertices, faces) count -> [proto, name]
+        self._extra: dict[tuple[int, int], list] = {}
+        #: a tilted body (on uneven ground) is drawn as its boxes alone and its cylinders as dynamic prisms: the
+        #: scene's prisms take their facets' phase from the world axis (cosim.world.meshes.orthonormal_frames),
+        #: which a body-frame prism turned by roll or pitch does not keep; name -> (boxes-only proto or None,
+        #: the body's rows of the scene's cylinders)
+        self._parts = dict(parts)
+        self._tilted: dict[str, list] = {}
         for name, p in parts.items():
             self._bodies[name] = self._new(*body_triangles(p), emb.QUALITY_HIGH)
             self._n_boxes += 0 if p.mesh_file is not None else len(p.half_extents)
+            self._tilted[name] = [None, slice(self._n_cyl, self._n_cyl + len(p.cyl_radius))]
             self._n_cyl += len(p.cyl_radius)
         self._cubes: list[_Proto] = []
         self._prisms: list[_Proto] = []
@@ -203,6 +214,32 @@ class RigidCaster:
             emb.refit(self._hf.geom)
             emb.api().rtcCommitScene(self._hf.scene)
 
+    def _meshes(self, scene: Scene) -> list[tuple[_Proto, np.ndarray]]:
+        """(prototype, world_from_mesh) of the scene's meshes that are no entity's (the terrain's patch,
+        cosim.world.terrain): one refittable prototype per vertex and face count, its vertices rewritten and
+        refitted when a mesh of another name arrives; the others hidden."""
+        used = []
+        for mesh in scene.meshes:
+            if mesh.name in self._bodies:
+                continue
+            key = (len(mesh.vertices), len(mesh.faces))
+            v = np.asarray(mesh.vertices, np.float64)
+            if key not in self._extra:
+                self._extra[key] = [self._new(v, np.asarray(mesh.faces, np.int64), emb.QUALITY_REFIT), mesh.name]
+            proto, name = self._extra[key]
+            if name != mesh.name:
+                proto.geom.buffers[0][:-1, :3] = v
+                emb.refit(proto.geom)
+                emb.api().rtcCommitScene(proto.scene)
+                proto.planes = _planes(v, np.asarray(mesh.faces, np.int64))
+                self._owner = None                          # the plane table is rebuilt
+                self._extra[key][1] = mesh.name
+            used.append((proto, mesh.world_from_mesh))
+        for proto, _ in self._extra.values():
+            if all(proto is not u for u, _ in used):
+                proto.hide()
+        return used
+
     def cast(self, scene: Scene, origin: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Exact ranges (N,) float64 m (inf on a miss) of rays from ``origin`` (3,) along unit ``directions``
         (N, 3), world frame, through ``scene`` (built by ``scene_from_state`` for this caster's scenario)."""
@@ -213,8 +250,15 @@ class RigidCaster:
         self._heightfield(scene)
         b, c = scene.boxes, scene.cylinders
         cubes = self._pool(self._cubes, "cube", len(b) - self._n_boxes)
+        tilted = [n for n in self._bodies if scene.poses[n][2, 0] != 0.0 or scene.poses[n][2, 1] != 0.0]
         dyn = slice(self._n_cyl, len(c))
+        if tilted:
+            dyn = np.concatenate([np.arange(len(c))[self._tilted[n][1]] for n in tilted] + [np.arange(len(c))[dyn]])
         prisms = self._pool(self._prisms, "prism", len(c.radius[dyn]))
+        for n in tilted:
+            if self._tilted[n][0] is None:
+                self._tilted[n][0] = self._new(*body_triangles(self._parts[n], cylinders=False), emb.QUALITY_HIGH)
+        meshes = self._meshes(scene)
         if self._owner is None:
             self._table()
         # every prototype's placement (origin-relative): lin (K, 3, 3), trans (K, 3); hidden ones stay identity
@@ -224,6 +268,12 @@ class RigidCaster:
         idx = [self._protos.index(self._hf)]
         lin[idx[0]], trans[idx[0]] = hf.world_from_grid[:3, :3], hf.world_from_grid[:3, 3] - o
         for name, proto in self._bodies.items():
+            boxes_only = self._tilted[name][0]
+            if name in tilted:
+                proto.hide()
+                proto = boxes_only
+            elif boxes_only is not None:
+                boxes_only.hide()
             k = self._protos.index(proto)
             lin[k], trans[k] = scene.poses[name][:3, :3], scene.poses[name][:3, 3] - o
             idx.append(k)
@@ -238,6 +288,10 @@ class RigidCaster:
                                                            np.linalg.norm(axis, axis=1)], axis=1)[:, None, :]
             trans[ks] = c.p0[dyn] - o
         idx += ks
+        for proto, m in meshes:
+            k = self._protos.index(proto)
+            lin[k], trans[k] = m[:3, :3], m[:3, 3] - o
+            idx.append(k)
         ground = None
         if scene.ground_box is not None and scene.ground_box >= self._n_boxes:
             ground = top_face_from_above(b.world_from_box[scene.ground_box], b.half_extents[scene.ground_box], o, d)

@@ -4,11 +4,12 @@ One :class:`Scene` feeds both renderers (GL and the numpy mock) and the exact ra
 geometry by construction. It holds only a few kinds of primitive, each exact in the ray caster:
 
 * :class:`Boxes` - oriented boxes (combine body, cab, header, tractor, cart floor / walls / rim / tongue, the
-  ground slab whose top face is the ground plane z = 0);
+  ground slab whose top face is the ground plane z = 0 on flat ground);
 * :class:`Cylinders` - capped finite cylinders (auger tube, wheels, the grain stream between polyline points);
 * :class:`HeightField` - the grain surface over the cart floor (``cosim.world.heightfield``);
 * :class:`MeshInstance` - an optional triangle mesh loaded with trimesh from a scenario ``mesh_file``
-  (replaces that entity's procedural boxes).
+  (replaces that entity's procedural boxes), and on uneven ground (``terrain:``) the terrain's patch around the
+  cart in place of the ground slab (``cosim.world.terrain``; its name changes when the patch moves on).
 
 All coordinates are world frame (x forward, y left, z up, m) unless a name says otherwise.
 """
@@ -22,7 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from cosim.scenario.config.scenario import Scenario
-from cosim.world.geometry import apply, cart_body_from_grid, vehicle_pose
+from cosim.world.geometry import apply, cart_body_from_grid, entity_pose, make_transform, vehicle_pose
+from cosim.world.terrain import terrain_of
 
 from .labels import AUGER, GRAIN_MAT, GROUND, STEEL, STREAM, STUBBLE
 from .parts import EntityParts, entity_parts
@@ -151,11 +153,8 @@ def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _poses(state: Mapping[str, float]) -> dict[str, np.ndarray]:
-    """world_from_body of each entity from the dyn_state fields."""
-    return {
-        name: vehicle_pose(float(state[f"{name}_x_m"]), float(state[f"{name}_y_m"]), float(state[f"{name}_yaw_rad"]))
-        for name in ("combine", "tractor", "cart")
-    }
+    """world_from_body of each entity from the dyn_state fields (on the terrain: with z, roll and pitch)."""
+    return {name: entity_pose(state, name) for name in ("combine", "tractor", "cart")}
 
 
 def _stream_cylinders(stream: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -209,15 +208,22 @@ def scene_from_state(scenario: Scenario, state: Mapping[str, float], heightmap: 
         ccol.append(p.cyl_colour)
         clabel.append(p.cyl_label)
         cmat.append(p.cyl_material)
-    # ground slab under the combine: its top face z = 0 is the ground plane
-    size = scenario.render.ground_size_m
-    g = vehicle_pose(float(state["combine_x_m"]), float(state["combine_y_m"]), 0.0, -GROUND_THICKNESS_M / 2.0)
-    ground_box = sum(len(x) for x in half)
-    w_from_box.append(g[None])
-    half.append(np.array([[size / 2.0, size / 2.0, GROUND_THICKNESS_M / 2.0]]))
-    colour.append(np.array([GROUND_COLOUR], dtype=np.float32))
-    hidden.append(np.zeros(1, dtype=bool))
-    blabel.append(np.array([GROUND], np.uint8))
+    terrain = terrain_of(scenario)
+    ground_box = None
+    if terrain is None:
+        # ground slab under the combine: its top face z = 0 is the ground plane
+        size = scenario.render.ground_size_m
+        g = vehicle_pose(float(state["combine_x_m"]), float(state["combine_y_m"]), 0.0, -GROUND_THICKNESS_M / 2.0)
+        ground_box = sum(len(x) for x in half)
+        w_from_box.append(g[None])
+        half.append(np.array([[size / 2.0, size / 2.0, GROUND_THICKNESS_M / 2.0]]))
+        colour.append(np.array([GROUND_COLOUR], dtype=np.float32))
+        hidden.append(np.zeros(1, dtype=bool))
+        blabel.append(np.array([GROUND], np.uint8))
+    else:
+        # the terrain's patch around the cart (cosim.world.terrain): the surface the wheels stand on
+        name, verts, faces, origin = terrain.mesh((float(state["cart_x_m"]), float(state["cart_y_m"])))
+        meshes.append(MeshInstance(name, verts, faces, make_transform(np.eye(3), origin), GROUND_COLOUR))
     # auger tube: pivot (combine body) -> spout (world)
     pivot = apply(poses["combine"], np.asarray(scenario.auger.pivot_xyz_m, dtype=np.float64))
     spout = np.array([state["spout_x_m"], state["spout_y_m"], state["spout_z_m"]], dtype=np.float64)

@@ -21,7 +21,7 @@ import numpy as np
 from cosim.scenario.config.cameras import Camera, StereoCamera
 from cosim.scenario.config.scenario import Scenario
 from cosim.world.camera import Pinhole
-from cosim.world.geometry import body_from_camera_axes, make_transform, mount_transform, vehicle_pose
+from cosim.world.geometry import body_from_camera_axes, entity_pose, make_transform, mount_transform
 
 __all__ = ["MIN_SIDE_PX", "BLOCK_PREFIX", "camera_pinhole", "points_stride", "intrinsics_matrix", "level_from_sensor",
            "world_from_parent", "world_from_sensor", "left_from_right", "camera_block", "camera_views", "camera_parts"]
@@ -61,11 +61,11 @@ def level_from_sensor(sensor) -> np.ndarray:
 
 
 def world_from_parent(parent: str, state: Mapping[str, float]) -> np.ndarray:
-    """(4, 4) world_from_body of ``parent`` (``world``, ``combine``, ``tractor`` or ``cart``) from dyn_state."""
+    """(4, 4) world_from_body of ``parent`` (``world``, ``combine``, ``tractor`` or ``cart``) from dyn_state (on
+    uneven ground with its height, roll and pitch: ``cosim.world.geometry.entity_pose``)."""
     if parent == "world":
         return np.eye(4)
-    return vehicle_pose(float(state[f"{parent}_x_m"]), float(state[f"{parent}_y_m"]),
-                        float(state[f"{parent}_yaw_rad"]))
+    return entity_pose(state, parent)
 
 
 def world_from_sensor(sensor, state: Mapping[str, float]) -> np.ndarray:

@@ -7,9 +7,10 @@ from .outcome import Outcome
 from .rendering import Render
 from .scenario import FORMAT_VERSION, Outputs, Scenario, Timing
 from .sensing import Codec, Noise, Pattern, Perception, Sensor
+from .terrain import Terrain
 
 __all__ = [
     "Model", "Mount", "Controller", "Coping", "Fusion", "Grain", "Integrator", "CROP_PRESETS", "Auger", "Cart", "Combine", "Crop",
     "MachineSync", "Outcome", "Tractor", "FMU_REF", "Fmu", "TractorCart", "Vehicles", "Render", "FORMAT_VERSION", "Outputs", "Scenario", "Timing", "Codec", "Noise",
-    "Pattern", "Perception", "Sensor",
+    "Pattern", "Perception", "Sensor", "Terrain",
 ]

@@ -9,16 +9,28 @@ from __future__ import annotations
 import json
 from typing import Annotated, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, JsonValue
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, JsonValue, model_validator
+
+from .docs import schema_docs
+from .limits import check_limits, schema_limits
 
 __all__ = ["Model", "Vec3", "Mount", "Entity", "PosFloat", "NonNegFloat", "Fraction", "Angle", "PluginRef",
            "PluginOptions", "Options"]
 
 
 class Model(BaseModel):
-    """Frozen, strict record: unknown keys are rejected, no silent type coercion."""
+    """Frozen, strict record: unknown keys are rejected, no silent type coercion, every number finite and within
+    the limits of its unit (cosim.scenario.config.limits). A field's docstring (the string literal under it) is
+    its description in the JSON Schema (cosim.scenario.config.docs)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, validate_default=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, validate_default=True, allow_inf_nan=False,
+                              json_schema_extra=lambda schema, model: (schema_limits(schema, model),
+                                                                       schema_docs(schema, model)))
+
+    @model_validator(mode="after")
+    def _within_limits(self):
+        check_limits(self)
+        return self
 
 
 PosFloat = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
@@ -57,5 +69,9 @@ class Mount(Model):
     """
 
     parent: Entity = "combine"
+    """Entity whose body frame the pose is given in: world, combine, tractor or cart."""
     xyz_m: Vec3 = (0.0, 0.0, 0.0)
+    """Position (x forward, y left, z up) in the parent's body frame, m."""
     rpy_deg: Vec3 = (0.0, 0.0, 0.0)
+    """Roll, pitch, yaw, deg, applied as R = Rz(yaw) Ry(pitch) Rx(roll); positive pitch tips the forward axis
+    down."""

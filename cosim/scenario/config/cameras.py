@@ -57,6 +57,7 @@ class LidarSensor(Sensor):
     """The LiDAR under ``sensors:`` (``kind: lidar``): the same keys as ``sensor:``."""
 
     kind: Literal["lidar"]
+    """lidar: this sensor is the LiDAR (the keys of sensor:)."""
 
 
 class Camera(Model):
@@ -69,15 +70,25 @@ class Camera(Model):
     image, at least 1)."""
 
     profile: str | None = None
+    """A packaged device profile (oak_d, multisense_s21b, tof_kinect_class) that fills every key not set here."""
     mount: Mount
+    """Where the camera is: parent body, position and roll, pitch, yaw; the optical axis is the mount's x axis."""
     width_px: int = Field(default=640, ge=16, le=4096)
+    """Image width, px (scaled by render.mock_scale under the mock renderer)."""
     height_px: int = Field(default=480, ge=16, le=4096)
+    """Image height, px (scaled by render.mock_scale under the mock renderer)."""
     hfov_deg: float = Field(default=60.0, gt=1.0, lt=170.0, allow_inf_nan=False)
+    """Horizontal field of view, deg (square pixels, principal point at the image centre)."""
     range_min_m: NonNegFloat = 0.3
+    """Nearest planar depth the camera reports, m."""
     range_max_m: PosFloat = 10.0
+    """Farthest planar depth the camera reports, m."""
     labels: bool = False
+    """Also render the per-pixel label image (ground, cart wall, cart rim, grain, stream, combine, tractor, auger)."""
     every_frames: int = Field(default=1, ge=1, le=1000)
+    """Take an image every this many ring frames (perception keeps the last one in between)."""
     points_stride: int = Field(default=2, ge=1, le=64)
+    """Back-project every this many pixels along each axis into the built-in algorithm's points."""
 
     @model_validator(mode="before")
     @classmethod
@@ -118,17 +129,29 @@ class DepthCamera(Camera):
     also render the colour image (an RGB-D camera)."""
 
     kind: Literal["depth_camera"]
+    """depth_camera: exact rendered depth with the time-of-flight (Kinect-class) noise model."""
     rgb: bool = False
+    """Also render the colour image (an RGB-D camera)."""
     noise: bool = True
+    """Apply the noise model (false: the exact depth within the range limits)."""
     axial_a_m: NonNegFloat = 0.0012
+    """Axial 1-sigma at z0, m (Nguyen et al. 2012: 0.0012)."""
     axial_b_per_m: NonNegFloat = 0.0019
+    """Axial 1-sigma's growth with (z - z0)^2, m per m^2 (Nguyen et al. 2012: 0.0019)."""
     axial_z0_m: NonNegFloat = 0.4
+    """Depth of the axial model's minimum, m (Nguyen et al. 2012: 0.4)."""
     axial_grazing_m: NonNegFloat = 0.0001
+    """Axial grazing term's coefficient, m (Nguyen et al. 2012: 0.0001 / sqrt(z) theta^2 / (pi/2 - theta)^2)."""
     grazing_from_deg: float = Field(default=60.0, ge=0.0, lt=90.0, allow_inf_nan=False)
+    """Incidence beyond which the axial grazing term applies, deg (Nguyen et al. 2012: 60)."""
     lateral_px: NonNegFloat = 0.8
+    """Lateral 1-sigma at normal incidence, px (Nguyen et al. 2012: 0.8)."""
     lateral_grazing_px: NonNegFloat = 0.035
+    """Lateral growth with theta / (pi/2 - theta), px (Nguyen et al. 2012: 0.035)."""
     max_incidence_deg: float = Field(default=80.0, gt=0.0, lt=90.0, allow_inf_nan=False)
+    """Pixels seen at a steeper incidence are invalid, deg."""
     flying_edge_m: PosFloat = 0.1
+    """A pixel whose 3 x 3 neighbourhood spans more depth than this is a mixed (flying) pixel, m."""
 
 
 class StereoCamera(Camera):
@@ -144,16 +167,27 @@ class StereoCamera(Camera):
     images: the mock renderer's plain shading has nothing to match."""
 
     kind: Literal["stereo_camera"]
+    """stereo_camera: left and right textured images, disparity from OpenCV's matcher, depth = f B / d."""
     baseline_m: PosFloat = 0.12
+    """Distance from the left camera (the mount) to the right one along the image's X (right), m."""
     matcher: Literal["sgbm", "bm"] = "sgbm"
+    """OpenCV's StereoSGBM (sgbm) or StereoBM (bm)."""
     sgbm_mode: Literal["sgbm", "3way", "hh"] = "sgbm"
+    """SGBM's variant: sgbm (one pass, five paths; OpenCV's default), 3way, or hh (two passes, eight paths)."""
     num_disparities: int = Field(default=128, ge=16, le=512)
+    """Disparities searched, px (a multiple of 16)."""
     min_disparity_px: int = Field(default=0, ge=0, le=512)
+    """Smallest disparity searched, px."""
     block_size: int = Field(default=5, ge=3, le=51)
+    """Matched block size, px (odd; BM needs >= 5)."""
     uniqueness_ratio: int = Field(default=10, ge=0, le=100)
+    """OpenCV's uniqueness ratio, percent."""
     speckle_window_px: int = Field(default=100, ge=0, le=10_000)
+    """OpenCV's speckle filter window, px (0: off)."""
     speckle_range_px: int = Field(default=2, ge=0, le=64)
+    """OpenCV's speckle filter range, px of disparity."""
     disp12_max_diff_px: int = Field(default=1, ge=-1, le=64)
+    """OpenCV's left-right check tolerance, px (-1: off)."""
 
     @model_validator(mode="after")
     def _matcher(self) -> "StereoCamera":
@@ -177,6 +211,7 @@ class RgbCamera(Camera):
     """A colour camera: the textured, lit image (and labels when asked); no depth."""
 
     kind: Literal["rgb_camera"]
+    """rgb_camera: a textured, lit colour image (no depth)."""
 
 
 #: one entry of ``sensors:``, its record picked by ``kind``

@@ -23,8 +23,12 @@ class Grain(Model):
     """
 
     cell_m: PosFloat = 0.1
+    """Side of a cell of the true height map over the cart floor, m; must divide the cart interior length and
+    width."""
     initial_fill_m: NonNegFloat = 1.0
+    """Level of the grain above the cart floor at the start, m (at most the interior depth)."""
     deposit_radius_m: PosFloat = 0.25
+    """Radius of the flat top of the heap the stream builds around its impact point, m."""
 
 
 class Fusion(Model):
@@ -41,9 +45,14 @@ class Fusion(Model):
     """
 
     flow_sigma: NonNegFloat = 0.2
+    """Relative 1-sigma of each frame's predicted rise per cell (flow signal, heap shape, placement)."""
     settle_sigma_m: NonNegFloat = 0.002
+    """Per-frame 1-sigma drift of every cell (settling the heap law does not model), m."""
     measurement_sigma_m: PosFloat = 0.03
+    """1-sigma of a perceived cell height, m."""
     flow_meter_bias: float = Field(default=0.0, ge=-0.9, le=10.0, allow_inf_nan=False)
+    """Relative error of the flow signal the estimator is given (0: calibrated; -0.9 to 10); the grain delivered
+    is unchanged."""
 
 
 class Coping(Model):
@@ -65,12 +74,22 @@ class Coping(Model):
     """
 
     full_lead_s: NonNegFloat = 1.0
+    """Lead on the full level, s: a section counts as full once its peak plus its rise rate times this reaches
+    the full level (0: no lead)."""
     slow_flow: float = Field(default=0.3, gt=0.0, le=1.0, allow_inf_nan=False)
+    """Flow fraction commanded once a section is near full at a high flow, until the impact reaches the next
+    target (0-1]."""
     lead_allowance_m: NonNegFloat = 0.06
+    """A rise over the lead up to this needs no slowing, m."""
     rise_tau_s: PosFloat = 2.0
+    """Time constant of the filter on each section's measured rise rate, s."""
     fallback_sigma_m: PosFloat = 0.05
+    """The controller fills on its dead-reckoned estimate while the target section's 1-sigma stays at most this,
+    m; beyond it the auger stops and the controller holds."""
     feedforward: bool = True
+    """Feed the cart's steady-state off-tracking in a turn forward into the auger target."""
     feedforward_lead_s: NonNegFloat = 2.0
+    """How far ahead a turn is anticipated (from the combine's known yaw rate), s."""
 
 
 class Controller(Model):
@@ -97,22 +116,42 @@ class Controller(Model):
     """
 
     target_fill_m: PosFloat = 1.9
+    """Operator's target grain level above the cart floor, m (at most the interior depth)."""
     strategy: PluginRef = "front_to_back"
+    """Which section to fill next: front_to_back, back_to_front, lowest_first, fmu, an entry point name or an
+    import path package.module:name."""
     strategy_options: Options = {}
+    """Keyword arguments the strategy plug-in is called with (checked against its signature)."""
     model: PluginRef = "section_fill"
+    """The whole controller: section_fill (built in), fmu, or a plug-in implementing
+    dynamics_proc.control_protocol."""
     model_options: Options = {}
+    """Keyword arguments the controller factory is called with (checked against its signature)."""
     sections: int = Field(default=9, ge=1, le=64)
+    """Number of sections the cart is filled in, along its length (1-64)."""
     grid_cell_m: PosFloat = 0.1
+    """Side of a cell of the controller's and the perceived height map's grid, m."""
     full_fraction: Fraction = 0.995
+    """A section is full when its estimated peak reaches this fraction of target_fill_m (latched)."""
     estimator: Literal["paper", "fused"] = "fused"
+    """fused: perceived heights fused with the delivered volume; paper: perceived heights alone."""
     safe_margin_m: NonNegFloat = 0.3
+    """The auger runs only while the predicted impact lies at least this far inside every inner wall, m."""
     safety_hysteresis_m: NonNegFloat = 0.1
+    """The auger stops when the impact comes closer than safe_margin_m minus this, m."""
     stale_timeout_s: PosFloat = 10.0
+    """A target section without a valid measurement for this long while it is filled counts as full, s."""
     edge_margin_m: NonNegFloat = 0.2
+    """Cells whose centre lies within this distance of an inner wall are left out of the estimate, m."""
     min_section_cells: int = Field(default=4, ge=1)
+    """A section's estimate is updated only from a map with at least this many valid cells in it."""
     fusion: Fusion = Fusion()
+    """Parameters of the fused estimator (estimator: fused)."""
     coping: Coping = Coping()
+    """How the built-in controller copes with field conditions: lead on the full level, dead reckoning and hold,
+    turn feed-forward."""
     fmu: Fmu | None = None
+    """The FMU named by model: fmu or strategy: fmu (path, variable mapping, parameters)."""
 
     @model_validator(mode="after")
     def _fmu_named(self) -> "Controller":
@@ -136,5 +175,8 @@ class Integrator(Model):
     """
 
     method: Literal["rk4", "exponential", "radau", "bdf"] = "exponential"
+    """rk4, exponential (lags solved exactly), radau or bdf (scipy solve_ivp, a reference)."""
     rtol: PosFloat = 1e-8
+    """Relative tolerance of radau / bdf."""
     atol: PosFloat = 1e-10
+    """Absolute tolerance of radau / bdf."""

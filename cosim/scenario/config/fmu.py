@@ -52,13 +52,22 @@ class Fmu(Model):
     """
 
     path: Path
+    """The .fmu file (FMI 2.0 or 3.0 co-simulation), relative to the scenario file."""
     inputs: dict[str, str] = {}
+    """Our signal name -> the FMU's input variable; for per-section signals the FMU name holds {k} (section
+    1..N)."""
     outputs: dict[str, str] = {}
+    """Our signal name -> the FMU's output variable; for per-section signals the FMU name holds {k}."""
     initial: dict[str, str] = {}
+    """Our initial value -> FMU variable (parameter or input) set before initialisation."""
     parameters: dict[str, ParameterValue] = {}
+    """FMU parameter variable -> value (Real, Integer, Boolean or String), set before initialisation."""
     step: FmuStep | None = None
+    """dynamics_step (one doStep per dynamics step) or frame (one per sensor frame); unset: the role's own."""
     instance_name: str = Field(default="graincosim", pattern=_NAME, max_length=64)
+    """Instance name given to the FMU (1-64 characters, no surrounding whitespace)."""
     index_base: Literal[0, 1] = 1
+    """How the FMU numbers sections: 1 (1..N, 0 for none) or 0 (0..N-1, -1 for none)."""
 
     def __hash__(self) -> int:
         # frozen records are hashable (the scenario is a cache key); the mappings hash as their items
@@ -71,9 +80,11 @@ class TractorCart(Model):
     """The tractor towing the cart: the built-in model (``dynamics_proc.vehicles``) unless ``fmu`` is given."""
 
     fmu: Fmu | None = None
+    """An FMU that replaces the built-in tractor-and-cart dynamics (docs/fmu.md)."""
 
 
 class Vehicles(Model):
     """Replaceable vehicle dynamics. The combine always follows its path (``combine``)."""
 
     tractor_cart: TractorCart = TractorCart()
+    """The tractor towing the cart: the built-in model unless an FMU is given."""

@@ -28,8 +28,11 @@ class Crop(Model):
     """Grain being offloaded. Density and repose default to the named crop's preset."""
 
     name: Literal["corn", "soybeans", "wheat"] = "corn"
+    """corn, soybeans or wheat: sets the default density and angle of repose."""
     density_kgpm3: PosFloat | None = None
+    """Bulk density, kg/m^3; unset: the crop's preset."""
     repose_deg: float | None = Field(default=None, gt=0.0, lt=60.0)
+    """Angle of repose of the heap, deg (0-60); unset: the crop's preset."""
 
     @property
     def density(self) -> float:
@@ -47,31 +50,52 @@ class Combine(Model):
     """Combine harvester: path, speed and the box dimensions used to draw it."""
 
     speed_mps: NonNegFloat = 2.0
+    """Ground speed along the path, m/s."""
     path: Literal["straight", "arc"] = "straight"
+    """straight or arc (of path_radius_m, turning left)."""
     path_radius_m: PosFloat = 400.0
+    """Radius of the arc path, m."""
     start_xy_m: tuple[float, float] = (0.0, 0.0)
+    """Start position of the combine body origin in the world frame, m."""
     heading_deg: float = 0.0
+    """Start heading, deg from the world x axis towards y."""
     length_m: PosFloat = 8.5
+    """Length of the drawn body box, m."""
     width_m: PosFloat = 3.5
+    """Width of the drawn body box, m."""
     height_m: PosFloat = 3.9
+    """Height of the drawn body box, m."""
     header_width_m: PosFloat = 7.6
+    """Width of the header (cutting platform), m."""
     mesh_file: Path | None = None
+    """A mesh (any format trimesh reads) drawn instead of the boxes, relative to the scenario file."""
 
 
 class Auger(Model):
     """Unloading auger on the combine's left side. Geometry in the combine body frame."""
 
     pivot_xyz_m: tuple[float, float, float] = (-2.0, 1.5, 3.8)
+    """Auger pivot in the combine body frame, m."""
     length_m: PosFloat = 6.0
+    """Length from the pivot to the spout, m."""
     swing_deg: float = 90.0
+    """Swing from the combine's forward axis towards its left, deg (90: straight out to the left)."""
     elevation_deg: float = 8.0
+    """Elevation of the tube above the horizontal, deg."""
     tube_radius_m: PosFloat = 0.2
+    """Radius of the auger tube (drawn and checked for collisions), m."""
     flow_m3ps: NonNegFloat = 0.125
+    """Grain flow while running at full speed, m^3/s."""
     spool_up_s: NonNegFloat = 1.0
+    """Time from off to full flow, s."""
     run_out_s: NonNegFloat = 1.0
+    """Time from full flow to none after the auger is switched off, s."""
     exit_speed_mps: NonNegFloat = 3.0
+    """Speed of the grain leaving the spout relative to the combine, m/s."""
     exit_down_deg: float = 60.0
+    """Angle below the horizontal at which the grain leaves the spout, deg."""
     stream_radius_m: PosFloat = 0.15
+    """Radius of the grain stream at full flow, m."""
 
 
 class Tractor(Model):
@@ -84,19 +108,33 @@ class Tractor(Model):
     """
 
     wheelbase_m: PosFloat = 3.0
+    """Wheelbase of the bicycle model, m."""
     hitch_offset_m: PosFloat = 1.5
+    """Distance of the hitch behind the rear axle, m."""
     drivetrain_tau_s: PosFloat = 0.5
+    """Time constant of the drivetrain's first-order lag, s."""
     accel_max_mps2: PosFloat = 1.0
+    """Largest acceleration, m/s^2."""
     brake_max_mps2: PosFloat = 3.0
+    """Largest deceleration, m/s^2."""
     steer_tau_s: PosFloat = 0.2
+    """Time constant of the steering's first-order lag, s."""
     steer_max_deg: PosFloat = 35.0
+    """Largest steering angle, deg."""
     steer_rate_max_degps: PosFloat = 30.0
+    """Largest steering rate, deg/s."""
     max_speed_mps: PosFloat = 12.0
+    """Largest speed, m/s (the tractor does not reverse)."""
     rear_axle_x_m: float = -2.0
+    """Position of the rear axle along the body x axis (the body origin is the centre of the drawn box), m."""
     length_m: PosFloat = 6.0
+    """Length of the drawn body box, m."""
     width_m: PosFloat = 2.6
+    """Width of the drawn body box, m."""
     height_m: PosFloat = 3.3
+    """Height of the drawn body box, m."""
     mesh_file: Path | None = None
+    """A mesh (any format trimesh reads) drawn instead of the boxes, relative to the scenario file."""
 
 
 class Cart(Model):
@@ -108,14 +146,23 @@ class Cart(Model):
     """
 
     interior_length_m: PosFloat = 6.0
+    """Interior length (towing direction), m."""
     interior_width_m: PosFloat = 3.0
+    """Interior width, m."""
     interior_depth_m: PosFloat = 2.0
+    """Interior depth from the floor to the wall top, m."""
     floor_height_m: PosFloat = 1.0
+    """Height of the cart floor above the ground, m."""
     wall_thickness_m: PosFloat = 0.08
+    """Thickness of the walls, m."""
     rim_width_m: PosFloat = 0.12
+    """Width of the rim on top of the walls, m."""
     rim_height_m: PosFloat = 0.06
+    """Height of the rim above the wall top, m."""
     tongue_length_m: PosFloat = 5.0
+    """Length of the tongue from the hitch to the cart, m."""
     mesh_file: Path | None = None
+    """A mesh (any format trimesh reads) drawn instead of the boxes, relative to the scenario file."""
 
     @property
     def rim_top_m(self) -> float:
@@ -148,11 +195,20 @@ class MachineSync(Model):
     """
 
     longitudinal_offset_m: float = -4.65
+    """Cart body origin ahead (+) or behind (-) the combine body origin at the start, m."""
     lateral_offset_m: float = 7.4
+    """Lateral distance from the combine to the cart body origin (cart to the combine's left), m."""
     kp_long: PosFloat = 0.8
+    """Gain of the longitudinal position error, 1/s."""
     kp_lat: PosFloat = 0.6
+    """Gain of the lateral position error, 1/s."""
     heading_gain_ps: PosFloat = 2.0
+    """Gain with which the tractor's heading follows its wanted velocity, 1/s."""
     nudge_m: PosFloat = 0.3
+    """Step by which a nudge moves the setpoint, m."""
     nudge_min_interval_s: NonNegFloat = 1.0
+    """Shortest time between two nudges, s."""
     initial_long_error_m: float = 0.0
+    """Tractor displaced from its setpoint along the combine's axis at t = 0, m."""
     initial_lat_error_m: float = 0.0
+    """Tractor displaced from its setpoint across the combine's axis at t = 0, m."""

@@ -17,5 +17,8 @@ class Outcome(Model):
     """
 
     overfill_tolerance_m: NonNegFloat = 0.05
+    """The highest grain may stand this much above controller.target_fill_m; more is a failed job, m."""
     underfill_tolerance_m: NonNegFloat = 0.05
+    """Every section's peak must reach the target less this for the cart to count as filled, m."""
     spill_tolerance_kg: NonNegFloat = 0.0
+    """Spill above this fails the job (0: any spill does), kg."""

@@ -16,7 +16,9 @@ class WorkLight(Model):
     the cameras' exposure: at night a camera exposes for its work light)."""
 
     mount: Mount = Mount(parent="combine", xyz_m=(-2.0, 5.5, 4.9))
+    """Where the light is (its position; on the auger by default)."""
     intensity: PosFloat = 12.0
+    """Irradiance at 1 m, in units of the full sun's (falls off as 1 / r^2)."""
 
 
 class Lighting(Model):
@@ -27,10 +29,15 @@ class Lighting(Model):
     images and the LiDAR do not depend on it."""
 
     sun_elevation_deg: float = Field(default=60.0, ge=-90.0, le=90.0, allow_inf_nan=False)
+    """Sun above the horizon, deg (at or below 0: night)."""
     sun_azimuth_deg: float = Field(default=53.13, ge=-360.0, le=360.0, allow_inf_nan=False)
+    """Sun's direction from world +x (the harvest direction) towards +y (left), deg."""
     ambient: Fraction = 0.35
+    """The sky's share of the light by day."""
     night_ambient: Fraction = 0.02
+    """The sky glow at night."""
     work_light: WorkLight | None = None
+    """A work light on a machine (the light there is at night)."""
 
     @property
     def night(self) -> bool:
@@ -55,12 +62,23 @@ class Render(Model):
     """
 
     rig: Literal["auto", "fixed"] = "auto"
+    """auto: the fewest cameras (then pixels) that cover the beam pattern within sensor.max_angular_error_deg;
+    fixed: cameras x width_px x height_px with hfov_deg."""
     cameras: int = Field(default=2, ge=1, le=16)
+    """Cameras of a fixed rig, side by side in yaw (1-16)."""
     width_px: int = Field(default=640, ge=8, le=8192)
+    """Image width of a fixed rig's camera, px."""
     height_px: int = Field(default=480, ge=8, le=8192)
+    """Image height of a fixed rig's camera, px."""
     hfov_deg: float = Field(default=60.0, gt=1.0, lt=170.0)
+    """Horizontal field of view of a fixed rig's camera, deg."""
     rgb: Literal["auto", "on", "off"] = "auto"
+    """auto: render the shaded image only when something consumes it (a viewer); on: always; off: never."""
     float_depth: bool = False
+    """Also write each camera's exact float32 planar depth."""
     mock_scale: float = Field(default=0.25, gt=0.0, le=1.0, allow_inf_nan=False)
+    """Resolution factor of the rig with the mock renderer (0-1]; images and perception follow the scaled rig."""
     ground_size_m: PosFloat = 400.0
+    """Side of the square ground plane, centred under the combine, m."""
     lighting: Lighting = Lighting()
+    """Light for the camera sensors' colour images: the sun, or night with a work light."""

@@ -10,16 +10,36 @@ from .base import Model, PosFloat
 from .cameras import DEPTH_KINDS, Camera, LidarSensor, SensorMap, Sensors, StereoCamera
 from .control import Controller, Grain, Integrator
 from .fmu import Vehicles
+from .limits import key_error
 from .machines import Auger, Cart, Combine, Crop, MachineSync, Tractor
 from .outcome import Outcome
 from .rendering import Render
 from .sensing import Perception, Sensor
+from .terrain import Terrain
 
-__all__ = ["Timing", "Outputs", "Scenario", "FORMAT_VERSION", "RATIO_TOLERANCE"]
+__all__ = ["Timing", "Outputs", "Scenario", "FORMAT_VERSION", "RATIO_TOLERANCE", "MAX_SENSOR_PERIOD_S",
+           "MAX_GRID_CELLS"]
 
 FORMAT_VERSION = 1
 #: relative tolerance when checking that a rate ratio is an integer
 RATIO_TOLERANCE = 1e-9
+#: longest sensor period, s: a LiDAR frame rate below 1 Hz is none this platform models (100 is milliseconds typed
+#: as seconds: 3 frames for a 200 s run)
+MAX_SENSOR_PERIOD_S = 1.0
+#: most cells of a height-map grid over the cart (grain.cell_m, controller.grid_cell_m): 2048 x 2048, a 1.5 mm
+#: cell on the default cart; each cell costs the fill model and perception several float64 arrays per frame
+MAX_GRID_CELLS = 1 << 22
+
+
+def _grid_problem(cart: Cart, cell_m: float) -> str | None:
+    """Why a grid of ``cell_m`` over ``cart``'s interior is too large to hold, None when it is not."""
+    nx, ny = cart.interior_length_m / cell_m, cart.interior_width_m / cell_m
+    if nx * ny <= MAX_GRID_CELLS:
+        return None
+    smallest = math.sqrt(cart.interior_length_m * cart.interior_width_m / MAX_GRID_CELLS)
+    return (f"{cell_m:g} m cells grid the {cart.interior_length_m:g} x {cart.interior_width_m:g} m cart interior "
+            f"into {nx:,.0f} x {ny:,.0f} cells; at most {MAX_GRID_CELLS:,} cells fit (a cell of at least "
+            f"{smallest:.2g} m on this cart)")
 
 
 def _integer_ratio(num: float, den: float) -> int | None:
@@ -32,15 +52,27 @@ def _integer_ratio(num: float, den: float) -> int | None:
 class Timing(Model):
     """Co-simulation clock: one sensor frame per ring turn, an integer number of dynamics steps in it."""
 
-    sensor_period_s: PosFloat = 0.1
+    sensor_period_s: float = Field(default=0.1, gt=0.0, le=MAX_SENSOR_PERIOD_S)
+    """One LiDAR frame = one turn of the process ring, s (at most 1 s: a sensor frame rate of at least 1 Hz)."""
     dynamics_dt_s: PosFloat = 0.01
+    """Dynamics integration step, s; must divide sensor_period_s (an integer number of steps per frame)."""
     latency_frames: int = Field(default=1, ge=0, le=100)
-    #: with latency_frames >= 1 (or ground-truth feedback) perception of frame m runs while dynamics and the
-    #: renderer do frame m + 1 and publishes its outputs at its next turn; the results are the same either way
-    #: (cosim.runtime.participant.perception_overlaps)
+    """Frames between a perception output and the controller seeing it (0-100)."""
     overlap_perception: bool = True
+    """With latency_frames >= 1 (or ground-truth feedback) perception of frame m runs while dynamics and the
+    renderer do frame m + 1 and publishes at its next turn; results are the same either way
+    (cosim.runtime.participant.perception_overlaps)."""
+    schedule: Literal["sequential", "pipelined"] = "pipelined"
+    """How the processes of a launched run take turns (docs/architecture.md): sequential, one token ring
+    (dynamics, renderer, perception, supervisor; perception overlapping the next frame as above), or pipelined,
+    each process waiting only for the frames it reads, so that dynamics, the renderer and perception work on
+    neighbouring frames at once. Both give the same results; a run with one process (no renderer or perception)
+    or on one core runs sequential."""
     handoff_timeout_s: PosFloat = 30.0
+    """Longest wait for one lockstep hand-off before the run stops with HandoffTimeout naming the stuck process,
+    s."""
     startup_timeout_s: PosFloat = 120.0
+    """Longest wait for every process to start and attach, s."""
 
     @field_validator("dynamics_dt_s")
     @classmethod
@@ -66,42 +98,72 @@ class Outputs(Model):
     """What a run writes beside summary.json and timeseries.csv."""
 
     figures: bool = True
+    """Draw the run's figures (PNG) into the run directory at the end."""
     report: bool = False
+    """Also write report.html with the figures."""
 
 
 class Scenario(Model):
     """A whole scenario, as loaded from YAML and validated before anything starts."""
 
     format_version: Literal[1]
+    """Version of the scenario format; this version of graincosim reads 1. The only required key."""
     name: str = Field(default="scenario", pattern=r"^[A-Za-z0-9_.-]{1,64}$")
+    """Name of the scenario: letters, digits, '_', '.', '-' (1-64); names the default run directory."""
     description: str = ""
+    """Free text describing the scenario (`launch.py list` shows its first sentence)."""
     seed: int = Field(default=0, ge=0, le=2**63 - 1)
+    """Random seed of everything random in the run (noise, dropout, accuracy beams); same seed, same results."""
     duration_s: PosFloat = 60.0
+    """Simulated time, s."""
     feedback: Literal["ground_truth", "perception"] = "perception"
+    """What the controller sees: perception (the perceived height map) or ground_truth (the true one)."""
     renderer: Literal["gl", "mock", "none"] = "gl"
+    """gl (OpenGL), mock (CPU ray caster, no OpenGL needed) or none (ground-truth feedback only)."""
     viewer: bool = False
+    """Serve the live dashboard while the run goes (the CLI's --viewer sets it)."""
     timing: Timing = Timing()
+    """Co-simulation clock: sensor period, dynamics step, latency, timeouts."""
     crop: Crop = Crop()
+    """The grain being offloaded: crop, density, angle of repose."""
     combine: Combine = Combine()
+    """The combine harvester: path, speed, size."""
     auger: Auger = Auger()
+    """The combine's unloading auger: geometry and flow."""
     tractor: Tractor = Tractor()
+    """The tractor towing the cart: vehicle model, lags and limits, size."""
     cart: Cart = Cart()
+    """The grain cart: interior, walls, rim, tongue."""
     machine_sync: MachineSync = MachineSync()
+    """Machine Sync: how the combine holds the cart beside it, and the nudges."""
+    terrain: Terrain = Terrain()
+    """The ground the machines drive on: flat, or uneven with its tilt and bumps."""
     vehicles: Vehicles = Vehicles()
+    """Replaceable vehicle dynamics (an FMU for the tractor and cart)."""
     grain: Grain = Grain()
+    """The grain fill model: height-map cell, initial fill, heap radius."""
     controller: Controller = Controller()
+    """The offloading controller: target, strategy, sections, safety margins, estimator."""
     integrator: Integrator = Integrator()
+    """Integration of the continuous vehicle states within a frame."""
     sensor: Sensor = Sensor()
-    #: named sensors (docs/cameras.md): name -> a sensor whose ``kind`` is lidar, depth_camera, stereo_camera or
-    #: rgb_camera; empty: the one LiDAR of ``sensor:`` (the shorthand), named ``lidar``
+    """The LiDAR of the one-LiDAR shorthand (used when sensors is empty): mount, beam pattern, range limits,
+    noise, depth codec."""
     sensors: Sensors = {}
+    """Named sensors (docs/cameras.md): name -> a sensor whose kind is lidar, depth_camera, stereo_camera or
+    rgb_camera, each with its mount; empty: the one LiDAR of sensor, named lidar."""
     render: Render = Render()
+    """Renderer options: camera rig, image sizes, mock scale."""
     perception: Perception = Perception()
+    """Offloading perception: resampling, height map, impact, accuracy evaluation, plug-ins."""
     outputs: Outputs = Outputs()
+    """Optional outputs of a run: figures, report."""
     outcome: Outcome = Outcome()
-    #: folder searched first for plug-in modules named by import path (the loader sets it to the scenario
-    #: file's folder; '' only sys.path); carried to the run's processes so that they import the same code
+    """What the run must achieve to count as done (the run's outcome)."""
     plugin_dir: str = ""
+    """Folder searched first for plug-in modules named by import path; the loader sets it to the scenario file's
+    folder unless given (a relative one is resolved against the file that gives it, or the working directory with
+    --set); '' searches sys.path only. Carried to the run's processes, so that they import the same code."""
 
     @field_validator("renderer")
     @classmethod
@@ -118,7 +180,17 @@ class Scenario(Model):
     @classmethod
     def _grain_fits_cart(cls, grain: Grain, info: ValidationInfo) -> Grain:
         cart = info.data.get("cart")
-        if cart is not None and grain.initial_fill_m > cart.interior_depth_m:
+        if cart is None:
+            return grain
+        too_large = _grid_problem(cart, grain.cell_m)
+        if too_large:
+            raise key_error("Grain", ("cell_m",), too_large, grain.cell_m)
+        for what, extent in (("length", cart.interior_length_m), ("width", cart.interior_width_m)):
+            if _integer_ratio(extent, grain.cell_m) is None:
+                n = max(1, round(extent / grain.cell_m))
+                raise key_error("Grain", ("cell_m",), f"{grain.cell_m:g} m does not divide the cart interior {what} "
+                                f"{extent:g} m; choose a cell that divides it (e.g. {extent / n:g} m)", grain.cell_m)
+        if grain.initial_fill_m > cart.interior_depth_m:
             raise ValueError(f"initial_fill_m ({grain.initial_fill_m:g}) is above the wall top "
                              f"(cart.interior_depth_m = {cart.interior_depth_m:g}): the cart would already overflow")
         return grain
@@ -129,6 +201,9 @@ class Scenario(Model):
         cart = info.data.get("cart")
         if cart is None:
             return controller
+        too_large = _grid_problem(cart, controller.grid_cell_m)
+        if too_large:
+            raise key_error("Controller", ("grid_cell_m",), too_large, controller.grid_cell_m)
         if controller.target_fill_m > cart.interior_depth_m:
             raise ValueError(f"target_fill_m ({controller.target_fill_m:g}) is above the wall top "
                              f"(cart.interior_depth_m = {cart.interior_depth_m:g}): grain that high spills")

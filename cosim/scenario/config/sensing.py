@@ -29,9 +29,14 @@ class Codec(Model):
     """
 
     alpha_cm: PosFloat = 5000.0
+    """Largest encodable planar depth, cm (alpha / beta at most 254)."""
     beta_cm: PosFloat = 100.0
+    """Period of the fine depth channel, cm; the worst-case quantisation error is beta / 510."""
     gamma: PosFloat = 2.2
+    """Gamma of the depth image's colour channels."""
     gamma_mode: Literal["linear", "mishandled"] = "linear"
+    """linear: linear bytes (the inverse gamma undone before 8-bit storage); mishandled: quantised in the gamma
+    domain (for the error study)."""
 
     @model_validator(mode="after")
     def _ratio(self) -> "Codec":
@@ -66,13 +71,22 @@ class Pattern(Model):
     """
 
     preset: Literal["grid", "honeycomb", "csv"] = "honeycomb"
+    """grid (uniform), honeycomb (a Honeycomb-like unit, denser near the horizon) or csv (a table in csv_file)."""
     csv_file: Path | None = None
+    """Beam table for preset csv: a header line elevation_deg,azimuth_deg then one row per beam; relative to the
+    scenario file."""
     azimuth_min_deg: float = Field(default=-45.0, ge=-180.0, le=180.0)
+    """Smallest azimuth, deg (from the forward axis towards the left)."""
     azimuth_max_deg: float = Field(default=45.0, ge=-180.0, le=180.0)
+    """Largest azimuth, deg."""
     elevation_min_deg: float = Field(default=-47.5, ge=-90.0, le=90.0)
+    """Smallest elevation, deg."""
     elevation_max_deg: float = Field(default=47.5, ge=-90.0, le=90.0)
+    """Largest elevation, deg."""
     azimuth_count: int = Field(default=240, ge=1, le=100_000)
+    """Beams per row (azimuth steps)."""
     elevation_count: int = Field(default=160, ge=1, le=10_000)
+    """Rows of beams (elevation steps)."""
 
     @model_validator(mode="after")
     def _ranges(self) -> "Pattern":
@@ -89,27 +103,37 @@ class Noise(Model):
     """Range noise (Gaussian, m) and independent random dropout per beam, seeded from the scenario seed."""
 
     range_sigma_m: NonNegFloat = 0.0
+    """1-sigma of the Gaussian range noise of each beam, m."""
     dropout: Fraction = 0.0
+    """Fraction of beams lost at random (0-1)."""
 
 
 class Sensor(Model):
     """The LiDAR: where it is, what it samples, its range limits and noise, the codec its images use."""
 
-    #: on a mast on the combine's auger side, 1.5 m behind the auger, 3.5 m out from the centre line and 6 m up,
-    #: looking left, 15 deg forward and 60 deg down, rolled 90 deg so the 95 deg vertical field runs along the
-    #: cart. Exact ray cast from half full to the target, wherever Machine Sync puts the cart: 50-85 % of the
-    #: grain cells seen and ~230 beams on the stream's lowest metre (a mast on the auger saw 58 % of the cells but
-    #: the tube hid the stream; the combine's side saw 5 %).
+    # on a mast on the combine's auger side, 1.5 m behind the auger, 3.5 m out from the centre line and 6 m up,
+    # looking left, 15 deg forward and 60 deg down, rolled 90 deg so the 95 deg vertical field runs along the
+    # cart. Exact ray cast from half full to the target, wherever Machine Sync puts the cart: 50-85 % of the
+    # grain cells seen and ~230 beams on the stream's lowest metre (a mast on the auger saw 58 % of the cells but
+    # the tube hid the stream; the combine's side saw 5 %).
     mount: Mount = Mount(parent="combine", xyz_m=(-3.5, 5.0, 6.0), rpy_deg=(90.0, 60.0, 75.0))
+    """Where the LiDAR is: by default on a mast on the combine's auger side, 6 m up, looking left and down at the
+    cart (so that 50-85 % of the grain cells and the stream are seen)."""
     pattern: Pattern = Pattern()
+    """The beam pattern: a preset grid, a Honeycomb-like unit or a CSV table."""
     range_min_m: NonNegFloat = 0.0
+    """Shortest range returned, m."""
     range_max_m: PosFloat = 40.0
+    """Longest range returned, m."""
     noise: Noise = Noise()
+    """Range noise and dropout."""
     codec: Codec = Codec()
+    """The depth-in-colour codec of the camera images."""
     max_angular_error_deg: PosFloat = 0.1
-    #: how images become ranges: ``camera_rig`` is the paper's pipeline (camera images, Eqs 5-7 resample);
-    #: ``beam_native`` draws from the LiDAR origin into one pixel per beam and decodes per beam (docs/lidar.md)
+    """Largest angle between a beam and the pixel ray it is read from (the auto rig is planned for it), deg."""
     method: Literal["camera_rig", "beam_native"] = "camera_rig"
+    """camera_rig: the paper's pipeline (camera images, Eqs 5-7 resample); beam_native: one pixel per beam, drawn
+    from the LiDAR origin and decoded per beam (docs/lidar.md)."""
 
     @model_validator(mode="after")
     def _limits(self) -> "Sensor":
@@ -125,11 +149,17 @@ class Stages(Model):
     arguments the stage is called with."""
 
     rim: PluginRef = "builtin"
+    """The stage that finds the cart: builtin, an entry point name or an import path."""
     rim_options: Options = {}
+    """Keyword arguments the rim stage is called with."""
     heightmap: PluginRef = "builtin"
+    """The stage that grids the grain surface: builtin, an entry point name or an import path."""
     heightmap_options: Options = {}
+    """Keyword arguments the height-map stage is called with."""
     impact: PluginRef = "builtin"
+    """The stage that finds where the stream lands: builtin, an entry point name or an import path."""
     impact_options: Options = {}
+    """Keyword arguments the impact stage is called with."""
 
 
 class Perception(Model):
@@ -149,10 +179,20 @@ class Perception(Model):
     """
 
     min_points_per_cell: int = Field(default=1, ge=1)
+    """Points a grid cell needs to get a height."""
     impact_search_radius_m: PosFloat = 0.6
+    """Radius around the predicted impact searched for the stream, m."""
     sampler: Literal["planar", "nearest"] = "planar"
+    """planar: inverse depth interpolated inside continuous 2 x 2 pixel patches; nearest: the paper's nearest
+    pixel."""
     accuracy_every_frames: int = Field(default=120, ge=0, le=1_000_000)
+    """Compare with an exact ray cast of the same scene every that many frames (0: never)."""
     accuracy_beams: int = Field(default=16384, ge=0, le=10_000_000)
+    """Beams each accuracy evaluation casts, one per stratum of the beam table (0: every beam)."""
     algorithm: PluginRef = "staged"
+    """The per-frame algorithm: staged (runs stages), an entry point name or an import path that replaces it
+    whole."""
     algorithm_options: Options = {}
+    """Keyword arguments the algorithm is called with."""
     stages: Stages = Stages()
+    """The stages of the staged algorithm, each replaceable on its own."""
