@@ -2,12 +2,15 @@
 streaming the outputs costs the ground-truth ring.
 
     python bench/reliability.py detect [--reps 7]      # SIGSTOP before frame 0 / mid-run, a GIL deadlock
+    python bench/reliability.py return [--reps 3]      # real children: fault -> launcher back, per child per kind
     python bench/reliability.py kill9 [--reps 5]       # frames lost when the launcher is SIGKILLed
     python bench/reliability.py stream --main /work/main [--reps 5]   # A/B wall time, ground-truth 120 s run
 
 ``detect``: stand-ins of cosim/testing/fakes.py stop (SIGSTOP) or deadlock (a C sleep holding the GIL) themselves and
 stamp CLOCK_MONOTONIC; the figure is the time from that stamp to the launcher's return (named, every child
-ended, outputs written). ``kill9``: a ground-truth run (renderer none) is SIGKILLed 2.5-4.5 s into its frames;
+ended, outputs written). ``return``: the same for the real participants of the packaged default (mock renderer,
+perception feedback; ``cosim.testing.fakes.real_specs``) for each child and each kind of fault (raise, SIGSTOP,
+a GIL deadlock, a hang past a 1.5 s hand-off timeout, timed from the timeout's end) at frame 4. ``kill9``: a ground-truth run (renderer none) is SIGKILLed 2.5-4.5 s into its frames;
 frames lost = the supervisor's last frame (read from the segment just before the kill) + 1 - rows in
 timeseries.csv. ``stream``: the packaged default with ground-truth feedback and no figures, run by this checkout
 and by another (``--main``), interleaved A/B; the figure is summary.json's wall_time_s.
@@ -104,6 +107,31 @@ def _gt_run(repo: Path, out: Path) -> float:
     return json.loads((out / "summary.json").read_text())["wall_time_s"]
 
 
+def fault_return(reps: int) -> None:
+    from cosim.runtime.launcher import launch
+    from cosim.scenario.loader import load_scenario, resolve_scenario_arg
+    from cosim.testing import fakes
+
+    handoff_s, frame = 1.5, 4
+    kinds = {"crash": "crash_at", "stop": "stop_at", "deadlock": "deadlock_at", "hang": "hang_at"}
+    sc = load_scenario(resolve_scenario_arg("default"), [], extra={"renderer": "mock", "duration_s": 1.5})
+    sc = sc.model_copy(update={"timing": sc.timing.model_copy(update={"handoff_timeout_s": handoff_s})})
+    with tempfile.TemporaryDirectory() as tmp:
+        for role in ("dynamics", "renderer", "perception"):
+            for kind, keyword in kinds.items():
+                took = []
+                for i in range(reps):
+                    out = Path(tmp) / f"{role}-{kind}-{i}"
+                    stamp = out.with_suffix(".stamp")
+                    res = launch(sc, out, specs=fakes.real_specs(sc, **{role: {keyword: frame,
+                                                                               "stamp_file": str(stamp)}}),
+                                 console_log=False)
+                    took.append(time.monotonic() - float(stamp.read_text()) - (handoff_s if kind == "hang" else 0))
+                    assert res.error is not None and res.error.process == role, res.error
+                print(f"{role:10s} {kind:8s} back after median {statistics.median(took):.2f} s, "
+                      f"max {max(took):.2f} s ({reps} runs)", flush=True)
+
+
 def stream(main: Path, reps: int) -> None:
     a, b = [], []
     with tempfile.TemporaryDirectory() as tmp:
@@ -118,13 +146,13 @@ def stream(main: Path, reps: int) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("detect", "kill9", "stream"))
+    ap.add_argument("what", choices=("detect", "return", "kill9", "stream"))
     ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--main", type=Path, default=Path("/work/main"), help="checkout to compare with (stream)")
     args = ap.parse_args()
     os.chdir(REPO)
     sys.path.insert(0, str(REPO))
-    {"detect": lambda: detect(args.reps), "kill9": lambda: kill9(args.reps),
+    {"detect": lambda: detect(args.reps), "return": lambda: fault_return(args.reps), "kill9": lambda: kill9(args.reps),
      "stream": lambda: stream(args.main, args.reps)}[args.what]()
 
 

@@ -1,7 +1,5 @@
 """``python -m cosim ...`` - same as ``python launch.py ...``."""
-import sys
-
 if __name__ == "__main__":
-    from cosim.entry import run_cli
+    from cosim.entry import exit_cli
 
-    sys.exit(run_cli())
+    exit_cli()

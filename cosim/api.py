@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import traceback
+import weakref
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -33,9 +34,12 @@ from cosim.errors import (
     SimulationDone,
     UnknownInput,
 )
+from cosim.runtime.figures import PENDING, draw_figures, figures_plan
 from cosim.runtime.inprocess import InProcessSession
-from cosim.runtime.outputs import compose_summary, write_figures, write_outputs, write_scenario
+from cosim.runtime.outputs import compose_summary, finish_outputs, write_scenario
+from cosim.runtime.rundir import RunDirLock, clear_run_files, open_run_dir
 from cosim.runtime.state import FrameState, StateReader
+from cosim.runtime.stream import write_running_summary
 from cosim.scenario.config import Scenario
 from cosim.scenario.options import load_with_options
 
@@ -69,15 +73,17 @@ class Simulation:
     the command line: ``renderer`` ("gl", "mock", "none"), ``feedback`` ("ground_truth", "perception"), ``seed``,
     ``duration`` (s), ``overrides`` ({"dotted.path": value}) and ``set`` (["path=value", ...], as ``--set``),
     ``out`` (run directory to write, as ``--out``; nothing is written without it), ``record`` (True or a path:
-    an MCAP recording, as ``--record``; needs ``out``), ``allow_plugins`` (False refuses any code that is not
-    built in, as ``--no-plugins``). A bad scenario or option raises :class:`cosim.errors.ScenarioError`.
+    an MCAP recording, as ``--record``; needs ``out``), ``overwrite`` (replace an earlier run's files in ``out``,
+    as ``--overwrite``; ``out`` holding an earlier run is refused without it, at the first ``reset``), ``allow_plugins``
+    (False refuses any code that is not built in, as ``--no-plugins``). A bad scenario or option raises
+    :class:`cosim.errors.ScenarioError`; an unusable ``out`` :class:`cosim.runtime.rundir.RunDirError`.
     """
 
     def __init__(self, scenario: str | Path | Scenario = "default", *, renderer: str | None = None,
                  feedback: str | None = None, seed: int | None = None, duration: float | None = None,
                  overrides: Mapping[str, Any] | None = None, set: Sequence[str] = (),  # noqa: A002 - as --set
                  out: str | Path | None = None, record: bool | str | Path | None = None,
-                 allow_plugins: bool = True, transport: str = "inprocess"):
+                 overwrite: bool = False, allow_plugins: bool = True, transport: str = "inprocess"):
         if transport != "inprocess":
             raise ValueError(f"transport {transport!r}: only 'inprocess' exists (see cosim.api's docstring)")
         self._scenario = load_with_options(scenario, renderer=renderer, feedback=feedback, seed=seed,
@@ -87,6 +93,9 @@ class Simulation:
         if record is not None and record is not False and self._out is None:
             raise ValueError("record= needs out= (the recording is written into the run directory)")
         self._record = record
+        self._overwrite = overwrite
+        #: the lock of ``out`` (cosim.runtime.rundir), held from the first reset to close
+        self._lock: RunDirLock | None = None
         self._session: InProcessSession | None = None
         self._reader: StateReader | None = None
         self._state: FrameState | None = None
@@ -154,7 +163,9 @@ class Simulation:
             self._scenario = load_with_options(self._scenario, seed=seed)
         self._live, self._changes, self._result, self._state = self._scenario, [], None, None
         if self._out is not None:
-            self._out.mkdir(parents=True, exist_ok=True)
+            self._claim_out()
+            write_running_summary(self._out, {"scenario": self._scenario.name, "seed": self._scenario.seed,
+                                              "frames_planned": self._scenario.frames + 1})
             write_scenario(self._out, self._scenario)
         self._session = InProcessSession(self._scenario)
         self._session.sinks.extend(self._make_sinks(self._session.segment))
@@ -208,6 +219,8 @@ class Simulation:
                 self._finish(None)
         finally:
             self._drop_session()
+            if self._lock is not None:
+                self._lock.release()
             self._closed = True
 
     def __enter__(self) -> "Simulation":
@@ -256,19 +269,23 @@ class Simulation:
 
     def _finish(self, error: RunError | None) -> None:
         run = self._session.finish()
-        extra = {"inputs_changed": list(self._changes)} if self._changes else {}
-        if self._out is not None:
-            summary = write_outputs(self._out, self._live, run.recorder, run.ring, wall_time_s=run.wall_time_s,
-                                    error=error, extra=extra)
-        else:
-            summary = compose_summary(self._live, run.recorder, run.ring, wall_time_s=run.wall_time_s, error=error)
-            summary.update(extra)
         for sink in self._session.sinks:
             close = getattr(sink, "close", None)
             if close is not None:
                 close()
+            error = error or getattr(sink, "error", None)  # a recording not written whole
+        extra = {"inputs_changed": list(self._changes)} if self._changes else {}
         if self._out is not None:
-            write_figures(self._out, self._live, summary, run.recorder)
+            figures = figures_plan(self._out, self._live, run.recorder, error)
+            summary, failure = finish_outputs(self._out, self._live, run.recorder, run.ring,
+                                              wall_time_s=run.wall_time_s, error=error,
+                                              extra={**extra, "figures": figures}, reserve=figures["status"] == PENDING)
+            if failure is None and figures["status"] == PENDING:
+                summary, failure = draw_figures(self._out, self._live, summary, run.recorder)
+            error = error or failure
+        else:
+            summary = compose_summary(self._live, run.recorder, run.ring, wall_time_s=run.wall_time_s, error=error)
+            summary.update(extra)
         arrays = {k: v.copy() for k, v in run.recorder.arrays.items()}
         self._result = SimulationResult(self._scenario, summary, run.recorder.series(), arrays, self._out, error)
 
@@ -291,6 +308,15 @@ class Simulation:
 
         path = None if self._record is True else Path(self._record)
         return [mcap_sink(RecordOptions(path=path))(self._scenario, self._out, segment)]
+
+    def _claim_out(self) -> None:
+        """Lock ``out`` at the first reset (an earlier run's files there: refused, or removed with ``overwrite``);
+        at a later reset, remove the files of this simulation's previous run."""
+        if self._lock is None:
+            self._lock = open_run_dir(self._out, overwrite=self._overwrite, parents=True)
+            weakref.finalize(self, self._lock.release)  # a Simulation dropped without close() frees ``out`` too
+        else:
+            clear_run_files(self._out)
 
     def _drop_session(self) -> None:
         session, self._session = self._session, None

@@ -2,10 +2,12 @@
 
 Verbs: ``run [SCENARIO]`` (the default verb; no scenario runs the packaged default), ``validate SCENARIO``,
 ``schema`` (write the scenario JSON Schema), ``view RUN`` (attach the live viewer to a running run) and
-``replay FILE.mcap`` (serve a recording to the viewer's dashboard, with play / pause / step / seek), ``list``
-(the packaged scenarios with their descriptions), ``compare`` and ``study``. Exit codes: 0 success, 1 run failure,
-2 invalid scenario or usage, 3 (``run --require-filled``, ``sweep --require-filled``) the job was not done (the
-outcome is not ``filled``), 130 interrupted.
+``replay FILE.mcap`` (serve a recording to the viewer's dashboard, with play / pause / step / seek), ``report
+RUN_DIR`` (draw a run's figures, a failed run's too), ``list`` (the packaged scenarios with their descriptions),
+``compare``, ``study``, ``sweep`` and ``export-fmu SCENARIO --out NAME.fmu`` (the scenario's world, sensors and
+perception as an FMU, docs/fmu.md). Exit codes: 0 success, 1 run failure, 2 invalid scenario or usage, 3
+(``run --require-filled``, ``sweep --require-filled``) the job was not done (the outcome is not ``filled``), 130
+interrupted.
 """
 from __future__ import annotations
 
@@ -19,12 +21,14 @@ from typing import Sequence
 
 from cosim.runtime.threadpools import default_to_single_threaded_pools
 
-from .errors import RunRefused, ScenarioError
-from .studies.commands import add_sweep_parser, study_command, sweep_command
+from .errors import OutputError, RunRefused, ScenarioError
+from .studies.commands import add_sweep_parser, out_options, study_command, sweep_command
 
 __all__ = ["main", "build_parser", "run_extras", "required_exit", "VERBS", "EXIT_NOT_FILLED"]
 
-VERBS = ("run", "validate", "schema", "compare", "study", "view", "replay", "list", "sweep")
+VERBS = ("run", "validate", "schema", "compare", "study", "view", "replay", "report", "list", "sweep",
+         "export-fmu")
+EXIT_RUN_ERROR = 1
 EXIT_SCENARIO = 2
 #: ``run --require-filled``: the run completed but its outcome is not ``filled`` (summary.json ``outcome``)
 EXIT_NOT_FILLED = 3
@@ -49,7 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="verb")
     run = sub.add_parser("run", help="run a scenario (default verb)")
     _scenario_options(run)
-    run.add_argument("--out", type=Path, help="run directory (default runs/<scenario>-<timestamp>)")
+    out_options(run, "run directory (default runs/<scenario>-<timestamp>)", overwrite=True)
     run.add_argument("--viewer", action="store_true",
                      help="render the RGB image and serve the live dashboard on 127.0.0.1 (see --viewer-port)")
     run.add_argument("--viewer-port", type=int, default=8765, metavar="PORT",
@@ -73,14 +77,15 @@ def build_parser() -> argparse.ArgumentParser:
     val.add_argument("--print", action="store_true", help="print the fully resolved scenario as YAML")
     cmp_ = sub.add_parser("compare", help="run with ground-truth and with perception feedback; write one report")
     _scenario_options(cmp_)
-    cmp_.add_argument("--out", type=Path, help="report directory (default runs/compare-<scenario>-<timestamp>)")
+    out_options(cmp_, "report directory, a run directory per variant inside (default "
+                "runs/compare-<scenario>-<timestamp>)", overwrite=True)
     cmp_.add_argument("--quiet", action="store_true", help="no progress output")
     st = sub.add_parser("study", help="error against run time over the fidelity knobs")
     _scenario_options(st)
     st.add_argument("--knobs", default="dynamics,grain_cell", help="comma-separated: dynamics, grain_cell, render, "
                     "beams, perception_grid (default: %(default)s)")
     st.add_argument("--sim-seconds", type=float, default=20.0, help="simulated seconds per setting")
-    st.add_argument("--out", type=Path, help="output directory (default runs/study-<scenario>-<timestamp>)")
+    out_options(st, "output directory (default runs/study-<scenario>-<timestamp>; run again to resume)")
     st.add_argument("--quiet", action="store_true", help="no progress output")
     st.add_argument("--knob", action="append", default=[], metavar="NAME=PATH:V1,V2",
                     help="a knob of your own: one field over values, the last the reference (repeatable)")
@@ -93,12 +98,20 @@ def build_parser() -> argparse.ArgumentParser:
     view = sub.add_parser("view", help="attach the live viewer to a running run (python -m cosim.viewer --attach)")
     view.add_argument("run", help="run directory (with run.json) or shared-memory segment name")
     _server_options(view)
-    rep = sub.add_parser("replay", help="serve an MCAP recording to the viewer's dashboard (play, pause, step, seek)")
-    rep.add_argument("file", type=Path, help="recording written by run --record")
-    _server_options(rep)
-    rep.add_argument("--speed", type=float, default=1.0, help="x simulated time (default %(default)s)")
-    rep.add_argument("--loop", action="store_true", help="start over at the end")
+    rpl = sub.add_parser("replay", help="serve an MCAP recording to the viewer's dashboard (play, pause, step, seek)")
+    rpl.add_argument("file", type=Path, help="recording written by run --record")
+    _server_options(rpl)
+    rpl.add_argument("--speed", type=float, default=1.0, help="x simulated time (default %(default)s)")
+    rpl.add_argument("--loop", action="store_true", help="start over at the end")
+    rep = sub.add_parser("report", help="draw a run directory's figures (a failed or stopped run's too)")
+    rep.add_argument("run_dir", type=Path, help="run directory")
     sub.add_parser("list", help="list the packaged scenarios (run them by name) with their descriptions")
+    exp = sub.add_parser("export-fmu", help="write the scenario's world, sensors and perception as a co-simulation "
+                         "FMU (docs/fmu.md)")
+    _scenario_options(exp)
+    exp.add_argument("--out", type=Path, required=True, metavar="NAME.fmu", help="the FMU file to write")
+    exp.add_argument("--fmi", choices=("2", "3"), default="2", help="FMI version (default %(default)s; 3 needs "
+                     "pythonfmu3)")
     return parser
 
 
@@ -184,12 +197,33 @@ def _print_summary(result, stream) -> None:
     if s.get("timing_ms"):
         lines.append("per-frame medians (ms): " + ", ".join(f"{k} {v:.2f}" for k, v in s["timing_ms"].items()
                                                             if v is not None))
+    figures = s.get("figures") or {}
+    if figures.get("status") == "not_drawn":
+        lines.append(f"figures: not drawn ({figures['reason']}); to draw them: {figures['command']}")
+    elif figures.get("status") == "failed":
+        lines.append(f"figures: failed: {figures['error']}")
     if result.error is not None:
         lines.append(f"error: {result.error}")
     from .runtime.outcome import outcome_line
 
     lines.append(outcome_line(s.get("outcome")))
     stream.write("\n".join(lines) + "\n")
+
+
+def _report(run_dir: Path) -> int:
+    """``report RUN_DIR``: draw the run's figures and record them in its summary.json."""
+    from cosim.runtime.figures import report
+
+    try:
+        entry = report(run_dir)
+    except (FileNotFoundError, ValueError) as exc:
+        sys.stderr.write(f"{exc}\n")
+        return EXIT_SCENARIO
+    except OutputError as exc:
+        sys.stderr.write(f"{exc}\n")
+        return EXIT_RUN_ERROR
+    sys.stdout.write(f"figures of {run_dir}: {', '.join(entry['files'])}\n")
+    return 0
 
 
 def _interruptible(fn):
@@ -237,6 +271,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                            + (["--loop"] if args.loop else []))
     if args.verb == "sweep":
         return sweep_command(args)
+    if args.verb == "report":
+        return _report(args.run_dir)
     if args.verb == "list":
         from cosim.scenario.loader import describe_packaged
 
@@ -277,12 +313,17 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     if args.verb == "study":
         return study_command(args, scenario)
+    if args.verb == "export-fmu":
+        from cosim.fmi.export.build import export_command
+
+        return export_command(args, scenario)
     if args.verb == "compare":
         from cosim.runtime.outputs import default_run_dir
         from cosim.studies.compare import compare
 
         out = args.out or default_run_dir(scenario.model_copy(update={"name": f"compare-{scenario.name}"}))
-        report = compare(scenario, out, quiet=args.quiet)
+        report = compare(scenario, out, quiet=args.quiet, overwrite=args.overwrite,
+                         parents=args.parents or args.out is None)
         sys.stdout.write(f"report: {report}\n")
         return 0
     from cosim.runtime.launcher import launch
@@ -305,7 +346,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stderr.write(f"{exc}\n")
         return EXIT_SCENARIO
     try:
-        result = launch(scenario, args.out, progress=progress, observers=observers, sinks=sinks)
+        result = launch(scenario, args.out, progress=progress, observers=observers, sinks=sinks,
+                        overwrite=args.overwrite, parents=args.parents)
     finally:
         if announcer is not None:
             announcer.close()

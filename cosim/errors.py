@@ -13,7 +13,8 @@ from dataclasses import dataclass
 
 __all__ = [
     "CosimError", "Problem", "ScenarioError", "RunError", "HandoffTimeout", "FrameMismatch",
-    "ParticipantCrashed", "ParticipantDied", "ParticipantHung", "RunInterrupted", "OutputError", "RunRefused",
+    "ParticipantCrashed", "ParticipantDied", "ParticipantHung", "RunInterrupted", "OutputError", "RecordingFailed",
+    "RunRefused",
     "RendererUnavailable", "PluginFault", "SimulationError", "SimulationClosed", "SimulationDone", "InputError",
     "UnknownInput", "InputNotSettable", "InputOutOfRange",
 ]
@@ -81,7 +82,19 @@ class ParticipantHung(RunError):
 
 
 class OutputError(RunError):
-    """Writing the run's outputs failed (no space left on the device, permission): names the path."""
+    """Writing the run's outputs failed (no space left on the device, permission): names the path. The process at
+    fault is the one that writes the outputs, the launcher (its ring name: ``supervisor``), unless said."""
+
+    def __init__(self, message: str, *, process: str = "supervisor", frame: int = -1, detail: str = ""):
+        super().__init__(message, process=process, frame=frame, detail=detail)
+
+
+class RecordingFailed(OutputError):
+    """The recording asked for (``--record``, ``record=``) was not written whole: names the file and the cause.
+    The run goes on without it (an observer never stops a run) and ends failed, with every other output."""
+
+    def __init__(self, message: str, *, process: str = "recorder", frame: int = -1, detail: str = ""):
+        super().__init__(message, process=process, frame=frame, detail=detail)
 
 
 class RunInterrupted(RunError):

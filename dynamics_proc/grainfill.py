@@ -141,6 +141,8 @@ def _heap_height(gap: np.ndarray, target: float) -> float:
     # H <= g0 + target, so no other cell can join. The candidates hold neither NaN nor -0.0 (gap = h - base with
     # base <= -0.0), so every sort orders them alike: the stable one is twice as fast here as the default
     cand = np.sort(gap[gap < g0 + target], kind="stable")
+    if cand.size == 0:                  # target below the resolution of g0 (g0 + target == g0): one cell, exact
+        return g0 + target
     k = np.arange(1, cand.size + 1)
     csum = np.cumsum(cand)
     # V at H = cand[k-1] with the first k-1 cells active; find the last breakpoint with V <= target

@@ -67,7 +67,7 @@ def commands(folder: Path, out: Path) -> list[tuple[str, list[str], dict]]:
     if scenario.is_file():
         cmds.append(("scenario.yaml", [py, "launch.py", "run", str(scenario), "--duration", f"{DURATION_S:g}",
                                        "--renderer", renderer_for(scenario), "--quiet", "--out",
-                                       str(out / "run")], {}))
+                                       str(out / "run"), "--parents", "--overwrite"], {}))
     env = {"GRAINCOSIM_EXAMPLE_QUICK": "1", "GRAINCOSIM_EXAMPLE_OUT": str(out)}
     cmds += [(p.name, [py, str(p)], env) for p in scripts(folder)]
     return cmds

@@ -323,3 +323,43 @@ def test_allow_plugins_false_refuses_a_scenario_that_names_a_plug_in():
         Simulation(path, allow_plugins=False)
     with pytest.raises(ScenarioError, match="controller.strategy"):
         Simulation("default", overrides={"controller.strategy": "json:dumps"}, allow_plugins=False)
+
+
+NO_GUARD = """
+import sys
+sys.path[:0] = [{root!r}]
+import cosim
+from cosim.recording.reader import read_recording
+from cosim.runtime.launcher import launch
+from cosim.scenario.options import load_with_options
+
+res = cosim.run("default", renderer="none", feedback="ground_truth", duration=1.0, out={out!r}, record=True)
+print("api", res.completed, res.error, read_recording({out!r} + "/recording.mcap").frames == list(range(11)))
+launched = launch(load_with_options("default", renderer="mock", duration=0.5), {out!r} + "-launched",
+                  console_log=False)
+print("launch", launched.completed, launched.error)
+"""
+
+
+def test_a_plain_script_without_a_main_guard_runs_and_records(tmp_path):
+    """The run's processes (ring children, the recorder) never run the user's script again (spawning.py): a script
+    without ``if __name__ == "__main__":`` records, and launches, as one with it."""
+    script = tmp_path / "plain.py"
+    script.write_text(NO_GUARD.format(root=str(Path(__file__).resolve().parents[1]), out=str(tmp_path / "run")))
+    r = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=180)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert r.stdout.splitlines() == ["api True None True", "launch True None"], r.stdout + r.stderr[-3000:]
+    assert "Traceback" not in r.stderr
+
+
+def test_a_recording_asked_for_and_not_written_is_the_results_error(tmp_path):
+    from cosim.errors import RecordingFailed
+
+    (tmp_path / "a_folder.mcap").mkdir()  # the recorder cannot open it as a file
+    res = run("default", **{**GT, "duration": 1.0}, out=tmp_path / "run", record=tmp_path / "a_folder.mcap")
+    assert isinstance(res.error, RecordingFailed) and not res.completed
+    assert f"recording {tmp_path / 'a_folder.mcap'} is incomplete: " in str(res.error)
+    assert res.error.process == "recorder"
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["status"] == "failed" and summary["error"]["type"] == "RecordingFailed"
+    assert summary["frames"] == summary["frames_planned"] == 11  # the simulation itself ran to its end

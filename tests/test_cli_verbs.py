@@ -19,7 +19,7 @@ from cosim.scenario.loader import describe_packaged, load_scenario, packaged_sce
 
 ROOT = Path(__file__).resolve().parent.parent
 #: a verb shown in the docs: "launch.py <verb>" or "python -m cosim <verb>"
-_VERB = re.compile(r"(?:launch\.py|python -m cosim)\s+([a-z]+)\b")
+_VERB = re.compile(r"(?:launch\.py|python -m cosim)\s+([a-z]+(?:-[a-z]+)*)\b")
 
 
 def documented_verbs() -> set[str]:
@@ -60,7 +60,7 @@ def test_view_and_replay_help_through_launch_py_and_python_m(how):
 
 def test_the_console_script_is_the_same_entry_point():
     scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
-    assert scripts["graincosim"] == "cosim.entry:run_cli"
+    assert scripts["graincosim"] == "cosim.entry:exit_cli"
 
 
 def test_list_prints_every_packaged_scenario_with_its_description():

@@ -16,12 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.errors import HandoffTimeout, OutputError, ParticipantHung
+from cosim.errors import HandoffTimeout, OutputError, ParticipantHung, RecordingFailed
 from cosim.recording import RecordOptions, mcap_sink
 from cosim.runtime import stream
-from cosim.runtime.files import LOCK_NAME, RunDirError
 from cosim.runtime.launcher import EXIT_RUN_ERROR, launch
 from cosim.runtime.liveness import STALL_S, process_state
+from cosim.runtime.rundir import LOCK_NAME, RunDirError
 from cosim.scenario.config import Scenario
 from cosim.testing import fakes
 
@@ -72,23 +72,30 @@ def test_a_child_busy_in_one_long_call_that_keeps_the_gil_is_slow_not_hung(tmp_p
     assert res.error is None and res.completed
 
 
-def _stopping_sink(stop_at: int):
-    """An MCAP sink whose recorder process is SIGSTOPped at frame ``stop_at`` (4 slots: the ring soon waits)."""
+def _faulty_recording(frame: int, sig: int):
+    """An MCAP sink whose recorder process gets ``sig`` at ``frame`` (4 slots: the ring soon waits for a stopped
+    one)."""
     make = mcap_sink(RecordOptions(queue_frames=4))
 
-    def factory(sc, run_dir, seg):
-        rec = make(sc, run_dir, seg)
+    class Sink:
+        def __init__(self, rec):
+            self.rec = rec
 
-        def sink(seg, frame):
-            if frame == stop_at:
-                os.kill(rec._proc.pid, signal.SIGSTOP)
-            rec(seg, frame)
+        def __call__(self, seg, f):
+            if f == frame:
+                os.kill(self.rec._proc.pid, sig)
+                if sig == signal.SIGKILL:
+                    self.rec._proc.join(5)
+            self.rec(seg, f)
 
-        sink.close = rec.close
-        sink.recorder = rec
-        return sink
+        def close(self):
+            self.rec.close()
 
-    return factory
+        @property
+        def error(self):
+            return self.rec.error
+
+    return lambda sc, run_dir, seg: Sink(make(sc, run_dir, seg))
 
 
 @pytest.mark.parametrize("stop_at", [3, 10])
@@ -96,8 +103,8 @@ def test_a_stopped_recorder_never_holds_the_run(stop_at, tmp_path, shm_clean, ca
     """Stopped mid-run (the sink waits for a slot) or at the last frame (``close`` waits for it): it is ended
     and the run finishes with all its own outputs; no traceback."""
     t0 = time.monotonic()
-    res = launch(scenario(), tmp_path / "run", specs=fakes.specs(), console_log=True, sinks=[_stopping_sink(stop_at)])
-    assert res.exit_code == 0 and res.completed
+    res = launch(scenario(), tmp_path / "run", specs=fakes.specs(), console_log=True, sinks=[_faulty_recording(stop_at, signal.SIGSTOP)])
+    _check_ran_without_its_recording(res, "is stopped (SIGSTOP)")
     assert time.monotonic() - t0 < 20
     log = (tmp_path / "run" / "log.txt").read_text()
     assert "is stopped (SIGSTOP)" in log and "Traceback" not in log
@@ -119,22 +126,9 @@ def test_a_stopped_viewer_is_ended_with_the_run(tmp_path, shm_clean):
 
 
 def test_a_killed_recorder_is_one_line_not_a_traceback(tmp_path, shm_clean, capfd):
-    make = mcap_sink(RecordOptions(queue_frames=4))
-
-    def factory(sc, run_dir, seg):
-        rec = make(sc, run_dir, seg)
-
-        def sink(seg, frame):
-            if frame == 2:
-                os.kill(rec._proc.pid, signal.SIGKILL)
-                rec._proc.join(5)
-            rec(seg, frame)
-
-        sink.close = rec.close
-        return sink
-
-    res = launch(scenario(), tmp_path / "run", specs=fakes.specs(), console_log=True, sinks=[factory])
-    assert res.completed
+    res = launch(scenario(), tmp_path / "run", specs=fakes.specs(), console_log=True,
+                 sinks=[_faulty_recording(2, signal.SIGKILL)])
+    _check_ran_without_its_recording(res, "the recorder process ended (exit -9)")
     err = capfd.readouterr().err
     assert "Traceback" not in err and "BrokenPipeError" not in err
     assert "the recorder process ended (exit -9)" in (tmp_path / "run" / "log.txt").read_text()
@@ -185,11 +179,14 @@ def test_kill9_of_the_launcher_leaves_the_rows_and_a_running_summary(tmp_path):
 
 
 @pytest.fixture
-def small_tmpfs(tmp_path):
-    """A 48 KiB tmpfs (root and a kernel that allows the mount), else the test is skipped."""
+def small_tmpfs(tmp_path, request):
+    """A small tmpfs (48 KiB, or ``@pytest.mark.tmpfs_size("128k")``; root and a kernel that allows the mount),
+    else the test is skipped."""
     mnt = tmp_path / "small"
     mnt.mkdir()
-    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=48k", "tmpfs", str(mnt)], capture_output=True).returncode:
+    size = getattr(request.node.get_closest_marker("tmpfs_size"), "args", ("48k",))[0]
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(mnt)],
+                      capture_output=True).returncode:
         pytest.skip("cannot mount a small tmpfs here (needs root)")
     yield mnt
     subprocess.run(["umount", "-l", str(mnt)], check=False)
@@ -236,10 +233,21 @@ def test_an_injected_enospc_at_the_rows_is_named(tmp_path, shm_clean, monkeypatc
     _check_full_disk_run(res, tmp_path / "run")
 
 
+def _check_ran_without_its_recording(res, why: str) -> None:
+    """Every frame ran and every other output is written, but the recording asked for is not whole: the run's
+    error (process recorder, exit 1), never a silent completed run."""
+    assert res.exit_code == EXIT_RUN_ERROR and not res.completed
+    assert isinstance(res.error, RecordingFailed) and res.error.process == "recorder" and why in str(res.error)
+    summary = json.loads((res.run_dir / "summary.json").read_text())
+    assert summary["frames"] == summary["frames_planned"] and summary["status"] == "failed"
+    assert summary["error"]["type"] == "RecordingFailed" and summary["error"]["process"] == "recorder"
+    assert len((res.run_dir / "timeseries.csv").read_text().splitlines()) == 1 + summary["frames"]
+
+
 def test_a_full_disk_under_the_recording_stops_only_the_recording(small_tmpfs, tmp_path, shm_clean, capfd):
     sink = mcap_sink(RecordOptions(path=small_tmpfs / "big.mcap", queue_frames=4, image_every=1))
     res = launch(scenario(duration_s=20.0), tmp_path / "run", specs=fakes.specs(), console_log=True, sinks=[sink])
-    assert res.completed and res.exit_code == 0
+    _check_ran_without_its_recording(res, "write error")
     err = capfd.readouterr().err
     assert "Traceback" not in err and "no space left on device writing" in err
 
@@ -385,7 +393,10 @@ def test_any_number_of_signals_at_any_moment_exit_130_without_traceback(moment, 
     assert proc.returncode == 130, stderr
     assert "Traceback" not in stderr and "Traceback" not in stdout
     if moment == "figures":
-        assert _summary_status(out) == "completed" and "figures not written: stopped by SIGINT" in stderr
+        summary = json.loads((out / "summary.json").read_text())
+        assert summary["status"] == "completed" and "figures not drawn: stopped by SIGINT" in stderr
+        assert summary["figures"] == {"status": "not_drawn", "reason": "stopped by SIGINT while drawing them",
+                                      "command": f"python launch.py report {out}"}
     elif (out / "summary.json").exists():
         summary = json.loads((out / "summary.json").read_text())
         assert summary["completed"] is False and summary["status"] in ("interrupted", "running")
@@ -396,6 +407,25 @@ def test_any_number_of_signals_at_any_moment_exit_130_without_traceback(moment, 
         assert not list(Path("/dev/shm").glob(f"cosim-{proc.pid}-*"))
 
 
+@pytest.mark.parametrize("delay_s", [0.0, 0.03, 0.1])
+def test_a_signal_after_the_summary_is_printed_still_exits_130(delay_s, tmp_path):
+    """SIGTERM while the process ends (after the summary is printed): 130, or 0 when it came after the end;
+    never killed by it (143, -15) and no traceback."""
+    proc = subprocess.Popen([sys.executable, str(REPO / "launch.py"), "run", "default", "--renderer", "none",
+                             "--feedback", "ground_truth", "--duration", "0.5", "--quiet", "--out",
+                             str(tmp_path / "run")], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    lines = []
+    while not any(line.startswith("outcome") for line in lines):  # the summary's last line
+        lines.append(proc.stdout.readline())
+        assert lines[-1] or proc.poll() is None, lines
+    time.sleep(delay_s)
+    proc.send_signal(signal.SIGTERM)
+    stdout, stderr = proc.communicate(timeout=30)
+    assert proc.returncode in (130, 0), (proc.returncode, stderr)
+    assert "Traceback" not in stderr
+
+
 def test_stop_signals_are_idempotent_and_cut_only_optional_work():
     from cosim.errors import RunInterrupted
     from cosim.runtime.signals import StopSignals
@@ -403,11 +433,14 @@ def test_stop_signals_are_idempotent_and_cut_only_optional_work():
     stop = StopSignals()
     stop.check(3)  # nothing yet
     with stop.raising():
-        with pytest.raises(RunInterrupted, match="stopped by SIGTERM before frame 0"):
+        with pytest.raises(RunInterrupted, match="^stopped by SIGTERM$"):
             stop(signal.SIGTERM, None)
         stop(signal.SIGINT, None)  # a second signal inside is only counted
     stop(signal.SIGINT, None)
     assert stop.count == 3 and stop.name == "SIGTERM"
+    with pytest.raises(RunInterrupted, match="^stopped by SIGTERM$"):  # optional work after a signal: not begun
+        with stop.raising():
+            pytest.fail("entered")
     with pytest.raises(RunInterrupted, match="stopped by SIGTERM at frame 7"):
         stop.check(7)
 
@@ -449,3 +482,62 @@ def test_a_failed_row_block_is_cut_back_even_when_the_close_writes_the_rest(tmp_
     with pytest.raises(OutputError, match="no space left on device writing"):
         app.append("1,2\n3,4\n5,6\n")
     assert path.read_text() == "a,b\n"
+
+
+def test_a_full_disk_while_the_figures_are_drawn_is_named_and_leaves_no_half_file(tmp_path, shm_clean, capfd,
+                                                                                   monkeypatch):
+    """ENOSPC halfway through the second figure: exit 1, named with its path in the result and the summary, the
+    first figure whole, no half or temporary file, the summary's figures entry says what happened."""
+    from cosim.runtime import files
+
+    real_open = open
+    target = ".fig8_heightmaps.png.tmp"
+
+    class Full:
+        def __init__(self, f):
+            self._f = f
+
+        def write(self, data):
+            self._f.write(data[: len(data) // 2])
+            self._f.flush()
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self._f.close()
+
+    monkeypatch.setattr(files, "open", lambda p, *a, **k: Full(real_open(p, *a, **k)) if str(p).endswith(target)
+                        else real_open(p, *a, **k), raising=False)
+    sc = Scenario(format_version=1, duration_s=0.5, renderer="none", feedback="ground_truth")
+    run_dir = tmp_path / "run"
+    res = launch(sc, run_dir, console_log=True)
+    assert res.exit_code == EXIT_RUN_ERROR and isinstance(res.error, OutputError)
+    assert str(res.error) == f"no space left on device writing {run_dir / 'fig8_heightmaps.png'}"
+    names = {p.name for p in run_dir.iterdir()}
+    assert "fig7_fullness.png" in names and not names & {"fig8_heightmaps.png", target, "fig9_auger.png"}
+    assert (run_dir / "fig7_fullness.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["status"] == "failed" and summary["completed"] is False
+    assert summary["error"]["type"] == "OutputError" and summary["error"]["process"] == "supervisor"
+    assert summary["figures"] == {"status": "failed", "error": str(res.error)}
+    assert summary["frames"] == summary["frames_planned"]  # the simulation itself completed
+    assert "Traceback" not in capfd.readouterr().err
+
+
+@pytest.mark.tmpfs_size("128k")
+def test_a_disk_that_fills_while_the_figures_are_drawn(small_tmpfs, shm_clean, capfd):
+    """The same on a real 128 KiB file system: the data fits, the figures do not."""
+    sc = Scenario(format_version=1, duration_s=0.5, renderer="none", feedback="ground_truth")
+    run_dir = small_tmpfs / "run"
+    res = launch(sc, run_dir, console_log=True)
+    assert res.exit_code == EXIT_RUN_ERROR and isinstance(res.error, OutputError)
+    assert str(res.error).startswith(f"no space left on device writing {run_dir}/fig")
+    pngs = sorted(run_dir.glob("*.png"))
+    assert not list(run_dir.glob(".*.tmp")) and len(pngs) < 4
+    assert all(p.read_bytes().endswith(b"IEND\xaeB`\x82") for p in pngs)  # whole files only
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["status"] == "failed" and summary["error"]["message"] == str(res.error)
+    assert summary["figures"]["status"] == "failed"
+    assert "Traceback" not in capfd.readouterr().err

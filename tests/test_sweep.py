@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -214,9 +215,12 @@ def test_resume_runs_nothing_again(local_sweep, capsys):
 
 @pytest.fixture
 def cluster(tmp_path):
-    """A scheduler and two workers (nannies, so the workers are daemonic) as subprocesses on 127.0.0.1."""
+    """A scheduler and two workers (nannies, so the workers are daemonic) as subprocesses on 127.0.0.1, started in
+    a folder of their own (``tmp_path / "workers"``), as on a user's machines."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), str(ROOT / "tests")])}
     sched_file, pids = tmp_path / "scheduler.json", set()
+    workers_cwd = tmp_path / "workers"
+    workers_cwd.mkdir()
     cli = [sys.executable, "-m"]
     procs = [subprocess.Popen(cli + ["distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", "0",
                                      "--no-dashboard", "--dashboard-address", "127.0.0.1:0",
@@ -231,7 +235,7 @@ def cluster(tmp_path):
             procs.append(subprocess.Popen(cli + ["distributed.cli.dask_worker", address, "--nthreads", "1",
                                                  "--host", "127.0.0.1", "--no-dashboard",
                                                  "--dashboard-address", "127.0.0.1:0"], env=env,
-                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+                                          cwd=workers_cwd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
         with distributed.Client(address) as client:
             client.wait_for_workers(2, timeout=90)
             pids = set(client.run(os.getpid).values())
@@ -248,11 +252,23 @@ def cluster(tmp_path):
     _assert_gone(pids)
 
 
-def test_scheduler_and_workers_give_the_same_metrics_per_run(local_sweep, cluster, tmp_path):
+def test_scheduler_and_workers_give_the_same_metrics_per_run(local_sweep, cluster, tmp_path, monkeypatch, capsys):
+    """The README's form on a user's cluster: a relative --out, workers started in another folder. The runs land
+    in the sweep's folder (results.csv's run_dir, relative to it, points at each), and a second command resumes."""
     sweep = load_sweep(EXAMPLE)
-    outcome = run_sweep(sweep, tmp_path / "remote", scheduler=cluster, quiet=True, figures=False)
-    assert (outcome.completed, outcome.failed, outcome.skipped) == (4, 0, 0)
-    local, remote = _rows(local_sweep), _rows(tmp_path / "remote")
+    (tmp_path / "here").mkdir()
+    monkeypatch.chdir(tmp_path / "here")
+    command = ["sweep", str(EXAMPLE), "--scheduler", cluster, "--out", "remote", "--quiet"]
+    assert main(command) == 0
+    assert "4/4 runs completed, 0 failed, 0 finished before" in capsys.readouterr().out
+    out = tmp_path / "here" / "remote"
+    assert not list((tmp_path / "workers").iterdir())  # nothing in the workers' own folder
+    for row in _rows(out).values():
+        assert row["run_dir"] == f"runs/{row['id']}"
+        assert json.loads((out / row["run_dir"] / "summary.json").read_text())["completed"] is True
+    assert main(command) == 0
+    assert "4/4 runs completed, 0 failed, 4 finished before" in capsys.readouterr().out
+    local, remote = _rows(local_sweep), _rows(out)
     assert sorted(local) == sorted(remote)
     for rid in local:
         for col in ("profile_rmse_m", "fill_fraction", "max_overfill_m", "spill_kg", "sim_time_s"):
@@ -263,7 +279,7 @@ def test_scheduler_and_workers_give_the_same_metrics_per_run(local_sweep, cluste
         "gl-run", {}, 0, sweep.runs[0].scenario.model_copy(update={"renderer": "gl", "feedback": "perception"})),))
     with pytest.raises(RuntimeError, match="no worker of the cluster declares the EGL resource"):
         run_sweep(gl, tmp_path / "gl", scheduler=cluster, quiet=True, figures=False)
-    _assert_nothing_left(tmp_path / "remote", workers_closed=False)  # the fixture checks the workers end
+    _assert_nothing_left(out, workers_closed=False)  # the fixture checks the workers end
 
 
 def test_a_failing_run_is_recorded_and_a_dead_worker_costs_only_its_run(tmp_path):
@@ -300,3 +316,46 @@ def test_the_documented_sweep_files_and_errors(tmp_path, monkeypatch, capsys):
     assert main(["sweep", "sweep.yaml"]) == 2
     assert capsys.readouterr().err == shown
     assert not (tmp_path / "runs").exists()
+
+
+def test_sweep_figures_of_a_group_whose_values_are_identical(tmp_path):
+    """Three runs of 0.1 have the float mean 0.10000000000000002, 1 ulp above their max: the error bar's lower
+    half came out negative and matplotlib refused it ('yerr' must not contain negative values)."""
+    from cosim.studies.figures import spread, write_sweep_figures
+
+    rows = [{"id": f"r{i}", "completed": True, "seed": i, "controller.strategy": "a", "spill_kg": 0.1}
+            for i in range(3)]
+    rows += [{"id": f"s{i}", "completed": True, "seed": i, "controller.strategy": "b", "spill_kg": 0.7}
+             for i in range(3)]
+    assert sum([0.1] * 3) / 3 > 0.1 and sum([0.7] * 3) / 3 < 0.7  # the float facts behind it
+    assert [(v, mean) for v, mean, *_ in spread(rows, "controller.strategy", "spill_kg")] == [("a", 0.1), ("b", 0.7)]
+    assert [p.name for p in write_sweep_figures(tmp_path, rows, ("controller.strategy",))] == ["sweep_spill_kg.png"]
+
+
+def test_ctrl_c_during_a_sweep_stops_it_in_order_without_tracebacks(tmp_path):
+    """Ctrl-C on the terminal reaches the whole foreground process group: the sweep, its Dask workers and the
+    runs' children. Only the sweep acts on it (the cluster's processes are born with SIGINT blocked): the runs in
+    progress end interrupted with their rows, exit 130, one message, no traceback and no leaked resource."""
+    _write(tmp_path, HEAD.replace("duration_s: 5.0", "duration_s: 3600.0")
+           + "grid:\n  controller.strategy: [front_to_back, lowest_first]\n")
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, str(ROOT / "launch.py"), "sweep", str(tmp_path / "sweep.yaml"),
+                             "--jobs", "2", "--out", str(out), "--quiet"], cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not any(p.stat().st_size > 2000 for p in out.glob("runs/*/timeseries.csv")):
+            assert time.monotonic() < deadline and proc.poll() is None, "no run got going"
+            time.sleep(0.1)
+        os.killpg(proc.pid, signal.SIGINT)  # what a terminal's Ctrl-C does
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, stderr
+    assert "interrupted: the runs that finished are kept; run the same command to resume" in stderr
+    assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr and "leaked" not in stderr, stderr
+    summaries = [json.loads(p.read_text()) for p in out.glob("runs/*/summary.json")]
+    assert summaries and all(s["status"] == "interrupted" for s in summaries)  # one may not have begun its frames
+    assert any(s["frames"] > 0 for s in summaries)
+    _assert_nothing_left(out)

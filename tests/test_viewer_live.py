@@ -233,3 +233,70 @@ def test_run_flags_wire_the_viewer_and_the_recorder(tmp_path):
     with pytest.raises(ValueError, match="image_every must be >= 1"):
         run_extras(args)
     assert run_extras(build_parser().parse_args(["run"])) == ([], [])
+
+
+class Page:
+    """A client doing what the dashboard page does: wait for the viewer's address, poll ``/api/state``, fetch each
+    image panel whose frame changed; it stops at its first failed request once the run has ended."""
+
+    def __init__(self, announce: Path):
+        self.announce, self.url = announce, ""
+        self.states: list[dict] = []
+        self.panels: dict[str, list[int]] = {}
+        self.failures: list[tuple[int, str]] = []  # (states seen before it, what failed)
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self):
+        from cosim.viewer.page import POLL_MS
+        from cosim.viewer.panels import IMAGE_PANELS
+
+        while not self.announce.exists() and not self.stop.is_set():
+            time.sleep(0.05)
+        self.url = json.loads(self.announce.read_text())["url"]
+        while not self.stop.is_set():
+            try:
+                state = json.loads(get(self.url + "api/state", timeout=5)[2])
+                self.states.append(state)
+                for pid, info in state["panels"].items():
+                    seen = self.panels.setdefault(pid, [])
+                    if pid in IMAGE_PANELS and info["available"] and info["frame"] is not None and \
+                            (not seen or seen[-1] != info["frame"]):
+                        code = get(f"{self.url}panel/{pid}.png?frame={info['frame']}", timeout=5)[0]
+                        assert code == 200, (pid, code)
+                        seen.append(info["frame"])
+            except (OSError, ValueError) as exc:
+                self.failures.append((len(self.states), repr(exc)))
+                if self.states and self.states[-1]["status"] == "run ended":
+                    return
+            self.stop.wait(POLL_MS / 1000)
+
+
+def test_the_dashboard_ends_on_the_last_frame_with_run_ended(tmp_path, shm_clean):
+    """run --viewer: the page's last state is the run's last frame, "run ended", with that frame's image panels;
+    the viewer never went unreachable before (it used to be killed a few frames before the end)."""
+    page = Page(tmp_path / "viewer.json")
+
+    def hold_until_watched(scenario, run_dir, segment):  # the run's content never depends on wall time
+        def sink(seg, frame):
+            if frame == 3:
+                page.thread.start()
+                deadline = time.monotonic() + STARTUP_S
+                while not page.states and time.monotonic() < deadline:
+                    time.sleep(0.02)
+        return sink
+
+    obs = ObserverSpec("viewer", "cosim.viewer.server:observe", {"port": 0, "announce": str(tmp_path / "viewer.json")})
+    sc = standins.scenario(2.0)
+    try:
+        res = launch(sc, tmp_path / "run", specs=standins.specs(pace_s=PACE_S), console_log=False,
+                     observers=[obs], sinks=[hold_until_watched])
+        page.thread.join(10)
+    finally:
+        page.stop.set()
+    assert res.completed and page.states
+    last = page.states[-1]
+    assert last["status"] == "run ended" and last["frame"] == sc.frames, (last["status"], last["frame"])
+    for pid in ("rgb", "depth", "heightmaps", "lidar_top"):
+        assert page.panels[pid][-1] == last["panels"][pid]["frame"] == sc.frames, pid
+    assert all(before == len(page.states) for before, _ in page.failures), page.failures  # only after the end

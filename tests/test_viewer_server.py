@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import http.client
 import json
+import shutil
 import signal
 import subprocess
 import sys
@@ -10,6 +11,8 @@ import threading
 import time
 import urllib.request
 from pathlib import Path
+
+import pytest
 
 from cosim.viewer.server import DRAIN_S
 from cosim.viewer.snapshot import History, Snapshot
@@ -109,3 +112,65 @@ def test_after_stopping_the_port_is_closed(tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+PAGE_HARNESS = r"""
+const els = {};
+const anything = new Proxy(function () {}, {get: (t, k) => (k === "measureText" ? () => ({width: 10}) : anything),
+                                            apply: () => anything});
+function el(id) {
+  return els[id] ||= {id, textContent: "", className: "", title: "", dataset: {}, style: {}, clientWidth: 400,
+                      clientHeight: 200, width: 400, height: 200, classList: {add() {}, toggle() {}},
+                      querySelector: (q) => el(id + " " + q), getContext: () => anything};
+}
+globalThis.document = {getElementById: el};
+const timers = [];
+globalThis.setTimeout = (fn) => timers.push(fn);
+const answers = JSON.parse(process.argv[process.argv.length - 1]);  // a state document, or null: the viewer does not answer
+globalThis.fetch = async () => {
+  const a = answers.shift();
+  if (a === null) throw new TypeError("Failed to fetch");
+  return {ok: true, json: async () => a};
+};
+const flush = () => new Promise((r) => setImmediate(r));
+(async () => {
+  %(script)s
+  const seen = [];
+  for (let i = 0; i < 6; i++) {
+    await flush(); await flush();
+    seen.push([els.status.textContent, els.status.className]);
+    const next = timers.shift();
+    if (!next) break;
+    next();
+  }
+  await flush(); await flush();
+  console.log(JSON.stringify({seen, polling: timers.length > 0}));
+})();
+"""
+
+
+def _page_script() -> str:
+    from cosim.viewer.page import page_html
+
+    return page_html().split("<script>", 1)[1].split("</script>", 1)[0]
+
+
+def _state(status: str, frame: int) -> dict:
+    return {"run": "r", "status": status, "frame": frame, "frames_planned": 21, "t_s": frame * 0.1, "rtf": 1.0,
+            "dropped_total": 0, "panels": {}, "auger": None, "fullness": None, "frames": {}, "replay": None}
+
+
+@pytest.mark.skipif(shutil.which("node") is None, reason="needs node to run the page's script")
+def test_the_page_keeps_run_ended_when_the_viewer_goes_after_the_end():
+    def page(answers) -> dict:
+        js = PAGE_HARNESS.replace("%(script)s", _page_script())
+        r = subprocess.run(["node", "-e", js, json.dumps(answers)], capture_output=True, text=True, timeout=60)
+        assert r.returncode == 0, r.stderr
+        return json.loads(r.stdout)
+
+    ended = page([_state("running", 19), _state("run ended", 20), None, None])
+    assert ended["seen"] == [["running", "running"], ["run ended", "ended"], ["run ended", "ended"]]
+    assert not ended["polling"]  # the viewer has gone with the run: nothing more to ask
+    cut = page([_state("running", 19), None, _state("running", 20), None])
+    assert cut["seen"][:3] == [["running", "running"], ["viewer unreachable", "error"], ["running", "running"]]
+    assert cut["polling"]

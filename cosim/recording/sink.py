@@ -30,9 +30,10 @@ import struct
 import time
 from pathlib import Path
 
+from cosim.errors import RecordingFailed
 from cosim.runtime.files import write_error
 from cosim.runtime.liveness import STALL_S, cpu_ticks, end_process, is_stopped
-from cosim.runtime.threadpools import single_threaded_pools
+from cosim.runtime.spawning import start_process
 from shm_schema import Schema, Segment
 
 from .slots import FrameSlots
@@ -160,6 +161,9 @@ class McapRecorder:
         self.path = Path(self.options.path) if self.options.path else Path(run_dir) / DEFAULT_NAME
         self.recorded = Recorded.of(segment.schema)
         self._failed = False
+        #: why the recording is not whole, and the frame it stopped at (see :attr:`error`)
+        self._problem: tuple[str, int] | None = None
+        self._last_frame = -1
         self._closed = False
         self._writer: McapWriter | None = None
         self._proc = None
@@ -181,13 +185,11 @@ class McapRecorder:
         self._notify_frames = max(1, min(NOTIFY_FRAMES, n_slots // 2))
         self._credits = ctx.Semaphore(n_slots)
         recv, self._conn = ctx.Pipe(duplex=False)
-        self._proc = ctx.Process(target=_recorder_main, name="cosim-recorder", daemon=True,
-                                 args=(recv, self._credits, RunInfo.of(scenario), segment.schema.encoded,
-                                       self._slots.name, n_slots, str(self.path), self.options, segment.run_id,
-                                       segment.fingerprint))
         try:
-            with single_threaded_pools():
-                self._proc.start()
+            self._proc = start_process(_recorder_main, (recv, self._credits, RunInfo.of(scenario),
+                                                        segment.schema.encoded, self._slots.name, n_slots,
+                                                        str(self.path), self.options, segment.run_id,
+                                                        segment.fingerprint), name="cosim-recorder")
         except BaseException:
             self._release_slots()
             raise
@@ -205,6 +207,7 @@ class McapRecorder:
         just the lagging blocks."""
         if self._failed or self._closed:
             return
+        self._last_frame = frame
         try:
             # only blocks with contents newer than those last recorded (a block that lags comes a call later)
             names, last = [], self._stamps
@@ -231,11 +234,13 @@ class McapRecorder:
                 self._tell()
         except (OSError, RecorderGone) as exc:  # a dead, stopped or stalled recorder, a full disk: no traceback
             self._failed = True
+            self._problem = (self._why(exc), frame)
             log.error("recording to %s stopped at frame %d: %s; the run goes on without recording", self.path,
-                      frame, self._why(exc))
+                      frame, self._problem[0])
             self._end_recorder()
-        except Exception:  # noqa: BLE001 - a recording failure must not end the run
+        except Exception as exc:  # noqa: BLE001 - a recording failure must not end the run
             self._failed = True
+            self._problem = (f"{type(exc).__name__}: {exc}", frame)
             log.exception("recording to %s failed at frame %d; the run goes on without recording", self.path, frame)
 
     def _check_recorder(self, waited_s: float) -> None:
@@ -289,6 +294,20 @@ class McapRecorder:
             if now - t0 > CLOSE_TIMEOUT_S:
                 return f"did not finish in {CLOSE_TIMEOUT_S:.0f} s"
 
+    def _note(self, why: str) -> None:
+        """Keep the first reason the recording is not whole."""
+        if self._problem is None:
+            self._problem = (why, self._last_frame)
+
+    @property
+    def error(self) -> RecordingFailed | None:
+        """Why the recording is not whole (a dead, stopped or stalled recorder, a write error), or None. Read by
+        the launcher after :meth:`close`: the run then ends failed, with every other output written."""
+        if self._problem is None:
+            return None
+        why, frame = self._problem
+        return RecordingFailed(f"recording {self.path} is incomplete: {why}", frame=frame)
+
     def _tell(self) -> None:
         """Tell the recorder how many frames have been put (one small message; a no-op when it knows)."""
         if self._sent != self._told:
@@ -311,7 +330,8 @@ class McapRecorder:
             try:
                 self._writer.close()
             except OSError as exc:
-                log.error("recording to %s could not be finished: %s", self.path, write_error(exc, self.path))
+                self._note(str(write_error(exc, self.path)))
+                log.error("recording to %s could not be finished: %s", self.path, self._problem[0])
             return
         try:
             self._tell()
@@ -321,11 +341,14 @@ class McapRecorder:
         self._conn.close()
         why = self._wait_recorder()
         if why:
+            self._note(f"the recorder process {why}")
             log.error("the recorder of %s %s; ending it (the file keeps the frames flushed so far)", self.path, why)
             self._end_recorder()
         elif self._proc.exitcode == EXIT_WRITE_FAILED:
+            self._note(f"the recorder process stopped on a write error writing {self.path} (its message is above)")
             log.error("the recorder of %s stopped on a write error (see above)", self.path)
         elif self._proc.exitcode != 0:
+            self._note(f"the recorder process ended with exit {self._proc.exitcode}")
             log.error("the recorder of %s ended with exit %s", self.path, self._proc.exitcode)
         if self.waits:
             log.info("recording %s: the ring waited %d times (%.2f s in all) for a free frame slot", self.path,

@@ -7,6 +7,7 @@ every tick label in an extra layout pass: 470 M of the 2.1 G instructions of a r
 """
 from __future__ import annotations
 
+import io
 from pathlib import Path
 from typing import Sequence
 
@@ -16,10 +17,15 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch, Rectangle
 
+from cosim.runtime.files import atomic_write
+
 from .rundata import RunData
 
 __all__ = ["fig_auger", "fig_profile", "fig_heightmaps", "fig_fullness", "fig_study", "run_figures",
-           "write_run_figures", "section_profile", "renderer_label", "DPI", "MARGINS_IN", "NO_VALUE"]
+           "write_run_figures", "section_profile", "renderer_label", "DPI", "MARGINS_IN", "NO_VALUE", "RUN_FIGURES"]
+
+#: the file stems of one run's figures (``<stem>.png`` in the run directory), in the order they are drawn
+RUN_FIGURES = ("fig7_fullness", "fig8_heightmaps", "fig9_auger", "fig10_profile")
 
 DPI = 110
 #: space around the axes of the stacked figures, inches: left (tick labels and y label), right, bottom (tick
@@ -250,17 +256,22 @@ def _place_labels(fig: Figure) -> None:
 
 
 def run_figures(run: RunData) -> list[tuple[str, Figure]]:
-    """(file stem, Figure) of one run's figures: Figs 7, 8, 9 and 10."""
-    return [("fig7_fullness", fig_fullness([run])), ("fig8_heightmaps", fig_heightmaps(run)),
-            ("fig9_auger", fig_auger([run])), ("fig10_profile", fig_profile([run]))]
+    """(file stem, Figure) of one run's figures: Figs 7, 8, 9 and 10 (the stems of :data:`RUN_FIGURES`)."""
+    makers = {"fig7_fullness": lambda: fig_fullness([run]), "fig8_heightmaps": lambda: fig_heightmaps(run),
+              "fig9_auger": lambda: fig_auger([run]), "fig10_profile": lambda: fig_profile([run])}
+    return [(stem, makers[stem]()) for stem in RUN_FIGURES]
 
 
 def write_run_figures(run: RunData, out: Path | None = None) -> list[Path]:
-    """Write fig7_fullness.png, fig8_heightmaps.png, fig9_auger.png and fig10_profile.png for one run."""
+    """Write fig7_fullness.png, fig8_heightmaps.png, fig9_auger.png and fig10_profile.png for one run, each whole
+    or not at all (rendered in memory, then written atomically). Raises :class:`cosim.errors.OutputError` naming
+    the file on a write error (a full disk); the figures written before it stay."""
     out = Path(out) if out is not None else run.path
     made = []
     for name, fig in run_figures(run):
         p = out / f"{name}.png"
-        fig.savefig(p, dpi=DPI)
+        buf = io.BytesIO()
+        fig.savefig(buf, dpi=DPI, format="png")
+        atomic_write(p, buf.getvalue())
         made.append(p)
     return made

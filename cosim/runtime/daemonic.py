@@ -3,7 +3,7 @@
 multiprocessing refuses ``Process.start()`` in a daemonic process ("daemonic processes are not allowed to have
 children") because a daemonic process may be ended without joining its children, which would leave them
 orphaned. A run's launcher never relies on that: it stops, joins and (failing that) kills every child it started
-before ``launch()`` returns (``launcher._stop_children``), and each child also asks the kernel for SIGTERM when
+before ``launch()`` returns (cosim.runtime.teardown), and each child also asks the kernel for SIGTERM when
 its launcher dies (``child._die_with_parent``, PR_SET_PDEATHSIG), so even a worker killed outright leaves none
 behind. :func:`children_allowed` therefore lifts the flag only for the ``start()`` calls it wraps.
 

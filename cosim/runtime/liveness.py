@@ -20,15 +20,14 @@ import os
 import signal
 import threading
 import time
-from typing import Callable, Mapping
+from typing import Callable, Mapping, Sequence
 
 from cosim.errors import ParticipantCrashed, ParticipantDied, ParticipantHung, RunError
 from shm_schema import Phase, Segment
 from shm_schema.layout import SLOT_WORD
 
 __all__ = ["BEAT_S", "STALL_S", "CONFIRM_S", "Heartbeat", "Watch", "process_state", "cpu_ticks", "is_stopped",
-           "end_process",
-           "stop_processes", "child_failure"]
+           "end_process", "stop_processes", "child_failure", "ring_holder"]
 
 #: period of a child's liveness beat, s
 BEAT_S = 0.1
@@ -189,20 +188,36 @@ def child_failure(name: str, proc, seg: Segment) -> RunError:
                            process=name, frame=frame)
 
 
-def stop_processes(procs: Mapping[str, object], *, graceful: bool, join_timeout_s: float, grace_s: float) -> None:
+def ring_holder(seg: Segment, members: Sequence[str]) -> str | None:
+    """The member that holds up the run (the one a hand-off timeout is about): of the members starting or stepping
+    (a member blocked on a reader, under the pipelined schedule, says waiting), the one busy the longest (its slot's
+    ``heartbeat_ns`` is stamped when it starts a step; 0 before its first); None when every member waits (then no
+    member is at fault)."""
+    busy = [(int(seg.slot(n)["heartbeat_ns"]), n) for n in members
+            if int(seg.slot(n)["phase"]) in (Phase.STARTING, Phase.STEPPING)]
+    return min(busy)[1] if busy else None
+
+
+def stop_processes(procs: Mapping[str, object], *, graceful: bool, join_timeout_s: float, grace_s: float,
+                   hung: Sequence[str] = ()) -> None:
     """Join children after a clean finish; otherwise (or past ``join_timeout_s``) end them: SIGTERM, ``grace_s``,
-    then SIGKILL, which also ends a stopped one. Never leaves one, never waits unbounded."""
+    then SIGKILL, which also ends a stopped one. The ``hung`` ones (stopped or deadlocked: SIGTERM cannot reach
+    their code) and any stopped one get SIGKILL at once. Never leaves one, never waits unbounded."""
     if graceful:
         deadline = time.monotonic() + join_timeout_s
         for p in procs.values():
             p.join(max(0.0, deadline - time.monotonic()))
     alive = [p for p in procs.values() if p.is_alive()]
-    for p in alive:
-        if p.exitcode is None:
-            try:
+    for name, p in procs.items():
+        if p not in alive or p.exitcode is not None:
+            continue
+        try:
+            if name in hung or is_stopped(p.pid):
+                p.kill()
+            else:
                 p.terminate()
-            except ProcessLookupError:
-                pass
+        except ProcessLookupError:
+            pass
     deadline = time.monotonic() + grace_s
     for p in alive:
         p.join(max(0.0, deadline - time.monotonic()))

@@ -27,8 +27,8 @@ from .outcome import judge
 from .recorder import Recorder
 from .specs import ParticipantSpec, load_callable
 
-__all__ = ["default_run_dir", "write_scenario", "compose_summary", "write_outputs", "finish_outputs", "write_figures",
-           "saved_maps", "run_data", "clean_json", "run_status", "STAGE_KEYS", "SAVED_MAPS"]
+__all__ = ["default_run_dir", "write_scenario", "compose_summary", "error_entry", "fail_summary", "write_outputs",
+           "finish_outputs", "saved_maps", "run_data", "clean_json", "run_status", "STAGE_KEYS", "SAVED_MAPS"]
 
 log = logging.getLogger("cosim.runtime.outputs")
 
@@ -98,8 +98,7 @@ def compose_summary(scenario: Scenario, recorder: Recorder | None, ring: Sequenc
         "written_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
     }
     if error is not None:
-        summary["error"] = {"type": type(error).__name__, "message": str(error), "process": error.process,
-                            "frame": error.frame, "traceback": error.detail}
+        summary["error"] = error_entry(error)
     if recorder is None:
         summary["outcome"] = judge(scenario, summary, {})
         return summary
@@ -129,6 +128,17 @@ def compose_summary(scenario: Scenario, recorder: Recorder | None, ring: Sequenc
                 summary.setdefault("summary_errors", {})[spec.name] = f"{type(exc).__name__}: {exc}"
     summary["outcome"] = judge(scenario, summary, series)
     return summary
+
+
+def error_entry(error: RunError) -> dict:
+    """summary.json's ``error``: type, message, the process that failed, the frame and the traceback."""
+    return {"type": type(error).__name__, "message": str(error), "process": error.process, "frame": error.frame,
+            "traceback": error.detail}
+
+
+def fail_summary(summary: dict, error: RunError) -> dict:
+    """``summary`` of a run whose last step (its figures) failed with ``error``: not completed, with the error."""
+    return {**summary, "completed": False, "status": run_status(error), "error": error_entry(error)}
 
 
 def run_status(error: RunError | None) -> str:
@@ -164,12 +174,13 @@ def write_outputs(run_dir: Path, scenario: Scenario, recorder: Recorder | None, 
 
 
 def finish_outputs(run_dir: Path, scenario: Scenario, recorder: Recorder | None, ring: Sequence[ParticipantSpec],
-                   *, wall_time_s: float, error: RunError | None, files=None,
-                   extra: dict | None = None) -> tuple[dict, OutputError | None]:
+                   *, wall_time_s: float, error: RunError | None, files=None, extra: dict | None = None,
+                   reserve: bool = False) -> tuple[dict, OutputError | None]:
     """The run's last writes: the rows not yet appended (``files``, a :class:`cosim.runtime.stream.RunFiles`; None:
     write both CSV files whole), the final maps, then summary.json (atomically; over the reserved one on a full
-    disk). Returns (summary, the first write error or None); a write error becomes the run's error when it had
-    none, and the files after it are still tried."""
+    disk; ``reserve``: padded again, for a later rewrite after the figures). Returns (summary, the first write
+    error or None); a write error becomes the run's error when it had none, and the files after it are still
+    tried."""
     from .stream import write_final_summary
 
     failure: OutputError | None = None
@@ -196,7 +207,7 @@ def finish_outputs(run_dir: Path, scenario: Scenario, recorder: Recorder | None,
     summary = compose_summary(scenario, recorder, ring, wall_time_s=wall_time_s, error=error)
     summary.update(extra or {})
     try:
-        write_final_summary(run_dir, clean_json(summary))
+        write_final_summary(run_dir, clean_json(summary), reserve=reserve)
     except OutputError as exc:
         failure = failure or exc
     return summary, failure
@@ -206,21 +217,6 @@ def _npy_bytes(a: np.ndarray) -> bytes:
     buf = io.BytesIO()
     np.save(buf, a)
     return buf.getvalue()
-
-
-def write_figures(run_dir: Path, scenario: Scenario, summary: dict, recorder: Recorder | None) -> None:
-    """The run's figures (``outputs.figures``; needs dynamics' record). A failure is logged, never raised: the
-    run's data is already written."""
-    if not scenario.outputs.figures or recorder is None or not recorder.frames or "dyn_state" not in recorder.blocks:
-        return
-    try:
-        from cosim.report import write_run_figures
-
-        write_run_figures(run_data(run_dir, scenario, summary, recorder))
-    except RunInterrupted:
-        raise
-    except Exception:  # noqa: BLE001 - figures are a convenience
-        log.exception("writing the run's figures failed")
 
 
 def _summarize(spec: ParticipantSpec, scenario: Scenario, series: dict, recorder: Recorder) -> dict:

@@ -39,13 +39,14 @@ def write_running_summary(run_dir: Path, head: dict) -> None:
     atomic_write(Path(run_dir) / "summary.json", text + " " * max(0, SUMMARY_RESERVE - len(text)))
 
 
-def write_final_summary(run_dir: Path, summary: dict) -> None:
+def write_final_summary(run_dir: Path, summary: dict, *, reserve: bool = False) -> None:
     """Replace summary.json atomically; on a full disk, write it over the reserved one instead (a traceback that
-    does not fit is cut). Raises :class:`OutputError` only when neither works."""
+    does not fit is cut). ``reserve``: pad it to SUMMARY_RESERVE again (a summary that will be rewritten: the run's
+    figures are drawn after it). Raises :class:`OutputError` only when neither works."""
     path = Path(run_dir) / "summary.json"
     text = json.dumps(summary, indent=2) + "\n"
     try:
-        atomic_write(path, text)
+        atomic_write(path, text + " " * max(0, SUMMARY_RESERVE - len(text)) if reserve else text)
         return
     except OutputError:
         if not path.exists():

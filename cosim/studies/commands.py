@@ -7,13 +7,21 @@ from pathlib import Path
 
 from cosim.errors import ScenarioError
 
-__all__ = ["add_sweep_parser", "sweep_command", "study_command", "EXIT_OK", "EXIT_FAILED", "EXIT_USAGE",
-           "EXIT_INTERRUPTED",
-           "EXIT_NOT_FILLED"]
+__all__ = ["add_sweep_parser", "out_options", "sweep_command", "study_command", "EXIT_OK", "EXIT_FAILED", "EXIT_USAGE",
+           "EXIT_INTERRUPTED", "EXIT_NOT_FILLED"]
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 #: ``sweep --require-filled``: every run completed, but not every one filled the cart
 EXIT_NOT_FILLED = 3
+
+
+def out_options(p: argparse.ArgumentParser, what: str, *, overwrite: bool = False) -> None:
+    """``--out DIR`` and ``--parents`` (and ``--overwrite``): the rules of cosim.runtime.rundir."""
+    p.add_argument("--out", type=Path, help=f"{what}; only its last folder is created (see --parents)")
+    p.add_argument("--parents", action="store_true", help="create the missing parent folders of --out too")
+    if overwrite:
+        p.add_argument("--overwrite", action="store_true", help="replace the files of an earlier run in --out (it is "
+                       "refused without; files that are not a run's are never touched)")
 
 
 def add_sweep_parser(sub) -> None:
@@ -23,7 +31,7 @@ def add_sweep_parser(sub) -> None:
                     "the processes each run needs)")
     sw.add_argument("--scheduler", metavar="ADDRESS", help="run on an existing Dask cluster, e.g. "
                     "tcp://10.0.0.5:8786 (workers need graincosim installed; GL runs need --resources EGL=1)")
-    sw.add_argument("--out", type=Path, help="sweep directory (default runs/sweep-<name>; run again to resume)")
+    out_options(sw, "sweep directory (default runs/sweep-<name>; run again to resume)")
     sw.add_argument("--quiet", action="store_true", help="no progress bar")
     sw.add_argument("--require-filled", action="store_true",
                     help="exit 3 when every run completed but some did not fill the cart (outcome column)")
@@ -76,7 +84,8 @@ def sweep_command(args: argparse.Namespace) -> int:
     out = args.out or Path("runs") / f"sweep-{sweep.name}"
     sys.stderr.write(f"sweep {sweep.name}: {len(sweep.runs)} runs into {out}\n")
     try:
-        outcome = run_sweep(sweep, out, scheduler=args.scheduler, jobs=args.jobs, quiet=args.quiet)
+        outcome = run_sweep(sweep, out, scheduler=args.scheduler, jobs=args.jobs, quiet=args.quiet,
+                            parents=args.parents or args.out is None)
     except RuntimeError as exc:
         sys.stderr.write(f"{exc}\n")
         return EXIT_USAGE
@@ -102,7 +111,7 @@ def study_command(args: argparse.Namespace, scenario) -> int:
         knobs = names + [parse_knob(text, i) for i, text in enumerate(args.knob, start=1)]
         out = args.out or default_run_dir(scenario.model_copy(update={"name": f"study-{scenario.name}"}))
         md = run_study(scenario, knobs, out, args.sim_seconds, jobs=args.jobs, scheduler=args.scheduler,
-                       quiet=args.quiet)
+                       quiet=args.quiet, parents=args.parents or args.out is None)
     except ScenarioError as exc:
         return _problems(exc)
     sys.stdout.write(md.read_text() + f"\nstudy written to {out}\n")

@@ -9,6 +9,7 @@ from cosim.report.html import write_comparison_report
 from cosim.report.rundata import load_run
 from cosim.runtime.launcher import launch
 from cosim.runtime.progress import run_progress
+from cosim.runtime.rundir import make_out_dir
 from cosim.scenario.config import Scenario
 
 __all__ = ["VARIANTS", "variants", "compare"]
@@ -61,16 +62,19 @@ def variants(scenario: Scenario) -> dict[str, Scenario]:
     return out
 
 
-def compare(scenario: Scenario, out: Path, quiet: bool = True) -> Path:
+def compare(scenario: Scenario, out: Path, quiet: bool = True, *, overwrite: bool = False,
+            parents: bool = True) -> Path:
     """Run every variant into ``out/<variant>`` and write ``out/report.html``; returns the report path. Each run
-    shows its own progress bar labelled with its name (none when ``quiet``)."""
-    out.mkdir(parents=True, exist_ok=True)
+    shows its own progress bar labelled with its name (none when ``quiet``). ``out`` and the run directories in
+    it follow cosim.runtime.rundir (``parents``: create ``out``'s missing parents; ``overwrite``: replace the
+    runs of an earlier compare)."""
+    make_out_dir(out, parents)
     runs = []
     for k, (name, sc) in enumerate(variants(scenario).items(), start=1):
         log.info("compare: running %s", name)
         progress = run_progress(f"[{k}/{len(VARIANTS)}] {name}", quiet)
         try:
-            res = launch(sc, out / name, progress=progress)
+            res = launch(sc, out / name, progress=progress, overwrite=overwrite)
         finally:
             if progress is not None:
                 progress.close()

@@ -23,13 +23,14 @@ def _num(v) -> float | None:
 
 def spread(rows: list[dict], param: str, metric: str) -> list[tuple[object, float, float, float, list[float]]]:
     """Per value of ``param`` (first-seen order): (value, mean, min, max, values) of ``metric`` over the
-    completed runs that have it."""
+    completed runs that have it. The mean is kept inside [min, max]: a float sum can round it just outside (three
+    runs of 0.1 have the mean 0.10000000000000002), which made its error bar negative."""
     groups: dict = {}
     for r in rows:
         y = _num(r.get(metric))
         if r.get("completed") and y is not None:
             groups.setdefault(_key(r.get(param)), (r.get(param), []))[1].append(y)
-    return [(v, sum(ys) / len(ys), min(ys), max(ys), ys) for v, ys in groups.values()]
+    return [(v, min(max(math.fsum(ys) / len(ys), min(ys)), max(ys)), min(ys), max(ys), ys) for v, ys in groups.values()]
 
 
 def _key(v):

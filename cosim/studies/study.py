@@ -216,15 +216,16 @@ def _result(run: RunSpec, out: Path, setting: Setting) -> Result | None:
 
 
 def run_study(scenario: Scenario, knobs: Sequence[str | Knob], out: Path, duration_s: float = 20.0, *,
-              jobs: int | None = 1, scheduler: str | None = None, quiet: bool = True) -> Path:
-    """Run the knobs (names of :data:`KNOBS` or :class:`Knob`) as a sweep into ``out``; write study.csv,
-    study.md, study.json and study.png beside the sweep's results.csv; returns study.md.
+              jobs: int | None = 1, scheduler: str | None = None, quiet: bool = True, parents: bool = True) -> Path:
+    """Run the knobs (names of :data:`KNOBS` or :class:`Knob`) as a sweep into ``out`` (``parents``: create its
+    missing parents too); write study.csv, study.md, study.json and study.png beside the sweep's results.csv;
+    returns study.md.
 
     ``jobs`` defaults to 1 so that runs do not share cores: the cost axis is a wall time.
     """
     knobs = [KNOBS[k] if isinstance(k, str) else k for k in knobs]
     sweep = study_sweep(scenario, knobs, duration_s)
-    run_sweep(sweep, out, jobs=jobs, scheduler=scheduler, quiet=quiet, figures=False)
+    run_sweep(sweep, out, jobs=jobs, scheduler=scheduler, quiet=quiet, figures=False, parents=parents)
     rows, panels = [], []
     runs = iter(sweep.runs)
     for knob in knobs:

@@ -13,13 +13,15 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-import shutil
+import signal
 import sys
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterator
 
+from cosim.runtime.rundir import make_out_dir
+from cosim.runtime.signals import request_stop, sigint_blocked_in_new_threads
 from cosim.scenario.config import Scenario
 
 from .results import ResultsTable, read_summary, read_table
@@ -33,6 +35,9 @@ log = logging.getLogger("cosim.studies.sweep")
 EGL = "EGL"
 LOCAL = "local"
 LOOPBACK_ANY_PORT = "127.0.0.1:0"
+#: how long an interrupted sweep waits for the runs in progress on the workers to end (each stops within ~0.5 s
+#: of being asked, and writes its outputs), s
+STOP_WAIT_S = 10.0
 #: Dask settings of the embedded cluster: its idle work competes with the runs for the cores. No statistical
 #: profiler (it samples every thread of a worker every 10 ms, the run's supervisor included); event-loop health
 #: ticks, system and memory monitors at 1-2 s instead of 20-500 ms
@@ -65,10 +70,10 @@ def execute_run(run_dir: str, scenario_json: str) -> dict:
         worker = get_worker().address
     except (ImportError, ValueError):
         worker = LOCAL
-    path = Path(run_dir)
-    if path.exists():  # an earlier, failed attempt: start clean so its files do not mix with this one's
-        shutil.rmtree(path)
-    result = launch(Scenario.model_validate_json(scenario_json), path, console_log=False)
+    # overwrite: an earlier attempt's files (a failed run, a run cut short) are removed first, so that they do
+    # not mix with this one's; the run directory's parent is the sweep's runs/ (never created here: a worker that
+    # does not see it has no shared file system with the sweep, which the error then says)
+    result = launch(Scenario.model_validate_json(scenario_json), Path(run_dir), console_log=False, overwrite=True)
     return {"summary": result.summary, "error": "" if result.error is None else str(result.error),
             "worker": worker}
 
@@ -92,12 +97,15 @@ def open_client(scheduler: str | None, jobs: int, gl: bool) -> Iterator:
     import dask
 
     resources = {EGL: 1} if gl else None
-    # no dashboard; Dask's HTTP routes (health, metrics) on a free loopback port, not 0.0.0.0:8787
-    with dask.config.set(QUIET_CLUSTER), LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=LOOPBACK_ANY_PORT, scheduler_kwargs={"dashboard": False},
-                      worker_dashboard_address=LOOPBACK_ANY_PORT, resources=resources,
-                      silence_logs=logging.ERROR) as cluster, \
-            Client(cluster) as client:
+    # no dashboard; Dask's HTTP routes (health, metrics) on a free loopback port, not 0.0.0.0:8787. The cluster's
+    # threads are born with SIGINT blocked, and so are the worker processes they start (restarts included) and
+    # the runs' children: a Ctrl-C on the terminal reaches this process alone, which stops the sweep
+    with dask.config.set(QUIET_CLUSTER), sigint_blocked_in_new_threads():
+        cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=LOOPBACK_ANY_PORT, scheduler_kwargs={"dashboard": False},
+                               worker_dashboard_address=LOOPBACK_ANY_PORT, resources=resources,
+                               silence_logs=logging.ERROR)
+    with cluster, Client(cluster) as client:
         yield client
 
 
@@ -119,15 +127,18 @@ def _progress(total: int, done: int, quiet: bool):
 
 def run_sweep(sweep: Sweep, out: Path, *, scheduler: str | None = None, jobs: int | None = None,
               quiet: bool = False, retries: int = 1, runner: Callable[[str, str], dict] = execute_run,
-              figures: bool = True) -> SweepOutcome:
+              figures: bool = True, parents: bool = True) -> SweepOutcome:
     """Run ``sweep`` into ``out`` (runs/<id>/, results.csv, figures); see the module docstring.
 
     ``runner(run_dir, scenario_json) -> {"summary", "error", "worker"}`` executes one run on a worker
-    (default :func:`execute_run`). Never raises for a run's failure; raises RuntimeError when a GL run has
-    nowhere to go.
+    (default :func:`execute_run`) and is given the run directory as an absolute path: a worker's working
+    directory is its own. ``parents``: create ``out``'s missing parents too (cosim.runtime.rundir). Never raises
+    for a run's failure; raises RuntimeError when a GL run has nowhere to go and
+    :class:`cosim.runtime.rundir.RunDirError` when ``out`` cannot be made.
     """
-    out = Path(out)
-    (out / "runs").mkdir(parents=True, exist_ok=True)
+    out = Path(out).absolute()
+    make_out_dir(out, parents)
+    (out / "runs").mkdir(exist_ok=True)
     table = ResultsTable(out, sweep.labels, sweep.parameters, [r.id for r in sweep.runs])
     pending: list[RunSpec] = []
     before = read_table(out)
@@ -197,6 +208,11 @@ def _drive(client, pending: list[RunSpec], out: Path, table: ResultsTable, bar, 
             bar.update(1)
             bar.set_postfix(failed=failed, refresh=False)
     except KeyboardInterrupt:
-        client.cancel(futures)
+        client.cancel(futures)  # the queued runs never start; those running end now, as interrupted
+        try:
+            client.run(request_stop, [str(out / "runs" / r.id) for r in pending], signal.SIGINT, STOP_WAIT_S,
+                       wait=True)
+        except Exception as exc:  # noqa: BLE001 - a worker that is gone: its runs ended with it
+            log.warning("could not stop the runs in progress on every worker: %s", exc)
         return failed, True
     return failed, False

@@ -6,6 +6,9 @@ chosen per role with keyword arguments: ``crash_at`` (raise), ``kill_at`` (SIGKI
 itself; ``stop_at=-2``: in ``start``, before frame 0), ``deadlock_at`` (sleep in C holding the GIL, so its
 heartbeat thread stops too), ``busy_at`` (``busy_s`` of CPU in one C call that keeps the GIL: slow, not hung);
 ``stamp_file`` receives the monotonic time of a ``kill_at``/``stop_at``/``deadlock_at`` fault.
+
+:func:`real_specs` puts the same faults into the real participants (dynamics, renderer, perception): a run that
+records what a real run records, and so draws figures when it completes.
 """
 from __future__ import annotations
 
@@ -73,6 +76,8 @@ class Fake:
                 f.write(repr(time.monotonic()))
 
     def _faults(self, frame):
+        if frame in (self.faults["crash_at"], self.faults["hang_at"]):
+            self._stamp()
         if frame == self.faults["crash_at"]:
             raise ValueError(f"injected crash in {self.name} at frame {frame}")
         if frame == self.faults["kill_at"]:
@@ -201,3 +206,39 @@ def observe(segment, stop_self=False):
     if stop_self:
         os.kill(os.getpid(), signal.SIGSTOP)
     threading.Event().wait(3600.0)
+
+
+class RealWithFaults:
+    """A real participant (``DEFAULT_SPECS[role]``) with :class:`Fake`'s fault keywords injected before its step."""
+
+    def __init__(self, scenario, role, **faults):
+        from cosim.runtime.specs import DEFAULT_SPECS
+
+        self.name = role
+        self._inner = DEFAULT_SPECS[role].create(scenario)
+        self._faulty = Fake(scenario, role, **faults)
+
+    def start(self, segment):
+        self._faulty.start(segment)
+        self._inner.start(segment)
+
+    def step(self, frame):
+        self._faulty._faults(frame)
+        return self._inner.step(frame)
+
+    def __getattr__(self, name):  # flush, close, settable, ...
+        return getattr(self._inner, name)
+
+
+def make_real(scenario, role="dynamics", **faults):
+    return RealWithFaults(scenario, role, **faults)
+
+
+def real_specs(scenario, **faults_by_role):
+    """The scenario's real ring members, with faults as in :func:`specs` (``{'renderer': {'crash_at': 3}}``)."""
+    from dataclasses import replace
+
+    from cosim.runtime.specs import ring_specs
+
+    return {s.name: replace(s, factory=f"{__name__}:make_real", kwargs={"role": s.name, **faults_by_role.get(s.name, {})})
+            for s in ring_specs(scenario)}

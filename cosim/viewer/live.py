@@ -130,6 +130,13 @@ class LiveSource:
             return (SHM_DIR / self.segment_name).exists()
         return True
 
+    def finish(self) -> None:
+        """The run has ended (its launcher is stopping the viewer): keep the segment's last frame as the final
+        snapshot, status ``run ended``, and unmap."""
+        with self._lock:
+            if not self._ended:
+                self._end()
+
     def check_end(self) -> bool:
         """Notice a run that has ended: keep the last snapshot, unmap. Returns whether it has ended."""
         with self._lock:

@@ -53,6 +53,7 @@ section.absent{opacity:.55}section.absent .body{display:none}
 _JS = """
 const POLL_MS = %(poll)d, IMAGE_MIN_MS = %(image_min)d, IMAGE_PANELS = %(image_panels)s;
 const lastFetch = {};
+let ended = false;  // the run has ended: its last images are fetched at once, and kept when the viewer goes
 const $ = (id) => document.getElementById(id);
 function shown(sec, f) {
   sec.dataset.frame = String(f); sec.querySelector(".f").textContent = "frame " + f;
@@ -69,7 +70,7 @@ function setPanel(id, info) {
   if (IMAGE_PANELS.includes(id)) {
     const img = sec.querySelector("img");
     const now = Date.now();
-    if (img.dataset.want !== String(info.frame) && !(now - (lastFetch[id] || 0) < IMAGE_MIN_MS)) {
+    if (img.dataset.want !== String(info.frame) && (ended || !(now - (lastFetch[id] || 0) < IMAGE_MIN_MS))) {
       lastFetch[id] = now;
       img.dataset.want = String(info.frame);
       const f = info.frame;
@@ -172,9 +173,12 @@ async function poll() {
     $("dropped").textContent = String(s.dropped_total);
     const st = $("status"); st.textContent = s.status;
     st.className = s.status === "run ended" ? "ended" : s.status;
+    ended = s.status === "run ended";
     for (const [id, info] of Object.entries(s.panels)) setPanel(id, info);
     drawAuger(s.auger); drawFullness(s.fullness); showReplay(s.replay);
   } catch (e) {
+    // after the run's end the viewer goes away: its last frame stays on screen, still "run ended"
+    if (ended) { $("status").title = "the viewer has closed with the run"; return; }
     const st = $("status"); st.textContent = "viewer unreachable"; st.className = "error";
   }
   setTimeout(poll, POLL_MS);

@@ -15,6 +15,11 @@ on SIGTERM between the two (the launcher terminates its observers when the run e
 headers of a JSON document and none of its bytes (``http.client.IncompleteRead``). :func:`serve` turns SIGTERM
 (and Ctrl-C) into a graceful stop: stop accepting, let the requests being answered finish (at most
 DRAIN_S), then unmap and exit. A connection idle between requests is simply closed, which HTTP clients expect.
+
+The end of a run (``observe``: the launcher sends SIGTERM once the ring has stopped) is shown, not cut off: the
+viewer takes the segment's last frame as its final snapshot (``run ended``) and, if a page was watching, keeps
+answering until that page has fetched the final state and image panels (at most LINGER_S), so the dashboard ends
+on the run's last frame; the page then keeps it on screen when the viewer is gone.
 """
 from __future__ import annotations
 
@@ -37,7 +42,7 @@ from .panels import IMAGE_PANELS, PanelRenderer, panel_info
 from .snapshot import fullness
 
 __all__ = ["DashboardServer", "state_json", "observe", "serve", "ServerStop", "DEFAULT_PORT", "DEFAULT_HOST", "NICE",
-           "DRAIN_S"]
+           "DRAIN_S", "LINGER_S", "WATCHED_S", "RUN_ENDED"]
 
 log = logging.getLogger("cosim.viewer")
 
@@ -48,8 +53,16 @@ NICE = 10
 #: how often the server checks whether the run has ended (to unmap promptly), s
 HOUSEKEEPING_S = 1.0
 #: longest wait, when stopping, for the responses being sent to finish, s (the launcher allows its observers
-#: cosim.runtime.launcher.TERMINATE_GRACE_S = 0.5 s after SIGTERM before it kills them)
+#: cosim.runtime.teardown.OBSERVER_GRACE_S = 1.5 s after SIGTERM at the end of a completed run, 0.5 s after a
+#: failed one, before it kills them)
 DRAIN_S = 0.3
+#: longest time the viewer keeps answering after the run ended, for a watching page to fetch its last frame, s (a
+#: page polls the state every cosim.viewer.page.POLL_MS and then fetches the image panels of a new frame)
+LINGER_S = 1.0
+#: a page counts as watching if it asked for the state this recently when the run ended, s
+WATCHED_S = 1.0
+#: the status of a live source whose run has ended (cosim.viewer.live)
+RUN_ENDED = "run ended"
 
 
 class ServerStop(BaseException):
@@ -124,6 +137,7 @@ class _Handler(BaseHTTPRequestHandler):
                     self._send(404, f"panel {pid} is absent in this run".encode(), "text/plain")
                 else:
                     self._send(200, png, "image/png")
+                    srv.panel_sent(pid)
             elif path == "/healthz":
                 self._send(200, b"ok", "text/plain")
             else:
@@ -178,6 +192,12 @@ class DashboardServer(ThreadingHTTPServer):
         self._dropped = 0
         self._last_frame = -1
         self._lock = threading.Lock()
+        #: when a page last asked for the state (monotonic s), and what it has had of the run's end: the final
+        #: state, the image panels fetched after it (guarded by _end_seen)
+        self._t_state = -math.inf
+        self._end_state_sent = False
+        self._end_panels: set[str] = set()
+        self._end_seen = threading.Condition()
         #: requests being answered (read, computed, sent), guarded by _idle
         self._answering = 0
         self._idle = threading.Condition()
@@ -198,7 +218,40 @@ class DashboardServer(ThreadingHTTPServer):
             if doc["frame"] is not None:
                 self._last_frame = max(self._last_frame, doc["frame"])
             doc["dropped_total"] = self._dropped
+        with self._end_seen:
+            self._t_state = time.monotonic()
+            if doc["status"] == RUN_ENDED:
+                self._end_state_sent = True
+                self._end_seen.notify_all()
         return doc
+
+    def panel_sent(self, pid: str) -> None:
+        """Note an image panel answered (after the run ended: part of what a page fetches of its end)."""
+        with self._end_seen:
+            if self._end_state_sent:
+                self._end_panels.add(pid)
+                self._end_seen.notify_all()
+
+    def show_the_end(self, linger_s: float = LINGER_S) -> None:
+        """The run has ended: take its last frame as the final snapshot (``run ended``) and, if a page was
+        watching, keep answering until it has fetched that state and the image panels it shows (at most
+        ``linger_s``). Call after :meth:`serve_forever` has returned."""
+        finish = getattr(self.source, "finish", None)
+        if finish is None:
+            return
+        finish()
+        with self._end_seen:
+            if time.monotonic() - self._t_state > WATCHED_S:
+                return  # nobody is watching
+        shown = {pid for pid, info in panel_info(self.source.snapshot()).items()
+                 if pid in IMAGE_PANELS and info["available"] and info["frame"] is not None}
+        server = threading.Thread(target=self.serve_forever, kwargs={"poll_interval": 0.05}, name="viewer-end",
+                                  daemon=True)
+        server.start()
+        with self._end_seen:
+            self._end_seen.wait_for(lambda: self._end_state_sent and shown <= self._end_panels, timeout=linger_s)
+        self.shutdown()
+        server.join()
 
     @contextlib.contextmanager
     def answering(self):
@@ -255,9 +308,11 @@ def _raise_stop(signum, frame) -> None:
     raise ServerStop(signal.Signals(signum).name)
 
 
-def serve(source, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, announce: str | None = None) -> None:
+def serve(source, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, announce: str | None = None,
+          show_end: bool = False) -> None:
     """Serve ``source`` until SIGTERM or Ctrl-C, then stop gracefully (module docstring). ``announce``: a file to
-    write ``{"url": ...}`` to once listening."""
+    write ``{"url": ...}`` to once listening; ``show_end``: SIGTERM means the run has ended: show its end to a
+    watching page first (:meth:`DashboardServer.show_the_end`)."""
     try:
         srv = DashboardServer(source, host, port)
     except BaseException:
@@ -277,6 +332,10 @@ def serve(source, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, announce: 
         srv.serve_forever(poll_interval=0.5)
     except (ServerStop, KeyboardInterrupt) as exc:
         log.info("viewer of %s stopping (%s)", source.name, type(exc).__name__)
+        if previous is not None:
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second SIGTERM must not cut the end short
+        if show_end and isinstance(exc, ServerStop):
+            srv.show_the_end()
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second SIGTERM must not cut the drain short
@@ -297,4 +356,4 @@ def observe(segment_name: str, port: int = DEFAULT_PORT, host: str = DEFAULT_HOS
     source = LiveSource(segment_name, MIN_INTERVAL_S if min_interval_s is None else min_interval_s)
     if size_m is not None:
         source.size_m = (float(size_m[0]), float(size_m[1]))
-    serve(source, host, port, announce)
+    serve(source, host, port, announce, show_end=True)
