@@ -14,7 +14,10 @@ What it measures (each figure names its source in the Markdown):
   spill, mass balance, and the LiDAR range error against the exact ray cast (mean, median, p99, max, share
   above 5 cm and p99 in 2-15 m); the ground-truth run's section peaks;
 * the render + LiDAR step of ``sensor.method: beam_native`` against ``camera_rig`` on the same sample frames
-  (``bench/beam_native.py``'s methods, interleaved per frame): CPU ms per frame and the ratio.
+  (``bench/beam_native.py``'s methods, interleaved per frame): CPU ms per frame and the ratio;
+* the mock renderer's frame against the GL renderer's on the same sample frames (``bench/mock_cast.py``);
+* the curves of how the cost grows (``bench/curves.py``): CPU per frame against beams and the grain grid, sweep
+  throughput with 1 and 2 local workers (``--no-curves`` leaves them out).
 
 ``--quick`` is a smoke test of the script itself (short runs, one round, few frames): its numbers are not
 the headline figures. Usage::
@@ -28,7 +31,6 @@ import argparse
 import json
 import os
 import platform
-import resource
 import statistics
 import subprocess
 import sys
@@ -39,6 +41,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+from proctree import become_subreaper, reap, tree_cpu_s  # noqa: E402
 
 __all__ = ["RUNS", "launch", "main", "render_markdown", "step_ratio"]
 
@@ -46,44 +51,12 @@ __all__ = ["RUNS", "launch", "main", "render_markdown", "step_ratio"]
 RUNS = {"perception": [], "ground_truth": ["--feedback", "ground_truth", "--renderer", "none"]}
 #: the perception run's cost over the ground-truth run that the project aims at (medians of the rounds' own ratios)
 TARGET_WALL, TARGET_CPU = 2.0, 3.0
-#: how long the reaping waits for the processes that outlive a run's launcher (its resource tracker), s
-REAP_S = 5.0
-#: prctl option that makes this process the subreaper of its descendants
-_PR_SET_CHILD_SUBREAPER = 36
 #: full and quick settings: simulated seconds per run, interleaved rounds, sample frames of the step ratio
 FULL = {"duration": 120.0, "rounds": 5, "frames": 40}
 QUICK = {"duration": 3.0, "rounds": 1, "frames": 2}
-
-
-def become_subreaper() -> bool:
-    """Make this process the subreaper of its descendants (Linux), so that the CPU time of a process that
-    outlives its parent (reparented here, reaped by :func:`reap`) is counted; False where it cannot."""
-    try:
-        import ctypes
-
-        return ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) == 0
-    except (OSError, AttributeError):
-        return False
-
-
-def reap(timeout_s: float = REAP_S) -> None:
-    """Wait for every remaining child (orphans reparented here included), up to ``timeout_s``."""
-    deadline = time.monotonic() + timeout_s
-    while True:
-        try:
-            pid, _ = os.waitpid(-1, os.WNOHANG)
-        except ChildProcessError:
-            return
-        if pid == 0:
-            if time.monotonic() > deadline:
-                return
-            time.sleep(0.01)
-
-
-def tree_cpu_s() -> float:
-    """CPU time (user + system, s) of every child this process has reaped so far, and of their reaped children."""
-    r = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return r.ru_utime + r.ru_stime
+#: the curves' settings (bench/curves.py), full and quick
+CURVES = {"frames": 60, "warmup": 100, "runs": 4, "sweep_duration": 20.0, "rounds": 2}
+CURVES_QUICK = {"frames": 3, "warmup": 2, "runs": 2, "sweep_duration": 1.0, "rounds": 1, "quick": True}
 
 
 def launch(scenario: str, duration: float, extra: list[str]) -> dict:
@@ -144,6 +117,17 @@ def step_ratio(frames: int, renderer: str) -> dict:
             "beam_native_cpu_ms": med["beam_native"], "ratio_cpu": med["beam_native"] / med["camera_rig"]}
 
 
+def mock_ratio(frames: int) -> dict:
+    """The mock renderer's frame (rigid bodies built once) against the GL renderer's, same frames, interleaved."""
+    from mock_cast import measure as mock_measure
+
+    res = mock_measure(frames, 8.0, ["embree-static", "gl"])
+    if "gl" not in res or "embree-static" not in res:
+        return {}
+    return {"frames": frames, "mock_cpu_ms": res["embree-static"]["cpu_ms"], "gl_cpu_ms": res["gl"]["cpu_ms"],
+            "ratio_cpu": res["embree-static"]["cpu_ms"] / res["gl"]["cpu_ms"]}
+
+
 def _med(runs: list[dict], get) -> float:
     return statistics.median(get(r) for r in runs)
 
@@ -175,6 +159,7 @@ def measure(scenario: str, duration: float, rounds: int, frames: int, renderer: 
                       "wall_met": out["ratio"]["wall_paired"]["median"] <= TARGET_WALL,
                       "cpu_met": out["ratio"]["cpu_paired"]["median"] <= TARGET_CPU}
     out["lidar_step"] = step_ratio(frames, renderer)
+    out["mock_frame"] = mock_ratio(max(frames // 2, 2))
     out["meta"] = {"scenario": scenario, "duration_s": duration, "rounds": rounds, "renderer": renderer,
                    "written_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
                    "cores": os.cpu_count(), "machine": platform.processor() or platform.machine(),
@@ -247,6 +232,15 @@ def render_markdown(res: dict, quick: bool = False) -> str:
         f"{st['beam_native_cpu_ms']:.2f} ms CPU against camera_rig {st['camera_rig_cpu_ms']:.2f} ms: "
         f"**{st['ratio_cpu']:.2f}x**.", "",
     ]
+    mf = res.get("mock_frame") or {}
+    if mf:
+        lines += [f"Mock renderer frame (exact ray cast, rigid bodies built once) against the GL renderer's, "
+                  f"{mf['frames']} sample frames interleaved: {mf['mock_cpu_ms']:.2f} against {mf['gl_cpu_ms']:.2f} ms "
+                  f"CPU: **{mf['ratio_cpu']:.2f}x** (target: at most 1x).", ""]
+    if res.get("curves"):
+        from curves import render_markdown as curves_markdown
+
+        lines += ["## How the cost grows (`bench/curves.py`)", "", curves_markdown(res["curves"])]
     return "\n".join(lines)
 
 
@@ -256,11 +250,16 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--scenario", default="default")
     ap.add_argument("--renderer", default="gl", choices=("gl", "mock"), help="of the default run and the step")
     ap.add_argument("--out", type=Path, default=ROOT / "bench", help="folder of results.json and results.md")
+    ap.add_argument("--no-curves", dest="curves", action="store_false", help="leave bench/curves.py's curves out")
     a = ap.parse_args(argv)
     sys.path.insert(0, str(ROOT / "bench"))                     # beam_native's methods for the step ratio
     cfg = QUICK if a.quick else FULL
     become_subreaper()
     res = measure(a.scenario, cfg["duration"], cfg["rounds"], cfg["frames"], a.renderer)
+    if a.curves:
+        from curves import measure as curves_measure
+
+        res["curves"] = curves_measure(**(CURVES_QUICK if a.quick else CURVES))
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / "results.json").write_text(json.dumps(res, indent=2) + "\n")
     md = render_markdown(res, a.quick)

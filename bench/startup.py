@@ -36,7 +36,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 
-from run_all import become_subreaper, reap, tree_cpu_s  # noqa: E402
+from proctree import become_subreaper, reap, tree_cpu_s  # noqa: E402
 
 #: the two runs compared: label -> extra launch.py arguments
 RUNS = {"perception": [], "ground_truth": ["--feedback", "ground_truth", "--renderer", "none"]}

@@ -8,7 +8,9 @@ cached. A step that adds to another is printed with the increment:
 * launcher: command line, scenario loading and validation, the launcher's modules, the resolved scenario and
   the schema (every ring member's blocks): everything before it spawns the children;
 * child: what a spawned participant process imports before ``child_main`` runs, then each participant's
-  module and ``create`` (what ``start`` does, e.g. the renderer's GL context and shaders, is not counted);
+  module and ``create`` (what ``start`` does, e.g. the renderer's GL context and shaders, is not counted); ring
+  members are forked from a fork server that has imported the first part already (cosim.runtime.procstart), so
+  a launched child pays only the participant's part; a spawned one (where there is no fork server) pays both;
 * end of run: the plotting modules, and the four figures of a 300-frame ground-truth run (from memory; a tree
   without ``cosim.runtime.outputs.run_data`` writes the run directory's data and reads it back, as its launcher did).
 

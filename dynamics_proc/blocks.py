@@ -30,6 +30,7 @@ STATE_FIELDS: tuple[tuple[str, str, str, str], ...] = (
     ("combine_roll_rad", "rad", "f8", "combine roll on the terrain (R = Rz(yaw) Ry(pitch) Rx(roll))"),
     ("combine_pitch_rad", "rad", "f8", "combine pitch on the terrain (positive: nose down)"),
     ("combine_speed_mps", "m/s", "f8", ""),
+    ("combine_yaw_rate_radps", "rad/s", "f8", "combine's yaw rate (its path's curvature x speed)"),
     ("tractor_x_m", "m", "f8", "tractor body origin, world"),
     ("tractor_y_m", "m", "f8", ""),
     ("tractor_yaw_rad", "rad", "f8", ""),
@@ -50,6 +51,7 @@ STATE_FIELDS: tuple[tuple[str, str, str, str], ...] = (
     ("auger_on", "", "i8", "auger command (0/1)"),
     ("flow_level", "", "f8", "flow as a fraction of the nominal flow (spool-up / run-out)"),
     ("flow_m3ps", "m^3/s", "f8", "grain flow leaving the spout"),
+    ("flow_factor", "", "f8", "yield variation and start surge of the flow (1: none)"),
     ("impact_x_m", "m", "f8", "true impact point of the stream, world"),
     ("impact_y_m", "m", "f8", ""),
     ("impact_z_m", "m", "f8", ""),
@@ -86,6 +88,9 @@ STATE_FIELDS: tuple[tuple[str, str, str, str], ...] = (
     ("spilled_outside_m3", "m^3", "f8", "part of the spill that landed outside the interior"),
     ("cart_grain_m3", "m^3", "f8", "grain in the cart"),
     ("peak_height_m", "m", "f8", "highest grain cell above the floor"),
+    ("gnss_error_long_m", "m", "f8", "tractor's GNSS error relative to the combine's, along the combine"),
+    ("gnss_error_lat_m", "m", "f8", "... across the combine (Machine Sync steers on it)"),
+    ("tractor_slip", "", "f8", "tractor wheel slip (ground speed = wheel speed x (1 - slip))"),
 )
 
 

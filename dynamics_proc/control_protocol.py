@@ -76,7 +76,9 @@ class ControllerInput:
       (dynamics_proc.feedforward; (0, 0) on a straight path): the spout sits at ``nudge_signal_m`` plus it
       once the lateral correction below is applied;
     * ``lateral_correction_m``: the correction of Machine Sync's lateral setpoint that keeps the spout over the
-      same line of the cart in the turn ``feedforward_lead_s`` ahead (the cart off-tracks sideways), m.
+      same line of the cart in the turn ``feedforward_lead_s`` ahead (the cart off-tracks sideways), m;
+    * ``speed_change_mps2``: the largest rate at which the combine's speed changes within the next
+      ``controller.coping.safety_lead_s`` (its speed profile, known to the combine), m/s^2.
     """
 
     t_s: float
@@ -90,6 +92,7 @@ class ControllerInput:
     target_fill_m: float
     turn_shift_m: tuple[float, float] = (0.0, 0.0)
     lateral_correction_m: float = 0.0
+    speed_change_mps2: float = 0.0
 
 
 @dataclass(frozen=True)

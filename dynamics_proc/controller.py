@@ -48,7 +48,7 @@ from cosim.scenario.config import Scenario
 from cosim.scenario.plugins import load_plugin
 
 from .control_protocol import ControllerCommand, ControllerInput, Delivery
-from .coping import mode, peak_sigma, rise_rate, slowed_section
+from .coping import mode, peak_sigma, rise_rate, slowed_section, unexplained_shift
 from .estimator import FillEstimate, FusionParams, initial_estimate, landing_on, predict, update
 from .grainfill import GrainGrid, section_rows
 from .strategies import Strategy
@@ -102,6 +102,10 @@ class ControllerParams:
     fallback_sigma_m: float = math.inf  # dead reckoning goes on while the target's 1-sigma stays at most this, m
     feedforward: bool = False        # add the turn's predicted spout shift (ControllerInput.turn_shift_m)
     slow_flow: float = 1.0           # commanded flow fraction once a section is near full (1: never slowed)
+    safety_lead_s: float = 0.0       # the impact is checked this far ahead at the spout's unexplained velocity, s
+    pause_accel_mps2: float = math.inf  # the auger pauses while the combine's speed changes faster, m/s^2
+    nudge_speed_mps: float = math.inf  # the spout's speed over the cart a nudge explains, m/s
+    overfull_margin_m: float = math.inf  # no grain on a section other than the target this far over the target, m
     lead_allowance_m: float = 0.0    # a rise over the lead up to this needs no slowing, m
 
     @classmethod
@@ -126,8 +130,13 @@ class ControllerParams:
                    max(c.safe_margin_m - c.safety_hysteresis_m, 0.0), s.machine_sync.nudge_m,
                    s.machine_sync.nudge_min_interval_s, c.stale_timeout_s, c.estimator, strategy,
                    s.timing.sensor_period_s, _fusion(s, nx, ny) if c.estimator == "fused" else None, c.strategy,
-                   c.coping.full_lead_s, c.coping.rise_tau_s, c.coping.fallback_sigma_m, c.coping.feedforward,
-                   c.coping.slow_flow, c.coping.lead_allowance_m)
+                   full_lead_s=c.coping.full_lead_s, rise_tau_s=c.coping.rise_tau_s,
+                   fallback_sigma_m=c.coping.fallback_sigma_m, feedforward=c.coping.feedforward,
+                   slow_flow=c.coping.slow_flow, lead_allowance_m=c.coping.lead_allowance_m,
+                   safety_lead_s=c.coping.safety_lead_s,
+                   pause_accel_mps2=c.coping.pause_accel_mps2 if c.coping.pause_accel_mps2 > 0.0 else math.inf,
+                   nudge_speed_mps=s.machine_sync.kp_long * s.machine_sync.nudge_m,
+                   overfull_margin_m=c.coping.overfull_margin_m)
 
 
 def plugin_dir(s: Scenario) -> Path | None:
@@ -169,6 +178,7 @@ class ControllerState:
     rate: np.ndarray | None = None  # (N,) m/s, filtered rise rate of each section's peak (coping)
     hold: int = 0                # hold reason code (cosim.runtime.outcome.HOLD_*), 0 not holding
     slowed: int = -1             # 0-based section the auger is slowed for (near full), -1 none
+    spout_x: float = math.nan    # the spout's grid x at the last decision, m
 
 
 def min2x2(m: np.ndarray, next_row: np.ndarray | None = None) -> np.ndarray:
@@ -242,8 +252,8 @@ def _inside(x: float, y: float, margin: float, p: ControllerParams) -> bool:
 def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np.ndarray | None,
                     actual_x: float, impacts: tuple[tuple[float, float], ...], drift_x: float,
                     nudge_signal: float, delivery: Delivery | None = None,
-                    turn_shift_m: tuple[float, float] = (0.0, 0.0),
-                    lateral_correction_m: float = 0.0) -> tuple[ControllerState, ControllerCommand]:
+                    turn_shift_m: tuple[float, float] = (0.0, 0.0), lateral_correction_m: float = 0.0,
+                    speed_change_mps2: float = 0.0) -> tuple[ControllerState, ControllerCommand]:
     """One controller decision at time ``t`` s.
 
     ``meas`` (nx, ny) m or None; ``actual_x`` spout grid x m; ``impacts`` predicted impact points (grid
@@ -253,7 +263,8 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
     ``turn_shift_m`` (now, ahead): the steady-state shift of the spout along grid x that the combine's yaw rate
     now and ``controller.coping.feedforward_lead_s`` ahead would cause (dynamics_proc.feedforward), m, and
     ``lateral_correction_m`` the lateral setpoint correction for the turn ahead, m: both used with
-    ``controller.coping.feedforward``.
+    ``controller.coping.feedforward``; ``speed_change_mps2`` the combine's largest rate of speed change ahead
+    (``controller.coping.pause_accel_mps2``).
     """
     heights, last_valid, seen = st.heights, st.last_valid_t, st.seen
     est, delivered = st.estimate, st.delivered_m3
@@ -319,7 +330,10 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
         if lo <= landing <= hi:
             nudge, last_nudge, count = step, t, count + 1
     margin = p.off_margin_m if st.auger_cmd else p.safe_margin_m
-    safe = all(_inside(ix, iy, margin, p) for ix, iy in impacts)
+    ahead = unexplained_shift(actual_x, st.spout_x, p.frame_dt_s, p.nudge_speed_mps, p.safety_lead_s)
+    safe = all(_inside(ix, iy, margin, p) and _inside(ix + ahead, iy, margin, p) for ix, iy in impacts)
+    safe = safe and speed_change_mps2 <= p.pause_accel_mps2 and not _over_overfull(p, heights, target,
+                                                                                   actual_x + drift_x)
     # travel with the auger off: grain dropped far from the target lands on sections that may be full
     reach = TRAVEL_ON_SECTIONS * p.length_m / p.sections
     near = target >= 0 and abs(actual_x + drift_x - p.centres_m[target]) <= reach
@@ -330,10 +344,17 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
     new_state = ControllerState(heights=heights, last_valid_t=last_valid, forced_full=forced, full=full, estimate=est,
                                 delivered_m3=delivered, target=target, last_nudge_t=last_nudge, bias_m=bias,
                                 auger_cmd=auger, seen=seen, all_full=all_full, nudges=count, rate=rate, hold=hold,
-                                slowed=slowed)
+                                slowed=slowed, spout_x=actual_x)
     return new_state, ControllerCommand(nudge, auger, desired, effort, target, fullness, all_full, seen, total_bias,
                                         mode, hold, sigma, lead, p.slow_flow if slowed >= 0 else 1.0,
                                         lateral_correction_m if p.feedforward else 0.0)
+
+
+def _over_overfull(p: ControllerParams, heights: np.ndarray, target: int, impact_x: float) -> bool:
+    """Whether the predicted impact (grid x, m) lies over a section other than the target whose level is at
+    least the target plus ``overfull_margin_m``."""
+    k = min(max(int(impact_x / (p.length_m / p.sections)), 0), p.sections - 1)
+    return k != target and bool(heights[k] >= p.target_m + p.overfull_margin_m)
 
 
 def _mode(p: ControllerParams, seen: bool, target: int, ok: np.ndarray | None,
@@ -381,4 +402,5 @@ class SectionFillController:
             self.params = replace(self.params, target_m=inp.target_fill_m,
                                   full_level_m=self.full_fraction * inp.target_fill_m)
         return controller_step(state, self.params, inp.t_s, inp.heights, inp.spout_x_m, inp.impacts, inp.drift_x_m,
-                               inp.nudge_signal_m, inp.delivery, inp.turn_shift_m, inp.lateral_correction_m)
+                               inp.nudge_signal_m, inp.delivery, inp.turn_shift_m, inp.lateral_correction_m,
+                               inp.speed_change_mps2)

@@ -16,6 +16,10 @@
   latest measurement), :data:`MODE_DEAD_RECKONING` (it was not; the estimate carries on), :data:`MODE_HOLD`
   (auger off, no nudges; ``dyn_state.hold_reason`` says why).
 
+* **Safety ahead** (:func:`unexplained_shift`): a stop, a start or a latency makes the cart move under the spout
+  faster than any nudge would (Machine Sync lags or overshoots); the impact is checked where that velocity puts it
+  ``safety_lead_s`` on, and the auger pauses while the combine's speed changes fast (``pause_accel_mps2``).
+
 Feed-forward of the auger target through turns is :mod:`dynamics_proc.feedforward` (it needs the vehicles'
 geometry, so the frame step computes it and hands it to the controller in ``ControllerInput.feedforward_m``).
 """
@@ -27,7 +31,8 @@ import numpy as np
 
 from cosim.runtime.outcome import HOLD_LOST, HOLD_NO_MEASUREMENT, HOLD_NONE
 
-__all__ = ["MODE_MEASURED", "MODE_DEAD_RECKONING", "MODE_HOLD", "rise_rate", "peak_sigma", "slowed_section", "mode"]
+__all__ = ["MODE_MEASURED", "MODE_DEAD_RECKONING", "MODE_HOLD", "rise_rate", "peak_sigma", "slowed_section", "mode",
+           "unexplained_shift"]
 
 MODE_MEASURED, MODE_DEAD_RECKONING, MODE_HOLD = 0, 1, 2
 
@@ -88,3 +93,15 @@ def mode(seen: bool, target: int, target_seen: bool, fused: bool, sigma_m: float
     if fused and not (math.isfinite(sigma_m) and sigma_m <= fallback_sigma_m):
         return MODE_HOLD, HOLD_LOST
     return MODE_DEAD_RECKONING, HOLD_NONE
+
+
+def unexplained_shift(spout_x: float, prev_x: float, dt_s: float, nudge_speed_mps: float, lead_s: float) -> float:
+    """How far (m, along grid x) the spout will have moved over the cart in ``lead_s`` at its measured velocity
+    (``spout_x`` now and ``prev_x`` one decision of ``dt_s`` ago, m) beyond what a nudge explains: only the part
+    of the speed above ``nudge_speed_mps`` counts (a nudge moves the cart to a setpoint the controller vetted as
+    safe). 0.0 before a previous position is known."""
+    if not math.isfinite(prev_x) or lead_s <= 0.0:
+        return 0.0
+    v = (spout_x - prev_x) / dt_s
+    excess = abs(v) - nudge_speed_mps
+    return math.copysign(excess, v) * lead_s if excess > 0.0 else 0.0

@@ -61,6 +61,8 @@ def step_exponential_values(xs: list[float], u: tuple[float, float], p: VehicleP
     back into the derivatives, so the stage positions are not formed, and stages 2 and 3 share the combine
     heading (its yaw rate is constant)."""
     v0, vm, v1, v_end = _stage_lag(xs[V], u[0], p.drivetrain_tau_s, p.accel_max_mps2, p.brake_max_mps2, dt)
+    if p.ground_keep != 1.0:                      # wheel slip: the kinematics move at the ground speed
+        v0, vm, v1 = v0 * p.ground_keep, vm * p.ground_keep, v1 * p.ground_keep
     r = p.steer_rate_max_radps
     d0, dm, d1, d_end = _stage_lag(xs[DELTA], u[1], p.steer_tau_s, r, r, dt)
     cx, cy, cyaw, tx, ty, tyaw, pyaw = xs[0], xs[1], xs[2], xs[3], xs[4], xs[5], xs[8]

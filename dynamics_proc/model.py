@@ -9,15 +9,14 @@ dynamics_proc.control_protocol).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from functools import lru_cache
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from cosim.errors import PluginFault
 from cosim.scenario.config import FMU_REF, Scenario
 from cosim.scenario.plugins import load_plugin
-from cosim.world.geometry import POSE_3D_FIELDS, cart_grid_from_body, invert, vehicle_pose
+from cosim.world.geometry import cart_grid_from_body, invert, vehicle_pose
 
 from . import auger as ag
 from .blocks import SECTION_FIELD
@@ -31,13 +30,24 @@ from .control_protocol import (
 )
 from .controller import ControllerParams, plugin_dir
 from .feedforward import turn_compensation
+from .fieldsync import (
+    FieldParams,
+    FieldState,
+    advance_noise,
+    advance_vehicles,
+    combine_motion,
+    flow_factor,
+    initial_field,
+    measured_state,
+    speed_change,
+)
 from .fmus import Fmus
 from .grainfill import GrainGrid, deposit, initial_heights, resample, volume
-from .ground import Stance, machine_poses, planar_poses, spout_on_terrain, stance_of
+from .ground import Stance, spout_on_terrain, stance_of
 from .integrators import integrate, step_exponential_values
-from .machine_sync import SyncGains, cart_offset, sync_command
+from .machine_sync import SyncGains, sync_command
 from .tilt import Tilt, deposit_tilted, settle, tilt_of, tilted_cap
-from .vehicles import CX, CY, CYAW, DELTA, V, VehicleParams, cart_pose, initial_state, tractor_pose
+from .vehicles import CX, CY, CYAW, VehicleParams, cart_pose, initial_state
 
 __all__ = ["ModelParams", "World", "SpoutGeometry", "initial_world", "step_frame", "truth_measurement", "signals",
            "spout_grid", "SECTION_FIELD"]
@@ -72,6 +82,7 @@ class ModelParams:
     fmus: Fmus | None = None         # FMUs in place of built-in models (dynamics_proc.fmus)
     feedforward_lead_s: float = 0.0  # controller.coping.feedforward_lead_s: the turn anticipated this far ahead, s
     stance: Stance | None = None     # the machines on the terrain (dynamics_proc.ground), None on flat ground
+    field: FieldParams | None = None  # Machine Sync and flow in a field (dynamics_proc.fieldsync), None: ideal
 
     @classmethod
     def from_scenario(cls, s: Scenario, fmus: Fmus | None = None) -> "ModelParams":
@@ -94,7 +105,7 @@ class ModelParams:
                    s.cart.interior_length_m / 2.0 - spout_x, s.crop.density, s.controller.fusion.flow_meter_bias,
                    controller, s.controller.model, fmus if fmus.vehicle or fmus.strategy else None,
                    s.controller.coping.feedforward_lead_s,
-                   stance_of(s, s.tractor.rear_axle_x_m - s.tractor.hitch_offset_m))
+                   stance_of(s, s.tractor.rear_axle_x_m - s.tractor.hitch_offset_m), FieldParams.from_scenario(s))
 
 
 def _make_controller(factory, control: ControllerParams, s: Scenario) -> OffloadingController:
@@ -134,6 +145,7 @@ class World:
     stream_points: int
     spout: SpoutGeometry             # spout_grid(x), derived from x once per frame (the next frame starts from it)
     nudges: int = 0                  # nudges made so far
+    field: FieldState | None = None  # the field conditions' memory (dynamics_proc.fieldsync), None: ideal
 
 
 def _grid_from_world(x: np.ndarray, p: ModelParams) -> np.ndarray:
@@ -175,7 +187,9 @@ def initial_world(s: Scenario, p: ModelParams | None = None) -> World:
     except Exception as e:  # noqa: BLE001 - a plug-in's failure is reported with its name
         raise PluginFault(p.controller_ref, CONTROLLER_POINT, f"initial_state raised {type(e).__name__}: {e}",
                           0) from e
-    return World(0, 0.0, x, 0.0, h, volume(h, p.grid), 0.0, 0.0, 0.0, setpoint, state, out, imp, rows, n, spout)
+    field = initial_field(p.field, x, p.vehicles, p.dt_s) if p.field is not None else None
+    return World(0, 0.0, x, 0.0, h, volume(h, p.grid), 0.0, 0.0, 0.0, setpoint, state, out, imp, rows, n, spout,
+                 field=field)
 
 
 def truth_measurement(h: np.ndarray, p: ModelParams) -> np.ndarray:
@@ -210,23 +224,29 @@ def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
     x = w.x
     if p.fmus is not None:
         p.fmus.begin_frame(w.frame + 1)
-    _, vel, spg, g = w.spout
+    fs = advance_noise(w.field, p.field, w.frame + 1) if p.field is not None else None
+    # the controller aims with the relative pose the GNSS receivers give (the truth without their error)
+    seen = w.spout if fs is None or p.field.gnss[0] == 0.0 else spout_grid(np.array(measured_state(x, fs.gnss)), p)
+    _, vel, spg, g = seen
     vg = g[:3, :3] @ vel
-    gravity = _gravity_grid(w.spout)
+    gravity = _gravity_grid(seen)
     drift, top, floor = _predicted_impacts(spg, vg, p, gravity)
     signal = w.setpoint[0] + p.signal_offset_m
     delivery = Delivery(w.delivered_m3 * (1.0 + p.flow_meter_bias), spg, vg, gravity)
     # the stream lands between these two points: both must be safely inside
     shifts, lateral = _turn_feedforward(w, p)
     inp = ControllerInput(w.t_s, w.frame, meas, float(spg[0]), (top, floor), drift, signal, delivery,
-                          p.control.target_m, shifts, lateral)
+                          p.control.target_m, shifts, lateral, speed_change(p.field, w.t_s, p.control.safety_lead_s))
     ctrl, out = _decide(w, inp, p)
     setpoint = (w.setpoint[0] + out.nudge * p.control.nudge_m, w.setpoint[1])
-    x = _advance_vehicles(x, (setpoint[0], setpoint[1] + out.lateral_m), p, w.frame + 1)
-    level, vol = w.flow_level, 0.0
-    for _ in range(p.steps):
-        level, dv = ag.flow_advance(level, out.auger_on, p.dt_s, p.auger, out.flow)
-        vol += dv
+    if fs is not None and p.field.moves_vehicles and (p.fmus is None or p.fmus.vehicle is None):
+        x, fs = advance_vehicles(x, (setpoint[0], setpoint[1] + out.lateral_m), fs, p.field, p.vehicles, p.gains,
+                                 p.method, p.dt_s, p.steps, w.t_s, p.rtol, p.atol)
+    else:
+        x = _advance_vehicles(x, (setpoint[0], setpoint[1] + out.lateral_m), p, w.frame + 1)
+    level, vol = _flow(w.flow_level, out, p, fs)
+    if fs is not None:
+        fs = replace(fs, since_start_s=_since_start(w.flow_level, level, fs.since_start_s, p.frame_dt_s))
     spout = spout_grid(x, p)
     h, spill, spill_outside = w.heights, 0.0, 0.0
     tilt = _tilt(spout)
@@ -244,18 +264,34 @@ def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
             spill += deposit_spill
     return World(w.frame + 1, (w.frame + 1) * p.frame_dt_s, x, level, h, w.initial_m3, w.delivered_m3 + vol,
                  w.spilled_m3 + spill + spill_outside, w.spilled_outside_m3 + spill_outside, setpoint, ctrl, out, imp,
-                 rows, n, spout, w.nudges + (out.nudge != 0))
+                 rows, n, spout, w.nudges + (out.nudge != 0), fs)
+
+
+def _flow(level: float, out: ControllerCommand, p: ModelParams, fs: FieldState | None) -> tuple[float, float]:
+    """(flow level, volume delivered m^3) over the frame: the auger's ramps step by step, times the field's
+    flow factor (the yield variation and the start surge, dynamics_proc.fieldsync) where there is one."""
+    vol = 0.0
+    for _ in range(p.steps):
+        level, dv = ag.flow_advance(level, out.auger_on, p.dt_s, p.auger, out.flow)
+        vol += dv
+    return level, (vol * flow_factor(p.field, fs) if fs is not None else vol)
+
+
+def _since_start(before: float, after: float, since: float, dt: float) -> float:
+    """Time since the flow last started (s): 0 where it starts this frame, else one frame more."""
+    return 0.0 if before == 0.0 and after > 0.0 else since + dt
 
 
 def _turn_feedforward(w: World, p: ModelParams) -> tuple[tuple[float, float], float]:
     """((now, ahead) spout shifts along grid x m, lateral setpoint correction m ahead) of the combine's turn at
     ``w.t_s`` and ``feedforward_lead_s`` later (dynamics_proc.feedforward); ((0, 0), 0) on a straight path."""
-    rate = p.vehicles.combine_yaw_rate_radps
-    if rate == 0.0:
+    now, ahead = (combine_motion(p.field, p.vehicles, t) for t in (w.t_s, w.t_s + p.feedforward_lead_s))
+    if now[1] == 0.0 and ahead[1] == 0.0:
         return (0.0, 0.0), 0.0
     spout = np.add(p.auger.pivot, p.auger.arm)
-    lateral, shift = turn_compensation(rate, w.setpoint, p.vehicles, spout, p.grid_from_cart_body)
-    return (shift, shift), lateral
+    out = [turn_compensation(wr, w.setpoint, replace(p.vehicles, combine_speed_mps=v), spout, p.grid_from_cart_body)
+           for v, wr in (now, ahead)]
+    return (out[0][1], out[1][1]), out[1][0]
 
 
 def _decide(w: World, inp: ControllerInput, p: ModelParams) -> tuple[object, ControllerCommand]:
@@ -294,61 +330,4 @@ def _advance_vehicles(x: np.ndarray, setpoint: tuple[float, float], p: ModelPara
     return x
 
 
-def signals(w: World, p: ModelParams) -> dict[str, float]:
-    """The ``dyn_state`` fields of world ``w`` (names carry units; see blocks.py)."""
-    x, vp = w.x, p.vehicles
-    tx, ty, tyaw = tractor_pose(x, vp)
-    px, py, pyaw = cart_pose(x, vp)
-    sp, _, spg, _ = w.spout
-    long_m, lat_m = cart_offset(x, vp)
-    in_cart = volume(w.heights, p.grid) - w.initial_m3
-    d = {
-        "t_s": w.t_s, "frame": w.frame,
-        "combine_x_m": float(x[CX]), "combine_y_m": float(x[CY]), "combine_yaw_rad": float(x[CYAW]),
-        "combine_speed_mps": vp.combine_speed_mps,
-        "tractor_x_m": tx, "tractor_y_m": ty, "tractor_yaw_rad": tyaw, "tractor_speed_mps": float(x[V]),
-        "tractor_steer_rad": float(x[DELTA]),
-        "cart_x_m": px, "cart_y_m": py, "cart_yaw_rad": pyaw,
-        **_ground_fields(x, p),
-        "spout_x_m": float(sp[0]), "spout_y_m": float(sp[1]), "spout_z_m": float(sp[2]),
-        "auger_on": int(w.out.auger_on), "flow_level": w.flow_level,
-        "flow_m3ps": w.flow_level * p.auger.flow_m3ps,
-        "impact_x_m": float(w.impact.world[0]), "impact_y_m": float(w.impact.world[1]),
-        "impact_z_m": float(w.impact.world[2]), "impact_valid": int(w.stream_points > 0),
-        "impact_surface": w.impact.surface, "impact_gx_m": float(w.impact.grid[0]),
-        "impact_gy_m": float(w.impact.grid[1]), "impact_gz_m": float(w.impact.grid[2]),
-        "stream_points": w.stream_points,
-        "desired_auger_x_m": w.out.desired_m, "control_effort_m": w.out.effort_m,
-        "nudge_m": w.setpoint[0] + p.signal_offset_m, "actual_auger_x_m": float(spg[0]),
-        "actual_auger_y_m": float(spg[1]), "nudge_cmd": w.out.nudge, "nudge_count": w.nudges,
-        "setpoint_long_m": w.setpoint[0], "setpoint_lat_m": w.setpoint[1],
-        "offset_long_err_m": long_m - w.setpoint[0], "offset_lat_err_m": lat_m - w.setpoint[1],
-        "target_section": w.out.target + 1, "all_full": int(w.out.all_full),
-        "measurement_seen": int(w.out.seen), "control_bias_m": w.out.bias_m, "target_fill_m": p.control.target_m,
-        "control_mode": w.out.mode, "hold_reason": w.out.hold_reason, "estimate_sigma_m": w.out.sigma_m,
-        "full_lead_m": w.out.lead_m, "lateral_feedforward_m": w.out.lateral_m,
-        "delivered_m3": w.delivered_m3, "in_cart_m3": in_cart, "spilled_m3": w.spilled_m3,
-        "spilled_outside_m3": w.spilled_outside_m3, "cart_grain_m3": w.initial_m3 + in_cart,
-        "peak_height_m": float(w.heights.max()),
-    }
-    d.update(zip(_section_names(p.control.sections), w.out.fullness.tolist()))
-    return d
-
-
-#: the terrain fields of dyn_state on flat ground
-_LEVEL = {f"{n}_{f}": 0.0 for n in ("combine", "tractor", "cart") for f in POSE_3D_FIELDS}
-
-
-def _ground_fields(x: np.ndarray, p: ModelParams) -> dict[str, float]:
-    """``<body>_{z_m, roll_rad, pitch_rad}`` of the three bodies on the terrain (all 0.0 on flat ground)."""
-    if p.stance is None:
-        return _LEVEL
-    poses = machine_poses(p.stance, *planar_poses(x, p.vehicles))
-    return {f"{n}_{f}": v for n, pose in zip(("combine", "tractor", "cart"), poses)
-            for f, v in zip(POSE_3D_FIELDS, pose[3:])}
-
-
-@lru_cache(maxsize=4)
-def _section_names(sections: int) -> tuple[str, ...]:
-    """The dyn_state names of the section fullness fields, 1..N."""
-    return tuple(SECTION_FIELD.format(k=k + 1) for k in range(sections))
+from .record import signals  # noqa: E402 - the dyn_state record of a world (re-exported: CONTRACTS.md)

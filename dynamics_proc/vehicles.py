@@ -59,6 +59,7 @@ class VehicleParams:
     steer_max_rad: float
     steer_rate_max_radps: float
     max_speed_mps: float
+    ground_keep: float = 1.0         # ground speed / wheel speed, 1 - the tractor's wheel slip (docs/field.md)
 
     @classmethod
     def from_scenario(cls, s: Scenario) -> "VehicleParams":
@@ -101,9 +102,11 @@ def combine_advance(cx: float, cy: float, cyaw: float, p: VehicleParams, dt: flo
 
 def kinematic_derivative(k: list[float], v: float, delta: float, p: VehicleParams) -> tuple[float, ...]:
     """Time derivative of the seven kinematic states ``k`` = (cx, cy, cyaw, tx, ty, tyaw, pyaw) at the given
-    speed v (m/s) and steering angle delta (rad)."""
+    wheel speed v (m/s; the ground speed is v times ``p.ground_keep``) and steering angle delta (rad)."""
     cyaw = k[2]
     vc = p.combine_speed_mps
+    if p.ground_keep != 1.0:                          # wheel slip: the tractor moves at its ground speed
+        v = v * p.ground_keep
     r = v * math.tan(delta) / p.wheelbase_m
     dp, vx, vy = towing_rates(v, r, k[5], k[6], p.hitch_offset_m, p.tow_length_m)
     return (vc * math.cos(cyaw), vc * math.sin(cyaw), p.combine_yaw_rate_radps, vx, vy, r, dp)

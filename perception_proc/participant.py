@@ -42,6 +42,7 @@ from . import accuracy as acc
 from .blocks import ACCURACY_FIELDS, HEIGHTS_BLOCK, POINTS_BLOCK, STATE_BLOCK, WRITER, sensor_state_block
 from .cameras import PerceptionCameras
 from .leveling import level_from_parent
+from .lidar_atmosphere import lidar_atmosphere
 from .pipeline import FrameResult, Perception
 from .sensor_report import record_of, sensor_values
 
@@ -69,6 +70,7 @@ class PerceptionParticipant:
         #: publish one turn late, overlapping the next frame (cosim.runtime.participant)
         self.deferred = perception_overlaps(scenario)
         self._pending: _Outputs | None = None
+        self._atmosphere = None
 
     # -- contract -------------------------------------------------------------------------------------------
     def start(self, segment: "Segment") -> None:
@@ -81,6 +83,7 @@ class PerceptionParticipant:
         self.cameras = PerceptionCameras(self.scenario)
         self.pipeline = Perception(self.scenario, rig, self.cameras.pipes)
         self.cameras.level_parent = self.pipeline.level_parent
+        self._atmosphere = lidar_atmosphere(self.scenario, self.pipeline.directions) if lidar is not None else None
         self._images = []
         for name, want in _image_blocks(self.pipeline, rig):
             if not segment.has(name):
@@ -132,11 +135,14 @@ class PerceptionParticipant:
             truth = (np.array(seg.view("heightmap_truth"), copy=True), np.array(seg.view("stream"), copy=True))
         gathered = pipe.gather([img for _, img in self._images]) if self._images else None
         cam_images = self.cameras.gather(frame)
+        stream = None
+        if self._atmosphere is not None and self._atmosphere.particles and seg.has("stream"):
+            stream = np.array(seg.view("stream"), copy=True)
 
         def rest() -> None:
             clean = pipe.resample_gathered(gathered, out=self._ranges) if gathered is not None else self._ranges
             beams = self._accuracy_beams(frame) if due else None           # drawn here, off the token's path
-            self._finish(frame, t0, state, clean, beams, truth, cam_images)
+            self._finish(frame, t0, state, clean, beams, truth, cam_images, stream)
 
         if self.deferred:
             return rest
@@ -165,15 +171,19 @@ class PerceptionParticipant:
         self._pending = None
 
     def _finish(self, frame: int, t0: float, state: dict, clean: np.ndarray, beams: np.ndarray | None,
-                truth: tuple[np.ndarray, np.ndarray] | None, cam_images: list) -> None:
-        """Noise, the cameras' models, cart, height map, impact and accuracy of frame ``frame`` into the pending
-        outputs."""
+                truth: tuple[np.ndarray, np.ndarray] | None, cam_images: list, stream: np.ndarray | None = None
+                ) -> None:
+        """Atmosphere, noise, the cameras' models, cart, height map, impact and accuracy of frame ``frame`` into
+        the pending outputs (``stream``: the frame's stream rows, for the kernels of
+        ``atmosphere.stream_particles``)."""
         pipe, out = self.pipeline, self._out
         clean_sample = clean[beams] if beams is not None else None        # a copy: noise comes next, in place
+        wfp = world_from_parent(pipe.level_parent, state) if state else np.eye(4)
+        if self._atmosphere is not None:                  # dust and the stream's kernels (docs/field.md)
+            clean = self._atmosphere.apply(clean, frame, state, stream, wfp @ pipe.level_from_sensor)
         ranges = pipe.noisy(clean, frame)
         t1 = time.perf_counter()
         cams = self.cameras.frames(cam_images, state)
-        wfp = world_from_parent(pipe.level_parent, state) if state else np.eye(4)
         lfp = level_from_parent(self.scenario, state, pipe.level_parent)
         if lfp is not None:                               # uneven ground: the level frame on the cart's plane
             wfp = wfp @ invert(lfp)

@@ -253,6 +253,7 @@ class GLBeamRenderer(GLResources):
 
     def set_scene(self, scene: Scene) -> None:
         """Upload one frame: box (the ground slab among them) and cylinder instances, mesh poses, grain heights."""
+        self.make_current()
         self._origin = scene.heightfield.world_from_grid[:3, 3].copy()
         boxes = box_instances(scene.boxes, self._origin)
         ground = np.zeros(len(boxes), bool)

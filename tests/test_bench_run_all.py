@@ -45,6 +45,8 @@ def test_figures_and_markdown_from_runs(monkeypatch):
                 "summary": _summary(ring, duration / ring, [1.894, 1.909] if lab == "perception" else [1.892, 1.903])}
 
     monkeypatch.setattr(ra, "launch", fake_launch)
+    monkeypatch.setattr(ra, "mock_ratio", lambda frames: {"frames": frames, "mock_cpu_ms": 5.0, "gl_cpu_ms": 2.5,
+                                                          "ratio_cpu": 2.0})
     monkeypatch.setattr(ra, "step_ratio", lambda frames, renderer: {
         "renderer": renderer, "frames": frames, "camera_rig_cpu_ms": 8.0, "beam_native_cpu_ms": 4.0, "ratio_cpu": 0.5})
     res = ra.measure("default", 120.0, 3, 4, "gl")
@@ -67,7 +69,8 @@ def test_figures_and_markdown_from_runs(monkeypatch):
     for text in ("**4.38x** whole-process wall time", "3.00-6.67x; ratio of the medians 4.38x", "4.33x ring wall time",
                  "**3.00x** CPU time of the process tree", "wall at most 2.0x (NOT met)", "CPU at most 3.0x (met)",
                  "| highest section peak (m) | 1.909 | 1.903 |",
-                 "median 0.97 mm", "p99 1.94 mm", "0.000 % of beams above 5 cm", "**0.50x**", "bench/HISTORY.md"):
+                 "median 0.97 mm", "p99 1.94 mm", "0.000 % of beams above 5 cm", "**0.50x**", "bench/HISTORY.md",
+                 "5.00 against 2.50 ms CPU: **2.00x** (target: at most 1x)"):
         assert text in md
 
 
@@ -83,4 +86,6 @@ def test_quick_mode_writes_both_files(tmp_path):
               res["perception"]["real_time_factor"], res["ground_truth"]["real_time_factor"]):
         assert math.isfinite(v) and v > 0
     assert res["perception"]["range_error"]["frames_evaluated"] >= 1
-    assert "Quick mode" in (tmp_path / "results.md").read_text()
+    md = (tmp_path / "results.md").read_text()
+    assert "Quick mode" in md and "CPU per frame against beams" in md and "runs per hour" in md
+    assert res["curves"]["beams"]["points"][0]["beams"] == 10_000

@@ -81,13 +81,14 @@ def _high_flow(*sets):
 
 
 def test_the_lead_fixes_high_flow_overfill_and_switched_off_it_comes_back():
+    """(The overfull guard, which keeps grain off a section already above the target, is switched off too.)"""
     s, r = _high_flow()
     out = _outcome(s, r)
     assert out["status"] == "filled", out["reason"]
     assert r.heights.max() - s.controller.target_fill_m <= s.outcome.overfill_tolerance_m
     assert np.any(r.series["dyn_state.flow_level"] == s.controller.coping.slow_flow)      # it slowed the auger
-    s0, r0 = _high_flow("controller.coping.full_lead_s=0")
-    assert r0.heights.max() - s0.controller.target_fill_m > 0.10          # the lead is what removes the 15 cm
+    s0, r0 = _high_flow("controller.coping.full_lead_s=0", "controller.coping.overfull_margin_m=100")
+    assert r0.heights.max() - s0.controller.target_fill_m > 0.10          # the coping is what removes the 15 cm
     assert _outcome(s0, r0)["reason"].startswith("overfill 15 cm in section")
 
 

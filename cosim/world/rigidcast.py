@@ -21,6 +21,7 @@ two agree to rounding (tested beam for beam, ``tests/test_rigidcast.py``). Rays:
 """
 from __future__ import annotations
 
+import weakref
 from collections.abc import Mapping
 
 import numpy as np
@@ -106,6 +107,15 @@ def _planes(v: np.ndarray, f: np.ndarray) -> np.ndarray:
     return np.concatenate([n, np.einsum("fi,fi->f", n, tri[:, 0])[:, None]], axis=1)
 
 
+def _release(holder: list, protos: list) -> None:
+    """Drop the embreex top scene and device (``holder``: the last references; the top scene releases its
+    instances), then release every prototype scene, then let their buffers go."""
+    holder.clear()
+    for proto in protos:
+        proto.release()
+    protos.clear()
+
+
 class _Proto:
     """A prototype scene holding one geometry (its id: the prototype's index), instanced once in the top scene;
     ``planes`` (F, 4) of its triangles in its own frame."""
@@ -148,6 +158,10 @@ class RigidCaster:
         self._top_obj = rtcore_scene.EmbreeScene(self._device_obj)
         self._top, self._dev = emb.handles(self._top_obj, self._device_obj)
         self._protos: list[_Proto] = []
+        # everything released in order (the instances with the top scene, then the prototypes, then the buffers
+        # they share) by close(), or when this caster is collected or the interpreter exits without it
+        self._holder = [self._top_obj, self._device_obj]
+        self._finalizer = weakref.finalize(self, _release, self._holder, self._protos)
         self._bodies: dict[str, _Proto] = {}
         self._n_boxes = self._n_cyl = 0
         cv, cf = unit_cube()
@@ -335,8 +349,7 @@ class RigidCaster:
         return t
 
     def close(self) -> None:
-        """Release the prototype scenes (the top scene and its instances go with its embreex object)."""
-        for proto in self._protos:
-            proto.release()
-        self._protos.clear()
+        """Release the top scene with its instances, then the prototype scenes and their shared buffers."""
+        self._top_obj = self._device_obj = None
         self._bodies.clear()
+        self._finalizer()

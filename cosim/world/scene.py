@@ -172,7 +172,7 @@ def _stream_cylinders(stream: np.ndarray, n_points: int) -> tuple[np.ndarray, np
 
 
 def scene_from_state(scenario: Scenario, state: Mapping[str, float], heightmap: np.ndarray,
-                     stream: np.ndarray) -> Scene:
+                     stream: np.ndarray, stream_solid: bool | None = None) -> Scene:
     """Build the frame's scene.
 
     ``state``: dyn_state field name -> value (poses ``<entity>_{x_m,y_m,yaw_rad}``, ``spout_{x,y,z}_m``,
@@ -233,8 +233,10 @@ def scene_from_state(scenario: Scenario, state: Mapping[str, float], heightmap: 
     ccol.append(np.array([parts["combine"].box_colour[0]], dtype=np.float32))
     clabel.append(np.array([AUGER], np.uint8))
     cmat.append(np.array([STEEL], np.uint8))
-    # the stream is drawn from its valid rows alone (grain still falls for a while after the auger stops)
-    s0, s1, sr = _stream_cylinders(stream, int(state["stream_points"]))
+    # the stream is drawn from its valid rows alone (grain still falls for a while after the auger stops); with
+    # atmosphere.stream_particles it is no solid: the LiDAR's atmosphere meets its kernels (docs/field.md)
+    solid = not scenario.atmosphere.stream_particles if stream_solid is None else stream_solid
+    s0, s1, sr = _stream_cylinders(stream, int(state["stream_points"]) if solid else 0)
     c0.append(s0)
     c1.append(s1)
     rad.append(sr)

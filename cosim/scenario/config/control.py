@@ -70,7 +70,15 @@ class Coping(Model):
       nudges) until a measurement brings the confidence back, and says why (``dyn_state.hold_reason``);
     * ``feedforward``: feed the steady-state off-tracking of the cart in a turn forward into the auger target
       (from the combine's known yaw rate ``feedforward_lead_s`` ahead), instead of waiting for the learnt bias;
-    * ``feedforward_lead_s``: how far ahead the turn is anticipated, s.
+    * ``feedforward_lead_s``: how far ahead the turn is anticipated, s;
+    * ``safety_lead_s``: the auger runs only while the impact, moved on by the spout's velocity over the cart
+      beyond what a nudge explains (``machine_sync.kp_long * nudge_m``) for this long, stays in the safe zone (the
+      grain still in the air and in the auger's run-out lands meanwhile);
+    * ``pause_accel_mps2``: the auger pauses while the combine's speed changes faster than this within the next
+      ``safety_lead_s`` (Machine Sync cannot hold the offset through a stop or a start: the tractor lags or
+      overshoots), 0 never;
+    * ``overfull_margin_m``: the auger pauses while the predicted impact lies over a section other than the
+      target whose level is at least the target plus this (the cart moved under the spout: slip, a stop).
     """
 
     full_lead_s: NonNegFloat = 1.0
@@ -90,6 +98,15 @@ class Coping(Model):
     """Feed the cart's steady-state off-tracking in a turn forward into the auger target."""
     feedforward_lead_s: NonNegFloat = 2.0
     """How far ahead a turn is anticipated (from the combine's known yaw rate), s."""
+    safety_lead_s: NonNegFloat = 1.2
+    """The impact is checked this far ahead at the spout's velocity over the cart beyond what a nudge explains,
+    s (0: only where it is now)."""
+    pause_accel_mps2: NonNegFloat = 0.25
+    """The auger pauses while the combine's speed changes faster than this within the next safety_lead_s, m/s^2
+    (0: never)."""
+    overfull_margin_m: NonNegFloat = 0.02
+    """The auger pauses while the impact lies over a section other than the target whose level is at least the
+    target plus this, m."""
 
 
 class Controller(Model):

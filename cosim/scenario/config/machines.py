@@ -10,9 +10,10 @@ import math
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from .base import Model, NonNegFloat, PosFloat
+from .field import GaussMarkov, ProfilePoint, Slip, increasing_times
 
 __all__ = ["Crop", "Combine", "Auger", "Tractor", "Cart", "MachineSync", "CROP_PRESETS"]
 
@@ -47,7 +48,10 @@ class Crop(Model):
 
 
 class Combine(Model):
-    """Combine harvester: path, speed and the box dimensions used to draw it."""
+    """Combine harvester: path, speed and the box dimensions used to draw it.
+
+    ``profile`` (docs/field.md): speed and curvature against time (slow-downs, stop-and-go, headland turns),
+    linear between its points; when given it replaces ``speed_mps`` and ``path``."""
 
     speed_mps: NonNegFloat = 2.0
     """Ground speed along the path, m/s."""
@@ -55,6 +59,8 @@ class Combine(Model):
     """straight or arc (of path_radius_m, turning left)."""
     path_radius_m: PosFloat = 400.0
     """Radius of the arc path, m."""
+    profile: tuple[ProfilePoint, ...] = ()
+    """Speed and path curvature against time, linear between points; replaces speed_mps and path when given."""
     start_xy_m: tuple[float, float] = (0.0, 0.0)
     """Start position of the combine body origin in the world frame, m."""
     heading_deg: float = 0.0
@@ -70,9 +76,19 @@ class Combine(Model):
     mesh_file: Path | None = None
     """A mesh (any format trimesh reads) drawn instead of the boxes, relative to the scenario file."""
 
+    @field_validator("profile")
+    @classmethod
+    def _profile_in_order(cls, v: tuple[ProfilePoint, ...]) -> tuple[ProfilePoint, ...]:
+        return increasing_times(v)
+
 
 class Auger(Model):
-    """Unloading auger on the combine's left side. Geometry in the combine body frame."""
+    """Unloading auger on the combine's left side. Geometry in the combine body frame.
+
+    Field conditions (docs/field.md): ``flow_variation``, the yield-driven relative variation of the flow (a
+    Gauss-Markov process: flow = ``flow_m3ps`` x level x (1 + variation), at least 0; the flow signal the
+    controller gets measures it); ``start_surge``, the extra flow when the auger starts (the grain standing in the
+    tube), a fraction of the nominal flow decaying as exp(-t / ``start_surge_tau_s``) from each start."""
 
     pivot_xyz_m: tuple[float, float, float] = (-2.0, 1.5, 3.8)
     """Auger pivot in the combine body frame, m."""
@@ -96,6 +112,12 @@ class Auger(Model):
     """Angle below the horizontal at which the grain leaves the spout, deg."""
     stream_radius_m: PosFloat = 0.15
     """Radius of the grain stream at full flow, m."""
+    flow_variation: GaussMarkov = GaussMarkov()
+    """Yield-driven relative variation of the flow (a Gauss-Markov process; sigma 0: none)."""
+    start_surge: float = Field(default=0.0, ge=0.0, le=2.0, allow_inf_nan=False)
+    """Extra flow at each start of the auger, a fraction of the nominal flow, decaying with start_surge_tau_s."""
+    start_surge_tau_s: PosFloat = 1.0
+    """Time constant of the start surge's decay, s."""
 
 
 class Tractor(Model):
@@ -104,7 +126,8 @@ class Tractor(Model):
     The tractor body origin is the centre of its drawn box; the bicycle model runs about the rear axle at body
     x = ``rear_axle_x_m``; the hitch is ``hitch_offset_m`` behind the rear axle. The drivetrain is a first-order
     lag (``drivetrain_tau_s``) with acceleration / braking limits; the steering a first-order lag
-    (``steer_tau_s``) with angle and rate limits. The tractor does not reverse (speed command >= 0).
+    (``steer_tau_s``) with angle and rate limits. The tractor does not reverse (speed command >= 0). ``slip``:
+    its wheels' longitudinal slip (docs/field.md).
     """
 
     wheelbase_m: PosFloat = 3.0
@@ -135,6 +158,8 @@ class Tractor(Model):
     """Height of the drawn body box, m."""
     mesh_file: Path | None = None
     """A mesh (any format trimesh reads) drawn instead of the boxes, relative to the scenario file."""
+    slip: Slip = Slip()
+    """Longitudinal wheel slip: ground speed = wheel speed x (1 - slip)."""
 
 
 class Cart(Model):
@@ -192,6 +217,13 @@ class MachineSync(Model):
     plus ``kp_long`` / ``kp_lat`` (1/s) times the position error in combine axes; the heading follows that
     velocity's direction with gain ``heading_gain_ps`` (1/s). ``initial_*_error_m`` displace the tractor from
     its setpoint at t = 0 (combine axes, m).
+
+    In a field (docs/field.md): ``gnss`` is each receiver's horizontal position error per axis (combine and
+    tractor, independent; RTK class about 0.02 m with a correlation time of tens of seconds): Machine Sync steers
+    on the measured positions and the controller aims with the relative pose they give; ``radio_latency_s`` delays
+    the combine's pose on its way to the tractor (``latency_compensation``: extrapolated over the delay with the
+    speed and yaw rate it came with); ``actuation_delay_s`` is a dead time between the tractor's commands and its
+    drivetrain and steering (on top of their lags).
     """
 
     longitudinal_offset_m: float = -4.65
@@ -212,3 +244,11 @@ class MachineSync(Model):
     """Tractor displaced from its setpoint along the combine's axis at t = 0, m."""
     initial_lat_error_m: float = 0.0
     """Tractor displaced from its setpoint across the combine's axis at t = 0, m."""
+    gnss: GaussMarkov = GaussMarkov(correlation_time_s=30.0)
+    """Each GNSS receiver's horizontal position error per axis (RTK class: sigma about 0.02 m)."""
+    radio_latency_s: float = Field(default=0.0, ge=0.0, le=2.0, allow_inf_nan=False)
+    """Delay of the combine's pose on its way to the tractor, s."""
+    latency_compensation: bool = True
+    """Extrapolate the delayed pose over the latency with the speed and yaw rate it came with."""
+    actuation_delay_s: float = Field(default=0.0, ge=0.0, le=2.0, allow_inf_nan=False)
+    """Dead time between the tractor's commands and its drivetrain and steering, s."""

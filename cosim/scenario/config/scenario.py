@@ -6,6 +6,7 @@ from typing import Literal
 
 from pydantic import Field, ValidationInfo, field_validator
 
+from .atmosphere import Atmosphere
 from .base import Model, PosFloat
 from .cameras import DEPTH_KINDS, Camera, LidarSensor, SensorMap, Sensors, StereoCamera
 from .control import Controller, Grain, Integrator
@@ -156,6 +157,8 @@ class Scenario(Model):
     """Renderer options: camera rig, image sizes, mock scale."""
     perception: Perception = Perception()
     """Offloading perception: resampling, height map, impact, accuracy evaluation, plug-ins."""
+    atmosphere: Atmosphere = Atmosphere()
+    """The air between the sensors and what they see: dust, the grain stream as particles (clear by default)."""
     outputs: Outputs = Outputs()
     """Optional outputs of a run: figures, report."""
     outcome: Outcome = Outcome()
