@@ -20,6 +20,13 @@ Usage::
 
     python bench/frame_path.py --frames 400
     python bench/frame_path.py --frames 200 --split-draws
+    python bench/frame_path.py --frames 100 --fragments
+
+``--fragments`` counts instead, with GL pipeline-statistics queries around each draw call (llvmpipe's own
+counters, ``ARB_pipeline_statistics_query``): fragment shader invocations (``<draw>.shaded``), the fragments
+that passed the shader and the depth test (``<draw>.passed``, a samples-passed query) and the geometry shader's
+emitted primitives (``<draw>.emitted``: two per rectangle), per frame, medians; and the beams (pixels) of the
+target. Counts do not depend on the machine's load.
 """
 from __future__ import annotations
 
@@ -30,6 +37,8 @@ import statistics
 import sys
 import time
 from pathlib import Path
+
+import numpy as np
 
 os.environ.setdefault("LP_NUM_THREADS", "0")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -52,8 +61,10 @@ def _timed(obj, name: str, into: list, clock=time.thread_time) -> None:
     setattr(obj, name, wrapped)
 
 
-def measure(frames: int, warmup: int, split_draws: bool = False, scenario: str = "default") -> dict[str, float]:
-    """Median ms per frame of every part above (and ``faults``: minor page faults per frame)."""
+def measure(frames: int, warmup: int, split_draws: bool = False, scenario: str = "default",
+            fragments: bool = False) -> dict[str, float]:
+    """Median ms per frame of every part above (and ``faults``: minor page faults per frame); with ``fragments``
+    the counts of :func:`_count_draws` instead (medians per frame)."""
     import renderer_proc.participant as rp
     from cosim.runtime.inprocess import InProcessSession
     from cosim.scenario.loader import load_scenario, resolve_scenario_arg
@@ -97,6 +108,8 @@ def measure(frames: int, warmup: int, split_draws: bool = False, scenario: str =
         rp.scene_from_state = scene
         if split_draws:
             _split_draws(be, series)
+        if fragments:
+            _count_draws(be, series)
         for _ in range(warmup):
             sess.step()
         for v in t.values():
@@ -110,6 +123,10 @@ def measure(frames: int, warmup: int, split_draws: bool = False, scenario: str =
     finally:
         rp.scene_from_state = scene_fn
         sess.close()
+    if fragments:
+        out = {k: statistics.median(v) for k, v in t.items() if "." in k and v}
+        out["beams"] = float(np.prod(be.layout.shape))
+        return out
     out = {k: 1e3 * statistics.median(v) for k, v in t.items() if v}
     parts = ("renderer: scene", "renderer: upload", "renderer: draw", "renderer: raster")
     out["renderer: rest"] = out["renderer"] - sum(out.get(k, 0.0) for k in parts)
@@ -152,14 +169,57 @@ def _split_draws(be, series) -> None:
     bg.begin_frame = begin_frame
 
 
+#: GL query targets: ARB_pipeline_statistics_query's fragment shader invocations and geometry shader primitives
+#: emitted, and the core samples-passed query
+_QUERIES = {"shaded": 0x82F4, "emitted": 0x82F3, "passed": 0x8914}
+_QUERY_RESULT = 0x8866
+
+
+def _gl(name: str, *args):
+    """A GL entry point of the current EGL context (ctypes)."""
+    import ctypes
+
+    egl = ctypes.CDLL("libEGL.so.1")
+    egl.eglGetProcAddress.restype, egl.eglGetProcAddress.argtypes = ctypes.c_void_p, [ctypes.c_char_p]
+    return ctypes.CFUNCTYPE(None, *args)(egl.eglGetProcAddress(name.encode()))
+
+
+def _count_draws(be, series) -> None:
+    """Count each of the beam renderer's draw calls (see the module docstring: ``--fragments``)."""
+    import ctypes
+
+    u, u64 = ctypes.c_uint, ctypes.c_uint64
+    gen, begin = _gl("glGenQueries", ctypes.c_int, ctypes.POINTER(u)), _gl("glBeginQuery", u, u)
+    end, get = _gl("glEndQuery", u), _gl("glGetQueryObjectui64v", u, u, ctypes.POINTER(u64))
+    ids = (u * len(_QUERIES))()
+    gen(len(_QUERIES), ids)
+
+    def counted(name, fn):
+        def call(*args):
+            for q, target in zip(ids, _QUERIES.values()):
+                begin(target, q)
+            fn(*args)
+            for target in _QUERIES.values():
+                end(target)
+            for q, key in zip(ids, _QUERIES):
+                v = u64()
+                get(q, _QUERY_RESULT, ctypes.byref(v))
+                series(f"{name}.{key}").append(float(v.value))
+        return call
+    render = be._render
+    be._render = lambda name: counted(name, render)(name)
+    be._surface.render = counted("surface", be._surface.render)
+
+
 def main(argv: list[str] | None = None) -> dict[str, float]:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--frames", type=int, default=400)
     ap.add_argument("--warmup", type=int, default=100)
     ap.add_argument("--scenario", default="default")
     ap.add_argument("--split-draws", action="store_true", help="time each draw call's raster work apart")
+    ap.add_argument("--fragments", action="store_true", help="count fragments shaded and passed per draw call")
     a = ap.parse_args(argv)
-    res = measure(a.frames, a.warmup, a.split_draws, a.scenario)
+    res = measure(a.frames, a.warmup, a.split_draws, a.scenario, a.fragments)
     print(f"{a.scenario}, frames {a.warmup}..{a.warmup + a.frames}, LP_NUM_THREADS={os.environ['LP_NUM_THREADS']}, "
           f"load {os.getloadavg()[0]:.1f}; thread CPU ms per frame, medians\n")
     print("| part | ms per frame |\n|---|---:|")

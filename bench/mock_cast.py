@@ -12,6 +12,15 @@ returns the figures. Usage::
 
     python bench/mock_cast.py --frames 30
     python bench/mock_cast.py --frames 10 --arms embree-static,gl
+
+``--callgrind`` counts instructions instead (deterministic, independent of the machine's load): under
+``valgrind --tool=callgrind --collect-atstart=no`` the first arm's frames are collected alone (after one
+uncounted frame) and dumped as ``frame``; ``python bench/mock_cast.py totals bench/out/cg.mock.*`` prints
+instructions per frame, and ``callgrind_annotate --inclusive=yes`` on the dump the share of Embree's traversal
+(embreex's ``EmbreeScene.run``, ``__pyx_pw_..._EmbreeScene_3run``)::
+
+    PYTHONHASHSEED=0 valgrind --tool=callgrind --collect-atstart=no --callgrind-out-file=bench/out/cg.mock.%p \
+        python bench/mock_cast.py --frames 8 --arms embree-static --callgrind
 """
 from __future__ import annotations
 
@@ -24,6 +33,7 @@ from datetime import datetime
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np  # noqa: E402
 
@@ -93,9 +103,51 @@ def measure(frames: int, span: float, arms: list[str]) -> dict:
                 "bytes_equal_min": min(same[a])} for a in names}
 
 
+def count(frames: int, span: float, arm: str) -> None:
+    """Callgrind dump ``frame N`` of ``arm``'s N frames (see the module docstring)."""
+    from perception_replay import _Callgrind
+
+    lib = _Callgrind().lib
+    keep_heap()
+    sc = Scenario(format_version=1)
+    lay = beam_layout(sc.sensor.pattern)
+    r = renderers(sc, [arm])[arm]
+    img = np.zeros(lay.shape + (4,), np.uint8)
+    times = np.linspace(0.0, span, frames + 1)
+    for k, t in enumerate(times):                       # the first frame: warm-up, not counted
+        state, heights, stream = sample_frame(sc, float(t))
+        scene = scene_from_state(sc, state, heights, stream)
+        if k:
+            lib.cg_toggle()
+        r.set_scene(scene)
+        r.draw(0, world_from_sensor(sc, state))
+        r.read_depth(0, img)
+        if k:
+            lib.cg_toggle()
+    lib.cg_dump(f"frame {frames}".encode())
+    r.close()
+
+
+def totals(paths: list[str]) -> dict:
+    """Instructions per frame of the ``frame`` dump in callgrind output files."""
+    from perception_replay import dump_totals
+
+    out = {}
+    for name, ir in dump_totals([Path(p) for p in paths]).items():
+        what, n = name.rsplit(" ", 1)
+        out[what] = ir / int(n)
+    for k, v in out.items():
+        print(f"{k}: {v / 1e6:.2f} M instructions per frame")
+    return out
+
+
 def main(argv: list[str] | None = None) -> dict:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["totals"]:
+        return totals(argv[1:])
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--frames", type=int, default=30)
+    ap.add_argument("--callgrind", action="store_true", help="count the first arm's instructions (valgrind)")
     ap.add_argument("--span", type=float, default=8.0, help="simulated seconds the sample frames spread over")
     ap.add_argument("--arms", default=",".join(ARMS), help=f"comma-separated, of {', '.join(ARMS)}")
     a = ap.parse_args(argv)
@@ -103,6 +155,9 @@ def main(argv: list[str] | None = None) -> dict:
     unknown = set(arms) - set(ARMS)
     if unknown:
         ap.error(f"unknown arms {sorted(unknown)}")
+    if a.callgrind:
+        count(a.frames, a.span, arms[0])
+        return {}
     res = measure(a.frames, a.span, arms)
     n = beam_layout(Scenario(format_version=1).sensor.pattern).n_beams
     print(f"Beam renderers, default scene, {a.frames} frames x {n} beams, interleaved; {os.cpu_count()} cores, "

@@ -387,7 +387,7 @@ def run_stages(rec: Recording, meter, repeat: int = 1, upto: str | None = None) 
         st, beams = rec.states[i], part._accuracy_beams(frames[i])
         res = out["perceived"][i]
         return part._accuracy(st, beams, clean[i][beams], res, acc.world_from_parent(sc, st),
-                              rec.truth["heightmap_truth"][i], rec.truth["stream"][i])
+                              part.pipeline.level_from_sensor, rec.truth["heightmap_truth"][i], rec.truth["stream"][i])
 
     def step(i):
         # the whole participant: step, rest, flush (accuracy included on the evaluated frames); writing the
