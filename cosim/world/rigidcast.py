@@ -48,6 +48,7 @@ _NO_HIT = 1e37
 #: relative (and absolute, m) slack on the ground's range given to Embree as tfar: float32 rounding never hides
 #: a hit just before the ground (the float64 comparison after the traversal decides)
 _TFAR_SLACK = 1e-6
+_EYE3 = np.eye(3)
 #: an instance whose linear map has an axis shorter than this (a prism of zero radius or length, a box of zero
 #: extent) encloses no volume and is not cast, m (the scene's own threshold for stream segments)
 _MIN_SCALE_M = MIN_SEGMENT_M
@@ -65,7 +66,7 @@ def top_face_from_above(world_from_box: np.ndarray, half: np.ndarray, o: np.ndar
     ob = rot.T @ (o - world_from_box[:3, 3])
     if not (ob[2] > half[2] and abs(ob[0]) < half[0] and abs(ob[1]) < half[1]):
         return None
-    db = d @ rot
+    db = d if np.array_equal(rot, _EYE3) else d @ rot       # a level slab: the product is d, exactly
     with np.errstate(divide="ignore", invalid="ignore"):
         t = (half[2] - ob[2]) / db[:, 2]
     inside = (db[:, 2] < 0.0) & (np.abs(ob[0] + t * db[:, 0]) <= half[0]) & (np.abs(ob[1] + t * db[:, 1]) <= half[1])
@@ -138,10 +139,11 @@ def _release(holder: list, protos: list) -> None:
 
 
 class _Proto:
-    """A prototype scene holding one geometry (its id: the prototype's index), instanced once in the top scene;
-    ``planes`` (F, 4) of its triangles in its own frame."""
+    """A prototype scene holding one geometry (its id ``k``: the prototype's index), instanced once in the top
+    scene; ``planes`` (F, 4) of its triangles in its own frame."""
 
     def __init__(self, device: int, top: int, geom_id: int, v: np.ndarray, f: np.ndarray, quality: int):
+        self.k = geom_id
         self.geom = emb.triangles(device, v, f, quality)
         self.scene = emb.prototype_scene(device, self.geom, geom_id)
         emb.api().rtcReleaseGeometry(self.geom.handle)      # the prototype scene holds it
@@ -300,7 +302,7 @@ class RigidCaster:
         lin = np.tile(np.eye(3), (len(self._protos), 1, 1))
         trans = np.zeros((len(self._protos), 3))
         hf = scene.heightfield
-        idx = [self._protos.index(self._hf)]
+        idx = [self._hf.k]
         lin[idx[0]], trans[idx[0]] = hf.world_from_grid[:3, :3], hf.world_from_grid[:3, 3] - o
         for name, proto in self._bodies.items():
             boxes_only = self._tilted[name][0]
@@ -309,14 +311,14 @@ class RigidCaster:
                 proto = boxes_only
             elif boxes_only is not None:
                 boxes_only.hide()
-            k = self._protos.index(proto)
+            k = proto.k
             lin[k], trans[k] = scene.poses[name][:3, :3], scene.poses[name][:3, 3] - o
             idx.append(k)
-        ks = [self._protos.index(p) for p in cubes]
+        ks = [p.k for p in cubes]
         m = b.world_from_box[self._n_boxes:]
         lin[ks], trans[ks] = m[:, :3, :3] * b.half_extents[self._n_boxes:, None, :], m[:, :3, 3] - o
         idx += ks
-        ks = [self._protos.index(p) for p in prisms]
+        ks = [p.k for p in prisms]
         axis = c.p1[dyn] - c.p0[dyn]
         if ks:
             lin[ks] = orthonormal_frames(axis) * np.stack([c.radius[dyn], c.radius[dyn],
@@ -324,14 +326,14 @@ class RigidCaster:
             trans[ks] = c.p0[dyn] - o
         idx += ks
         for proto, m in meshes:
-            k = self._protos.index(proto)
+            k = proto.k
             lin[k], trans[k] = m[:3, :3], m[:3, 3] - o
             idx.append(k)
         ground, ground_k = None, -1
         if scene.ground_box is not None and scene.ground_box >= self._n_boxes:
             ground = top_face_from_above(b.world_from_box[scene.ground_box], b.half_extents[scene.ground_box], o, d)
             if ground is not None:                         # the ground is the plane below: tfar, not a solid
-                ground_k = self._protos.index(cubes[scene.ground_box - self._n_boxes])
+                ground_k = cubes[scene.ground_box - self._n_boxes].k
         idx = np.asarray(idx, np.int64)
         solid = has_volume(lin[idx], trans[idx])
         lin[idx[~solid]], trans[idx[~solid]] = np.eye(3), 0.0     # no volume: hidden, never inverted
@@ -357,7 +359,7 @@ class RigidCaster:
         hit = np.flatnonzero((geom >= 0) & (out["tfar"] < _MISS_M))
         if hit.size == 0:
             return t
-        k_hf = self._protos.index(self._hf)
+        k_hf = self._hf.k
         planes = self._planes_all
         planes[self._base[k_hf]:self._base[k_hf + 1]] = _grid_planes(self._hf_v, self._hf_f)
         inv = np.linalg.inv(lin)                                    # (K, 3, 3)
