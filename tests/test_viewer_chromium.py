@@ -86,6 +86,9 @@ def test_dashboard_updates_with_the_runs_frames(tmp_path):
     frames_run = json.loads((out / "summary.json").read_text())["frames"]
     for pid in PANELS:
         seen = panels[pid]
+        if pid == "cameras":                 # a LiDAR run: no camera sensor (tests/test_camera_observers.py)
+            assert seen == [], seen
+            continue
         assert len(seen) >= 2, (pid, seen)  # the panel updated while the page was open
         assert seen == sorted(set(seen)) and 0 <= seen[0] and seen[-1] < frames_run, (pid, seen)
     # block stamps may run one frame ahead of the supervisor's (the ring is mid-turn)

@@ -48,9 +48,19 @@ def full_snapshot(frame: int = 10) -> Snapshot:
     return Snapshot(frame=frame, structs={"dyn_state": dyn},
                     images={"cam0_rgb": rgb, "cam1_rgb": rgb, "cam0_depth": rgb.copy()},
                     arrays={"lidar_points": standins.points(frame), "heightmap_truth": standins.truth(frame),
-                            "heightmap_perceived": np.full((30, 15), np.nan, np.float32)},
+                            "heightmap_perceived": np.full((30, 15), np.nan, np.float32),
+                            "cam_tof_measured": _tof_depth()},
                     frames={"dyn_state": frame, "cam0_rgb": frame, "cam1_rgb": frame - 1, "cam0_depth": frame,
-                            "lidar_points": frame, "heightmap_truth": frame, "heightmap_perceived": frame})
+                            "lidar_points": frame, "heightmap_truth": frame, "heightmap_perceived": frame,
+                            "cam_tof_measured": frame})
+
+
+def _tof_depth() -> np.ndarray:
+    """A camera sensor's measured depth (docs/cameras.md): 2 m on the left, 4 m on the right, a NaN column."""
+    z = np.full((24, 32), 2.0, np.float32)
+    z[:, 16:] = 4.0
+    z[:, 10] = np.nan
+    return z
 
 
 def test_discovery_of_fields():
@@ -81,6 +91,16 @@ def test_a_run_without_rgb_shows_the_panel_absent_not_an_error():
     assert render_panel(snap, "rgb") is None
     with pytest.raises(KeyError, match="no image panel 'auger'"):
         render_panel(snap, "auger")
+
+
+def test_camera_sensor_depth_near_red_far_blue_invalid_grey():
+    info = panel_info(full_snapshot())["cameras"]
+    assert info == {"available": True, "frame": 10, "note": "cam_tof_measured"}
+    img = decode(render_panel(full_snapshot(), "cameras"))
+    assert img.shape == (24 + 4, 32, 3)
+    near, far, invalid = img[5, 2], img[5, 30], img[5, 10]
+    assert near[2] > near[0] and far[0] > far[2], (near, far)          # BGR: red near, blue far
+    assert tuple(invalid) == UNKNOWN[::-1]
 
 
 def test_camera_images_side_by_side_in_rgb_order():
@@ -154,7 +174,9 @@ def test_replay_gives_back_the_recorded_blocks(recording):
     want = standins.points(last)
     np.testing.assert_allclose(snap.arrays["lidar_points"], want[np.isfinite(want[:, 0])])
     np.testing.assert_array_equal(snap.arrays["heightmap_truth"], standins.truth(last))
-    assert all(v["available"] for v in panel_info(snap).values())
+    info = panel_info(snap)
+    assert all(v["available"] for k, v in info.items() if k != "cameras")
+    assert not info["cameras"]["available"], "a LiDAR run has no camera sensor (tests/test_camera_observers.py)"
     assert len(src.history.as_json()["t"]) == last + 1
     with pytest.raises(ValueError, match="replay speed must be > 0"):
         ReplaySource(recording, speed=0)
@@ -167,7 +189,7 @@ def test_replay_served_to_the_dashboard(recording):
     try:
         state = json.loads(urllib.request.urlopen(srv.url + "api/state", timeout=10).read())
         assert state["status"] == "replay ended" and state["panels"]["lidar_side"]["available"]
-        for pid in IMAGE_PANELS:
+        for pid in (p for p in IMAGE_PANELS if p != "cameras"):            # no camera sensor in this run
             with urllib.request.urlopen(f"{srv.url}panel/{pid}.png", timeout=10) as r:
                 assert r.headers["Content-Type"] == "image/png" and decode(r.read()).size > 0
         page = urllib.request.urlopen(srv.url, timeout=10).read().decode()

@@ -6,8 +6,9 @@ panel's ``src`` when that panel's frame changes, and marks each panel with the f
 The auger chart and the fullness bars are
 drawn on canvases, at their shown size, from the numbers in the state, each with its legend.
 
-Layout: a two-column grid that fills the page's width (one column below 900 px): the camera images, then the
-height maps across the page, the two LiDAR views, the auger chart and the fullness bars. A replay adds a bar
+Layout: a two-column grid that fills the page's width (one column below 900 px): the camera images, the camera
+sensors across the page, then the height maps across the page, the two LiDAR views, the auger chart and the
+fullness bars. A replay adds a bar
 under the header: step back, play / pause, step on, and a slider to seek (``POST /api/replay``).
 """
 from __future__ import annotations
@@ -36,8 +37,8 @@ header .v{font-variant-numeric:tabular-nums;font-weight:600}
 #replay input[type=range]{flex:1}
 #rp-pos{font-variant-numeric:tabular-nums;min-width:150px;text-align:right}
 main{display:grid;grid-template-columns:repeat(2,minmax(0,1fr));gap:12px;padding:12px;
-  grid-template-areas:"rgb depth" "heightmaps heightmaps" "lidar_top lidar_side" "auger fullness"}
-@media (max-width:900px){main{grid-template-columns:minmax(0,1fr);grid-template-areas:"rgb" "depth"
+  grid-template-areas:"rgb depth" "cameras cameras" "heightmaps heightmaps" "lidar_top lidar_side" "auger fullness"}
+@media (max-width:900px){main{grid-template-columns:minmax(0,1fr);grid-template-areas:"rgb" "depth" "cameras"
   "heightmaps" "lidar_top" "lidar_side" "auger" "fullness"}}
 section.panel{background:#1b2027;border:1px solid #2c333d;border-radius:6px;padding:8px;min-width:0}
 section.panel h2{font-size:14px;margin:0 0 6px 0;display:flex;justify-content:space-between}

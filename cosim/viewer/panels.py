@@ -22,19 +22,20 @@ import numpy as np
 
 from .snapshot import Snapshot, auger_now, fullness
 
-__all__ = ["PANELS", "IMAGE_PANELS", "panel_info", "PanelRenderer", "render_panel", "lidar_frame"]
+__all__ = ["PANELS", "IMAGE_PANELS", "panel_info", "PanelRenderer", "render_panel", "lidar_frame", "depth_colour"]
 
 #: panel id -> title shown on the page
 PANELS = {
     "rgb": "Shaded camera image",
     "depth": "Depth-encoded image",
+    "cameras": "Camera sensors: colour | measured depth",
     "lidar_top": "LiDAR point cloud, from above",
     "lidar_side": "LiDAR point cloud, from the side",
     "heightmaps": "Height map: ground truth | perceived",
     "auger": "Auger location vs desired (cart grid x)",
     "fullness": "Fullness per section",
 }
-IMAGE_PANELS = ("rgb", "depth", "lidar_top", "lidar_side", "heightmaps")
+IMAGE_PANELS = ("rgb", "depth", "cameras", "lidar_top", "lidar_side", "heightmaps")
 #: size of the LiDAR drawings, px, and their plot area (x0, y0, x1, y1): room for ticks, labels, colour bar
 PLOT_W, PLOT_H = 560, 420
 PLOT_BOX = (48, 30, PLOT_W - 80, PLOT_H - 44)
@@ -64,6 +65,12 @@ def _cams(snap: Snapshot, suffix: str) -> list[str]:
     return sorted(n for n in snap.names if n.endswith(suffix) and n not in snap.structs)
 
 
+def _camera_sensors(snap: Snapshot) -> list[str]:
+    """The camera sensors a snapshot knows of (``cam_<name>`` of their colour or measured-depth blocks)."""
+    return sorted({n.rpartition("_")[0] for n in snap.names if n.startswith("cam_")
+                   and n.endswith(("_rgb", "_measured")) and n not in snap.structs})
+
+
 def _heightmaps(snap: Snapshot) -> tuple[str | None, str | None]:
     maps = [n for n in snap.names if n.startswith("heightmap")]
     truth = "heightmap_truth" if "heightmap_truth" in maps else None
@@ -89,7 +96,9 @@ def panel_info(snap: Snapshot, stamps: bool = True) -> dict[str, dict]:
                     "note": ", ".join(blocks)}
 
     put("rgb", _cams(snap, "_rgb"), "absent: this run renders no RGB image (start it with --viewer)")
-    put("depth", _cams(snap, "_depth"), "absent: this run has no renderer")
+    put("depth", [n for n in _cams(snap, "_depth") if not n.startswith("cam_")], "absent: this run has no renderer")
+    put("cameras", [f"{c}_{part}" for c in _camera_sensors(snap) for part in ("rgb", "measured")
+                    if f"{c}_{part}" in snap.names], "absent: this run has no camera sensor (sensors:)")
     lidar = ["lidar_points"] if "lidar_points" in snap.names else []
     put("lidar_top", lidar, "absent: this run has no perception (lidar_points)")
     put("lidar_side", lidar, "absent: this run has no perception (lidar_points)")
@@ -111,6 +120,37 @@ def _png(bgr: np.ndarray) -> bytes:
     if not ok:
         raise ValueError(f"PNG encoding failed for shape {bgr.shape}")
     return buf.tobytes()
+
+
+def depth_colour(depth: np.ndarray, top_m: float | None = None) -> np.ndarray:
+    """(H, W, 3) RGB uint8 of a planar depth image (H, W) m: near red to far blue (turbo), 0 .. ``top_m`` (the
+    image's largest depth when None), grey where invalid (NaN)."""
+    z = np.asarray(depth, np.float32)
+    ok = np.isfinite(z)
+    top = top_m if top_m is not None else (float(z[ok].max()) if ok.any() else 1.0)
+    level = np.zeros(z.shape, np.uint8)
+    level[ok] = 255 - np.clip(z[ok] / max(top, 1e-6) * 255, 0, 255).astype(np.uint8)
+    rgb = cv2.cvtColor(cv2.applyColorMap(level, cv2.COLORMAP_TURBO), cv2.COLOR_BGR2RGB)
+    rgb[~ok] = UNKNOWN
+    return rgb
+
+
+def _camera_rows(snap: Snapshot) -> np.ndarray | None:
+    """Each camera sensor a row: its colour image and its measured depth side by side, rows stacked (BGR)."""
+    rows = []
+    for cam in _camera_sensors(snap):
+        parts = []
+        if f"{cam}_rgb" in snap.images:
+            parts.append(snap.images[f"{cam}_rgb"])
+        if f"{cam}_measured" in snap.arrays:
+            parts.append(depth_colour(snap.arrays[f"{cam}_measured"]))
+        if parts:
+            rows.append(_camera_strip(parts))
+    if not rows:
+        return None
+    width = max(r.shape[1] for r in rows)
+    rows = [cv2.copyMakeBorder(r, 0, 4, 0, width - r.shape[1], cv2.BORDER_CONSTANT, value=BACKGROUND) for r in rows]
+    return cv2.vconcat(rows) if len(rows) > 1 else rows[0]
 
 
 def _camera_strip(images: list[np.ndarray]) -> np.ndarray:
@@ -300,6 +340,9 @@ def render_panel(snap: Snapshot, panel: str, size_m: tuple[float, float] | None 
     if panel in ("rgb", "depth"):
         names = [n for n in _cams(snap, f"_{panel}") if n in snap.images]
         return _png(_camera_strip([snap.images[n] for n in names])) if names else None
+    if panel == "cameras":
+        img = _camera_rows(snap)
+        return _png(img) if img is not None else None
     if panel in ("lidar_top", "lidar_side"):
         pts = snap.arrays.get("lidar_points")
         return _png(_lidar(pts, panel[len("lidar_"):])) if pts is not None else None

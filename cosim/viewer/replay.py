@@ -7,7 +7,10 @@ steps and seeks (the dashboard's replay bar; ``POST /api/replay``), :meth:`Repla
 the replay is. Topics map back to block names: ``/<block>``
 (cosim.struct) -> struct block, ``/<cam>/rgb`` -> ``<cam>_rgb`` ((H, W, 3) from a CompressedImage, (H, W, 4)
 from a RawImage), ``/<cam>/depth_encoded`` -> ``<cam>_depth`` ((H, W, 4) uint8, the block's bytes),
-``/lidar/points`` -> ``lidar_points`` (camera axes again), ``/heightmap/<kind>`` -> ``heightmap_<kind>``.
+``/lidar/points`` -> ``lidar_points`` (camera axes again), ``/heightmap/<kind>`` -> ``heightmap_<kind>``; a
+camera sensor's ``/cam_<name>/depth`` -> ``cam_<name>_measured``, ``/depth_exact`` -> ``cam_<name>_depth``,
+``/labels`` -> ``cam_<name>_labels``, ``/points`` -> ``cam_<name>_points`` (arrays), ``/right`` ->
+``cam_<name>_right`` (an image).
 """
 from __future__ import annotations
 
@@ -16,6 +19,7 @@ import threading
 import time
 from pathlib import Path
 
+from cosim.foxglove.cameras import CAMERA_ARRAY_PARTS
 from cosim.recording.encode import heights_from_grid, image_from_msg, points_from_cloud
 from cosim.recording.reader import RecordingError, read_recording
 
@@ -33,6 +37,10 @@ def block_of_topic(topic: str, schema: str) -> tuple[str, str] | None:
     parts = topic.strip("/").split("/")
     if schema.startswith("cosim.struct."):
         return schema[len("cosim.struct."):], "struct"
+    if len(parts) == 2 and parts[0].startswith("cam_"):
+        arrays = {suffix: part for part, suffix in CAMERA_ARRAY_PARTS.items()}
+        if parts[1] in arrays and schema in ("foxglove.RawImage", "foxglove.PointCloud"):
+            return f"{parts[0]}_{arrays[parts[1]]}", "array"
     if schema in ("foxglove.CompressedImage", "foxglove.RawImage") and len(parts) == 2:
         return f"{parts[0]}_{'depth' if parts[1] == 'depth_encoded' else parts[1]}", "image"
     if schema == "foxglove.PointCloud" and topic == "/lidar/points":
@@ -137,7 +145,7 @@ class ReplaySource:
             return cached[1]
         if self.rec.channels[topic].schema in ("foxglove.CompressedImage", "foxglove.RawImage"):
             data = image_from_msg(msg)
-        elif kind_block == "lidar_points":
+        elif kind_block == "lidar_points" or kind_block.endswith("_points"):
             data = points_from_cloud(msg)
         else:
             data = heights_from_grid(msg)

@@ -26,10 +26,12 @@ HISTORY_LEN = 600
 
 
 def wanted_block(name: str, kind: str, shape: tuple[int, ...]) -> bool:
-    """Whether the viewer copies block ``name``: structs, camera images, the LiDAR points, height maps."""
+    """Whether the viewer copies block ``name``: structs, camera images, the LiDAR points, height maps, the
+    camera sensors' measured depth (``cam_<name>_measured``)."""
     if kind == "struct" or kind == "image":
         return True
-    return name == "lidar_points" or (name.startswith("heightmap") and len(shape) == 2)
+    return name == "lidar_points" or (len(shape) == 2 and (name.startswith("heightmap")
+                                                            or (name.startswith("cam_") and name.endswith("_measured"))))
 
 
 @dataclass
