@@ -86,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
         cases = load_cases()
         if a.list:
             width = max(len(n) for n in cases)
-            print("\n".join(f"{n:<{width}}  {c.summary}" for n, c in cases.items()))
+            print("\n".join(f"{n:<{width}}  {cases[n].summary}" for n in sorted(cases)))
             return 0
         if a.describe:
             if a.describe not in cases:

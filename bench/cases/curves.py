@@ -8,7 +8,9 @@ side by side in one process (sweep throughput with 1 and 2 local workers: the ``
   member's step (process CPU over the step: llvmpipe's threads included), medians over ``frames`` after ``warmup``.
   The cost per beam is the slope of a least-squares line through the points.
 * cells: the same with ``grain.cell_m`` 0.1 to 0.025 m (cells per cart 1,800 to 28,800).
-* sensors: one LiDAR per scenario until several sensors can be named in one; that curve is not measured.
+* sensors: the default scenario's LiDAR (beam-native) and 0 to 3 depth cameras beside it (the ``tof_mast`` camera,
+  Kinect-class profile, 512 x 424, an image every frame; a scenario has at most one LiDAR); the cost per added
+  camera is the slope. What each other kind costs: the ``sensor_cost`` case.
 """
 from __future__ import annotations
 
@@ -23,8 +25,8 @@ BEAM_POINTS = (("100 x 100", 100, 100), ("240 x 160 (the default)", 240, 160), (
 #: grain cells of the grid curve, m
 CELL_POINTS = (0.1, 0.075, 0.05, 0.025)
 MEMBERS = ("dynamics", "renderer", "perception")
-SENSORS_NOTE = ("Not measured: a scenario has one LiDAR until several sensors (and cameras) can be named in it; "
-                "this curve is to be added then.")
+#: depth cameras beside the LiDAR on the sensors curve
+CAMERA_POINTS = (0, 1, 2, 3)
 
 
 def interleaved_sessions(scenarios: dict, frames: int, warmup: int) -> dict[str, dict[str, float]]:
@@ -107,8 +109,30 @@ def cells_curve(ctx: Context, frames: int, warmup: int, points=CELL_POINTS) -> d
             "cost per cell (slope)": {"us per cell and frame": slopes}}
 
 
-@case("curves", "how the cost grows: CPU per frame of each member against beams and against the grain grid",
-      options={"only": "beams,cells", "frames": 60, "warmup": 100}, quick={"frames": 3, "warmup": 2}, settings=True)
+def sensors_curve(ctx: Context, frames: int, warmup: int, points=CAMERA_POINTS) -> dict:
+    """CPU ms per frame of each member with the LiDAR and 0..3 depth cameras; ms per added camera (slopes)."""
+    import json
+
+    from cases.sensors import TOF
+    from cosim.scenario.config import Scenario
+
+    base = ctx.scenario()
+    data = base.model_dump(mode="json")
+    lidar = {"kind": "lidar", **data.pop("sensor")}
+    scenarios = {}
+    for n in points:
+        sensors = {"lidar": lidar, **{f"tof{k}": TOF for k in range(n)}}
+        scenarios[f"LiDAR + {n} depth camera(s)"] = Scenario.model_validate_json(json.dumps({**data, "sensors": sensors}))
+    res = interleaved_sessions(scenarios, frames, warmup)
+    xs = [int(k.split(" + ")[1].split()[0]) for k in res]
+    slopes = {m: fit_per_unit(xs, [res[k].get(m, 0.0) for k in res])[0] for m in (*MEMBERS, "total")}
+    return {"CPU per frame against sensors (ms)": {k: {"depth cameras": x, **res[k]} for k, x in zip(res, xs)},
+            "cost per depth camera (slope)": {"ms per camera and frame": slopes}}
+
+
+@case("curves", "how the cost grows: CPU per frame of each member against beams, the grain grid and sensors",
+      options={"only": "beams,cells,sensors", "frames": 60, "warmup": 100}, quick={"frames": 3, "warmup": 2},
+      settings=True)
 def curves(ctx: Context) -> dict:
     """Every curve in ``only`` (module docstring); ``--quick``: two points of each curve."""
     only = ctx["only"].split(",")
@@ -117,5 +141,6 @@ def curves(ctx: Context) -> dict:
         out.update(beams_curve(ctx, ctx["frames"], ctx["warmup"], BEAM_POINTS[:2] if ctx.quick else BEAM_POINTS))
     if "cells" in only:
         out.update(cells_curve(ctx, ctx["frames"], ctx["warmup"], CELL_POINTS[::2] if ctx.quick else CELL_POINTS))
-    out["CPU per frame against sensors"] = {"not measured": {"why": SENSORS_NOTE}}
+    if "sensors" in only:
+        out.update(sensors_curve(ctx, ctx["frames"], ctx["warmup"], CAMERA_POINTS[:2] if ctx.quick else CAMERA_POINTS))
     return out
