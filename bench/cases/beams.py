@@ -20,6 +20,9 @@ import time
 
 from harness import Context, case, rotating
 
+__all__ = ["BeamNative", "CameraRig", "beam_native", "cast_costs", "cast_renderers", "mock_cast", "range_errors",
+           "step_methods", "timed"]
+
 #: the "large error" threshold and the working range, m
 ABOVE_M, WORKING_M = 0.05, (2.0, 15.0)
 #: the mock renderer's ray casters and the GL renderer

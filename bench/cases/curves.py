@@ -19,6 +19,8 @@ import time
 
 from harness import Context, case, rotating
 
+__all__ = ["beams_curve", "cells_curve", "curves", "fit_per_unit", "interleaved_sessions", "sensors_curve"]
+
 #: (label, azimuth_count, elevation_count) of the beam curve: the default field at these densities
 BEAM_POINTS = (("100 x 100", 100, 100), ("240 x 160 (the default)", 240, 160), ("400 x 250", 400, 250),
                ("2048 x 128 (the 128 x 2048 pattern)", 2048, 128), ("600 x 500", 600, 500))

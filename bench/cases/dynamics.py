@@ -23,6 +23,8 @@ import time
 
 from harness import Context, case
 
+__all__ = ["dynamics_frame", "frame_costs", "integrators", "strategies"]
+
 #: integrator study: frame, nudge period and size
 FRAME_S, NUDGE_EVERY_S, NUDGE_M = 0.1, 4.0, 0.3
 #: the perceived stand-in of ``strategies``: share of cells lost, noise sigma (m)

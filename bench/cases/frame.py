@@ -24,6 +24,8 @@ import time
 
 from harness import Context, case
 
+__all__ = ["frame_parts", "frame_path"]
+
 #: the renderer's parts (the rest of its step is ``renderer: rest``)
 PARTS = ("renderer: scene", "renderer: upload", "renderer: draw", "renderer: raster")
 

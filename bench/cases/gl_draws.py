@@ -20,6 +20,8 @@ import time
 
 from harness import Context, case
 
+__all__ = ["beam_solids", "beam_surface", "rough_heights", "solid_draws", "surface_paths"]
+
 #: GL_RASTERIZER_DISCARD: primitives end after the geometry shader (its cost alone)
 RASTERIZER_DISCARD = 0x8C89
 #: a fragment shader that shades every fragment its rectangle makes (no discard)

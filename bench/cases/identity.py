@@ -28,6 +28,8 @@ from pathlib import Path
 
 from harness import Context, case
 
+__all__ = ["differences", "digest", "identity", "record"]
+
 #: final array blocks compared bit for bit
 MAPS = ("heightmap_truth", "heightmap_perceived")
 #: columns whose values are wall-clock times (never reproducible)

@@ -32,6 +32,8 @@ from pathlib import Path
 
 from harness import Context, case
 
+__all__ = ["frame_instructions", "make_step", "run_measured", "startup_instructions"]
+
 #: frames F1..F2 measured per workload (after F1 frames of warm-up)
 SPANS = {"dynamics": (150, 450), "supervisor": (150, 1050), "stamps": (150, 1050)}
 #: the C function that callgrind toggles collection on: the frame loop runs inside it

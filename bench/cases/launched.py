@@ -20,6 +20,8 @@ import time
 from harness import Context, case
 from harness.launched import launch_run
 
+__all__ = ["e2e", "fill_figures", "log_steps", "range_figures", "startup"]
+
 #: the launcher's last log line: start-up to the first frame and shut-down by part
 _LAUNCH = re.compile(r"start-up ([\d.]+) s to the first frame \(set-up before spawning ([\d.]+) s\), shut-down "
                      r"([\d.]+) s \(children ([\d.]+) s, outputs ([\d.]+) s, figures(?: and observers)? ([\d.]+) s\)")

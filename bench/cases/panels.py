@@ -14,6 +14,8 @@ import time
 
 from harness import Context, case
 
+__all__ = ["snapshot", "viewer_panels"]
+
 
 def snapshot():
     """A ``cosim.viewer.snapshot.Snapshot`` with a default run's payload sizes (module docstring)."""

@@ -26,6 +26,9 @@ from pathlib import Path
 
 from harness import Context, case
 
+__all__ = ["accuracy_cost_rows", "best_ms", "lidar_rows", "offset_accuracy", "perception_accuracy",
+           "perception_synthetic", "stage_rows"]
+
 #: LiDAR-to-camera offset of the offset rows, sensor frame, m
 OFFSET_M = (0.2, 0.0, 0.0)
 #: the synthetic pattern: a 160 x 240 grid over 46 x 110 deg

@@ -27,6 +27,8 @@ from pathlib import Path
 
 from harness import Context, case
 
+__all__ = ["detect", "fault_return", "kill9", "reliability"]
+
 #: a stand-in run with one faulty participant, in a fresh interpreter (the fault may kill or stop it)
 DETECT = textwrap.dedent("""
     import sys, time

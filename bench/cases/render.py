@@ -20,6 +20,8 @@ import time
 
 from harness import Context, case
 
+__all__ = ["render_fps", "renderer_frames", "rig_plan", "run_frames", "triangles"]
+
 #: untimed frames before timing (shader compilation, first allocation)
 WARMUP_FRAMES = 5
 #: first dynamics frame of the "run frames" rows (30 s into the default fill: a heaped, rough grain surface)

@@ -30,6 +30,8 @@ from typing import Iterator
 
 from harness import Context, case
 
+__all__ = ["Clock", "Focus", "perception_replay", "recording_path", "run_stages", "stages_under_callgrind"]
+
 #: stages timed or counted one by one, in pipeline order
 STAGES = ("lidar", "points", "level", "cart", "heightmap", "impact", "accuracy", "step")
 #: where recordings made on demand are kept

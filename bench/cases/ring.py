@@ -13,6 +13,8 @@ import time
 
 from harness import Context, case
 
+__all__ = ["bare_ring", "launcher_ring", "ring_latency"]
+
 #: the frame the hand-offs are compared with, ms
 FRAME_BUDGET_MS = 10.0
 #: turns left out at the start (warm-up)

@@ -28,6 +28,8 @@ from pathlib import Path
 
 from harness import Context, case, rotating
 
+__all__ = ["api_overhead", "extreme", "fmu"]
+
 #: the packaged scenarios of ``extreme``
 EXTREMES = ("default", "stiff_drivetrain", "high_flow", "fast_harvest", "misaligned_start", "heavy_noise",
             "grazing_sensor", "near_alpha", "curved_pass", "soybeans", "back_to_front", "lowest_first")

@@ -29,6 +29,8 @@ from pathlib import Path
 
 from harness import Context, case, rotating
 
+__all__ = ["sensor_cost", "stereo_pile_height"]
+
 STEREO = {"kind": "stereo_camera", "profile": "multisense_s21b", "points_stride": 4, "every_frames": 1,
           "mount": {"parent": "combine", "xyz_m": [-2.0, 7.45, 6.0], "rpy_deg": [0.0, 90.0, -90.0]}}
 TOF = {"kind": "depth_camera", "profile": "tof_kinect_class", "range_max_m": 8.0, "points_stride": 3,

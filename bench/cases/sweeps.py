@@ -25,6 +25,9 @@ from pathlib import Path
 from harness import Context, alternating, case
 from harness.proctree import become_subreaper, self_and_tree_cpu_s
 
+__all__ = ["idle_cost", "instant", "make_sweep", "sweep_engine", "sweep_throughput", "time_cluster", "time_figures",
+           "time_plain", "time_sweep"]
+
 #: the arms of ``sweep_throughput``
 SWEEP_ARMS = ("sweep1", "plain", "sweep2", "first")
 

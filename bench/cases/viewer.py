@@ -33,6 +33,9 @@ from pathlib import Path
 from harness import Context, case, rotating
 from harness.proctree import process_cpu_s
 
+__all__ = ["ObserverCpu", "Payload", "TimedSink", "Timing", "blocks_dynamics", "blocks_perception", "blocks_renderer",
+           "depth_image", "make", "one_run", "payload_specs", "recorder_metadata", "viewer", "workload"]
+
 CAMS, H, W = 2, 480, 640
 BEAMS = 32768
 CONFIGS = ("plain", "viewer", "viewer-idle", "record", "record-img5", "viewer+record", "foxglove", "foxglove-idle")
@@ -307,6 +310,9 @@ def one_run(scenario, specs, config: str, tmp: Path, settle_s: float) -> dict:
     if watcher is not None:
         row["observer (+ client) CPU ms/s"] = watcher.ms_per_s
     if record.calls:
+        problem = getattr(record.inner, "_problem", None)
+        if problem:                                       # e.g. a recorder given up on by the sink's timeouts
+            raise RuntimeError(f"{config}: the recording is not whole: {problem[0]} (from frame {problem[1]})")
         row["sink ms/frame"] = 1e3 * statistics.mean(record.calls)
         meta = recorder_metadata(out / "recording.mcap")
         if meta:

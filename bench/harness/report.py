@@ -13,7 +13,7 @@ __all__ = ["case_markdown", "fmt", "markdown", "table", "to_json", "write_json"]
 
 
 def fmt(v) -> str:
-    """A number with about four significant figures (thousands grouped), a string as is, None as ``-``."""
+    """A number with about four significant figures (thousands grouped), a string as is, None and NaN as ``-``."""
     if v is None:
         return "-"
     if isinstance(v, str):
