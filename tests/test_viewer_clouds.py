@@ -218,3 +218,10 @@ def test_view_record_round_trips_and_refuses_bad_records(tmp_path):
     assert ViewInfo.from_scenario_yaml(tmp_path / "scenario.yaml") is None
     write_scenario(tmp_path, SCENARIO)
     assert ViewInfo.from_scenario_yaml(tmp_path / "scenario.yaml") == VIEW
+
+
+def test_a_camera_only_run_without_a_scenario_draws_the_cameras_points():
+    pts = np.array([[0.0, 0.0, 5.0, 5.0], [1.0, 0.0, 6.0, 6.1]], np.float32)
+    snap = Snapshot(arrays={"cam_tof_points": pts}, frames={"cam_tof_points": 1})
+    assert panel_info(snap)["lidar_top"] == {"available": True, "frame": 1, "note": "cam_tof_points"}
+    assert len(blobs_any(decode(render_panel(snap, "lidar_top")))) == 2

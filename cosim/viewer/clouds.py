@@ -15,8 +15,9 @@ and the ground at z = -floor height (from the side). Points are coloured by z on
 HEIGHT_HEADROOM_M above the rim; each sensor has its marker shape (legend) and its position marked. Higher
 points are drawn over lower ones from above, nearer over farther from the side.
 
-Without the cart's geometry or the machines' poses, the LiDAR's points are drawn in its own frame (x forward,
-y left, z up), coloured by range, extents from their percentiles (:func:`sensor_frame_view`).
+Without the cart's geometry or the machines' poses, one sensor's points (the LiDAR's, else the first camera's)
+are drawn in its own frame (x forward, y left, z up), coloured by range, extents from their percentiles
+(:func:`sensor_frame_view`).
 """
 from __future__ import annotations
 
@@ -57,8 +58,10 @@ MARKERS = (((0, 0), (0, 1), (1, 0), (1, 1)),
            ((0, 0), (-1, -1), (1, 1), (-1, 1), (1, -1)),
            ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)))
 OUTLINE, OUTLINE_OUTER, TARGET, GROUND = (255, 255, 255), (150, 150, 150), (96, 192, 240), (60, 110, 150)
-#: about how many metre ticks along x and along y or z
+#: about how many metre ticks along x and along y or z (and on the colour scale)
 AXIS_TICKS = (8, 6)
+#: the ticks between sections on the long walls (from above), m; a sensor's position mark, px
+SECTION_TICK_M, SENSOR_MARK_PX = 0.15, 10
 #: points the fallback drawing's extents (robust percentiles) are taken from, at most
 EXTENT_SAMPLE = 4096
 #: the dyn_state struct that holds the machines' poses (docs/CONTRACTS.md)
@@ -176,6 +179,34 @@ def _legend(img, clouds: list[Cloud], drawn: list[int]) -> None:
         x += width + 16
 
 
+def _outline_top(img, plot: Plot, cart: CartShape, sections: int) -> None:
+    """The cart from above: outer edge of walls and rim (grey), interior (white), section numbers under the left
+    wall (where no sensor looks) and ticks between sections on the long walls."""
+    length, width, o = cart.interior_length_m, cart.interior_width_m, cart.outer_m
+    _rect(img, plot, -o, -o, length + o, width + o, OUTLINE_OUTER)
+    _rect(img, plot, 0.0, 0.0, length, width, OUTLINE)
+    for k in range(sections):
+        cx, cy = plot.pixel((k + 0.5) * length / sections, -o)
+        text(img, str(k + 1), (cx - 4, cy + 14), colour=OUTLINE_OUTER)
+        if k:
+            x = k * length / sections
+            cv2.line(img, plot.pixel(x, 0.0), plot.pixel(x, SECTION_TICK_M), OUTLINE_OUTER, 1)
+            cv2.line(img, plot.pixel(x, width), plot.pixel(x, width - SECTION_TICK_M), OUTLINE_OUTER, 1)
+
+
+def _outline_side(img, plot: Plot, cart: CartShape, target_m: float) -> None:
+    """The cart from its left: outer edge from the floor's underside to the rim top (grey), interior (white), the
+    target fill level (yellow) and the ground's label (its line is drawn under the points)."""
+    length, o = cart.interior_length_m, cart.outer_m
+    _, ground = plot.pixel(0.0, -cart.floor_height_m)
+    text(img, "ground", (plot.box[0] + 4, ground + 14), colour=GROUND)
+    _rect(img, plot, -o, -cart.wall_thickness_m, length + o, cart.rim_above_floor_m, OUTLINE_OUTER)
+    _rect(img, plot, 0.0, 0.0, length, cart.interior_depth_m, OUTLINE)
+    cv2.line(img, plot.pixel(0.0, target_m), plot.pixel(length, target_m), TARGET, 1)
+    tx, ty = plot.pixel(length, target_m)
+    text(img, "target", (tx + 4, ty + 4), colour=TARGET)
+
+
 def cart_view(view: ViewInfo, clouds: list[Cloud], which: str, sections: int = 0) -> np.ndarray:
     """The PLOT_H x PLOT_W BGR drawing of ``clouds`` in the cart frame, ``which`` "top" (from above) or "side"
     (from the cart's left), with the cart's outline; ``sections``: how many section numbers to write (0: none)."""
@@ -184,51 +215,36 @@ def cart_view(view: ViewInfo, clouds: list[Cloud], which: str, sections: int = 0
     plot = top if which == "top" else side
     img = canvas(PLOT_H, PLOT_W)
     lo, hi = height_scale(cart)
-    _, ground = plot.pixel(0.0, -cart.floor_height_m)
     if which == "side":                                        # the ground under the points
+        _, ground = plot.pixel(0.0, -cart.floor_height_m)
         cv2.line(img, (plot.box[0] + 1, ground), (plot.box[2] - 1, ground), GROUND, 1)
+    y_near, y_far = top.v_lim
     drawn = []
     for c in clouds:
-        p = c.points
+        p, marker = c.points, MARKERS[c.index % len(MARKERS)]
         level = height_level(p[:, 2], lo, hi)
         if which == "top":                                     # higher over lower
-            drawn.append(_points(img, plot, p[:, 0], p[:, 1], level, level, MARKERS[c.index % len(MARKERS)]))
+            drawn.append(_points(img, plot, p[:, 0], p[:, 1], level, level, marker))
         else:                                                  # nearer (smaller y) over farther
-            y0, y1 = top.v_lim
-            key = np.clip((y1 - p[:, 1]) / max(y1 - y0, 1e-9) * 65535, 0, 65535).astype(np.uint16)
-            drawn.append(_points(img, plot, p[:, 0], p[:, 2], level, key, MARKERS[c.index % len(MARKERS)]))
-    length, width, o = cart.interior_length_m, cart.interior_width_m, cart.outer_m
+            key = np.clip((y_far - p[:, 1]) * (65535 / (y_far - y_near)), 0, 65535).astype(np.uint16)
+            drawn.append(_points(img, plot, p[:, 0], p[:, 2], level, key, marker))
     if which == "top":
-        _rect(img, plot, -o, -o, length + o, width + o, OUTLINE_OUTER)
-        _rect(img, plot, 0.0, 0.0, length, width, OUTLINE)
-        for k in range(sections):                              # under the left wall, where no sensor looks
-            cx, cy = plot.pixel((k + 0.5) * length / sections, -o)
-            text(img, str(k + 1), (cx - 4, cy + 14), colour=OUTLINE_OUTER)
-            if k:
-                for v in (0.0, width):
-                    cv2.line(img, plot.pixel(k * length / sections, v),
-                             plot.pixel(k * length / sections, v + (0.15 if v else -0.15)), OUTLINE_OUTER, 1)
-        xlabel, ylabel = "x from the front wall (m)", "y from the left wall (m)"
+        _outline_top(img, plot, cart, sections)
+        labels = ("x from the front wall (m)", "y from the left wall (m)")
     else:
-        text(img, "ground", (plot.box[0] + 4, ground + 14), colour=GROUND)
-        _rect(img, plot, -o, -cart.wall_thickness_m, length + o, cart.rim_above_floor_m, OUTLINE_OUTER)
-        _rect(img, plot, 0.0, 0.0, length, cart.interior_depth_m, OUTLINE)
-        cv2.line(img, plot.pixel(0.0, view.target_fill_m), plot.pixel(length, view.target_fill_m), TARGET, 1)
-        tx, ty = plot.pixel(length, view.target_fill_m)
-        text(img, "target", (tx + 4, ty + 4), colour=TARGET)
-        xlabel, ylabel = "x from the front wall (m)", "z above the cart floor (m)"
+        _outline_side(img, plot, cart, view.target_fill_m)
+        labels = ("x from the front wall (m)", "z above the cart floor (m)")
     for c in clouds:                                           # where each sensor is
-        u, v = (c.origin[0], c.origin[1]) if which == "top" else (c.origin[0], c.origin[2])
-        cx, cy = plot.pixel(u, v)
+        cx, cy = plot.pixel(c.origin[0], c.origin[1] if which == "top" else c.origin[2])
         if plot.box[0] < cx < plot.box[2] and plot.box[1] < cy < plot.box[3]:
-            cv2.drawMarker(img, (cx, cy), OUTLINE, cv2.MARKER_TRIANGLE_UP, 10, 1)
+            cv2.drawMarker(img, (cx, cy), OUTLINE, cv2.MARKER_TRIANGLE_UP, SENSOR_MARK_PX, 1)
             text(img, c.sensor.name, (cx + 7, cy - 4))
-    axes(img, plot.box, plot.u_lim, plot.v_lim, xlabel, ylabel, ticks=AXIS_TICKS)
+    axes(img, plot.box, plot.u_lim, plot.v_lim, *labels, ticks=AXIS_TICKS)
     x1 = plot.box[2]
     colourbar(img, (x1 + 22, plot.box[1] + 18, x1 + 36, plot.box[3]), lo, hi,
-              colour_lut(HEIGHT_CMAP, HEIGHT_FIRST_LEVEL), "z (m)")
+              colour_lut(HEIGHT_CMAP, HEIGHT_FIRST_LEVEL), "z (m)", ticks=AXIS_TICKS[1])
     _legend(img, clouds, drawn)
-    if not clouds or not any(len(c.points) for c in clouds):
+    if not any(len(c.points) for c in clouds):
         text(img, "no valid points", (PLOT_W // 3, PLOT_H // 2), 0.5)
     return img
 
@@ -240,16 +256,17 @@ def lidar_frame(points: np.ndarray) -> np.ndarray:
     return np.stack([p[:, 2], -p[:, 0], p[:, 1]], axis=1)
 
 
-def sensor_frame_view(points: np.ndarray, which: str, why: str) -> np.ndarray:
-    """The fallback drawing of the ``lidar_points`` block (N, 4) in the LiDAR's own frame: from above ("top": x
-    forward up the picture, y left to the left) or from its right side ("side": x forward to the right, z up),
-    colour = range; ``why`` says on the picture why the cart frame is not used."""
+def sensor_frame_view(points: np.ndarray, which: str, why: str, block: str = "lidar_points") -> np.ndarray:
+    """The fallback drawing of one sensor's points block ``block`` (N, 4) (camera axes, range) in the sensor's own
+    frame with body axes: from above ("top": x forward up the picture, y left to the left) or from its right side
+    ("side": x forward to the right, z up), colour = range; ``why`` says on the picture why the cart frame is not
+    used."""
     p = np.asarray(points, dtype=np.float32).reshape(-1, points.shape[-1])
     p = p[np.isfinite(p[:, :3]).all(axis=1)]
     rng = p[:, 3] if p.shape[1] > 3 else np.linalg.norm(p[:, :3], axis=1)
     q = lidar_frame(p[:, :3])
     img = canvas(PLOT_H, PLOT_W)
-    text(img, f"LiDAR frame ({why}): {len(q)} points", (PLOT_BOX[0], LEGEND_ROWS[0]), colour=AXIS)
+    text(img, f"{block} in its sensor's frame ({why}): {len(q)} points", (PLOT_BOX[0], LEGEND_ROWS[0]), colour=AXIS)
     if not len(q):
         text(img, "no valid points", (PLOT_W // 3, PLOT_H // 2), 0.5)
         return img

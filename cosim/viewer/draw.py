@@ -90,14 +90,14 @@ def colour_lut(cmap: int, first: int = 0) -> np.ndarray:
     return lut
 
 
-def colourbar(img, box, lo: float, hi: float, lut: np.ndarray, title: str) -> None:
+def colourbar(img, box, lo: float, hi: float, lut: np.ndarray, title: str, ticks: int = 4) -> None:
     """Vertical colour scale ``lut`` (256, 3) BGR in ``box`` (x0, y0, x1, y1) from ``lo`` (bottom, row 0 of
-    the table) to ``hi`` (top, row 255), ticked."""
+    the table) to ``hi`` (top, row 255), about ``ticks`` ticks."""
     x0, y0, x1, y1 = box
     ramp = np.linspace(255, 0, y1 - y0).round().astype(np.intp)
     img[y0:y1, x0:x1] = lut[ramp][:, None, :]
     cv2.rectangle(img, (x0, y0), (x1 - 1, y1 - 1), AXIS, 1)
-    for t in nice_ticks(lo, hi, 4):
+    for t in nice_ticks(lo, hi, ticks):
         y = round(y1 - (t - lo) / max(hi - lo, 1e-9) * (y1 - y0))
         cv2.line(img, (x1, y), (x1 + 4, y), AXIS, 1)
         text(img, f"{t + 0.0:g}", (x1 + 6, y + 5))

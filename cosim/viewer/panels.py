@@ -7,8 +7,8 @@ never an error.
 Frames of the drawings (docs/viewer.md): the point clouds (every depth-giving sensor's, cosim.viewer.clouds) and
 the height maps are in the cart grid frame, x from the front wall to the right, seen from above: the height maps
 with y (from the left wall) up, metres when the cart's size is known, truth and perceived on one colour scale
-with its bar, grey = no value (legend). Without the run's scenario the point clouds fall back to the LiDAR's own
-frame.
+with its bar, grey = no value (legend). Without the run's scenario the point clouds fall back to one sensor's
+own frame.
 """
 from __future__ import annotations
 
@@ -208,7 +208,8 @@ def _heightmap_pair(snap: Snapshot, size_m: tuple[float, float] | None = None) -
 
 def _cloud_panel(snap: Snapshot, which: str, view: ViewInfo | None) -> np.ndarray | None:
     """The point-cloud drawing ``which`` ("top" or "side"): every sensor's points in the cart frame when the
-    view and the machines' poses are known, else the LiDAR's points in its own frame; None without points."""
+    view and the machines' poses are known, else one sensor's points (the LiDAR's, else the first camera's) in
+    its own frame; None without points."""
     if view is not None:
         clouds = clouds_in_cart(view, snap.structs, snap.arrays)
         if clouds:
@@ -217,8 +218,8 @@ def _cloud_panel(snap: Snapshot, which: str, view: ViewInfo | None) -> np.ndarra
         why = "the machines' poses are unknown"
     else:
         why = "the cart's geometry is unknown"
-    pts = snap.arrays.get(LIDAR_POINTS)
-    return sensor_frame_view(pts, which, why) if pts is not None else None
+    block = next((b for b in sorted(point_blocks(snap), key=lambda b: b != LIDAR_POINTS) if b in snap.arrays), None)
+    return sensor_frame_view(snap.arrays[block], which, why, block) if block is not None else None
 
 
 def render_panel(snap: Snapshot, panel: str, size_m: tuple[float, float] | None = None,
