@@ -43,8 +43,8 @@ from .panels import IMAGE_PANELS, PanelRenderer, panel_info
 from .snapshot import fullness
 from .viewinfo import ViewInfo, default_fill
 
-__all__ = ["DashboardServer", "state_json", "fill_band_of", "observe", "serve", "ServerStop", "DEFAULT_PORT", "DEFAULT_HOST", "NICE",
-           "DRAIN_S", "LINGER_S", "WATCHED_S", "RUN_ENDED"]
+__all__ = ["DashboardServer", "state_json", "fill_band_of", "observe", "serve", "ServerStop", "DEFAULT_PORT",
+           "DEFAULT_HOST", "NICE", "DRAIN_S", "LINGER_S", "WATCHED_S", "RUN_ENDED"]
 
 log = logging.getLogger("cosim.viewer")
 

@@ -13,6 +13,7 @@ y left, z up, m) with the sensor's axes those of its points block, camera axes X
 """
 from __future__ import annotations
 
+import functools
 import json
 import math
 from dataclasses import asdict, dataclass, fields
@@ -167,6 +168,7 @@ def fill_band(target_m: float, under_m: float, over_m: float) -> tuple[float, fl
     return 1.0 - under_m / target_m, 1.0 + over_m / target_m
 
 
+@functools.lru_cache(maxsize=1)
 def default_fill() -> tuple[float, float]:
     """The fill band of the scenario records' defaults (target_fill_m, the outcome's tolerances): the fullness
     bars' band when the run's scenario is unknown."""
