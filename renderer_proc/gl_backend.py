@@ -10,7 +10,7 @@ owns one framebuffer of renderbuffers (no textures, so nothing can mipmap or fil
 The image is flipped in the projection (``renderer_proc.projection``), so ``read_into`` fills a top-down
 (H, W, 4) destination, e.g. a shared-memory view, directly.
 
-Throughput on llvmpipe (bench/README.md, "Renderer"): the cost is rasterisation, per 4 x 4 pixel block each
+Throughput on llvmpipe (bench/HISTORY.md, "Renderer"): the cost is rasterisation, per 4 x 4 pixel block each
 triangle touches, hidden or not. So the grain surface is drawn with its flat blocks merged
 (``renderer_proc.hfmesh``), box faces that other parts always cover are skipped (``Boxes.hidden_top``), the
 ground slab, which fills every image, is drawn once per camera and copied into each frame while the camera's
