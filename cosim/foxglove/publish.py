@@ -119,9 +119,12 @@ class RunInfo:
     cart_interior_m: tuple[float, float]
     #: the camera sensors (their frames are among ``static``)
     cameras: tuple[CameraInfo, ...] = ()
+    #: what the dashboard's replay needs of the scenario (cosim.viewer.viewinfo.ViewInfo as JSON; "" unknown)
+    view_json: str = ""
 
     @classmethod
     def of(cls, scenario) -> "RunInfo":
+        from cosim.viewer.viewinfo import ViewInfo
         from cosim.world.geometry import cart_body_from_grid, mount_transform
 
         from .cameras import camera_infos
@@ -134,7 +137,7 @@ class RunInfo:
         cams = camera_infos(scenario)
         frames += [f for c in cams for f in camera_frames(c)]
         return cls(scenario.name, float(scenario.timing.sensor_period_s), tuple(frames),
-                   (float(cart.interior_length_m), float(cart.interior_width_m)), cams)
+                   (float(cart.interior_length_m), float(cart.interior_width_m)), cams, ViewInfo.of(scenario).to_json())
 
 
 class FramePublisher:

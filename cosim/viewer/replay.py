@@ -22,6 +22,7 @@ from pathlib import Path
 from cosim.foxglove.cameras import CAMERA_ARRAY_PARTS
 from cosim.recording.encode import heights_from_grid, image_from_msg, points_from_cloud
 from cosim.recording.reader import RecordingError, read_recording
+from cosim.viewer.viewinfo import METADATA_NAME, ViewInfo
 
 __all__ = ["ReplaySource", "block_of_topic", "REPLAY_ACTIONS"]
 
@@ -104,7 +105,19 @@ class ReplaySource:
                 t = structs.get(hit[0], {}).get("t_s", self.frames[k] * self.period_s)
                 self._auger.append((t, hit[1], hit[2]))
         self.history = _ReplayHistory(self)
-        self.size_m = self._grid_size_m()
+        #: the run's cart, sensors and fill target: the recording's ``view`` metadata, else the scenario.yaml of
+        #: the run directory the recording lies in (None: unknown)
+        self.view = self._view(Path(path))
+        self.size_m = self.view.size_m if self.view is not None else self._grid_size_m()
+
+    def _view(self, path: Path) -> ViewInfo | None:
+        record = self.rec.metadata.get(METADATA_NAME, {}).get("json")
+        if record:
+            try:
+                return ViewInfo.from_json(record)
+            except ValueError:
+                pass
+        return ViewInfo.from_scenario_yaml(path.parent / "scenario.yaml")
 
     def _grid_size_m(self) -> tuple[float, float] | None:
         """(length, width) the recorded truth height map covers, m (its cell size times its cells), or None."""
