@@ -18,6 +18,7 @@ class Atmosphere(Model):
 
     * ``visibility_m``: meteorological optical range (MOR) of the dust, m; extinction alpha = ln(20) / MOR. Or
       ``dust_mass_g_m3`` with ``mass_extinction_m2_per_g``: alpha = mass x that. Both unset / 0: clear air;
+    * ``dust_window_s``: the dust blows only over [start, end) s of the run (a gust), None all the time;
     * ``lidar_ratio_sr``: extinction-to-backscatter ratio of the dust, sr (backscatter beta = alpha / it; Saharan
       dust: 50 +- 5 sr at 532 nm, 63 +- 13 sr at 1064 nm, Haarig et al. 2022);
     * ``return_mode``: the return a LiDAR reports, the ``strongest`` or the ``last`` above its detection limit;
@@ -37,6 +38,8 @@ class Atmosphere(Model):
     """Dust mass concentration, g/m^3 (used when visibility_m is not given; 0: none)."""
     mass_extinction_m2_per_g: PosFloat = 0.5
     """Extinction per mass of the dust, m^2/g (mineral dust about 0.3-1; an assumption, see docs/field.md)."""
+    dust_window_s: tuple[float, float] | None = None
+    """The dust blows only from the first to the second time, s (None: all the run): a gust over the cart."""
     lidar_ratio_sr: PosFloat = 60.0
     """Extinction-to-backscatter ratio of the dust, sr."""
     return_mode: Literal["strongest", "last"] = "strongest"
