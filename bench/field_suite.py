@@ -3,7 +3,7 @@ spill and overfill (docs/field.md).
 
 Reads a finished (or partly finished) run of ``bench/field_suite.yaml`` (``python launch.py sweep
 bench/field_suite.yaml --out runs/field-suite``: its ``results.csv``) and writes ``bench/field_suite.json`` and
-``bench/field_suite.md``; ``python bench/run_all.py`` puts the table in ``bench/results.md``. ``--run`` runs the
+``bench/field_suite.md`` and puts the table in ``bench/results.md`` (``python bench/run_all.py`` keeps it there). ``--run`` runs the
 sweep first (resumable; hours on 2 cores). Usage::
 
     python bench/field_suite.py --results runs/field-suite
@@ -15,6 +15,7 @@ import argparse
 import csv
 import json
 import os
+import re
 import statistics
 import subprocess
 import sys
@@ -28,7 +29,10 @@ SWEEP = ROOT / "bench" / "field_suite.yaml"
 FILLED_SHARE = 0.95
 STATUSES = ("filled", "stopped_safe", "job_failed")
 
-__all__ = ["summarize_results", "render_markdown", "main"]
+__all__ = ["SECTION", "summarize_results", "render_markdown", "put_section", "main"]
+
+#: the heading of the suite's section in bench/results.md (run_all.py keeps it when it rewrites the file)
+SECTION = "## Field-conditions suite"
 
 
 def _num(row: dict, key: str) -> float | None:
@@ -68,8 +72,7 @@ def summarize_results(rows: list[dict]) -> dict:
 
 def _short(reason: str) -> str:
     """A reason without the numbers that differ from seed to seed (its first clause)."""
-    head = reason.split(";")[0]
-    return "".join("#" if c.isdigit() else c for c in head).replace("#.#", "#")
+    return re.sub(r"\d+(\.\d+)?", "#", reason.split(";")[0])
 
 
 def _pct(x) -> str:
@@ -96,6 +99,13 @@ def render_markdown(table: dict, meta: dict) -> str:
     return "\n".join(lines + ([""] + notes if notes else [])) + "\n"
 
 
+def put_section(results_md: Path, table_md: str) -> None:
+    """Write ``table_md`` as the suite's section of ``results_md`` (bench/results.md), replacing the one there."""
+    text = results_md.read_text() if results_md.exists() else "# Current benchmark results\n"
+    head = text.split(SECTION)[0].rstrip("\n")
+    results_md.write_text(f"{head}\n\n{SECTION}\n\n{table_md}")
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--results", type=Path, default=ROOT / "runs" / "field-suite", help="the sweep's directory")
@@ -115,6 +125,7 @@ def main(argv: list[str] | None = None) -> dict:
     (a.out / "field_suite.json").write_text(json.dumps({"meta": meta, "cases": table}, indent=2) + "\n")
     md = render_markdown(table, meta)
     (a.out / "field_suite.md").write_text(md)
+    put_section(a.out / "results.md", md)
     sys.stdout.write(md)
     return table
 

@@ -40,7 +40,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-__all__ = ["RUNS", "launch", "main", "render_markdown", "step_ratio"]
+__all__ = ["RUNS", "launch", "main", "render_markdown", "step_ratio", "kept_suite_section"]
 
 #: the two runs whose wall times are compared: label -> extra launch.py arguments
 RUNS = {"perception": [], "ground_truth": ["--feedback", "ground_truth", "--renderer", "none"]}
@@ -250,6 +250,14 @@ def render_markdown(res: dict, quick: bool = False) -> str:
     return "\n".join(lines)
 
 
+def kept_suite_section(results_md: Path) -> str:
+    """The field-conditions suite's section of an existing ``results_md`` (written by bench/field_suite.py from
+    its hours-long sweep, which this script does not rerun), or ""."""
+    heading = "## Field-conditions suite"
+    text = results_md.read_text() if results_md.exists() else ""
+    return "\n" + heading + text.split(heading, 1)[1] if heading in text else ""
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="short runs, one round: checks the script only")
@@ -264,6 +272,7 @@ def main(argv: list[str] | None = None) -> dict:
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / "results.json").write_text(json.dumps(res, indent=2) + "\n")
     md = render_markdown(res, a.quick)
+    md += kept_suite_section(a.out / "results.md")
     (a.out / "results.md").write_text(md)
     print(md)
     return res
