@@ -223,3 +223,16 @@ def test_a_stream_of_no_radius_is_nothing_to_the_rigid_cast_as_to_the_reference(
     caster.close()
     hit = np.isfinite(a)
     assert np.array_equal(hit, np.isfinite(b)) and np.abs(a[hit] - b[hit]).max() < 1e-9
+
+
+def test_a_height_map_file_is_the_ground_and_holds_its_edges(tmp_path):
+    import json
+
+    heights = np.add.outer(np.arange(5) * 0.1, np.arange(4) * 0.02)   # z = 0.1 i + 0.02 j every 2 m
+    np.save(tmp_path / "field.npy", heights)
+    s = Scenario.model_validate_json(json.dumps({"format_version": 1, "terrain": {
+        "height_map_file": str(tmp_path / "field.npy"), "cell_m": 2.0, "origin_xy_m": [-4.0, -2.0]}}))
+    t = terrain_of(s)
+    assert t.height(-4.0 + 2.0 * 3, -2.0 + 2.0 * 2) == pytest.approx(0.34)           # a sample
+    assert t.height(-4.0 + 3.0, -2.0 + 1.0) == pytest.approx(0.15 + 0.01)            # linear between samples
+    assert t.height(100.0, -50.0) == pytest.approx(0.4)                               # beyond: the edge holds
