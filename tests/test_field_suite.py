@@ -25,7 +25,8 @@ def test_the_suite_sweeps_every_case_over_twenty_seeds_with_perception():
     assert sweep.labels == ("base",) and len(sweep.runs) == len(CASES) * 20
     assert [r.labels["base"] for r in sweep.runs[::20]] == list(CASES)
     for run in sweep.runs[::20]:
-        case = load_scenario(packaged_scenarios()[run.labels["base"]], extra={"renderer": "mock"})
+        case = load_scenario(packaged_scenarios()[run.labels["base"]], ["sensor.noise.range_sigma_m=0.01"],
+                             extra={"renderer": "mock"})
         assert run.scenario.feedback == "perception" and run.scenario.renderer == "mock"
         assert run.scenario.model_copy(update={"outputs": case.outputs, "plugin_dir": case.plugin_dir}) == case
     assert sorted({r.seed for r in sweep.runs}) == list(range(20)) and len({r.id for r in sweep.runs}) == 180
