@@ -145,12 +145,12 @@ def run_extras(args: argparse.Namespace, scenario=None) -> tuple[list, list]:
                                       {"port": args.foxglove_port, "scenario_json": scenario.model_dump_json()}))
     if getattr(args, "viewer", False):
         from cosim.runtime.launcher import ObserverSpec
+        from cosim.viewer.viewinfo import ViewInfo
 
         observers.append(ObserverSpec("viewer", "cosim.viewer.server:observe",
                                       {"port": args.viewer_port, "host": args.viewer_host,
                                        "announce": getattr(args, "viewer_announce", None),
-                                       "size_m": None if scenario is None else
-                                       (scenario.cart.interior_length_m, scenario.cart.interior_width_m)}))
+                                       "view": None if scenario is None else ViewInfo.of(scenario).to_dict()}))
     if getattr(args, "record", None) is not None:
         from .recording import RecordOptions, mcap_sink
 

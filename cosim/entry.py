@@ -36,34 +36,51 @@ def same_sys_path() -> None:
         sys.path.insert(0, package_root())
 
 
+#: set once the CLI has returned (or stopped): from then on a stop signal is only noted in :data:`_STOPS`
+_ending = False
+#: stop signals received after :data:`_ending` was set
+_STOPS: list[int] = []
+
+
+def _on_stop(signum, frame) -> None:
+    """Ctrl-C / SIGTERM: KeyboardInterrupt while the CLI runs, a note once it has returned."""
+    if _ending:
+        _STOPS.append(signum)
+        return
+    raise KeyboardInterrupt
+
+
 def run_cli() -> int:
-    """Run :func:`cosim.cli.main` on ``sys.argv``; the process exit status."""
+    """Run :func:`cosim.cli.main` on ``sys.argv``; the process exit status.
+
+    A stop signal at any moment until the status is known (even between ``main``'s return and this function
+    noting it) raises KeyboardInterrupt inside the ``try`` and makes the status 130; after that it is noted in
+    :data:`_STOPS` (the end of the process reads it), never raised: there is no moment at which it could escape
+    as a traceback."""
+    global _ending
     same_sys_path()
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, _on_stop)
     try:
-        # the ring members' fork server imports their common modules while the command line loads
-        from cosim.runtime.procstart import prestart_for
+        try:
+            # the ring members' fork server imports their common modules while the command line loads
+            from cosim.runtime.procstart import prestart_for
 
-        prestart_for(sys.argv[1:])
-        from cosim.cli import main
+            prestart_for(sys.argv[1:])
+            from cosim.cli import main
 
-        code = main()
+            code = main()
+        finally:
+            _ending = True
     except KeyboardInterrupt:
-        sys.stderr.write("interrupted\n")
         code = EXIT_INTERRUPTED
-    if code == EXIT_INTERRUPTED:  # the process is ending on a stop: more signals change nothing
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        sys.stderr.write("interrupted\n")
     return code
 
 
 def exit_cli() -> NoReturn:
     """Run the CLI and end the process with its status (130 if a stop signal comes before the very end)."""
     code = run_cli()
-    stopped: list[int] = []
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        if signal.getsignal(sig) is not signal.SIG_IGN:
-            signal.signal(sig, lambda signum, frame: stopped.append(signum))
     try:
         atexit._run_exitfuncs()  # what the interpreter's exit would run: logging.shutdown, multiprocessing's
     finally:
@@ -72,4 +89,4 @@ def exit_cli() -> NoReturn:
                 stream.flush()
             except (OSError, ValueError):  # a closed pipe, a closed stream: nothing more can be said
                 pass
-    os._exit(EXIT_INTERRUPTED if stopped else code)
+    os._exit(EXIT_INTERRUPTED if _STOPS else code)

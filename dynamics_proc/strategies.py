@@ -10,7 +10,7 @@ section being filled (-1 at the start).
   nearest to the current section; the current one is kept while it stays in that band. The cart rises in
   layers swept front to back and back again (adjacent moves, so the auger keeps running): the load stays
   level all along (an early stop leaves an even load: 29 cm spread at half time against 61 cm for
-  front-to-back, bench/README.md) and is the most accurate with a noisy, holed map, for up to ~20 % more
+  front-to-back, bench/HISTORY.md) and is the most accurate with a noisy, holed map, for up to ~20 % more
   time with ideal feedback.
 
 front_to_back and back_to_front keep filling the current section until it is full.

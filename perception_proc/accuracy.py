@@ -95,7 +95,7 @@ def range_error_stats(ranges: np.ndarray, exact: np.ndarray, range_min_m: float,
 
 def world_from_parent(scenario: Scenario, state: Mapping[str, float]) -> np.ndarray:
     """world_from_body (4 x 4) of the sensor's parent entity from dyn_state fields (identity for 'world')."""
-    parent = scenario.sensor.mount.parent
+    parent = scenario.lidar.mount.parent
     if parent == "world":
         return np.eye(4)
     return entity_pose(state, parent)

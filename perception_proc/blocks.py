@@ -5,16 +5,26 @@
   where accuracy is not evaluated). Every field is a ``timeseries.csv`` column ``perc_state.<field>``.
 * ``heightmap_perceived`` (nxc, nyc) float32: grain height m above the cart floor on the controller's grid
   (``controller.grid_cell_m``), NaN where there is no valid return (or no cart).
-* ``lidar_points`` (N, 4) float32: x, y, z (sensor frame, m), range (m); NaN rows for invalid beams.
+* ``lidar_points`` (N, 4) float32: x, y, z (sensor frame, m), range (m); NaN rows for invalid beams (only
+  with a LiDAR);
+* per depth-giving camera (docs/cameras.md): ``cam_<name>_measured`` (H, W) float32, the camera's measured
+  planar depth m (the depth camera's model, the stereo matcher's), NaN invalid; ``cam_<name>_points`` (M, 4)
+  float32, its strided pixels back-projected, x y z (camera frame) and range m, NaN rows invalid;
+* with ``sensors:``, per depth-giving sensor, the struct ``sensor_<name>``: the share of valid data, the
+  model's time, and on evaluated frames its depth error against the exact ray cast and the error of the
+  height map it alone gives (:data:`SENSOR_FIELDS`).
 """
 from __future__ import annotations
 
 from cosim.scenario.config import Scenario
+from cosim.scenario.config.cameras import DEPTH_KINDS
 from cosim.world.patterns import beam_table
+from cosim.world.sensors import camera_block, camera_pinhole, points_stride
 from shm_schema import ArrayBlock, Block, Field, StructBlock
 
 __all__ = ["WRITER", "STATE_BLOCK", "HEIGHTS_BLOCK", "POINTS_BLOCK", "RANGE_BANDS_M", "band_name",
-           "state_fields", "declare_blocks", "ACCURACY_FIELDS"]
+           "state_fields", "declare_blocks", "ACCURACY_FIELDS", "SENSOR_FIELDS", "sensor_state_block",
+           "camera_output_blocks"]
 
 WRITER = "perception"
 STATE_BLOCK = "perc_state"
@@ -87,16 +97,69 @@ def state_fields() -> tuple[Field, ...]:
     return tuple(Field(n, unit=u, dtype=d, doc=doc) for n, u, d, doc in _BASE + ACCURACY_FIELDS)
 
 
+#: the fields of a sensor's own status struct ``sensor_<name>`` (named sensors only; NaN where not evaluated)
+SENSOR_FIELDS: tuple[tuple[str, str, str, str], ...] = (
+    ("t_s", "s", "f8", "simulation time of the state the sensor's data show"),
+    ("frame", "", "i8", "ring frame of the sensor's latest data"),
+    ("valid_fraction", "", "f8", "share of the sensor's pixels (beams) with a valid depth (range)"),
+    ("points", "", "i8", "valid points the sensor gave the built-in algorithm"),
+    ("measure_ms", "ms", "f8", "the sensor's model: noise, or the stereo matcher"),
+    ("acc_evaluated", "", "i8", "1 on frames compared with the exact ray cast"),
+    ("depth_pixels", "", "f8", "pixels (beams) valid in both the sensor and the exact cast, working range"),
+    ("depth_err_mean_m", "m", "f8", "mean |depth - exact depth| (range for the LiDAR), working range"),
+    ("depth_err_median_m", "m", "f8", "median |depth error|, working range"),
+    ("depth_err_p99_m", "m", "f8", "99th percentile |depth error|, working range"),
+    ("frac_above_5cm", "", "f8", "share of |depth error| > 5 cm, working range"),
+    ("coverage", "", "f8", "share of pixels with an exact hit in the working range that have a valid depth"),
+    ("spurious_frac", "", "f8", "share of valid depths where the exact cast has none in range"),
+    ("fill_rel_err", "", "f8", "mean |h - h_true| / h_true over the cells this sensor alone maps"),
+    ("fill_bias_m", "m", "f8", "mean h - h_true over those cells"),
+    ("fill_cells", "", "f8", "controller cells this sensor alone maps"),
+)
+
+
+def sensor_state_block(name: str) -> str:
+    """The status struct of named sensor ``name``: ``sensor_<name>``."""
+    return f"sensor_{name}"
+
+
+def camera_output_blocks(scenario: Scenario, name: str) -> dict[str, tuple[str, tuple[int, ...]]]:
+    """The blocks perception writes for depth-giving camera ``name``: part -> (block, shape): ``measured``
+    (H, W) float32 the sensor's planar depth m (NaN invalid), ``points`` (M, 4) float32 its strided pixels
+    back-projected, x y z (camera frame) and range m (NaN rows invalid)."""
+    cam = scenario.cameras[name]
+    pin = camera_pinhole(cam, scenario)
+    s = points_stride(cam, scenario)
+    rows, cols = len(range(s // 2, pin.height, s)), len(range(s // 2, pin.width, s))
+    return {"measured": (camera_block(name, "measured"), (pin.height, pin.width)),
+            "points": (camera_block(name, "points"), (rows * cols, 4))}
+
+
 def declare_blocks(scenario: Scenario) -> list[Block]:
     """The perception blocks for ``scenario`` (empty when the scenario runs no perception)."""
     if not scenario.needs_perception:
         return []
     nxc, nyc = scenario.cart.grid_shape(scenario.controller.grid_cell_m)
-    n = beam_table(scenario.sensor.pattern)[0].shape[0]
-    return [
+    blocks: list[Block] = [
         StructBlock(STATE_BLOCK, WRITER, state_fields(), doc="perception outputs and accuracy per frame"),
         ArrayBlock(HEIGHTS_BLOCK, WRITER, "f4", (nxc, nyc), unit="m",
                    doc="grain height above the cart floor, controller grid, cart grid frame; NaN no return"),
-        ArrayBlock(POINTS_BLOCK, WRITER, "f4", (n, 4), unit="m",
-                   doc="LiDAR points x, y, z (sensor frame) and range; NaN rows invalid"),
     ]
+    if scenario.lidar is not None:
+        n = beam_table(scenario.lidar.pattern)[0].shape[0]
+        blocks.append(ArrayBlock(POINTS_BLOCK, WRITER, "f4", (n, 4), unit="m",
+                                 doc="LiDAR points x, y, z (sensor frame) and range; NaN rows invalid"))
+    for name, cam in scenario.cameras.items():
+        if cam.kind not in DEPTH_KINDS:
+            continue
+        out = camera_output_blocks(scenario, name)
+        blocks.append(ArrayBlock(out["measured"][0], WRITER, "f4", out["measured"][1], unit="m",
+                                 doc=f"camera {name}: measured planar depth, NaN invalid"))
+        blocks.append(ArrayBlock(out["points"][0], WRITER, "f4", out["points"][1], unit="m",
+                                 doc=f"camera {name}: points x, y, z (camera frame) and range; NaN rows invalid"))
+    if scenario.sensors:
+        for name in scenario.depth_sensors:
+            blocks.append(StructBlock(sensor_state_block(name), WRITER,
+                                      tuple(Field(n, unit=u, dtype=d, doc=doc) for n, u, d, doc in SENSOR_FIELDS),
+                                      doc=f"sensor {name}: data validity, accuracy, own height map"))
+    return blocks

@@ -29,9 +29,12 @@ def _level(state: Mapping[str, float], name: str) -> bool:
     return all(float(state.get(f"{name}_{f}", 0.0)) == 0.0 for f in POSE_3D_FIELDS)
 
 
-def level_from_parent(scenario: Scenario, state: Mapping[str, float]) -> np.ndarray | None:
-    """level_from_parent (4, 4) of this frame (the module docstring), or None when no correction is needed."""
-    parent = scenario.sensor.mount.parent
+def level_from_parent(scenario: Scenario, state: Mapping[str, float], parent: str | None = None
+                      ) -> np.ndarray | None:
+    """level_from_parent (4, 4) of this frame (the module docstring), or None when no correction is needed.
+    ``parent``: the body whose frame perception works in (default: the LiDAR's parent)."""
+    if parent is None:
+        parent = scenario.lidar.mount.parent
     if parent == "cart" or not state or (_level(state, "cart") and (parent == "world" or _level(state, parent))):
         return None
     world_from_cart = entity_pose(state, "cart")

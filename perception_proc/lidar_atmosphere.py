@@ -41,7 +41,7 @@ class LidarAtmosphere:
         a = scenario.atmosphere
         self.scenario, self.directions, self.dust = scenario, np.asarray(directions, np.float64), dust
         self.particles = a.stream_particles
-        self.p_min = float(hard_power(scenario.sensor.range_max_m, 0.0, a.detection_reflectivity, 0.0, 0.0))
+        self.p_min = float(hard_power(scenario.lidar.range_max_m, 0.0, a.detection_reflectivity, 0.0, 0.0))
         self.last = a.return_mode == "last"
 
     def apply(self, ranges: np.ndarray, frame: int, state: Mapping[str, float], stream: np.ndarray | None,

@@ -36,12 +36,15 @@ from cosim.scenario.config import Scenario
 from cosim.world.beamtarget import BEAMS_DEPTH_BLOCK
 from cosim.world.camera import Rig
 from cosim.world.geometry import invert
+from cosim.world.sensors import world_from_parent
 
 from . import accuracy as acc
-from .blocks import ACCURACY_FIELDS, HEIGHTS_BLOCK, POINTS_BLOCK, STATE_BLOCK, WRITER
+from .blocks import ACCURACY_FIELDS, HEIGHTS_BLOCK, POINTS_BLOCK, STATE_BLOCK, WRITER, sensor_state_block
+from .cameras import PerceptionCameras
 from .leveling import level_from_parent
 from .lidar_atmosphere import lidar_atmosphere
 from .pipeline import FrameResult, Perception
+from .sensor_report import record_of, sensor_values
 
 if TYPE_CHECKING:
     from shm_schema import Segment
@@ -71,14 +74,16 @@ class PerceptionParticipant:
 
     # -- contract -------------------------------------------------------------------------------------------
     def start(self, segment: "Segment") -> None:
-        """Bind views and precompute the beam-to-pixel tables."""
-        rig = self._rig
-        if rig is None and self.scenario.sensor.method == "camera_rig":
+        """Bind views and precompute the beam-to-pixel tables and the cameras' pipelines."""
+        rig, lidar = self._rig, self.scenario.lidar
+        if rig is None and lidar is not None and lidar.method == "camera_rig":
             from cosim.world.rig import plan_rig
 
             rig = plan_rig(self.scenario)
-        self.pipeline = Perception(self.scenario, rig)
-        self._atmosphere = lidar_atmosphere(self.scenario, self.pipeline.directions)
+        self.cameras = PerceptionCameras(self.scenario)
+        self.pipeline = Perception(self.scenario, rig, self.cameras.pipes)
+        self.cameras.level_parent = self.pipeline.level_parent
+        self._atmosphere = lidar_atmosphere(self.scenario, self.pipeline.directions) if lidar is not None else None
         self._images = []
         for name, want in _image_blocks(self.pipeline, rig):
             if not segment.has(name):
@@ -87,17 +92,22 @@ class PerceptionParticipant:
             if img.shape != want:
                 raise ValueError(f"block {name!r} has shape {img.shape}, the rig expects {want}")
             self._images.append((name, img))
-        for name in (STATE_BLOCK, HEIGHTS_BLOCK, POINTS_BLOCK):
+        for name in (STATE_BLOCK, HEIGHTS_BLOCK) + ((POINTS_BLOCK,) if lidar is not None else ()):
             segment.view(name)                          # KeyError naming the missing block
-        if segment.view(POINTS_BLOCK).shape[0] != self.pipeline.n_beams:
+        if lidar is not None and segment.view(POINTS_BLOCK).shape[0] != self.pipeline.n_beams:
             raise ValueError(f"{POINTS_BLOCK} has {segment.view(POINTS_BLOCK).shape[0]} rows, the pattern "
                              f"{self.pipeline.n_beams} beams")
+        self.cameras.start(segment)
+        self._sensor_blocks = {n: sensor_state_block(n) for n in self.scenario.depth_sensors} \
+            if self.scenario.sensors else {}
+        for block in self._sensor_blocks.values():
+            segment.view(block)
         self._state = segment.view("dyn_state") if segment.has("dyn_state") else None
         self._state_names = self._state.array.dtype.names if self._state is not None else ()
         self._ranges = np.empty(self.pipeline.n_beams, np.float32)
         record = np.zeros((), segment.view(STATE_BLOCK).array.dtype)
-        self._out = _Outputs(np.empty_like(segment.view(POINTS_BLOCK)), np.empty_like(segment.view(HEIGHTS_BLOCK)),
-                             record)
+        points = np.empty_like(segment.view(POINTS_BLOCK)) if lidar is not None else np.zeros((0, 4), np.float32)
+        self._out = _Outputs(points, np.empty_like(segment.view(HEIGHTS_BLOCK)), record)
         self.segment = segment
 
     def step(self, frame: int):
@@ -112,6 +122,7 @@ class PerceptionParticipant:
             if got != frame:
                 raise FrameMismatch(f"perception expected {name} of frame {frame}, found frame {got}",
                                     process=WRITER, frame=frame)
+        self.cameras.check(seg, frame)
         self.flush()
         t0 = time.perf_counter()
         # everything read from the segment is read now: with overlap the rest runs while dynamics and the
@@ -122,15 +133,16 @@ class PerceptionParticipant:
         truth = None
         if due and state:
             truth = (np.array(seg.view("heightmap_truth"), copy=True), np.array(seg.view("stream"), copy=True))
-        gathered = pipe.gather([img for _, img in self._images])
+        gathered = pipe.gather([img for _, img in self._images]) if self._images else None
+        cam_images = self.cameras.gather(frame)
         stream = None
         if self._atmosphere is not None and self._atmosphere.particles and seg.has("stream"):
             stream = np.array(seg.view("stream"), copy=True)
 
         def rest() -> None:
-            clean = pipe.resample_gathered(gathered, out=self._ranges)
+            clean = pipe.resample_gathered(gathered, out=self._ranges) if gathered is not None else self._ranges
             beams = self._accuracy_beams(frame) if due else None           # drawn here, off the token's path
-            self._finish(frame, t0, state, clean, beams, truth, stream)
+            self._finish(frame, t0, state, clean, beams, truth, cam_images, stream)
 
         if self.deferred:
             return rest
@@ -143,8 +155,15 @@ class PerceptionParticipant:
         out, seg = self._pending, self.segment
         if out is None or seg is None:
             return
-        with seg.write(POINTS_BLOCK, out.frame) as pts:
-            np.copyto(pts, out.points)
+        if self.scenario.lidar is not None:
+            with seg.write(POINTS_BLOCK, out.frame) as pts:
+                np.copyto(pts, out.points)
+        for block, data in out.extra.items():
+            with seg.write(block, out.frame) as view:
+                np.copyto(view, data)
+        for block, rec in out.records.items():
+            with seg.write(block, out.frame) as st:
+                st.array[...] = rec
         with seg.write(HEIGHTS_BLOCK, out.frame) as hv:
             np.copyto(hv, out.heights)
         with seg.write(STATE_BLOCK, out.frame) as st:
@@ -152,21 +171,24 @@ class PerceptionParticipant:
         self._pending = None
 
     def _finish(self, frame: int, t0: float, state: dict, clean: np.ndarray, beams: np.ndarray | None,
-                truth: tuple[np.ndarray, np.ndarray] | None, stream: np.ndarray | None = None) -> None:
-        """Atmosphere, noise, cart, height map, impact and accuracy of frame ``frame`` into the pending outputs
-        (``stream``: the frame's stream rows, for the kernels of ``atmosphere.stream_particles``)."""
+                truth: tuple[np.ndarray, np.ndarray] | None, cam_images: list, stream: np.ndarray | None = None
+                ) -> None:
+        """Atmosphere, noise, the cameras' models, cart, height map, impact and accuracy of frame ``frame`` into
+        the pending outputs (``stream``: the frame's stream rows, for the kernels of
+        ``atmosphere.stream_particles``)."""
         pipe, out = self.pipeline, self._out
         clean_sample = clean[beams] if beams is not None else None        # a copy: noise comes next, in place
-        wfp = acc.world_from_parent(self.scenario, state) if state else np.eye(4)
+        wfp = world_from_parent(pipe.level_parent, state) if state else np.eye(4)
         if self._atmosphere is not None:                  # dust and the stream's kernels (docs/field.md)
             clean = self._atmosphere.apply(clean, frame, state, stream, wfp @ pipe.level_from_sensor)
         ranges = pipe.noisy(clean, frame)
         t1 = time.perf_counter()
-        lfp = level_from_parent(self.scenario, state)
+        cams = self.cameras.frames(cam_images, state)
+        lfp = level_from_parent(self.scenario, state, pipe.level_parent)
         if lfp is not None:                               # uneven ground: the level frame on the cart's plane
             wfp = wfp @ invert(lfp)
         heading = self._heading(state, wfp)
-        res = pipe.perceive(ranges, heading, with_points=False, frame=frame, level_from_parent=lfp)
+        res = pipe.perceive(ranges, heading, with_points=False, frame=frame, cameras=cams, level_from_parent=lfp)
         self.last = res
         pipe.points(ranges, out=out.points)
         t2 = time.perf_counter()
@@ -180,11 +202,23 @@ class PerceptionParticipant:
         values["perception_ms"] = _MS_PER_S * (t2 - t0)
         values.update({n: (0 if d == "i8" else math.nan) for n, _, d, _ in ACCURACY_FIELDS})
         values["accuracy_ms"] = math.nan
+        lidar_acc = None
         if truth is not None:
             t3 = time.perf_counter()
             values.update(self._accuracy(state, beams, clean_sample, res, wfp, lfs, *truth))
+            lidar_acc = values if pipe.n_beams else None
             values["acc_evaluated"] = 1
             values["accuracy_ms"] = _MS_PER_S * (time.perf_counter() - t3)
+        out.extra = {}
+        for name, blocks in self.cameras.outputs.items():
+            r = self.cameras.latest.get(name)
+            if r is not None:
+                out.extra[blocks["measured"]], out.extra[blocks["points"]] = r.measured, r.record
+        if self._sensor_blocks:
+            per = sensor_values(pipe, self.cameras, frame, state, ranges, values["lidar_ms"], res, lidar_acc, truth,
+                                lfp)
+            out.records = {block: record_of(per[n], self.segment.view(block).array.dtype)
+                           for n, block in self._sensor_blocks.items() if n in per}
         out.frame, out.values = frame, values
         out.record[()] = tuple(values[n] for n in out.record.dtype.names)      # every field, in one assignment
         self._pending = out
@@ -243,9 +277,11 @@ class PerceptionParticipant:
         ``truth_h`` and ``stream``: copies of the frame's ``heightmap_truth`` and ``stream`` blocks."""
         sc, pipe = self.scenario, self.pipeline
         wfs = wfp @ lfs                                   # world_from_level @ level_from_sensor
-        exact = acc.exact_ranges(sc, state, truth_h, stream, wfs, pipe.directions[beams])
-        clean = np.where((clean >= sc.sensor.range_min_m) & (clean <= sc.sensor.range_max_m), clean, np.nan)
-        out = acc.range_error_stats(clean, exact, sc.sensor.range_min_m, sc.sensor.range_max_m)
+        out = {}
+        if pipe.n_beams:
+            exact = acc.exact_ranges(sc, state, truth_h, stream, wfs, pipe.directions[beams])
+            clean = np.where((clean >= sc.lidar.range_min_m) & (clean <= sc.lidar.range_max_m), clean, np.nan)
+            out = acc.range_error_stats(clean, exact, sc.lidar.range_min_m, sc.lidar.range_max_m)
         truth_grid = acc.truth_on_grid(truth_h, sc.grain.cell_m, pipe.grid, sc.cart)
         heights = res.heightmap.heights if res.heightmap is not None else np.full(pipe.grid, np.nan)
         out["heightmap_rmse_m"], out["heightmap_bias_m"], _ = acc.heightmap_error(heights, truth_grid)
@@ -261,6 +297,8 @@ def _image_blocks(pipe: Perception, rig: Rig | None) -> list[tuple[str, tuple[in
     depth image."""
     if pipe.beams is not None:
         return [(BEAMS_DEPTH_BLOCK, pipe.beams.layout.shape + (4,))]
+    if rig is None:
+        return []
     return [(f"{c.name}_depth", (c.intrinsics.height, c.intrinsics.width, 4)) for c in rig.cameras]
 
 
@@ -268,13 +306,16 @@ def _image_blocks(pipe: Perception, rig: Rig | None) -> list[tuple[str, tuple[in
 class _Outputs:
     """One frame's outputs awaiting publication: ``points`` (N, 4) float32, ``heights`` (nx, ny) float32 and the
     ``perc_state`` values of frame ``frame`` (``values`` by name, and ``record``, the 0-d structured record
-    of the block that publication copies)."""
+    of the block that publication copies); the cameras' outputs ``extra`` and the sensors' ``records``."""
 
     points: np.ndarray
     heights: np.ndarray
     record: np.ndarray
     frame: int = -1
     values: dict = field(default_factory=dict)
+    #: the cameras' array outputs (block -> array) and the sensors' records (block -> 0-d record)
+    extra: dict = field(default_factory=dict)
+    records: dict = field(default_factory=dict)
 
 
 def create(scenario: Scenario) -> PerceptionParticipant:

@@ -27,10 +27,12 @@ from cosim.world.geometry import body_from_camera_axes, mount_transform
 from cosim.world.patterns import beam_table, pattern_shape
 
 from .beam_decode import BeamDecoder
+from .camera_pipeline import CameraPipeline
+from .fusion import merge
 from .heightmap import HeightMap, grid_shape
 from .impact import Impact
 from .lidar import apply_noise_and_limits, frame_generator, point_basis, to_points
-from .protocol import ALGORITHM_POINT, PerceptionContext, PerceptionInput, StageSet, check_output
+from .protocol import ALGORITHM_POINT, PerceptionContext, PerceptionInput, SensorFrame, StageSet, check_output
 from .resample import beam_words, build_table, resample, resample_words
 from .resample_offset import build_offset_table, is_offset, resample_offset
 from .rim import CartEstimate, border_beams
@@ -44,11 +46,12 @@ OWN_AXIS_PROBE_M = 20.0
 OWN_AXIS_PROBE_STEPS = 41
 
 
-def own_vehicle_box(scenario: Scenario) -> tuple[np.ndarray, np.ndarray] | None:
-    """(lo (3,), hi (3,)) m, level frame: the body box of the vehicle carrying the sensor (the combine's low,
-    wide header in front is left out: it is far below the rim and never over the cart) with
-    :data:`OWN_BOX_MARGIN_M`; None for a sensor on the cart or in the world."""
-    parent = scenario.sensor.mount.parent
+def own_vehicle_box(scenario: Scenario, parent: str | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+    """(lo (3,), hi (3,)) m, level frame: the body box of the vehicle carrying the sensor (``parent``, by
+    default the LiDAR's; the combine's low, wide header in front is left out: it is far below the rim and never
+    over the cart) with :data:`OWN_BOX_MARGIN_M`; None for a sensor on the cart or in the world."""
+    if parent is None:
+        parent = scenario.lidar.mount.parent
     if parent == "combine":
         c = scenario.combine
         lo, hi = np.array([-c.length_m / 2, -c.width_m / 2, 0.0]), np.array([c.length_m / 2, c.width_m / 2, c.height_m])
@@ -95,35 +98,49 @@ class Perception:
     """Per-rig precomputation and the per-frame pure pipeline. ``rig``: the camera rig (None, and unused, with
     ``sensor.method: beam_native``, whose one image is the beams target)."""
 
-    def __init__(self, scenario: Scenario, rig: Rig | None):
+    def __init__(self, scenario: Scenario, rig: Rig | None, cameras: Sequence[CameraPipeline] = ()):
         self.scenario = scenario
         self.rig = rig
-        sensor = scenario.sensor
-        self.elevation, self.azimuth = beam_table(sensor.pattern)
+        #: the camera sensors (perception_proc.camera_pipeline), in declaration order
+        self.cameras = list(cameras)
+        sensor = scenario.lidar
+        if sensor is not None:
+            self.elevation, self.azimuth = beam_table(sensor.pattern)
+            self.shape = pattern_shape(sensor.pattern)
+            #: ``sensor.method: beam_native``: ranges decoded per beam (perception_proc.beam_decode), no rig
+            self.beams = (BeamDecoder(beam_layout(sensor.pattern), sensor.codec) if sensor.method == "beam_native"
+                          else None)
+            self.level_from_sensor = mount_transform(sensor.mount) @ body_from_camera_axes()
+            #: the body whose frame is the level frame (the primary sensor's parent)
+            self.level_parent = sensor.mount.parent
+        else:                                        # cameras only: no beams, the first depth camera leads
+            self.elevation = self.azimuth = np.zeros(0)
+            self.shape, self.beams = None, None
+            lead = next((c for c in self.cameras if c.depth_giving), self.cameras[0])
+            self.level_from_sensor = lead.parent_from_camera
+            self.level_parent = lead.parent
         self.directions = beam_directions(self.elevation, self.azimuth)
-        self.shape = pattern_shape(sensor.pattern)
-        #: ``sensor.method: beam_native``: ranges decoded per beam (perception_proc.beam_decode), no rig
-        self.beams = BeamDecoder(beam_layout(sensor.pattern), sensor.codec) if sensor.method == "beam_native" else None
-        self.offset = self.beams is None and is_offset(rig)
-        if self.beams is not None:
+        self.offset = sensor is not None and self.beams is None and is_offset(rig)
+        if self.beams is not None or sensor is None:
             self.table = None
         elif self.offset:
             self.table = build_offset_table(rig, self.elevation, self.azimuth, self.shape)
         else:
             self.table = build_table(rig, self.directions)
-        self.level_from_sensor = mount_transform(sensor.mount) @ body_from_camera_axes()
         self.level_directions = self.directions @ self.level_from_sensor[:3, :3].T    # (N, 3) level frame
         #: (3, N) float64 C-contiguous: the level-frame direction components, one row each
         self._level_dir_rows = np.ascontiguousarray(self.level_directions.T)
         #: (N, 4) float64 rows (s, 1): the lidar_points record is this times the range (lidar.point_basis)
         self.point_basis = point_basis(self.directions)
-        self.own_box = own_vehicle_box(scenario)
+        self.own_box = own_vehicle_box(scenario, self.level_parent)
         self._own_axes = _own_box_axes(self.own_box, self.level_from_sensor[:3, 3], self.level_directions)
         self.grid = grid_shape(scenario.cart, scenario.controller.grid_cell_m)
         self.cell_xy = (scenario.cart.interior_length_m / self.grid[0],
                         scenario.cart.interior_width_m / self.grid[1])
+        depth_cams = [c for c in self.cameras if c.depth_giving]
         self.algorithm, self.context = _algorithm(scenario), PerceptionContext(
-            scenario, self.grid, self.cell_xy, self.level_from_sensor, self.shape, _stages(scenario))
+            scenario, self.grid, self.cell_xy, self.level_from_sensor, None if depth_cams else self.shape,
+            _stages(scenario), max((c.typical_sigma_m for c in depth_cams), default=0.0))
 
     @property
     def n_beams(self) -> int:
@@ -132,7 +149,7 @@ class Perception:
     def resample(self, images: Sequence[np.ndarray], out: np.ndarray | None = None) -> np.ndarray:
         """Noise-free ranges (N,) float32 m, NaN where no return, from one depth image per rig camera (rig
         order): decode and resample only, no range limits."""
-        codec = self.scenario.sensor.codec
+        codec = self.scenario.lidar.codec
         if self.beams is not None:
             return self.beams.ranges(images, out=out)
         if self.offset:
@@ -162,14 +179,16 @@ class Perception:
                 return gathered[0]
             out[:] = gathered[0]
             return out
-        return resample_words(gathered, self.table, self.scenario.sensor.codec, self.scenario.perception.sampler,
+        return resample_words(gathered, self.table, self.scenario.lidar.codec, self.scenario.perception.sampler,
                               out=out)
 
     def noisy(self, ranges: np.ndarray, frame: int | None) -> np.ndarray:
         """Apply the noise model (seeded by scenario seed and ``frame``; None: none) and the range limits, in
         place on ``ranges`` (N,) float32; returns it."""
+        if self.scenario.lidar is None:
+            return ranges
         gen = None if frame is None else frame_generator(self.scenario.seed, frame)
-        return apply_noise_and_limits(ranges, self.scenario.sensor, gen)
+        return apply_noise_and_limits(ranges, self.scenario.lidar, gen)
 
     def lidar(self, images: Sequence[np.ndarray], frame: int | None, out: np.ndarray | None = None) -> np.ndarray:
         """The frame's LiDAR ranges (N,) float32 m, NaN invalid: :meth:`resample` then :meth:`noisy`."""
@@ -206,23 +225,42 @@ class Perception:
 
     def perceive(self, ranges: np.ndarray, heading_xy=(1.0, 0.0), points_out: np.ndarray | None = None,
                  heights_out: np.ndarray | None = None, with_points: bool = True, frame: int = -1,
+                 cameras: Sequence[tuple[SensorFrame, np.ndarray]] = (),
                  level_from_parent: np.ndarray | None = None) -> FrameResult:
-        """Cart, height map and impact from the frame's ranges (N,) float32. ``heading_xy``: the towing
-        direction in the level frame. ``points_out`` (N, 4) / ``heights_out`` (nx, ny): optional destinations.
-        ``with_points`` False leaves the ``lidar_points`` record out (``FrameResult.points`` is None): a caller
-        that writes it straight into shared memory uses :meth:`points`. ``frame``: named in a plug-in's fault.
-        ``level_from_parent`` (4, 4): this frame's level frame on uneven ground (perception_proc.leveling; None:
-        the parent's body frame)."""
+        """Cart, height map and impact from the frame's ranges (N,) float32 (the LiDAR's; (0,) without one) and
+        the ``cameras``' frames with their border flags [(SensorFrame, (M,) uint8)], merged in the level frame.
+        ``heading_xy``: the towing direction in the level frame. ``points_out`` (N, 4) / ``heights_out``
+        (nx, ny): optional destinations. ``with_points`` False leaves the ``lidar_points`` record out
+        (``FrameResult.points`` is None): a caller that writes it straight into shared memory uses
+        :meth:`points`. ``frame``: named in a plug-in's fault. ``level_from_parent`` (4, 4): this frame's level
+        frame on uneven ground (perception_proc.leveling; None: the parent's body frame)."""
         t0 = time.perf_counter()
         pts = self.points(ranges, out=points_out) if with_points or points_out is not None else None
         lvl = self.level_points(ranges)
+        border = border_beams(ranges, self.shape)
+        frames = {f.name: f for f, _ in cameras}
+        depth = [(f, b) for f, b in cameras if len(f.points)]
+        merged, all_ranges = lvl, ranges
+        if depth:                                   # in the parent's body frame, where the own-vehicle box is
+            merged, all_ranges, border = merge([lvl] + [f.points for f, _ in depth],
+                                               [ranges] + [f.ranges for f, _ in depth],
+                                               [border] + [b for _, b in depth], self.own_box)
         context = self.context
         if level_from_parent is not None:
-            lvl = lvl @ level_from_parent[:3, :3].T + level_from_parent[:3, 3]
+            rot, shift = level_from_parent[:3, :3], level_from_parent[:3, 3]
+            lvl = lvl @ rot.T + shift
+            merged = merged @ rot.T + shift if depth else lvl
             context = replace(context, level_from_sensor=level_from_parent @ self.level_from_sensor)
-        border = border_beams(ranges, self.shape)
+            frames = {n: replace(f, points=f.points @ rot.T + shift, level_from_camera=None
+                                 if f.level_from_camera is None else level_from_parent @ f.level_from_camera)
+                      for n, f in frames.items()}
+        sensors: dict[str, SensorFrame] = {}
+        lidar_name = self.scenario.lidar_name
+        if lidar_name is not None:
+            sensors[lidar_name] = SensorFrame(lidar_name, "lidar", frame, lvl, ranges)
+        sensors.update(frames)
         t1 = time.perf_counter()
-        inp = PerceptionInput(frame, ranges, lvl, border, heading_xy, heights_out)
+        inp = PerceptionInput(frame, all_ranges, merged, border, heading_xy, heights_out, sensors)
         ref = self.scenario.perception.algorithm
         try:
             out = check_output(self.algorithm(context, inp), self.grid, ref)

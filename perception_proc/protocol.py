@@ -16,6 +16,11 @@ along the cart, y across, z up (``cart.level_from_grid`` (4, 4) maps grid to lev
 cart floor on the controller grid ``ctx.grid`` = (nx, ny) cells of ``ctx.cell_xy`` = (dx, dy) m, cell (i, j)
 covering grid x in [i dx, (i + 1) dx); NaN where a cell has no answer (holes are allowed and expected).
 
+Every sensor's own frame (docs/cameras.md): ``inp.sensors`` maps each sensor's name to a :class:`SensorFrame`
+with its ``points`` (N, 3) in the level frame and, for cameras, its images (``rgb``, ``depth_m``, ``labels``),
+intrinsics ``K`` and pose ``level_from_camera``. ``inp.points`` (what the built-in stages use) holds the
+points of every depth-giving sensor merged in the level frame; with one LiDAR it is that LiDAR's.
+
 What comes back is checked (:func:`check_output`): a wrong type, a height map of the wrong shape or with
 infinite heights, a valid cart or impact with non-finite coordinates ends the run with a
 :class:`cosim.errors.PluginFault` naming the plug-in, the frame and the cause.
@@ -24,7 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Mapping
 
 import numpy as np
 
@@ -35,7 +40,7 @@ from .heightmap import HeightMap
 from .impact import Impact
 from .rim import CartEstimate
 
-__all__ = ["PerceptionContext", "PerceptionInput", "PerceptionOutput", "StageSet", "ALGORITHM_POINT",
+__all__ = ["PerceptionContext", "PerceptionInput", "PerceptionOutput", "SensorFrame", "StageSet", "ALGORITHM_POINT",
            "STAGE_POINTS", "check_cart", "check_heightmap", "check_impact", "check_output"]
 
 #: the scenario keys of the plug-in points (named in faults)
@@ -57,9 +62,10 @@ class StageSet:
 @dataclass(frozen=True)
 class PerceptionContext:
     """What stays the same over a run: the ``scenario`` (cart dimensions ``scenario.cart``, noise
-    ``scenario.sensor.noise.range_sigma_m``, ``scenario.perception`` knobs); the controller ``grid`` (nx, ny)
-    and its ``cell_xy`` (dx, dy) m; ``level_from_sensor`` (4, 4), the sensor pose in the level frame;
-    ``beam_shape`` (rows, columns) of the beam pattern when it is a grid, else None; the loaded ``stages``."""
+    ``scenario.lidar.noise.range_sigma_m``, ``scenario.perception`` knobs); the controller ``grid`` (nx, ny)
+    and its ``cell_xy`` (dx, dy) m; ``level_from_sensor`` (4, 4), the sensor pose in the level frame (the
+    LiDAR's, else the first depth-giving camera's); ``beam_shape`` (rows, columns) of the beam pattern when it
+    is a grid and the LiDAR is the only depth-giving sensor, else None; the loaded ``stages``."""
 
     scenario: Scenario
     grid: tuple[int, int]
@@ -67,11 +73,44 @@ class PerceptionContext:
     level_from_sensor: np.ndarray
     beam_shape: tuple[int, int] | None
     stages: StageSet
+    #: a typical depth 1-sigma of the cameras at their working distance (m; 0 without depth cameras)
+    camera_sigma_m: float = 0.0
 
     @property
     def noise_sigma_m(self) -> float:
-        """The range noise 1-sigma, m."""
-        return self.scenario.sensor.noise.range_sigma_m
+        """The range noise 1-sigma, m: the LiDAR's, or the cameras' typical one when it is larger."""
+        lidar = self.scenario.lidar
+        return max(lidar.noise.range_sigma_m if lidar is not None else 0.0, self.camera_sigma_m)
+
+
+@dataclass(frozen=True)
+class SensorFrame:
+    """One sensor's data of the frame (``PerceptionInput.sensors[name]``). Level frame as above.
+
+    * ``name``, ``kind`` (``lidar``, ``depth_camera``, ``stereo_camera``, ``rgb_camera``); ``frame``: the ring
+      frame of its latest image (a camera with ``every_frames`` > 1 keeps it between its frames);
+    * ``points`` (N, 3) float64 m, level frame, NaN rows invalid: the LiDAR's returns, or a depth-giving
+      camera's pixels back-projected (every ``points_stride``-th pixel along each axis); (0, 3) for an RGB
+      camera; ``ranges`` (N,) float32 m, each point's distance from its sensor (NaN invalid);
+    * cameras only (None for the LiDAR): ``rgb`` (H, W, 3) uint8 (a stereo pair's left image; None where the
+      camera renders no colour), ``depth_m`` (H, W) float32 planar depth m, NaN invalid (the depth camera's
+      noisy depth, the stereo matcher's; None for an RGB camera), ``labels`` (H, W) uint8 per-pixel labels
+      (cosim.world.labels) when the camera has ``labels: true``, ``right`` (H, W, 3) uint8 a stereo pair's
+      right image; ``K`` (3, 3) the pinhole (u right, v down, pixel centres at half-integers);
+      ``level_from_camera`` (4, 4) the camera (X right, Y up, Z forward) in the level frame.
+    """
+
+    name: str
+    kind: str
+    frame: int
+    points: np.ndarray
+    ranges: np.ndarray
+    rgb: np.ndarray | None = None
+    depth_m: np.ndarray | None = None
+    labels: np.ndarray | None = None
+    right: np.ndarray | None = None
+    K: np.ndarray | None = None
+    level_from_camera: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -80,7 +119,9 @@ class PerceptionInput:
     returns in the level frame, NaN rows invalid (and where the return is on the sensor's own vehicle), stored
     column-major (``points[:, k]`` contiguous); ``border`` (N,) uint8 beam flags (perception_proc.rim
     ``FOV_EDGE`` / ``OCCLUDED``); the pose hint ``heading_xy``: the towing direction in the level frame (unit
-    (x, y)); ``heights_out``: an optional (nx, ny) float32 destination a height map stage may fill."""
+    (x, y)); ``heights_out``: an optional (nx, ny) float32 destination a height map stage may fill;
+    ``sensors``: every sensor's :class:`SensorFrame` by name. With several depth-giving sensors, ``ranges``,
+    ``points`` and ``border`` hold theirs one after the other, in declaration order."""
 
     frame: int
     ranges: np.ndarray
@@ -88,6 +129,7 @@ class PerceptionInput:
     border: np.ndarray
     heading_xy: tuple[float, float]
     heights_out: np.ndarray | None = None
+    sensors: Mapping[str, SensorFrame] = field(default_factory=dict)
 
 
 @dataclass

@@ -28,7 +28,7 @@ arithmetic (:func:`_rotated`), the row by a table on sin(elevation), and the flo
 reference per-pixel method, so the candidates are the reference's except that the column pre-test applies
 the tolerance exactly in azimuth: points that only float32 rounding let through (up to about 2e-7 in
 1 - cos beyond the tolerance) are dropped, 0.2-2.5 % of the candidates on the bench and default scenes, with
-identical coverage and error statistics (``bench/offset_accuracy.py``). Then an exact per-beam minimum
+identical coverage and error statistics (``python bench/run.py offset_accuracy``). Then an exact per-beam minimum
 (:func:`_nearest_per_beam`: repeated scatter, no sort, no ``ufunc.at``) and the plane refinement of the
 winners in float32 (:func:`_refine`; at the image border with the left / upper neighbour).
 

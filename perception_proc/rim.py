@@ -16,7 +16,9 @@ Works in the *level frame* (the sensor's parent vehicle body frame: x forward, y
    well above the rim cover little of its area (a tractor cab covers most of its own; the auger tube and the
    stream over an open cart cover a thin strip; :mod:`perception_proc.roof`). The candidate with most rim
    points wins.
-4. Orientation from the rectangle's long side, its sign from the heading hint (the cart is towed forward).
+4. Orientation from the rectangle's long side, its sign from the heading hint (the cart is towed forward); a
+   long side more than :data:`ACROSS_HEADING_DEG` off the heading is the cart's width (a piece seen over less
+   of the cart's length than its width), and the long axis is taken across it.
    Per axis, a span matching the known outer size fixes the centre; a shorter span means a partly visible cart:
    an end whose points come from beams at the pattern's edge, or which lies next to an occluder and covers
    little of its own length (a seen end shows the end rim running across it), is cut, and the other end
@@ -45,6 +47,9 @@ from .roof import roof_cells_bound, roofed
 __all__ = ["CartEstimate", "find_cart", "border_beams", "RIM_BAND_M", "RASTER_M", "SIZE_TOL_M", "NO_CART",
            "FOV_EDGE", "OCCLUDED", "BAND_NOISE_SIGMAS"]
 
+#: a rim rectangle whose long side is more than this off the towing direction is a cart seen over less of its
+#: length than its width, deg
+ACROSS_HEADING_DEG = 45.0
 #: half-height of the slab around the rim top in which points count as rim candidates, m
 RIM_BAND_M = 0.10
 #: the rim band widens by this many sigmas of range noise. One, not three: a grain surface filled near the
@@ -347,6 +352,10 @@ def find_cart(points: np.ndarray, border: np.ndarray, cart: Cart, heading_xy=(1.
     pts = np.take(xy, g, axis=0)
     ux = _refine_direction(pts, ux)
     hx = np.asarray(heading_xy, dtype=np.float64)
+    if abs(ux @ hx) < math.cos(math.radians(ACROSS_HEADING_DEG)) * math.sqrt(hx @ hx):
+        # the seen piece is wider than long: a cart seen over less of its length than its width (a camera
+        # over the spout); its long axis follows the towing direction, not the piece's long side
+        ux = np.array([-ux[1], ux[0]])
     if ux @ hx < 0:
         ux = -ux
     uy = np.array([-ux[1], ux[0]])                              # left of forward

@@ -16,9 +16,10 @@ import numpy as np
 from cosim.scenario.config import Scenario
 
 from . import accuracy as acc
-from .blocks import RANGE_BANDS_M, band_name
+from . import camera_accuracy as cacc
+from .blocks import RANGE_BANDS_M, SENSOR_FIELDS, band_name, sensor_state_block
 
-__all__ = ["summarize", "clean_json", "evaluation_caster", "evaluation_note"]
+__all__ = ["summarize", "clean_json", "evaluation_caster", "evaluation_note", "sensor_blocks"]
 
 _P = "perc_state."
 
@@ -134,4 +135,57 @@ def summarize(scenario: Scenario, series: Mapping[str, np.ndarray], heightmap_tr
         "timing_ms": {k: _median(_col(series, f"{k}_ms"))
                       for k in ("lidar", "cart", "heightmap", "impact", "perception", "accuracy")},
     }
+    out["sensors"] = sensor_blocks(scenario, series, range_error, heightmap_truth, heightmap_perceived)
     return {"perception": clean_json(out)}
+
+
+def _fill_final(scenario: Scenario, truth: np.ndarray | None, perceived: np.ndarray | None) -> dict:
+    """The fill-height figures of the final perceived map against the final truth (the shorthand LiDAR, whose
+    own map is the perceived map and has no per-frame record)."""
+    if truth is None or perceived is None:
+        return {"mean_rel_error": math.nan, "bias_m": math.nan, "cells": 0, "over": "final map"}
+    shape = scenario.cart.grid_shape(scenario.controller.grid_cell_m)
+    f = cacc.fill_error(perceived, acc.truth_on_grid(np.asarray(truth), scenario.grain.cell_m, shape, scenario.cart))
+    return {"mean_rel_error": f["fill_rel_err"], "bias_m": f["fill_bias_m"], "cells": f["fill_cells"],
+            "over": "final map"}
+
+
+def sensor_blocks(scenario: Scenario, series: Mapping[str, np.ndarray], lidar_range: dict,
+                  truth: np.ndarray | None, perceived: np.ndarray | None) -> dict:
+    """``perception.sensors``: per depth-giving sensor, its depth error against the exact ray cast in its working
+    range (mean, median, p99, share above 5 cm: weighted by the compared pixels of each evaluated frame), its
+    coverage, its valid share, the model's time, and the mean relative error of the fill height its own map
+    gives (over the evaluated frames; for the ``sensor:`` shorthand, of the final perceived map)."""
+    out = {}
+    for name in scenario.depth_sensors:
+        spec = scenario.sensor_set[name]
+        lo, hi = (acc.WORKING_RANGE_M if spec.kind == "lidar" else (spec.range_min_m, spec.range_max_m))
+        if not scenario.sensors:                                  # the shorthand: perc_state holds it all
+            out[name] = {"kind": "lidar", "working_range_m": [lo, hi],
+                         "frames_evaluated": lidar_range["frames_evaluated"],
+                         "depth_error": {"mean_m": lidar_range["working_mean_m"],
+                                         "p99_m": lidar_range["working_p99_m"],
+                                         "frac_above_5cm": lidar_range["working_frac_above_5cm"]},
+                         "coverage": 1.0 - lidar_range["beam_missing_frac"]
+                         if math.isfinite(lidar_range["beam_missing_frac"]) else math.nan,
+                         "fill_height": _fill_final(scenario, truth, perceived)}
+            continue
+        col = {f: np.asarray(series.get(f"{sensor_state_block(name)}.{f}", np.zeros(0)), np.float64)
+               for f, _, _, _ in SENSOR_FIELDS}
+        n, cells = col["depth_pixels"], col["fill_cells"]
+        out[name] = {
+            "kind": spec.kind, "working_range_m": [lo, hi],
+            "frames_evaluated": int(np.nansum(col["acc_evaluated"])) if col["acc_evaluated"].size else 0,
+            "depth_error": {"mean_m": _weighted(col["depth_err_mean_m"], n),
+                            "median_m": _median(col["depth_err_median_m"]),
+                            "p99_m": _weighted(col["depth_err_p99_m"], n),
+                            "frac_above_5cm": _weighted(col["frac_above_5cm"], n)},
+            "coverage": _weighted(col["coverage"], np.ones_like(col["coverage"])),
+            "spurious_frac": _weighted(col["spurious_frac"], np.ones_like(col["spurious_frac"])),
+            "valid_fraction": _median(col["valid_fraction"]),
+            "fill_height": {"mean_rel_error": _weighted(col["fill_rel_err"], cells),
+                            "bias_m": _weighted(col["fill_bias_m"], cells),
+                            "cells": _median(np.where(cells > 0, cells, np.nan)), "over": "evaluated frames"},
+            "measure_ms": _median(col["measure_ms"]),
+        }
+    return out

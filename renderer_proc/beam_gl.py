@@ -144,7 +144,7 @@ class GLBeamRenderer(GLResources):
     """Beam-native GL renderer of a gridded :class:`BeamLayout`: ``set_scene``, ``draw(0, world_from_sensor)``,
     ``read_depth(0, out)``, ``read_rgb(0, out)``, ``close`` (the renderer interface with one target).
     ``surface_quads`` False draws the grain surface as single triangles, the path before the quads (for
-    side-by-side measurement, ``bench/beam_surface.py``)."""
+    side-by-side measurement, ``python bench/run.py beam_surface``)."""
 
     def __init__(self, layout: BeamLayout, codec: Codec, *, rgb: bool = False, context: Any = None,
                  surface_quads: bool = True):
@@ -253,6 +253,7 @@ class GLBeamRenderer(GLResources):
 
     def set_scene(self, scene: Scene) -> None:
         """Upload one frame: box (the ground slab among them) and cylinder instances, mesh poses, grain heights."""
+        self.make_current()
         self._origin = scene.heightfield.world_from_grid[:3, 3].copy()
         boxes = box_instances(scene.boxes, self._origin)
         ground = np.zeros(len(boxes), bool)

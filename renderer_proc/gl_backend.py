@@ -10,7 +10,7 @@ owns one framebuffer of renderbuffers (no textures, so nothing can mipmap or fil
 The image is flipped in the projection (``renderer_proc.projection``), so ``read_into`` fills a top-down
 (H, W, 4) destination, e.g. a shared-memory view, directly.
 
-Throughput on llvmpipe (bench/README.md, "Renderer"): the cost is rasterisation, per 4 x 4 pixel block each
+Throughput on llvmpipe (bench/HISTORY.md, "Renderer"): the cost is rasterisation, per 4 x 4 pixel block each
 triangle touches, hidden or not. So the grain surface is drawn with its flat blocks merged
 (``renderer_proc.hfmesh``), box faces that other parts always cover are skipped (``Boxes.hidden_top``), the
 ground slab, which fills every image, is drawn once per camera and copied into each frame while the camera's
@@ -149,6 +149,12 @@ class GLResources:
         self._made: list = []
         self.ctx = context if context is not None else create_gl_context()
 
+    def make_current(self) -> None:
+        """Make this renderer's context the thread's current one (moderngl draws into whichever context is
+        current: several renderers in one thread, e.g. in-process simulations side by side, each make theirs
+        current when a frame starts, ~7 us)."""
+        self.ctx.__enter__()
+
     def _m(self, obj):
         """Remember a GL object made here, to release it when the context is not ours."""
         self._made.append(obj)
@@ -260,6 +266,7 @@ class GLRenderer(GLResources):
     def set_scene(self, scene: Scene) -> None:
         """Upload one frame: box / cylinder instance records (boxes with a hidden top face drawn without it),
         mesh poses, the grain heights (a buffer write; the triangle list only when its flat blocks change)."""
+        self.make_current()
         # GPU coordinates are relative to the cart grid origin (float64 here, float32 there)
         self._origin = scene.heightfield.world_from_grid[:3, 3].copy()
         boxes = box_instances(scene.boxes, self._origin)

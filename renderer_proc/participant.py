@@ -1,9 +1,11 @@
-"""The renderer ring member: reads the dynamics state, renders every camera, writes the image blocks.
+"""The renderer ring member: reads the dynamics state, renders the LiDAR's images and every camera sensor,
+writes the image blocks.
 
-Thin shell: ``start`` makes the backend (GL context or the numpy mock) and binds the segment's
-views; ``step(frame)`` checks the state's frame stamp, rebuilds the :class:`~cosim.world.scene.Scene`,
-uploads it (poses as instance records, grain heights as a buffer write), then per camera draws and reads
-straight into the shared-memory blocks under their seqlocks.
+Thin shell: ``start`` makes the LiDAR's backend (GL context or the numpy mock; none without a LiDAR) and the
+cameras' (``renderer_proc.cameras``, sharing the GL context) and binds the segment's views; ``step(frame)``
+checks the state's frame stamp, rebuilds the :class:`~cosim.world.scene.Scene`, uploads it (poses as
+instance records, grain heights as a buffer write), then per LiDAR camera (or the beams target) and per
+camera sensor view draws and reads straight into the shared-memory blocks under their seqlocks.
 """
 from __future__ import annotations
 
@@ -22,6 +24,7 @@ from cosim.world.rig import plan_rig
 from cosim.world.scene import scene_from_state
 
 from .blocks import STATE_BLOCK, WRITER, ray_casts, wants_rgb
+from .cameras import CameraSet
 from .projection import camera_poses, world_from_sensor
 
 if TYPE_CHECKING:
@@ -43,24 +46,24 @@ _MS_PER_S = 1000.0
 def make_backend(scenario: Scenario, rig, context: Any = None):
     """The backend ``scenario.renderer`` names: ``GLRenderer`` ("gl", imports moderngl now) or ``MockRenderer``
     ("mock", no GL). Raises RendererUnavailable when no GL context can be made."""
-    if scenario.sensor.method == "beam_native":
+    if scenario.lidar.method == "beam_native":
         return _beam_backend(scenario, context)
     opts = dict(rgb=wants_rgb(scenario), float_depth=scenario.render.float_depth)
     if scenario.renderer == "gl":
         from .gl_backend import GLRenderer
 
-        return GLRenderer(rig, scenario.sensor.codec, context=context, **opts)
+        return GLRenderer(rig, scenario.lidar.codec, context=context, **opts)
     if scenario.renderer == "mock":
         from .mock_backend import MockRenderer
 
-        return MockRenderer(rig, scenario.sensor.codec, parts=entity_parts(scenario), **opts)
+        return MockRenderer(rig, scenario.lidar.codec, parts=entity_parts(scenario), **opts)
     raise ValueError(f"scenario.renderer is {scenario.renderer!r}: this scenario runs no renderer")
 
 
 def _beam_backend(scenario: Scenario, context: Any = None):
     """The beam-native backend (``sensor.method: beam_native``): ``GLBeamRenderer`` (gl, grid and honeycomb
     patterns) or ``MockBeamRenderer`` (mock; gl with a CSV pattern)."""
-    layout, codec, rgb = beam_layout(scenario.sensor.pattern), scenario.sensor.codec, wants_rgb(scenario)
+    layout, codec, rgb = beam_layout(scenario.lidar.pattern), scenario.lidar.codec, wants_rgb(scenario)
     if scenario.renderer == "gl" and layout.gridded:
         from .beam_gl import GLBeamRenderer
 
@@ -79,8 +82,10 @@ class RendererParticipant:
 
     def __init__(self, scenario: Scenario):
         self.scenario = scenario
-        self.beam_native = scenario.sensor.method == "beam_native"
-        self.rig = None if self.beam_native else plan_rig(scenario)
+        self.has_lidar = scenario.lidar is not None
+        self.beam_native = self.has_lidar and scenario.lidar.method == "beam_native"
+        self.rig = plan_rig(scenario) if self.has_lidar and not self.beam_native else None
+        self.cameras = CameraSet(scenario)
         self.backend = None
         self.segment: Segment | None = None
         self.rgb = wants_rgb(scenario)
@@ -99,7 +104,7 @@ class RendererParticipant:
         self._outputs = []
         if self.beam_native:
             self._outputs.append({"depth": BEAMS_DEPTH_BLOCK, **({"rgb": BEAMS_RGB_BLOCK} if self.rgb else {})})
-        for cam in (() if self.beam_native else self.rig.cameras):
+        for cam in (self.rig.cameras if self.rig is not None else ()):
             outs = {"depth": f"{cam.name}_depth"}
             if self.rgb:
                 outs["rgb"] = f"{cam.name}_rgb"
@@ -108,16 +113,21 @@ class RendererParticipant:
             for block in outs.values():
                 segment.view(block)            # raises KeyError naming the missing block
             self._outputs.append(outs)
-        self.backend = make_backend(self.scenario, self.rig)
-        caster = getattr(self.backend, "caster", None)
-        self._caster_code = CASTERS.index(caster.name) if caster is not None and ray_casts(self.scenario) else None
-        if caster is not None:
-            log.info("exact ray cast: %s", caster.name)
+        self._caster_code = None
+        if self.has_lidar:
+            self.backend = make_backend(self.scenario, self.rig)
+            caster = getattr(self.backend, "caster", None)
+            self._caster_code = CASTERS.index(caster.name) if caster is not None and ray_casts(self.scenario) \
+                else None
+            if caster is not None:
+                log.info("exact ray cast: %s", caster.name)
+        if len(self.cameras):
+            self.cameras.start(segment, context=getattr(self.backend, "ctx", None))
 
     def step(self, frame: int) -> None:
         """Render frame ``frame``: the dynamics state S(frame) into the images I(frame)."""
         seg = self.segment
-        if seg is None or self.backend is None:
+        if seg is None or (self.backend is None and self.cameras.backend is None):
             raise RuntimeError("renderer stepped before start")
         got = seg.frame_of("dyn_state")
         if got != frame:
@@ -128,9 +138,10 @@ class RendererParticipant:
         # schedule dynamics may write the next frame once this member writes its first output
         state = dict(zip(self._state_names, self._state.array.item()))
         scene = scene_from_state(self.scenario, state, self._heights.copy(), self._stream.copy())
-        self.backend.set_scene(scene)
         valid = total = 0
-        poses = ([world_from_sensor(self.scenario, state)] if self.beam_native
+        if self.backend is not None:
+            self.backend.set_scene(scene)
+        poses = ([] if not self.has_lidar else [world_from_sensor(self.scenario, state)] if self.beam_native
                  else camera_poses(self.scenario, state, self.rig))
         for k, pose in enumerate(poses):
             self.backend.draw(k, pose)
@@ -145,17 +156,22 @@ class RendererParticipant:
             if "zf" in outs:
                 with seg.write(outs["zf"], frame) as zf:
                     self.backend.read_zf(k, zf)
+        if len(self.cameras):
+            cam_valid, cam_total = self.cameras.render(frame, state, scene)
+            if not self.has_lidar:                     # valid_fraction is the LiDAR's where there is one
+                valid, total = cam_valid, cam_total
         self.last_ms = (time.perf_counter() - t0) * _MS_PER_S
         if seg.has(STATE_BLOCK):
             with seg.write(STATE_BLOCK, frame) as st:
                 st.t_s = float(state.get("t_s", 0.0))
                 st.render_ms = self.last_ms
-                st.valid_fraction = valid / max(total, 1)
+                st.valid_fraction = valid / total if total else float("nan")
                 if self._caster_code is not None:
                     st.ray_caster = self._caster_code
 
     def close(self) -> None:
-        """Release the backend (the GL context). Safe to call more than once, also after a failed start."""
+        """Release the backends (the GL context). Safe to call more than once, also after a failed start."""
+        self.cameras.close()                           # before the context it may share
         if self.backend is not None:
             self.backend.close()
             self.backend = None

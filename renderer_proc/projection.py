@@ -43,7 +43,7 @@ def far_plane_m(max_depth_m: float) -> float:
 
 def world_from_sensor(scenario: Scenario, state: Mapping[str, float]) -> np.ndarray:
     """4 x 4 pose of the LiDAR (camera-convention axes) in the world: parent pose @ mount @ axes."""
-    m = scenario.sensor.mount
+    m = scenario.lidar.mount
     if m.parent == "world":
         parent = np.eye(4)
     else:

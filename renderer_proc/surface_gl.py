@@ -10,7 +10,7 @@ Two index lists: :meth:`SurfaceMesh.triangles` (the camera renderer, and the bea
 vertices a ``lines_adjacency`` primitive through ``beam_quad.geom`` -> ``beam_quad.frag``, a quad's two triangles
 bounded once and tested in one fragment per beam; drawn as triangles each grid quad's bounding rectangle is
 rasterised and shaded twice). The triangle path of the beam-native renderer is kept for side-by-side
-measurement (``bench/beam_surface.py``) and as the tests' second reference.
+measurement (``python bench/run.py beam_surface``) and as the tests' second reference.
 """
 from __future__ import annotations
 

@@ -199,20 +199,21 @@ def test_covered_top_is_bounded_by_the_side_faces_exactly(ctx, monkeypatch):
     check_exact(got, below, lay.directions)
 
 
-def test_bench_script_reports_the_solid_draws():
-    # bench/beam_solids.py as docs/lidar.md runs it, one frame: a Markdown row of fragments and CPU per draw
+def test_bench_case_reports_the_solid_draws(tmp_path):
+    # the beam_solids case as docs/lidar.md runs it, quick (one frame): fragments and CPU per draw
+    import json
     import subprocess
     import sys
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1]
-    out = subprocess.run([sys.executable, "bench/beam_solids.py", "--rounds", "1", "--frames", "1", "--reps", "1"],
-                         cwd=root, check=True, capture_output=True, text=True, timeout=120).stdout
-    row = [line for line in out.splitlines() if line.startswith("| this |")]
-    assert len(row) == 1, out
-    box_frags, box_ms, box_geom, cyl_frags, cyl_ms, cyl_geom = (float(x) for x in row[0].split("|")[2:8])
-    assert 1000 < box_frags < 38400 and 1000 < cyl_frags < 38400           # each draw shades some of the target
-    assert min(box_ms, box_geom, cyl_ms, cyl_geom) > 0.0
+    subprocess.run([sys.executable, "bench/run.py", "beam_solids", "--quick", "--json", str(tmp_path / "r.json")],
+                   cwd=root, check=True, capture_output=True, text=True, timeout=120)
+    rows = json.loads((tmp_path / "r.json").read_text())["cases"]["beam_solids"]["samples"]["this"][0]
+    for draw in ("boxes", "cylinders"):
+        r = rows["solid draws, per frame"][draw]
+        assert 1000 < r["fragments"] < 38400                   # each draw shades some of the target
+        assert min(r["CPU ms"], r["of which geometry ms"]) > 0.0
 
 
 def test_empty_cart_floor_stays_exact(ctx):

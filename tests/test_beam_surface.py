@@ -136,17 +136,18 @@ def test_rough_mid_run_heap_in_the_default_scene(ctx):
 
 
 @pytest.mark.gl
-def test_surface_benchmark_counts_fewer_fragments_for_quads(ctx, capsys):
-    # bench/beam_surface.py on one frame of each kind: the quads shade fewer fragments than the triangles (the
+def test_surface_benchmark_counts_fewer_fragments_for_quads(ctx):
+    # the beam_surface case on one frame of each kind: the quads shade fewer fragments than the triangles (the
     # counts are exact, not timings), and the two paths' images agree
-    import importlib.util
+    import sys
     from pathlib import Path
 
-    path = Path(__file__).resolve().parents[1] / "bench" / "beam_surface.py"
-    spec = importlib.util.spec_from_file_location("beam_surface_bench", path)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
-    bench.main(["--frames", "1", "--reps", "1"], context=ctx)
-    rows = [r.split("|") for r in capsys.readouterr().out.splitlines() if r.startswith("| ")]
-    ratio = {r[1].strip(): float(r[4].strip().rstrip("x")) for r in rows if r[2].strip() == "quads / triangles"}
-    assert set(ratio) == {"sample", "rough"} and all(0.0 < v < 0.75 for v in ratio.values())
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+    from cases.gl_draws import surface_paths
+
+    res = surface_paths(frames=1, span=8.0, reps=1, context=ctx)
+    rows = res["grain surface draw, per frame"]
+    ratio = {kind: rows[f"{kind}, quads / triangles"]["fragments shaded"] for kind in ("sample", "rough")}
+    assert all(0.0 < v < 0.75 for v in ratio.values()), ratio
+    checks = res["quads against triangles, checks"]
+    assert all(c["% beams byte-identical (worst frame)"] > 99.0 for c in checks.values()), checks

@@ -1,14 +1,18 @@
-"""bench/run_all.py: the results' structure and Markdown (fast), and its --quick mode end to end (slow)."""
+"""bench/run_all.py: the results' structure and Markdown from the harness's case results (fast), and its --quick mode
+end to end (slow)."""
 from __future__ import annotations
 
 import importlib.util
 import json
 import math
+import sys
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT / "bench") not in sys.path:
+    sys.path.insert(0, str(ROOT / "bench"))
 
 
 def _module():
@@ -18,37 +22,34 @@ def _module():
     return mod
 
 
-def _summary(wall: float, rtf: float, peaks, evaluation: str = "every 10 frames, 4096 sampled beams each") -> dict:
-    return {"wall_time_s": wall, "real_time_factor": rtf,
-            "fill": {"section_peak_height_m": peaks, "max_overfill_m": 0.009, "profile_rmse_m": 0.007,
-                     "time_to_target_s": 88.7},
-            "spill": {"mass_kg": 0.0}, "mass_balance": {"relative_error": 1e-14},
-            "perception": {"range_error": {"evaluation": evaluation, "frames_evaluated": 12, "mean_m": 0.00098,
-                                           "median_m": 0.00097, "p99_m": 0.00194, "max_m": 0.00197,
-                                           "working_frac_above_5cm": 0.0, "working_p99_m": 0.00194}}}
+def _e2e_sample(wall: float, cpu: float, ring: float, peaks, evaluation: str = "every 10 frames") -> dict:
+    """One sample of the e2e case, as bench/cases/launched.py writes it."""
+    return {"run": {"default": {"wall s": wall, "CPU s": cpu, "ring wall s": ring, "real-time factor (ring)": 120.0 / ring}},
+            "LiDAR range error against the exact ray cast": {"mm": {
+                "evaluation": evaluation, "frames evaluated": 12, "mean mm": 0.98, "median mm": 0.97, "p99 mm": 1.94,
+                "max mm": 1.97, "p99 in 2-15 m mm": 1.94, "% above 5 cm in 2-15 m": 0.0}},
+            "fill": {"default": {"lowest section peak m": min(peaks), "highest section peak m": max(peaks),
+                                 "max overfill m": 0.009, "profile RMSE m": 0.007, "time to target s": 88.7,
+                                 "spill kg": 0.0, "mass balance, relative error": 1e-14}}}
 
 
-def test_figures_and_markdown_from_runs(monkeypatch):
-    """measure() takes medians over interleaved runs, the ratios of the perception run's to the ground-truth
-    run's wall times, the fill and range figures of the first runs; the Markdown carries every headline figure."""
+def test_figures_and_markdown_from_the_cases_results():
+    """figures() takes medians over the e2e case's interleaved rounds, the ratios of the perception run's to the
+    ground-truth run's wall and CPU times round by round, the fill and range figures of the first runs, and the
+    beam_native and mock_cast cases' ratios; the Markdown carries every headline figure."""
     ra = _module()
-    walls = {"perception": iter([(30.0, 12.0), (40.0, 14.0), (35.0, 13.0)]),
-             "ground_truth": iter([(10.0, 2.0), (6.0, 3.0), (8.0, 4.0)])}
-    cpus = {"perception": iter([9.0, 12.0, 10.0]), "ground_truth": iter([3.0, 3.0, 5.0])}
-    order = []
+    from harness import Arm, Result, get
 
-    def fake_launch(scenario, duration, extra):
-        lab = "ground_truth" if "ground_truth" in extra else "perception"
-        order.append(lab)
-        wall, ring = next(walls[lab])
-        return {"wall_s": wall, "cpu_s": next(cpus[lab]),
-                "summary": _summary(ring, duration / ring, [1.894, 1.909] if lab == "perception" else [1.892, 1.903])}
-
-    monkeypatch.setattr(ra, "launch", fake_launch)
-    monkeypatch.setattr(ra, "step_ratio", lambda frames, renderer: {
-        "renderer": renderer, "frames": frames, "camera_rig_cpu_ms": 8.0, "beam_native_cpu_ms": 4.0, "ratio_cpu": 0.5})
-    res = ra.measure("default", 120.0, 3, 4, "gl")
-    assert order == ["perception", "ground_truth", "ground_truth", "perception", "perception", "ground_truth"]
+    p = [_e2e_sample(30.0, 9.0, 12.0, [1.894, 1.909]), _e2e_sample(40.0, 12.0, 14.0, [1.8, 1.95]),
+         _e2e_sample(35.0, 10.0, 13.0, [1.7, 1.96])]
+    g = [_e2e_sample(10.0, 3.0, 2.0, [1.892, 1.903]), _e2e_sample(6.0, 3.0, 3.0, [1.8, 1.9]),
+         _e2e_sample(8.0, 5.0, 4.0, [1.8, 1.9])]
+    e2e = Result(get("e2e"), {"scenario": "default"}, list(ra.ARMS), 3, {"ground_truth": g, "perception": p})
+    step = Result(get("beam_native"), {"frames": 4, "renderers": "gl"}, [Arm("this")], 1, {"this": [
+        {"render + LiDAR step": {"gl camera_rig": {"CPU ms/frame": 8.0}, "gl beam_native": {"CPU ms/frame": 4.0}}}]})
+    mock = Result(get("mock_cast"), {"frames": 2}, [Arm("this")], 1, {"this": [
+        {"beam renderers, default scene": {"embree-static": {"CPU ms/frame": 5.0}, "gl": {"CPU ms/frame": 2.5}}}]})
+    res = ra.figures(e2e, step, mock)
     assert res["perception"]["wall_s"] == 35.0 and res["ground_truth"]["wall_s"] == 8.0
     assert res["ratio"]["wall"] == pytest.approx(35.0 / 8.0)
     assert res["ratio"]["ring_wall"] == pytest.approx(13.0 / 3.0)
@@ -59,15 +60,20 @@ def test_figures_and_markdown_from_runs(monkeypatch):
     assert res["ratio"]["cpu"] == pytest.approx(10.0 / 3.0)
     assert res["targets"] == {"wall": 2.0, "cpu": 3.0, "wall_met": False, "cpu_met": True}
     assert res["perception"]["real_time_factor"] == pytest.approx(120.0 / 13.0)
-    assert res["perception"]["fill"]["section_peak_max_m"] == 1.909
+    assert res["perception"]["fill"]["section_peak_max_m"] == 1.909                    # the first round's run
     assert res["ground_truth"]["fill"]["section_peak_min_m"] == 1.892
-    assert res["perception"]["range_error"]["median_m"] == 0.00097
+    assert res["perception"]["range_error"]["median_m"] == pytest.approx(0.00097)
+    assert res["lidar_step"]["ratio_cpu"] == 0.5 and res["mock_frame"]["ratio_cpu"] == 2.0
+    res["meta"] = {"command": "python bench/run_all.py", "scenario": "default", "duration_s": 120.0, "rounds": 3,
+                   "renderer": "gl", "written_utc": "2026-01-01T00:00:00+00:00", "cores": 2, "machine": "x86_64",
+                   "python": "3.11", "load_average": [1.0, 1.2], "commit": "abc"}
     json.dumps(res, allow_nan=False)
     md = ra.render_markdown(res)
     for text in ("**4.38x** whole-process wall time", "3.00-6.67x; ratio of the medians 4.38x", "4.33x ring wall time",
                  "**3.00x** CPU time of the process tree", "wall at most 2.0x (NOT met)", "CPU at most 3.0x (met)",
                  "| highest section peak (m) | 1.909 | 1.903 |",
-                 "median 0.97 mm", "p99 1.94 mm", "0.000 % of beams above 5 cm", "**0.50x**", "bench/HISTORY.md"):
+                 "median 0.97 mm", "p99 1.94 mm", "0.000 % of beams above 5 cm", "**0.50x**", "bench/HISTORY.md",
+                 "5.00 against 2.50 ms CPU: **2.00x** (target: at most 1x"):
         assert text in md
 
 
@@ -83,4 +89,6 @@ def test_quick_mode_writes_both_files(tmp_path):
               res["perception"]["real_time_factor"], res["ground_truth"]["real_time_factor"]):
         assert math.isfinite(v) and v > 0
     assert res["perception"]["range_error"]["frames_evaluated"] >= 1
-    assert "Quick mode" in (tmp_path / "results.md").read_text()
+    md = (tmp_path / "results.md").read_text()
+    assert "Quick mode" in md and "CPU per frame against beams" in md and "runs per hour" in md
+    assert res["curves"]["curves"]["median"]["CPU per frame against beams (ms)"]["100 x 100"]["beams"] == 10_000

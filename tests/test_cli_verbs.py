@@ -16,6 +16,7 @@ import tomllib
 
 from cosim.cli import VERBS, main
 from cosim.scenario.loader import describe_packaged, load_scenario, packaged_scenarios, resolve_scenario_arg
+from cosim.viewer.viewinfo import ViewInfo
 
 ROOT = Path(__file__).resolve().parent.parent
 #: a verb shown in the docs: "launch.py <verb>" or "python -m cosim <verb>"
@@ -168,7 +169,7 @@ def test_the_viewer_address_is_printed_only_once_it_answers(recording):
     assert not announcer.path.exists()
 
 
-def test_run_hands_the_viewer_its_host_port_announce_file_and_cart_size():
+def test_run_hands_the_viewer_its_host_port_announce_file_and_the_scenarios_view():
     from cosim.cli import build_parser, run_extras
 
     args = build_parser().parse_args(["run", "default", "--viewer", "--viewer-port", "0", "--viewer-host",
@@ -178,7 +179,8 @@ def test_run_hands_the_viewer_its_host_port_announce_file_and_cart_size():
     (obs,), sinks = run_extras(args, sc)
     assert obs.target == "cosim.viewer.server:observe" and sinks == []
     assert dict(obs.kwargs) == {"port": 0, "host": "127.0.0.2", "announce": "/tmp/x.json",
-                                "size_m": (sc.cart.interior_length_m, sc.cart.interior_width_m)}
+                                "view": ViewInfo.of(sc).to_dict()}
+    assert ViewInfo.from_dict(obs.kwargs["view"]).size_m == (sc.cart.interior_length_m, sc.cart.interior_width_m)
 
 
 def test_main_in_process_leaves_the_signal_handlers_as_found(monkeypatch):

@@ -3,7 +3,7 @@
 The fast check (CI): the first 8 s of each, long enough for the cart to be found, the first measurement to
 reach the controller and the auger to start: finite numbers, exact mass balance, no spill, the cart found in
 most frames. The whole runs, with their metrics, are a slow study (``pytest -m slow``) and a benchmark
-(``bench/extreme_cases.py``).
+(``python bench/run.py extreme``).
 """
 from __future__ import annotations
 

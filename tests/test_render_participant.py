@@ -149,3 +149,45 @@ def test_import_never_touches_gl():
             "assert 'moderngl' not in sys.modules, 'moderngl imported'\n"
             "assert not any(m.startswith('glcontext') for m in sys.modules)\n")
     subprocess.run([sys.executable, "-c", code], check=True, cwd=str(__import__("pathlib").Path(__file__).parents[1]))
+
+
+def test_two_gl_renderers_in_one_thread_each_draw_into_their_own_context():
+    """Several GL renderers in one thread (in-process simulations side by side), each with its own context: a
+    renderer's images are those it drew alone, though another renderer (another pattern) was made and drew in
+    between (moderngl draws into whichever context is current; each renderer makes its own current when a frame
+    starts)."""
+    from cosim.world.beamtarget import beam_layout
+    from cosim.world.scene import scene_from_state
+    from renderer_proc.beam_gl import GLBeamRenderer
+    from renderer_proc.projection import world_from_sensor
+
+    s = Scenario(format_version=1)
+    lay = beam_layout(s.sensor.pattern)
+    other = beam_layout(s.sensor.pattern.model_copy(update={"azimuth_count": 120, "elevation_count": 90}))
+    state, heights, stream = sample_frame(s, 2.0)
+    pose = world_from_sensor(s, state)
+    scenes = [scene_from_state(s, state, heights + np.float32(dz), stream) for dz in (0.0, 0.4)]
+
+    def frame(r, layout, scene):
+        r.set_scene(scene)
+        r.draw(0, pose)
+        img = np.zeros(layout.shape + (4,), np.uint8)
+        r.read_depth(0, img)
+        return img
+
+    try:
+        first = GLBeamRenderer(lay, s.sensor.codec)
+    except RendererUnavailable as exc:
+        pytest.skip(str(exc))
+    second = None
+    try:
+        alone = [frame(first, lay, sc) for sc in scenes]
+        assert not np.array_equal(alone[0], alone[1])
+        second = GLBeamRenderer(other, s.sensor.codec)              # made last: its context is current
+        for sc, ref in zip(scenes, alone):
+            frame(second, other, sc)
+            np.testing.assert_array_equal(frame(first, lay, sc), ref)
+    finally:
+        if second is not None:
+            second.close()
+        first.close()

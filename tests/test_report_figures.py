@@ -86,6 +86,16 @@ def test_a_runs_figures_have_labelled_axes_and_colour_bars_with_units(run):
     assert "(m)" in colourbars(figs["fig8_heightmaps"])[0].get_ylabel()
 
 
+def test_height_maps_are_seen_from_above(run):
+    """Fig 8 as the dashboard draws the maps: the front-left cell (grid (0, 0)) at the lower left, y up."""
+    fig = dict(run_figures(run))["fig8_heightmaps"]
+    for ax in (ax for ax in fig.axes if ax not in colourbars(fig)):
+        (im,) = ax.get_images()
+        left, right, bottom, top = im.get_extent()
+        assert im.origin == "lower" and left < right and bottom < top and ax.get_ylim()[0] < ax.get_ylim()[1]
+        assert ax.get_ylabel() == "y from the left wall (m)"
+
+
 def test_no_value_cells_are_hatched_grey_and_named_not_black(run):
     fig = dict(run_figures(run))["fig8_heightmaps"]
     truth_ax, perc_ax = [ax for ax in fig.axes if ax not in colourbars(fig)]

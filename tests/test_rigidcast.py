@@ -160,3 +160,59 @@ def test_renderer_summary_names_the_caster():
     assert summarize(sc, {"render_state.ray_caster": np.array([3.0, 3.0])}, None) == {"ray_caster": "embree-static"}
     assert summarize(sc, {"render_state.ray_caster": np.array([1.0])}, None) == {"ray_caster": CASTERS[1]}
     assert summarize(sc, {"render_state.render_ms": np.array([2.0])}, None) == {}
+
+
+@pytest.mark.filterwarnings("ignore:invalid value encountered:RuntimeWarning")
+def test_degenerate_solids_are_not_cast():
+    """Solids without volume never reach Embree nor an inverse: the auger's last run-out frame (every stream
+    segment of zero radius, which raised LinAlgError), a prism of zero length, an empty
+    stream and a grain surface all at the floor, frame after frame on one caster (instances hidden, then shown
+    again): every beam as the numpy cast of the same scene."""
+    sc = Scenario(format_version=1)
+    caster = make_caster(entity_parts(sc))
+    try:
+        scene, o, d = rays(sc, 3.0)
+        c, n_stream = scene.cylinders, int(np.sum(scene.cylinders.radius < 0.16))
+        assert n_stream > 10
+        zero_r = c.radius.copy()
+        zero_r[-n_stream:] = 0.0
+        short = c.p1.copy()
+        short[-n_stream:-n_stream + 3] = c.p0[-n_stream:-n_stream + 3]          # three of zero length
+        cases = {
+            "zero radius": replace(scene, cylinders=Cylinders(c.p0, c.p1, zero_r, c.colour)),
+            "as before": scene,
+            "zero length": replace(scene, cylinders=Cylinders(c.p0, short, c.radius, c.colour)),
+            "no stream": replace(scene, cylinders=Cylinders(c.p0[:-n_stream], c.p1[:-n_stream],
+                                                            c.radius[:-n_stream], c.colour[:-n_stream])),
+            "grain at the floor": rays(sc, 3.0, np.zeros_like(scene.heightfield.heights))[0],
+            "again": scene,
+        }
+        for name, s in cases.items():
+            assert_agrees(caster.cast(s, o, d), cast_from(s, o, d, "numpy"), min_hit=0.3), name
+    finally:
+        caster.close()
+
+
+def test_has_volume():
+    """Scaled rotations have volume; a zero axis, a nearly coplanar frame or a non-finite entry does not."""
+    from cosim.world.rigidcast import has_volume
+
+    rot = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    lin = np.stack([rot * [0.1, 0.1, 2.0], rot * [0.0, 0.0, 2.0], rot * [0.3, 0.3, 0.0],
+                    np.array([[1.0, 1.0, 0.0], [0.0, 1e-12, 0.0], [0.0, 0.0, 1.0]]), np.full((3, 3), np.nan),
+                    rot * [1e-6, 1e-6, 1e-6]])
+    trans = np.zeros((len(lin), 3))
+    assert has_volume(lin, trans).tolist() == [True, False, False, False, False, True]
+    trans[0, 1] = np.inf
+    assert not has_volume(lin, trans)[0]
+
+
+def test_stream_segments_without_surface_are_dropped():
+    """The scene keeps no stream segment of zero radius (the run-out's last frame) nor of zero length."""
+    from cosim.world.scene import _stream_cylinders
+
+    rows = np.array([[0.0, 0.0, 3.0, 0.1], [0.0, 0.0, 2.0, 0.1], [0.0, 0.0, 2.0, 0.1], [0.0, 0.0, 1.0, 0.0],
+                     [0.0, 0.0, 0.5, 0.0]])
+    p0, p1, r = _stream_cylinders(rows, 5)
+    np.testing.assert_array_equal(p0[:, 2], [3.0, 2.0])            # 3 -> 2, 2 -> 1 (mean radius 0.05); 1 -> 0.5 gone
+    np.testing.assert_array_equal(r, [0.1, 0.05])

@@ -541,3 +541,42 @@ def test_a_disk_that_fills_while_the_figures_are_drawn(small_tmpfs, shm_clean, c
     assert summary["status"] == "failed" and summary["error"]["message"] == str(res.error)
     assert summary["figures"]["status"] == "failed"
     assert "Traceback" not in capfd.readouterr().err
+
+
+@pytest.mark.parametrize("where", ["main", "run_cli", "exit functions"])
+def test_a_stop_signal_in_the_entrys_last_instructions_is_never_a_traceback(where, tmp_path):
+    """The windows the timing test above can only hit by chance, hit every time: a SIGTERM sent as
+    ``cosim.cli.main`` returns or as ``run_cli`` returns (a profile hook sends it on the function's return event,
+    so the handler runs in the caller's next instructions), or while the exit functions run: 130, no traceback."""
+    script = tmp_path / "entry.py"
+    script.write_text(textwrap.dedent(f"""
+        import os, signal, sys
+        sys.path.insert(0, {str(REPO)!r})
+        import cosim.cli, cosim.entry
+        where = {where!r}
+
+        def main():
+            return 0
+
+        def on_return(frame, event, arg):
+            if event == "return" and frame.f_code.co_name == where:
+                sys.setprofile(None)
+                os.kill(os.getpid(), signal.SIGTERM)
+
+        cosim.cli.main = main
+        real_exitfuncs = cosim.entry.atexit._run_exitfuncs
+
+        def exitfuncs():
+            if where == "exit functions":
+                os.kill(os.getpid(), signal.SIGTERM)
+            real_exitfuncs()
+
+        cosim.entry.atexit._run_exitfuncs = exitfuncs
+        sys.argv = ["launch.py", "list"]
+        if where != "exit functions":
+            sys.setprofile(on_return)
+        cosim.entry.exit_cli()
+    """))
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 130, (out.returncode, out.stderr)
+    assert "Traceback" not in out.stderr

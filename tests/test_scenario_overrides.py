@@ -59,8 +59,8 @@ def _other(value, loc) -> list:
         return [not value]
     if isinstance(value, int):
         return [value + 1, value - 1]
-    if isinstance(value, float):
-        return [value * 1.01 + 0.001, value * 0.99, value + 0.5, value - 0.5]
+    if isinstance(value, float):        # another value (0.99 x 0 is 0 again)
+        return [v for v in (value * 1.01 + 0.001, value * 0.99, value + 0.5, value - 0.5) if v != value]
     if isinstance(value, list) and value and all(isinstance(v, (int, float)) for v in value):
         return [[value[0] + 0.5, *value[1:]], [value[0] - 0.5, *value[1:]]]
     if isinstance(value, str) and loc[-1] in ("name", "description"):

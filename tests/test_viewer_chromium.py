@@ -22,8 +22,11 @@ from pathlib import Path
 
 import cv2
 import pytest
+import test_viewer_standins as standins
 
+from cosim.viewer.fill import STATUSES, section_status
 from cosim.viewer.panels import PANELS
+from cosim.viewer.viewinfo import default_fill
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (apt-get install chromium)")
@@ -33,10 +36,12 @@ RUN_SCRIPT = textwrap.dedent("""
     sys.path[:0] = [{root!r}, {tests!r}]  # this checkout's code, not another installed copy
     import test_viewer_standins as standins
     from cosim.runtime.launcher import ObserverSpec, launch
+    from cosim.viewer.viewinfo import ViewInfo
     if __name__ == "__main__":
-        obs = ObserverSpec("viewer", "cosim.viewer.server:observe", {{"port": 0, "announce": {announce!r}}})
-        res = launch(standins.scenario(600.0), {out!r}, specs=standins.specs(pace_s=0.02), console_log=False,
-                     observers=[obs])
+        sc = standins.scenario(600.0)
+        obs = ObserverSpec("viewer", "cosim.viewer.server:observe",
+                           {{"port": 0, "announce": {announce!r}, "view": ViewInfo.of(sc).to_dict()}})
+        res = launch(sc, {out!r}, specs=standins.specs(pace_s=0.02), console_log=False, observers=[obs])
         sys.exit(res.exit_code)
 """)
 FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -63,6 +68,14 @@ def panels_in(dom: str) -> dict[str, list[int]]:
     return out
 
 
+def fullness_bars(dom: str) -> list[tuple[str, str]]:
+    """(label, status) of each fullness bar the page drew (the canvas's ``data-labels`` and ``data-status``)."""
+    canvas = re.search(r'<canvas[^>]*id="c-fullness"[^>]*>', dom).group(0)
+    labels = re.search(r'data-labels="([^"]*)"', canvas).group(1).split("|")
+    status = re.search(r'data-status="([^"]*)"', canvas).group(1).split("|")
+    return list(zip(labels, status))
+
+
 def test_dashboard_updates_with_the_runs_frames(tmp_path):
     out, announce = tmp_path / "run", tmp_path / "viewer.json"
     script = tmp_path / "run_it.py"
@@ -75,7 +88,8 @@ def test_dashboard_updates_with_the_runs_frames(tmp_path):
             time.sleep(0.1)
         assert announce.exists(), "the viewer observer did not start"
         url = json.loads(announce.read_text())["url"]
-        panels = panels_in(chromium(url, "--dump-dom"))
+        dom = chromium(url, "--dump-dom")
+        panels = panels_in(dom)
         shot = tmp_path / "dashboard.png"
         chromium(url, f"--screenshot={shot}")
     finally:
@@ -86,8 +100,16 @@ def test_dashboard_updates_with_the_runs_frames(tmp_path):
     frames_run = json.loads((out / "summary.json").read_text())["frames"]
     for pid in PANELS:
         seen = panels[pid]
+        if pid == "cameras":                 # a LiDAR run: no camera sensor (tests/test_camera_observers.py)
+            assert seen == [], seen
+            continue
         assert len(seen) >= 2, (pid, seen)  # the panel updated while the page was open
         assert seen == sorted(set(seen)) and 0 <= seen[0] and seen[-1] < frames_run, (pid, seen)
+    # each bar coloured as its label says (one rule, cosim.viewer.fill), in the default scenario's band
+    bars = fullness_bars(dom)
+    assert len(bars) == standins.SECTIONS and {s for _, s in bars} <= set(STATUSES) - {"unknown"}, bars
+    band = default_fill()
+    assert all(section_status(int(label.split()[0]) / 100, band) == (label, status) for label, status in bars), bars
     # block stamps may run one frame ahead of the supervisor's (the ring is mid-turn)
     assert panels["header"] and panels["header"][0] >= max(panels["rgb"]) - 1
     img = cv2.imread(str(shot))

@@ -17,6 +17,7 @@ import test_viewer_standins as standins
 from cosim.runtime.launcher import ObserverSpec, launch
 from cosim.viewer import LiveSource, RunEnded, RunNotFound, resolve_run
 from cosim.viewer.live import SHM_DIR
+from cosim.viewer.viewinfo import ViewInfo
 
 DURATION_S = 6.0
 #: per-step compute time of each stand-in: the run lasts long enough (~2 s) to attach to it mid-way
@@ -123,6 +124,7 @@ def test_fifty_attach_detach_cycles_during_a_run(tmp_path, shm_clean, baseline):
     sc = standins.scenario(DURATION_S)
     out = tmp_path / "run"
     cycles: list[tuple[int, bool]] = []
+    views: list = []
     errors: list[BaseException] = []
 
     def cycle():
@@ -132,6 +134,7 @@ def test_fifty_attach_detach_cycles_during_a_run(tmp_path, shm_clean, baseline):
                 snap = src.snapshot()
                 src.close()
                 cycles.append((snap.frames.get("dyn_state", -1), (SHM_DIR / src.segment_name).exists()))
+                views.append(src.view)
         except BaseException as exc:  # noqa: BLE001 - reported by the test thread
             errors.append(exc)
 
@@ -148,6 +151,7 @@ def test_fifty_attach_detach_cycles_during_a_run(tmp_path, shm_clean, baseline):
     assert not errors, errors
     assert res.completed and res.exit_code == 0
     assert (out / "timeseries.csv").read_bytes() == baseline
+    assert views and all(v == ViewInfo.of(sc) for v in views), "the run directory's scenario.yaml gives the view"
     assert len(cycles) == 50
     assert all(alive for _, alive in cycles), "a detach must never delete the segment"
     frames = [f for f, _ in cycles]
@@ -227,7 +231,7 @@ def test_run_flags_wire_the_viewer_and_the_recorder(tmp_path):
     args = build_parser().parse_args(["run", "default", "--viewer", "--viewer-port", "9001", "--record"])
     observers, sinks = run_extras(args)
     assert observers == [ObserverSpec("viewer", "cosim.viewer.server:observe",
-                                      {"port": 9001, "host": "127.0.0.1", "announce": None, "size_m": None})]
+                                      {"port": 9001, "host": "127.0.0.1", "announce": None, "view": None})]
     assert len(sinks) == 1 and args.record is True
     args = build_parser().parse_args(["run", "--record", str(tmp_path / "x.mcap"), "--record-image-every", "0"])
     with pytest.raises(ValueError, match="image_every must be >= 1"):

@@ -12,26 +12,22 @@ import test_viewer_standins as standins
 
 from cosim.recording import mcap_sink
 from cosim.runtime.launcher import launch
+from cosim.viewer.draw import UNKNOWN
 from cosim.viewer.page import page_html
 from cosim.viewer.panels import (
-    BACKGROUND,
     IMAGE_PANELS,
     MAP_MARGIN_BOTTOM,
     MAP_MARGIN_LEFT,
     MAP_MARGIN_TOP,
     MAP_W,
     PANELS,
-    PLOT_BOX,
-    PLOT_H,
-    PLOT_W,
-    UNKNOWN,
-    lidar_frame,
     panel_info,
     render_panel,
 )
 from cosim.viewer.replay import ReplaySource
 from cosim.viewer.server import DashboardServer
 from cosim.viewer.snapshot import Snapshot, auger_now, fullness
+from cosim.viewer.viewinfo import ViewInfo
 
 
 def decode(png: bytes) -> np.ndarray:
@@ -48,9 +44,19 @@ def full_snapshot(frame: int = 10) -> Snapshot:
     return Snapshot(frame=frame, structs={"dyn_state": dyn},
                     images={"cam0_rgb": rgb, "cam1_rgb": rgb, "cam0_depth": rgb.copy()},
                     arrays={"lidar_points": standins.points(frame), "heightmap_truth": standins.truth(frame),
-                            "heightmap_perceived": np.full((30, 15), np.nan, np.float32)},
+                            "heightmap_perceived": np.full((30, 15), np.nan, np.float32),
+                            "cam_tof_measured": _tof_depth()},
                     frames={"dyn_state": frame, "cam0_rgb": frame, "cam1_rgb": frame - 1, "cam0_depth": frame,
-                            "lidar_points": frame, "heightmap_truth": frame, "heightmap_perceived": frame})
+                            "lidar_points": frame, "heightmap_truth": frame, "heightmap_perceived": frame,
+                            "cam_tof_measured": frame})
+
+
+def _tof_depth() -> np.ndarray:
+    """A camera sensor's measured depth (docs/cameras.md): 2 m on the left, 4 m on the right, a NaN column."""
+    z = np.full((24, 32), 2.0, np.float32)
+    z[:, 16:] = 4.0
+    z[:, 10] = np.nan
+    return z
 
 
 def test_discovery_of_fields():
@@ -83,34 +89,20 @@ def test_a_run_without_rgb_shows_the_panel_absent_not_an_error():
         render_panel(snap, "auger")
 
 
+def test_camera_sensor_depth_near_red_far_blue_invalid_grey():
+    info = panel_info(full_snapshot())["cameras"]
+    assert info == {"available": True, "frame": 10, "note": "cam_tof_measured"}
+    img = decode(render_panel(full_snapshot(), "cameras"))
+    assert img.shape == (24 + 4, 32, 3)
+    near, far, invalid = img[5, 2], img[5, 30], img[5, 10]
+    assert near[2] > near[0] and far[0] > far[2], (near, far)          # BGR: red near, blue far
+    assert tuple(invalid) == UNKNOWN[::-1]
+
+
 def test_camera_images_side_by_side_in_rgb_order():
     img = decode(render_panel(full_snapshot(), "rgb"))
     assert img.shape == (48, 128, 3)
     assert tuple(img[5, 5]) == (0, 0, 255), "RGBA red must come out red (BGR 0, 0, 255)"
-
-
-def _dots(img: np.ndarray) -> list[tuple[float, float]]:
-    """(row, column) centres of the drawn points inside the LiDAR plot box, left to right."""
-    x0, y0, x1, y1 = PLOT_BOX
-    inner = img[y0 + 1:y1, x0 + 1:x1]
-    lit = (inner != BACKGROUND).any(axis=2).astype(np.uint8)
-    n, _, _, centres = cv2.connectedComponentsWithStats(lit)
-    return sorted(((c[1] + y0 + 1, c[0] + x0 + 1) for c in centres[1:]), key=lambda rc: rc[1])
-
-
-def test_lidar_drawings_are_in_the_lidar_frame_x_forward_y_left_z_up():
-    pts = np.full((3, 4), np.nan, np.float32)
-    pts[0] = (0.0, 0.0, 5.0, 5.0)   # camera axes X right, Y up, Z forward: 5 m ahead
-    pts[1] = (1.0, 0.0, 6.0, 6.1)   # 6 m ahead, 1 m to the right (lidar y = -1)
-    np.testing.assert_array_equal(lidar_frame(pts[:2, :3]), [[5, 0, 0], [6, -1, 0]])
-    top = decode(render_panel(Snapshot(arrays={"lidar_points": pts}), "lidar_top"))
-    assert top.shape == (PLOT_H, PLOT_W, 3)
-    (r0, c0), (r1, c1) = _dots(top)
-    # from above: x forward up the picture, y left to the left; one scale on both axes
-    assert c1 > c0 and r1 < r0 and abs((c1 - c0) - (r0 - r1)) <= 1
-    side = decode(render_panel(Snapshot(arrays={"lidar_points": pts}), "lidar_side"))
-    (r0, c0), (r1, c1) = _dots(side)
-    assert c1 > c0 and abs(r1 - r0) <= 0.5, "from the side: x forward to the right, both at z = 0"
 
 
 def test_heightmaps_share_a_scale_with_metre_axes_and_grey_unknown():
@@ -121,10 +113,11 @@ def test_heightmaps_share_a_scale_with_metre_axes_and_grey_unknown():
     assert img.shape[0] == h + MAP_MARGIN_TOP + MAP_MARGIN_BOTTOM and w >= 500, "large enough to read"
     right = img[top + 2:top + h - 2, 2 * left + w + 2:2 * (left + w) - 2]
     assert (right == UNKNOWN).all(axis=2).mean() > 0.99, "unknown cells of the perceived map are grey"
-    # the truth map's peak cell is drawn in the top colour of the shared scale (viridis at 255)
+    # the truth map's peak cell is drawn in the top colour of the shared scale (viridis at 255), seen from
+    # above: x (front wall) to the right, y (left wall) up
     truth = standins.truth(10)
     i, j = np.unravel_index(np.nanargmax(truth), truth.shape)
-    px = img[top + int((j + 0.5) * h / truth.shape[1]), left + int((i + 0.5) * w / truth.shape[0])]
+    px = img[top + int((truth.shape[1] - j - 0.5) * h / truth.shape[1]), left + int((i + 0.5) * w / truth.shape[0])]
     top_colour = cv2.applyColorMap(np.array([[255]], np.uint8), cv2.COLORMAP_VIRIDIS)[0, 0]
     np.testing.assert_array_equal(px, top_colour)
 
@@ -154,7 +147,10 @@ def test_replay_gives_back_the_recorded_blocks(recording):
     want = standins.points(last)
     np.testing.assert_allclose(snap.arrays["lidar_points"], want[np.isfinite(want[:, 0])])
     np.testing.assert_array_equal(snap.arrays["heightmap_truth"], standins.truth(last))
-    assert all(v["available"] for v in panel_info(snap).values())
+    assert src.view == ViewInfo.of(standins.scenario(1.0)), "the recording's view record"
+    info = panel_info(snap)
+    assert all(v["available"] for k, v in info.items() if k != "cameras")
+    assert not info["cameras"]["available"], "a LiDAR run has no camera sensor (tests/test_camera_observers.py)"
     assert len(src.history.as_json()["t"]) == last + 1
     with pytest.raises(ValueError, match="replay speed must be > 0"):
         ReplaySource(recording, speed=0)
@@ -167,7 +163,7 @@ def test_replay_served_to_the_dashboard(recording):
     try:
         state = json.loads(urllib.request.urlopen(srv.url + "api/state", timeout=10).read())
         assert state["status"] == "replay ended" and state["panels"]["lidar_side"]["available"]
-        for pid in IMAGE_PANELS:
+        for pid in (p for p in IMAGE_PANELS if p != "cameras"):            # no camera sensor in this run
             with urllib.request.urlopen(f"{srv.url}panel/{pid}.png", timeout=10) as r:
                 assert r.headers["Content-Type"] == "image/png" and decode(r.read()).size > 0
         page = urllib.request.urlopen(srv.url, timeout=10).read().decode()

@@ -22,6 +22,7 @@ from typing import Mapping, Sequence
 from cosim.errors import RunError
 
 from .describe import FmuDescription, require_fmpy
+from .pythonfmu_exit import release_at_exit
 
 __all__ = ["FmuStepError", "FmuSlave"]
 
@@ -122,6 +123,7 @@ class FmuSlave:
             fmu = FMU2Slave(guid=desc.guid, unzipDirectory=self._dir, modelIdentifier=desc.model_identifier,
                             instanceName=instance_name)
             fmu.instantiate()
+        release_at_exit(fmu.dll._name)          # a pythonfmu wrapper's exit order (cosim.fmi.pythonfmu_exit)
         return fmu
 
     def _initialise(self, start: Mapping[str, object], t0: float) -> None:

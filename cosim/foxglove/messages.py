@@ -152,7 +152,7 @@ def grid_msg(t_ns: int, heights: np.ndarray, cell_x_m: float, cell_y_m: float, f
 def scalars_json(t_ns: int, frame: int, values: dict) -> bytes:
     """A ``cosim.struct.<block>`` JSON message: ``{timestamp: {sec, nsec}, frame, **values}``; orjson writes
     non-finite floats as ``null`` (JSON has no NaN). orjson, not :func:`json.dumps`: a 60-field dyn_state row
-    costs ~10x less (bench/README.md, 2026-11-25), most of a ground-truth frame's recording cost."""
+    costs ~10x less (bench/HISTORY.md, 2026-11-25), most of a ground-truth frame's recording cost."""
     sec, nsec = divmod(max(0, int(t_ns)), NS_PER_S)
     return orjson.dumps({"timestamp": {"sec": sec, "nsec": nsec}, "frame": int(frame), **values},
                         option=orjson.OPT_SERIALIZE_NUMPY)

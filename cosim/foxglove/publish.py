@@ -14,6 +14,10 @@ not sent again. Topics, per block stamp:
 * ``/<cam>/depth_encoded`` foxglove.RawImage ``rgba8`` (lossless, alpha = validity) and ``/<cam>/rgb``
   foxglove.CompressedImage JPEG (or PNG, or RawImage: ``rgb_format``), when the caller passes them.
 * ``/lidar/points`` foxglove.PointCloud (valid beams), ``/heightmap/<kind>`` foxglove.Grid.
+* per camera sensor (cosim.foxglove.cameras): ``/cam_<name>/rgb`` and ``/right`` (frame ``cam_<name>_optical``),
+  ``/cam_<name>/calibration`` foxglove.CameraCalibration (with each of its images), ``/cam_<name>/depth``
+  (``32FC1``, the measured depth), ``/depth_exact``, ``/labels`` (``mono8``), ``/cam_<name>/points``
+  foxglove.PointCloud (frame ``cam_<name>``); the camera arrays are recorded on the images' beat.
 * ``/cosim/frame`` ``cosim.Frame`` (JSON), last: everything before it is in a file once its marker is.
 
 The recording (:class:`cosim.recording.writer.McapWriter`) is this publisher with an MCAP file as its sink.
@@ -27,6 +31,7 @@ from typing import Literal
 import foxglove
 import numpy as np
 from foxglove.channels import (
+    CameraCalibrationChannel,
     CompressedImageChannel,
     FrameTransformChannel,
     GridChannel,
@@ -36,6 +41,14 @@ from foxglove.channels import (
 
 from shm_schema import Schema, StructBlock
 
+from .cameras import (
+    CAMERA_ARRAY_PARTS,
+    CameraInfo,
+    calibration_msg,
+    camera_frames,
+    float_image_msg,
+    mono_image_msg,
+)
 from .messages import (
     FRAME_MARKER,
     compressed_image_msg,
@@ -66,6 +79,8 @@ class Recorded:
     images: tuple[str, ...]
     lidar: bool
     grids: tuple[str, ...]
+    #: the camera sensors' array blocks (``cam_<name>_measured``, ``_depth``, ``_labels``, ``_points``)
+    camera_arrays: tuple[str, ...] = ()
 
     @classmethod
     def of(cls, schema: Schema) -> "Recorded":
@@ -74,7 +89,10 @@ class Recorded:
                    tuple(b.name for b in blocks if getattr(b, "kind", "") == "image"),
                    "lidar_points" in schema and len(schema.block("lidar_points").shape) == 2,
                    tuple(b.name for b in blocks if b.name.startswith("heightmap") and not isinstance(b, StructBlock)
-                         and len(b.shape) == 2))
+                         and len(b.shape) == 2),
+                   tuple(b.name for b in blocks if b.name.startswith("cam_") and not isinstance(b, StructBlock)
+                         and getattr(b, "kind", "") != "image"
+                         and b.name.rpartition("_")[2] in CAMERA_ARRAY_PARTS))
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -84,7 +102,7 @@ class Recorded:
     def due(self, frame: int, image_every: int) -> tuple[str, ...]:
         """The blocks frame ``frame`` records: every struct, the LiDAR points and the height maps, and the
         images on every ``image_every``-th frame."""
-        images = self.images if frame % image_every == 0 else ()
+        images = self.images + self.camera_arrays if frame % image_every == 0 else ()
         return self.structs + (("lidar_points",) if self.lidar else ()) + self.grids + images
 
 
@@ -99,16 +117,27 @@ class RunInfo:
     static: tuple[tuple[str, str, np.ndarray], ...]
     #: cart interior length (along grid x) and width (along grid y), m
     cart_interior_m: tuple[float, float]
+    #: the camera sensors (their frames are among ``static``)
+    cameras: tuple[CameraInfo, ...] = ()
+    #: what the dashboard's replay needs of the scenario (cosim.viewer.viewinfo.ViewInfo as JSON; "" unknown)
+    view_json: str = ""
 
     @classmethod
     def of(cls, scenario) -> "RunInfo":
+        from cosim.viewer.viewinfo import ViewInfo
         from cosim.world.geometry import cart_body_from_grid, mount_transform
 
-        mount, cart = scenario.sensor.mount, scenario.cart
-        return cls(scenario.name, float(scenario.timing.sensor_period_s),
-                   (("cart", "cart_grid", np.asarray(cart_body_from_grid(cart), float)),
-                    (mount.parent, "lidar", np.asarray(mount_transform(mount), float))),
-                   (float(cart.interior_length_m), float(cart.interior_width_m)))
+        from .cameras import camera_infos
+
+        cart = scenario.cart
+        frames = [("cart", "cart_grid", np.asarray(cart_body_from_grid(cart), float))]
+        if scenario.lidar is not None:
+            mount = scenario.lidar.mount
+            frames.append((mount.parent, "lidar", np.asarray(mount_transform(mount), float)))
+        cams = camera_infos(scenario)
+        frames += [f for c in cams for f in camera_frames(c)]
+        return cls(scenario.name, float(scenario.timing.sensor_period_s), tuple(frames),
+                   (float(cart.interior_length_m), float(cart.interior_width_m)), cams, ViewInfo.of(scenario).to_json())
 
 
 class FramePublisher:
@@ -143,14 +172,29 @@ class FramePublisher:
                     break
         self._tf = FrameTransformChannel("/tf", context=ctx)
         self._images: dict[str, tuple[str, str, object]] = {}
+        cameras = {c.frame: c for c in self._run.cameras}
+        #: per camera sensor frame: its info and calibration channel, and the last stamp its calibration went at
+        self._calib: dict[str, tuple[CameraInfo, object]] = {
+            c.frame: (c, CameraCalibrationChannel(f"/{c.frame}/calibration", context=ctx)) for c in cameras.values()}
+        self._calib_sent: dict[str, int] = {}
         for name in rec.images:
             cam, _, kind = name.rpartition("_")
-            if kind == "rgb" and self.rgb_format != "raw":
-                fmt, channel = self.rgb_format, CompressedImageChannel(f"/{cam}/rgb", context=ctx)
+            frame_id = cam or name
+            if cam in cameras:                                     # a camera sensor: its optical frames
+                frame_id = f"{cam}_optical" if kind == "rgb" else f"{cam}_right_optical"
+            if kind in ("rgb", "right") and self.rgb_format != "raw":
+                fmt, channel = self.rgb_format, CompressedImageChannel(f"/{cam}/{kind}", context=ctx)
             else:
-                topic = {"rgb": f"/{cam}/rgb", "depth": f"/{cam}/depth_encoded"}.get(kind, f"/{name}")
+                topic = {"rgb": f"/{cam}/rgb", "right": f"/{cam}/right",
+                         "depth": f"/{cam}/depth_encoded"}.get(kind, f"/{name}")
                 fmt, channel = "raw", RawImageChannel(topic, context=ctx)
-            self._images[name] = (fmt, cam or name, channel)
+            self._images[name] = (fmt, frame_id, channel)
+        self._cam_arrays: dict[str, tuple[str, str, object]] = {}
+        for name in rec.camera_arrays:
+            cam, _, part = name.rpartition("_")
+            topic = f"/{cam}/{CAMERA_ARRAY_PARTS[part]}"
+            channel = PointCloudChannel(topic, context=ctx) if part == "points" else RawImageChannel(topic, context=ctx)
+            self._cam_arrays[name] = (part, cam if part == "points" else f"{cam}_optical", channel)
         self._lidar = PointCloudChannel("/lidar/points", context=ctx) if rec.lidar else None
         self._grids: dict[str, tuple[tuple[float, float], GridChannel]] = {}
         length_m, width_m = self._run.cart_interior_m
@@ -165,12 +209,14 @@ class FramePublisher:
     def topics(self) -> dict[str, str]:
         """{topic: schema name} of every channel."""
         chans = [*self._structs.values(), *(c for _, c in self._grids.values()),
-                 *(c for *_, c in self._images.values()), self._tf, self._marker, self._lidar]
+                 *(c for *_, c in self._images.values()), *(c for *_, c in self._cam_arrays.values()),
+                 *(c for _, c in self._calib.values()), self._tf, self._marker, self._lidar]
         return {c.topic(): c.schema_name() for c in chans if c is not None}
 
     def forget(self) -> None:
         """Send every block again from its next publish on, even at a stamp already sent."""
         self._last.clear()
+        self._calib_sent.clear()
         self._static_frame = -1
 
     def watched(self, name: str) -> bool:
@@ -178,8 +224,18 @@ class FramePublisher:
         client subscribes to its topic)."""
         ch = self._structs.get(name) or (self._grids[name][1] if name in self._grids else None) or \
             (self._images[name][2] if name in self._images else None) or \
+            (self._cam_arrays[name][2] if name in self._cam_arrays else None) or \
             (self._lidar if name == "lidar_points" else None)
         return ch is not None and ch.has_sinks()
+
+    def _calibration(self, cam: str, s: int, t_ns: int) -> None:
+        """The CameraCalibration of camera sensor frame ``cam`` at stamp ``s``, once per stamp (nothing for a
+        block that is not a camera sensor's)."""
+        if cam not in self._calib or self._calib_sent.get(cam, -1) >= s:
+            return
+        self._calib_sent[cam] = s
+        info, channel = self._calib[cam]
+        channel.log(calibration_msg(t_ns, info, f"{cam}_optical"), log_time=t_ns)
 
     # -- frames ------------------------------------------------------------------------------------------
     def _t_ns(self, frame: int) -> int:
@@ -203,7 +259,8 @@ class FramePublisher:
         """
         stamps = stamps or {}
         sent = [(name, s) for name in (*structs, *arrays) if (name in self._structs or name in self._grids
-                   or name in self._images or (name == "lidar_points" and self._lidar is not None))
+                   or name in self._images or name in self._cam_arrays
+                   or (name == "lidar_points" and self._lidar is not None))
                    and (s := self._new(name, stamps, frame)) is not None]
         newest = max((s for _, s in sent), default=-1)
         if newest > self._static_frame:
@@ -229,6 +286,14 @@ class FramePublisher:
                 msg = raw_image_msg(t_ns, img, cam) if fmt == "raw" else \
                     compressed_image_msg(t_ns, img, cam, fmt, self.jpeg_quality)
                 channel.log(msg, log_time=t_ns)
+                self._calibration(name.rpartition("_")[0], s, t_ns)
+            elif name in self._cam_arrays:
+                part, frame_id, channel = self._cam_arrays[name]
+                a = arrays[name]
+                msg = (point_cloud_msg(t_ns, a, frame_id) if part == "points" else
+                       mono_image_msg(t_ns, a, frame_id) if part == "labels" else float_image_msg(t_ns, a, frame_id))
+                channel.log(msg, log_time=t_ns)
+                self._calibration(name.rpartition("_")[0], s, t_ns)
             else:
                 self._lidar.log(point_cloud_msg(t_ns, arrays[name]), log_time=t_ns)
         t_ns = self._t_ns(frame)

@@ -28,14 +28,22 @@ def points_from_cloud(msg: dict) -> np.ndarray:
 
 
 def image_from_msg(msg: dict) -> np.ndarray:
-    """The image of a RawImage (``rgba8`` -> (H, W, 4), ``rgb8`` -> (H, W, 3)) or CompressedImage ((H, W, 3) RGB)
-    message dict, uint8."""
+    """The image of a RawImage (``rgba8`` -> (H, W, 4), ``rgb8`` -> (H, W, 3), ``mono8`` -> (H, W) uint8,
+    ``32FC1`` -> (H, W) float32) or CompressedImage ((H, W, 3) RGB) message dict, uint8 unless said."""
     import cv2
 
     if "encoding" in msg:
+        if msg["encoding"] in ("mono8", "32FC1"):
+            dtype = np.dtype(np.uint8) if msg["encoding"] == "mono8" else np.dtype("<f4")
+            h, w, step = int(msg["height"]), int(msg["width"]), int(msg["step"])
+            raw = np.frombuffer(msg["data"], np.uint8)
+            if step < dtype.itemsize * w or raw.size < step * h:
+                raise ValueError(f"raw image {w} x {h} step {step} does not fit its {raw.size} data bytes")
+            rows = raw[:step * h].reshape(h, step)[:, :dtype.itemsize * w]
+            return np.ascontiguousarray(rows).view(dtype).reshape(h, w).copy()
         channels = {"rgba8": 4, "rgb8": 3}.get(msg["encoding"])
         if channels is None:
-            raise ValueError(f"raw image encoding {msg['encoding']!r} is not rgba8 or rgb8")
+            raise ValueError(f"raw image encoding {msg['encoding']!r} is not rgba8, rgb8, mono8 or 32FC1")
         h, w, step = int(msg["height"]), int(msg["width"]), int(msg["step"])
         raw = np.frombuffer(msg["data"], np.uint8)
         if step < channels * w or raw.size < step * h:

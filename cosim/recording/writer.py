@@ -25,6 +25,7 @@ import numpy as np
 from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
 from cosim.foxglove.publish import FRAME_TOPIC, VEHICLES, FramePublisher, Recorded, RunInfo
+from cosim.viewer.viewinfo import METADATA_NAME as VIEW_METADATA
 from shm_schema import Schema, Segment, StructBlock
 
 __all__ = ["RecordOptions", "RunInfo", "McapWriter", "Recorded", "FrameData", "frame_data", "DEFAULT_NAME", "PROFILE",
@@ -137,7 +138,8 @@ class McapWriter(FramePublisher):
     """Writes one run's frames to an MCAP file (see the module docstring for the channels).
 
     ``run`` is a :class:`RunInfo` (or a scenario, turned into one); ``schema`` is the run's segment schema;
-    ``run_id`` and ``fingerprint`` go into the file's metadata.
+    ``run_id`` and ``fingerprint`` go into the file's ``run`` metadata record, and what the dashboard's replay
+    needs of the scenario into its ``view`` record (cosim.viewer.viewinfo).
     """
 
     def __init__(self, run, schema: Schema, path: Path, options: RecordOptions, run_id: str = "",
@@ -163,6 +165,8 @@ class McapWriter(FramePublisher):
         super().__init__(run, schema, ctx, options.rgb_format, options.jpeg_quality)
         self._mcap.write_metadata("run", {"run_id": run_id, "fingerprint": fingerprint, "scenario": self._run.scenario,
                                           "sensor_period_s": repr(self.period_s)})
+        if run.view_json:                         # the dashboard's replay: cart, sensors, fill target (docs/viewer.md)
+            self._mcap.write_metadata(VIEW_METADATA, {"json": run.view_json})
         self._mcap.flush()
 
     def write(self, frame: int, structs: dict[str, dict], arrays: dict[str, np.ndarray],

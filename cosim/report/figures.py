@@ -130,8 +130,9 @@ def fig_profile(runs: Sequence[RunData]):
 
 
 def fig_heightmaps(run: RunData):
-    """Fig 8: ground-truth height map beside the perceived one, one colour scale (viridis, 0 .. cart depth) with
-    its bar; cells without a value hatched grey and counted in the legend."""
+    """Fig 8: ground-truth height map beside the perceived one, seen from above (x from the front wall to the
+    right, y from the left wall up, as the dashboard draws them), one colour scale (viridis, 0 .. cart depth)
+    with its bar; cells without a value hatched grey and counted in the legend."""
     maps = [("ground truth", run.heightmap_truth, run.scenario.grain.cell_m),
             ("perceived", run.heightmap_perceived, run.scenario.controller.grid_cell_m)]
     maps = [m for m in maps if m[1] is not None]
@@ -141,14 +142,14 @@ def fig_heightmaps(run: RunData):
     depth = run.scenario.cart.interior_depth_m
     im = None
     for ax, (title, hm, cell) in zip(axes[0], maps):
-        ext = (0, hm.shape[0] * cell, hm.shape[1] * cell, 0)
+        ext = (0, hm.shape[0] * cell, 0, hm.shape[1] * cell)   # seen from above: front wall left, left wall down
         _hatch_missing(ax, ext)
         im = ax.imshow(np.ma.masked_invalid(hm.T), cmap=cmap, vmin=0, vmax=depth, extent=ext, interpolation="nearest",
-                       zorder=1)
+                       origin="lower", zorder=1)
         missing = float(np.mean(~np.isfinite(hm)))
         ax.set_title(f"{title} ({renderer_label(run)})" if title == "perceived" else title, fontsize=10)
         ax.set_xlabel("x from the front wall (m)")
-        ax.set_ylabel("y (m)")
+        ax.set_ylabel("y from the left wall (m)")
         ax.legend(handles=[Patch(label=f"no return / no value ({100 * missing:.0f} % of cells)", **NO_VALUE)],
                   loc="upper center", bbox_to_anchor=(0.5, -0.22), fontsize=8, frameon=False)
     fig.subplots_adjust(bottom=0.3, top=0.88, left=0.07, right=0.86, wspace=0.25)

@@ -3,10 +3,10 @@
 Every process of a run keeps numpy's BLAS (OpenBLAS), OpenMP, MKL and OpenCV single-threaded. The participants
 multiply (N, 3) by (3, 3) matrices, where a second BLAS thread buys nothing, while an idle pool thread spins for a
 while after each call and takes a core from llvmpipe's rasteriser or another participant. Measured on the 2-core
-machine (default scenario, 30 s runs interleaved, bench/README.md 2026-11-24): the perception process's CPU fell
+machine (default scenario, 30 s runs interleaved, bench/HISTORY.md 2026-11-24): the perception process's CPU fell
 from 22 to 12 ms per frame and the run went from 4.5x to 6.5x real time. OpenCV's own pool (``parallel_for_``,
 two threads on 2 cores) splits the rim search's small rasters (erode, connected components) and spent 0.5 ms of
-CPU per frame to save no wall time (``bench/perception_replay.py --stages``: cart 1.77 -> 1.23 ms CPU at the
+CPU per frame to save no wall time (``python bench/run.py perception_replay``: cart 1.77 -> 1.23 ms CPU at the
 same 1.24 ms wall, outputs bit-identical).
 
 The libraries read these variables once, when they load, so they are set in the environment that children are

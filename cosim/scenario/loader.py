@@ -56,6 +56,7 @@ from .overrides import (
     apply_extra,
     apply_set,
     at,
+    doc_path_fields,
     existing,
     fill_partial,
     model_at,
@@ -88,7 +89,7 @@ def _folder(mark_file: str, folders: Mapping[str, Path], base_dir: Path) -> Path
 
 
 def _resolve_paths(doc: _Doc, folders: Mapping[str, Path], base_dir: Path) -> None:
-    for loc in path_fields():
+    for loc in doc_path_fields(doc.data):
         parent = doc.data
         for part in loc[:-1]:
             parent = parent.get(part) if isinstance(parent, dict) else None
@@ -152,6 +153,8 @@ def _clean_loc(data, loc: Loc) -> Loc:
     for i, part in enumerate(loc):
         if isinstance(node, (dict, list)) and existing(node, (part,)):
             node = node[part]
+        elif isinstance(node, dict) and part == node.get("kind"):
+            continue                                  # the tag of a union picked by kind (sensors.<name>)
         elif isinstance(part, str) and not _KEY.match(part) and i < len(loc) - 1:
             continue
         else:

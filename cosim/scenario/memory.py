@@ -85,7 +85,9 @@ def memory_problems(s: Scenario, free: tuple | None = None, beams: int | None = 
     """The beam pattern's memory against /dev/shm's free space, the machine's available memory and the address
     space a process may map (``free``: a :class:`Room` or (shm, memory[, address space]) bytes, default:
     measured). ``beams``: the pattern's beam count (a CSV table's rows); default: the grid's."""
-    p = s.sensor.pattern
+    if s.lidar is None:
+        return []                                 # cameras only: their blocks are checked with the segment's size
+    p = s.lidar.pattern
     if beams is None:
         if p.preset == "csv":
             return []
@@ -97,7 +99,8 @@ def memory_problems(s: Scenario, free: tuple | None = None, beams: int | None = 
     shape = f"{p.azimuth_count} x {p.elevation_count} = " if p.preset != "csv" else ""
     limit = f" and a process {size_text(have.address_space)} of address space for them (ulimit -v)" \
         if have.address_space < UNLIMITED else ""
-    return [(("sensor", "pattern"),
+    where = ("sensor",) if not s.sensors else ("sensors", s.lidar_name)
+    return [(where + ("pattern",),
              f"{shape}{beams:,} beams need at least {size_text(shared)} of shared memory (block lidar_points) and "
              f"{size_text(private)} in the processes, but {SHM_DIR} has {size_text(have.shm)} free, the machine "
              f"{size_text(have.memory)} available{limit}; "

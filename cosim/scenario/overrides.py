@@ -27,7 +27,7 @@ from cosim.errors import Problem
 from .config import Scenario
 from .yamlmarks import MAX_DEPTH, Doc, Loc, Mark, dotted, parse
 
-__all__ = ["SET_FILE", "OPTIONS_FILE", "model_of", "model_at", "path_fields", "unknown_key", "tuple_len",
+__all__ = ["SET_FILE", "OPTIONS_FILE", "model_of", "model_at", "path_fields", "entry_models", "doc_path_fields", "unknown_key", "tuple_len",
            "check_override_path", "assign", "apply_set", "apply_extra", "fill_partial", "existing", "at", "KEY",
            "locs"]
 
@@ -69,6 +69,34 @@ def path_fields(model: type[BaseModel] = Scenario, prefix: Loc = ()) -> tuple[Lo
     return tuple(out)
 
 
+def entry_models(annotation) -> list[type[BaseModel]]:
+    """The records a free-keyed mapping of records holds (``sensors: name -> sensor``, a union picked by
+    ``kind``); [] for any other annotation."""
+    if typing.get_origin(annotation) is typing.Annotated:
+        annotation = typing.get_args(annotation)[0]
+    if typing.get_origin(annotation) is not dict:
+        return []
+    value = typing.get_args(annotation)[1]
+    if typing.get_origin(value) is typing.Annotated:
+        value = typing.get_args(value)[0]
+    members = typing.get_args(value) if typing.get_origin(value) in (typing.Union, types.UnionType) else (value,)
+    return [m for m in members if isinstance(m, type) and issubclass(m, BaseModel)]
+
+
+def doc_path_fields(data) -> list[Loc]:
+    """:func:`path_fields` plus the ``Path`` fields inside free-keyed mappings of records, for the keys ``data``
+    (the scenario document) has there (e.g. ``('sensors', 'mast', 'pattern', 'csv_file')``)."""
+    out = list(path_fields())
+    for name, info in Scenario.model_fields.items():
+        models = entry_models(info.annotation)
+        entries = data.get(name) if isinstance(data, dict) else None
+        if not models or not isinstance(entries, dict):
+            continue
+        for key in entries:
+            out += sorted({loc for m in models for loc in path_fields(m, (name, key))})
+    return out
+
+
 def model_at(loc: Loc) -> type[BaseModel] | None:
     """The record class at scenario key ``loc`` (``()``: Scenario), None where ``loc`` names no record."""
     model: type[BaseModel] | None = Scenario
@@ -99,7 +127,8 @@ def tuple_len(loc: Loc) -> int | None:
 
 def _free_mapping(loc: Loc) -> bool:
     """Whether ``loc`` names a field whose keys are free: a mapping (a plug-in's ``*_options``, an FMU's
-    ``parameters`` or variable mapping), any key, checked later by what reads it."""
+    ``parameters`` or variable mapping, the named sensors of ``sensors``), any key, checked later by what reads
+    it."""
     model = model_at(loc[:-1]) if loc else None
     field = model.model_fields.get(loc[-1]) if model is not None else None
     return field is not None and typing.get_origin(field.annotation) is dict

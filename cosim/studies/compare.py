@@ -37,15 +37,28 @@ NOTES = ("Ground truth feeds the controller the exact height map. Perception fee
          "variance; the measurement's latency is accounted for.")
 
 
+def _with_lidar_method(scenario: Scenario, method: str | None) -> dict:
+    """The update that sets the LiDAR's ``method`` (``sensor:``, or the ``kind: lidar`` entry of ``sensors:``);
+    none for the scenario's own method or a scenario without a LiDAR (its cameras are compared as they are)."""
+    lidar = scenario.lidar
+    if method is None or lidar is None:
+        return {}
+    if not scenario.sensors:
+        return {"sensor": lidar.model_copy(update={"method": method})}
+    sensors = type(scenario.sensors)({n: (s.model_copy(update={"method": method}) if s.kind == "lidar" else s)
+                                      for n, s in scenario.sensors.items()})
+    return {"sensors": sensors}
+
+
 def variants(scenario: Scenario) -> dict[str, Scenario]:
     """The scenarios compared, keyed by run name."""
     out = {}
     for name, (feedback, estimator, method) in VARIANTS.items():
         ctrl = scenario.controller.model_copy(update={"estimator": estimator})
-        sensor = scenario.sensor.model_copy(update={"method": method or scenario.sensor.method})
-        renderer = scenario.renderer if scenario.renderer != "none" else "mock"
+        stereo = any(c.kind == "stereo_camera" for c in scenario.cameras.values())     # needs GL's textures
+        renderer = scenario.renderer if scenario.renderer != "none" else ("gl" if stereo else "mock")
         out[name] = scenario.model_copy(update={"feedback": feedback, "controller": ctrl, "renderer": renderer,
-                                                "sensor": sensor})
+                                                **_with_lidar_method(scenario, method)})
     return out
 
 

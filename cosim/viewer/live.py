@@ -18,13 +18,12 @@ import time
 from collections import deque
 from pathlib import Path
 
-import yaml
-
 from shm_schema import Phase, Segment, SegmentNotFound, SnapshotTimeout, StructBlock
 
 from .snapshot import History, Snapshot, wanted_block
+from .viewinfo import ViewInfo
 
-__all__ = ["RunNotFound", "RunEnded", "resolve_run", "LiveSource", "cart_size_m", "SHM_DIR", "MIN_INTERVAL_S"]
+__all__ = ["RunNotFound", "RunEnded", "resolve_run", "LiveSource", "SHM_DIR", "MIN_INTERVAL_S"]
 
 log = logging.getLogger("cosim.viewer")
 
@@ -76,15 +75,6 @@ def resolve_run(run: str | os.PathLike) -> tuple[str, Path | None]:
     return name, None
 
 
-def cart_size_m(scenario_yaml: Path) -> tuple[float, float] | None:
-    """(interior length, interior width) of the cart, m, from a resolved scenario.yaml; None when unreadable."""
-    try:
-        cart = yaml.safe_load(scenario_yaml.read_text())["cart"]
-        return float(cart["interior_length_m"]), float(cart["interior_width_m"])
-    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError):
-        return None
-
-
 class LiveSource:
     """Snapshots of one running segment. Thread-safe; :meth:`close` unmaps (never unlinks)."""
 
@@ -110,9 +100,12 @@ class LiveSource:
         self._has_sup = SUPERVISOR in seg.schema.participants
         self.min_interval_s = float(min_interval_s)
         self.history = History()
-        #: the cart interior's (length, width), m (the height maps' metre axes): from the run directory's
-        #: scenario.yaml when attached by run directory, else set by whoever knows the scenario
-        self.size_m = cart_size_m(self.run_dir / "scenario.yaml") if self.run_dir else None
+        #: the run's cart, sensors and fill target (cosim.viewer.viewinfo): from the run directory's scenario.yaml
+        #: when attached by run directory, else set by whoever knows the scenario (None: unknown)
+        self.view: ViewInfo | None = ViewInfo.from_scenario_yaml(self.run_dir / "scenario.yaml") \
+            if self.run_dir else None
+        #: the cart interior's (length, width), m (the height maps' metre axes)
+        self.size_m = self.view.size_m if self.view is not None else None
         self._lock = threading.Lock()
         self._last = Snapshot(status="attached")
         self._t_last = -float("inf")

@@ -4,14 +4,20 @@ The script polls ``/api/state`` (about 4 times a second, with ``setTimeout``: no
 panel's ``src`` when that panel's frame changes, and marks each panel with the frame it shows in its
 ``data-frame`` attribute, and the frames it has shown in ``data-seen`` (what the headless-browser test reads).
 The auger chart and the fullness bars are
-drawn on canvases, at their shown size, from the numbers in the state, each with its legend.
+drawn on canvases, at their shown size, from the numbers in the state, each with its legend; each fullness bar
+takes its label and colour from the state (cosim.viewer.fill), and its canvas keeps them in ``data-labels`` and
+``data-status``.
 
-Layout: a two-column grid that fills the page's width (one column below 900 px): the camera images, then the
-height maps across the page, the two LiDAR views, the auger chart and the fullness bars. A replay adds a bar
+Layout: a two-column grid that fills the page's width (one column below 900 px): the camera images, the camera
+sensors across the page, then the height maps across the page, the two LiDAR views, the auger chart and the
+fullness bars. A replay adds a bar
 under the header: step back, play / pause, step on, and a slider to seek (``POST /api/replay``).
 """
 from __future__ import annotations
 
+import json
+
+from .fill import STATUSES
 from .panels import IMAGE_PANELS, PANELS
 
 __all__ = ["page_html", "POLL_MS"]
@@ -36,8 +42,8 @@ header .v{font-variant-numeric:tabular-nums;font-weight:600}
 #replay input[type=range]{flex:1}
 #rp-pos{font-variant-numeric:tabular-nums;min-width:150px;text-align:right}
 main{display:grid;grid-template-columns:repeat(2,minmax(0,1fr));gap:12px;padding:12px;
-  grid-template-areas:"rgb depth" "heightmaps heightmaps" "lidar_top lidar_side" "auger fullness"}
-@media (max-width:900px){main{grid-template-columns:minmax(0,1fr);grid-template-areas:"rgb" "depth"
+  grid-template-areas:"rgb depth" "cameras cameras" "heightmaps heightmaps" "lidar_top lidar_side" "auger fullness"}
+@media (max-width:900px){main{grid-template-columns:minmax(0,1fr);grid-template-areas:"rgb" "depth" "cameras"
   "heightmaps" "lidar_top" "lidar_side" "auger" "fullness"}}
 section.panel{background:#1b2027;border:1px solid #2c333d;border-radius:6px;padding:8px;min-width:0}
 section.panel h2{font-size:14px;margin:0 0 6px 0;display:flex;justify-content:space-between}
@@ -50,7 +56,7 @@ section.absent{opacity:.55}section.absent .body{display:none}
 """
 
 _JS = """
-const POLL_MS = %(poll)d, IMAGE_MIN_MS = %(image_min)d, IMAGE_PANELS = %(image_panels)s;
+const POLL_MS = %(poll)d, IMAGE_MIN_MS = %(image_min)d, IMAGE_PANELS = %(image_panels)s, FILL = %(fill)s;
 const lastFetch = {};
 let ended = false;  // the run has ended: its last images are fetched at once, and kept when the viewer goes
 const $ = (id) => document.getElementById(id);
@@ -119,21 +125,24 @@ function drawAuger(a) {
     g.fillStyle = col; g.fillText(k + " " + fmt(a[k][a[k].length - 1], 2) + " m", c.width - 260 + 130 * i, 16);
   });
 }
-function drawFullness(f) {
+function drawFullness(f) {  // labels and statuses come with the state (one rule: cosim.viewer.fill)
   const [c, g] = canvas("c-fullness");
   const L = 46, T = 28, H = c.height - T - 40, top = 1.2;
-  legend(g, L, 16, [["below target", "#60b0ff", "box"], ["at or above target", "#7fdc7f", "box"],
-                    ["unknown", "#555", "box"], ["target (100 %%)", "#f0c060", "line"]]);
+  legend(g, L, 16, Object.values(FILL).map(([label, col]) => [label, col, "box"])
+                   .concat([["target (100 %%)", "#f0c060", "line"]]));
   g.fillStyle = "#9ab"; g.fillText("section (1 = front)", c.width / 2 - 50, c.height - 4);
+  c.dataset.labels = f ? f.labels.join("|") : ""; c.dataset.status = f ? f.status.join("|") : "";
   if (!f || !f.values.length) return;
   const n = f.values.length, W = (c.width - L - 10) / n;
-  const Y = (v) => T + H * (1 - v / top);
-  [0, 0.5, 1].forEach((v) => { g.fillStyle = "#9ab"; g.fillText(Math.round(v * 100) + "%%", 4, Y(v) + 4); });
+  const Y = (v) => T + H * (1 - Math.min(Math.max(v, 0), top) / top);
+  g.fillStyle = "rgba(127, 220, 127, 0.12)";  // the band at the target the outcome allows
+  g.fillRect(L, Y(f.band[1]), c.width - 6 - L, Math.max(1, Y(f.band[0]) - Y(f.band[1])));
+  [0, 0.5, 1].forEach((v) => { g.fillStyle = "#9ab"; g.fillText(Math.round(v * 100) + " %%", 4, Y(v) + 4); });
   f.values.forEach((v, i) => {
-    const ok = v !== null && isFinite(v), h = ok ? Math.min(Math.max(v, 0), top) / top * H : H;
-    g.fillStyle = ok ? (v >= 1 ? "#7fdc7f" : "#60b0ff") : "#555";
+    const ok = f.status[i] !== "unknown", h = ok ? T + H - Y(v) : H;
+    g.fillStyle = FILL[f.status[i]][1];
     g.fillRect(L + i * W + 3, T + H - h, W - 6, h);
-    g.fillStyle = "#ddd"; g.fillText(ok ? Math.round(v * 100) + "%%" : "?", L + i * W + W / 2 - 12, Math.min(T + H - h - 4, T + H - 4));
+    g.fillStyle = "#ddd"; g.fillText(f.labels[i], L + i * W + W / 2 - 14, Math.min(T + H - h - 4, T + H - 4));
     g.fillStyle = "#ccc"; g.fillText(String(i + 1), L + i * W + W / 2 - 4, T + H + 16);
   });
   g.strokeStyle = "#f0c060"; g.lineWidth = 2; g.beginPath(); g.moveTo(L, Y(1)); g.lineTo(c.width - 6, Y(1)); g.stroke();
@@ -208,7 +217,7 @@ def page_html(title: str = "graincosim viewer", replay: bool = False) -> str:
     start (the page also shows it once ``/api/state`` has a ``replay`` position)."""
     panels = "\n".join(_panel(pid, t) for pid, t in PANELS.items())
     ids = "[" + ", ".join(f'"{p}"' for p in IMAGE_PANELS) + "]"
-    js = _JS % {"poll": POLL_MS, "image_min": IMAGE_MIN_MS, "image_panels": ids}
+    js = _JS % {"poll": POLL_MS, "image_min": IMAGE_MIN_MS, "image_panels": ids, "fill": json.dumps(STATUSES)}
     return f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>{title}</title>
 <meta name="viewport" content="width=device-width, initial-scale=1"><style>{_CSS}</style></head>

@@ -7,7 +7,10 @@ steps and seeks (the dashboard's replay bar; ``POST /api/replay``), :meth:`Repla
 the replay is. Topics map back to block names: ``/<block>``
 (cosim.struct) -> struct block, ``/<cam>/rgb`` -> ``<cam>_rgb`` ((H, W, 3) from a CompressedImage, (H, W, 4)
 from a RawImage), ``/<cam>/depth_encoded`` -> ``<cam>_depth`` ((H, W, 4) uint8, the block's bytes),
-``/lidar/points`` -> ``lidar_points`` (camera axes again), ``/heightmap/<kind>`` -> ``heightmap_<kind>``.
+``/lidar/points`` -> ``lidar_points`` (camera axes again), ``/heightmap/<kind>`` -> ``heightmap_<kind>``; a
+camera sensor's ``/cam_<name>/depth`` -> ``cam_<name>_measured``, ``/depth_exact`` -> ``cam_<name>_depth``,
+``/labels`` -> ``cam_<name>_labels``, ``/points`` -> ``cam_<name>_points`` (arrays), ``/right`` ->
+``cam_<name>_right`` (an image).
 """
 from __future__ import annotations
 
@@ -16,8 +19,10 @@ import threading
 import time
 from pathlib import Path
 
+from cosim.foxglove.cameras import CAMERA_ARRAY_PARTS
 from cosim.recording.encode import heights_from_grid, image_from_msg, points_from_cloud
 from cosim.recording.reader import RecordingError, read_recording
+from cosim.viewer.viewinfo import METADATA_NAME, ViewInfo
 
 __all__ = ["ReplaySource", "block_of_topic", "REPLAY_ACTIONS"]
 
@@ -33,6 +38,10 @@ def block_of_topic(topic: str, schema: str) -> tuple[str, str] | None:
     parts = topic.strip("/").split("/")
     if schema.startswith("cosim.struct."):
         return schema[len("cosim.struct."):], "struct"
+    if len(parts) == 2 and parts[0].startswith("cam_"):
+        arrays = {suffix: part for part, suffix in CAMERA_ARRAY_PARTS.items()}
+        if parts[1] in arrays and schema in ("foxglove.RawImage", "foxglove.PointCloud"):
+            return f"{parts[0]}_{arrays[parts[1]]}", "array"
     if schema in ("foxglove.CompressedImage", "foxglove.RawImage") and len(parts) == 2:
         return f"{parts[0]}_{'depth' if parts[1] == 'depth_encoded' else parts[1]}", "image"
     if schema == "foxglove.PointCloud" and topic == "/lidar/points":
@@ -96,7 +105,19 @@ class ReplaySource:
                 t = structs.get(hit[0], {}).get("t_s", self.frames[k] * self.period_s)
                 self._auger.append((t, hit[1], hit[2]))
         self.history = _ReplayHistory(self)
-        self.size_m = self._grid_size_m()
+        #: the run's cart, sensors and fill target: the recording's ``view`` metadata, else the scenario.yaml of
+        #: the run directory the recording lies in (None: unknown)
+        self.view = self._view(Path(path))
+        self.size_m = self.view.size_m if self.view is not None else self._grid_size_m()
+
+    def _view(self, path: Path) -> ViewInfo | None:
+        record = self.rec.metadata.get(METADATA_NAME, {}).get("json")
+        if record:
+            try:
+                return ViewInfo.from_json(record)
+            except ValueError:
+                pass
+        return ViewInfo.from_scenario_yaml(path.parent / "scenario.yaml")
 
     def _grid_size_m(self) -> tuple[float, float] | None:
         """(length, width) the recorded truth height map covers, m (its cell size times its cells), or None."""
@@ -137,7 +158,7 @@ class ReplaySource:
             return cached[1]
         if self.rec.channels[topic].schema in ("foxglove.CompressedImage", "foxglove.RawImage"):
             data = image_from_msg(msg)
-        elif kind_block == "lidar_points":
+        elif kind_block == "lidar_points" or kind_block.endswith("_points"):
             data = points_from_cloud(msg)
         else:
             data = heights_from_grid(msg)

@@ -37,12 +37,14 @@ from pathlib import Path
 from urllib.parse import parse_qs, urlsplit
 
 from .address import wait_until_answers
+from .fill import bar_labels
 from .page import page_html
 from .panels import IMAGE_PANELS, PanelRenderer, panel_info
 from .snapshot import fullness
+from .viewinfo import ViewInfo, default_fill
 
-__all__ = ["DashboardServer", "state_json", "observe", "serve", "ServerStop", "DEFAULT_PORT", "DEFAULT_HOST", "NICE",
-           "DRAIN_S", "LINGER_S", "WATCHED_S", "RUN_ENDED"]
+__all__ = ["DashboardServer", "state_json", "fill_band_of", "observe", "serve", "ServerStop", "DEFAULT_PORT",
+           "DEFAULT_HOST", "NICE", "DRAIN_S", "LINGER_S", "WATCHED_S", "RUN_ENDED"]
 
 log = logging.getLogger("cosim.viewer")
 
@@ -81,8 +83,15 @@ def _finite(x):
     return x
 
 
+def fill_band_of(source) -> tuple[float, float]:
+    """The fullness bars' band of ``source``: its run's (``source.view``), else the scenario defaults'."""
+    view = getattr(source, "view", None)
+    return view.fill_band if view is not None else default_fill()
+
+
 def state_json(source, dropped_total: int = 0) -> dict:
-    """The ``/api/state`` document for ``source``'s latest snapshot."""
+    """The ``/api/state`` document for ``source``'s latest snapshot. ``fullness`` holds each section's value,
+    label and status (cosim.viewer.fill: one rule for both) and the band at the target."""
     snap = source.snapshot()
     full = fullness(snap.structs)
     return _finite({
@@ -90,7 +99,8 @@ def state_json(source, dropped_total: int = 0) -> dict:
         "t_s": snap.t_s, "rtf": snap.rtf, "dropped_total": dropped_total,
         "panels": panel_info(snap),
         "auger": source.history.as_json(),
-        "fullness": {"block": full[0], "values": full[1]} if full else None,
+        "fullness": {"block": full[0], "values": full[1], **bar_labels(full[1], fill_band_of(source))}
+        if full else None,
         "frames": snap.frames,
         "replay": source.position() if hasattr(source, "position") else None,
     })
@@ -186,7 +196,7 @@ class DashboardServer(ThreadingHTTPServer):
         self.source = None
         super().__init__((host, port), _Handler)
         self.source = source
-        self.renderer = PanelRenderer(getattr(source, "size_m", None))
+        self.renderer = PanelRenderer(getattr(source, "size_m", None), getattr(source, "view", None))
         self.page = page_html(f"graincosim viewer: {source.name}",
                               replay=hasattr(source, "control")).encode()
         self._dropped = 0
@@ -344,9 +354,12 @@ def serve(source, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, announce: 
 
 
 def observe(segment_name: str, port: int = DEFAULT_PORT, host: str = DEFAULT_HOST, announce: str | None = None,
-            min_interval_s: float | None = None, size_m: tuple[float, float] | None = None) -> None:
+            min_interval_s: float | None = None, size_m: tuple[float, float] | None = None,
+            view: dict | None = None) -> None:
     """Observer entry (spawned by the launcher): attach to ``segment_name`` read-only and serve the dashboard.
-    ``size_m``: the cart interior's (length, width), m, for the height maps' metre axes."""
+    ``size_m``: the cart interior's (length, width), m, for the height maps' metre axes (``view``'s when None);
+    ``view``: :meth:`cosim.viewer.viewinfo.ViewInfo.to_dict` of the run's scenario (the point clouds' cart frame,
+    the fullness band)."""
     from .live import MIN_INTERVAL_S, LiveSource
 
     try:
@@ -354,6 +367,9 @@ def observe(segment_name: str, port: int = DEFAULT_PORT, host: str = DEFAULT_HOS
     except OSError:
         pass
     source = LiveSource(segment_name, MIN_INTERVAL_S if min_interval_s is None else min_interval_s)
+    if view is not None:
+        source.view = ViewInfo.from_dict(view)
+        source.size_m = source.view.size_m
     if size_m is not None:
         source.size_m = (float(size_m[0]), float(size_m[1]))
     serve(source, host, port, announce, show_end=True)

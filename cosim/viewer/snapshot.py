@@ -26,10 +26,12 @@ HISTORY_LEN = 600
 
 
 def wanted_block(name: str, kind: str, shape: tuple[int, ...]) -> bool:
-    """Whether the viewer copies block ``name``: structs, camera images, the LiDAR points, height maps."""
+    """Whether the viewer copies block ``name``: structs, camera images, the LiDAR points, height maps, the
+    camera sensors' measured depth and points (``cam_<name>_measured``, ``cam_<name>_points``)."""
     if kind == "struct" or kind == "image":
         return True
-    return name == "lidar_points" or (name.startswith("heightmap") and len(shape) == 2)
+    return name == "lidar_points" or (len(shape) == 2 and (
+        name.startswith("heightmap") or (name.startswith("cam_") and name.endswith(("_measured", "_points")))))
 
 
 @dataclass
@@ -37,8 +39,8 @@ class Snapshot:
     """A consistent-per-block copy of a run at one moment.
 
     ``structs`` maps struct block -> {field: value}; ``images`` block -> (H, W, 4) uint8 (or (H, W, 3) in a
-    replay); ``arrays`` block -> ndarray (``lidar_points`` (N, 4) float32 sensor frame, height maps (nx, ny)
-    float32 m); ``frames`` block -> frame stamp of the copy (-1: never written).
+    replay); ``arrays`` block -> ndarray (``lidar_points`` and ``cam_<name>_points`` (N, 4) float32 in the
+    sensor's camera axes, height maps (nx, ny) float32 m); ``frames`` block -> frame stamp of the copy (-1: never written).
     """
 
     frame: int = -1

@@ -68,7 +68,9 @@ _SIGNATURES = {
 @functools.lru_cache(maxsize=1)
 def api() -> ctypes.CDLL:
     """Embree's library from embreex's wheel, the functions this module calls bound with their C signatures;
-    :class:`EmbreeUnavailable` when there is none (ImportError when embreex is not installed)."""
+    :class:`EmbreeUnavailable` when there is none (ImportError when embreex is not installed). Called with the GIL
+    held (``ctypes.PyDLL``): Embree reports an error through the callback embreex sets on its device, which runs
+    Python code."""
     import embreex
     from embreex import rtcore_scene  # noqa: F401 - loads the library the wheel ships
 
@@ -78,7 +80,7 @@ def api() -> ctypes.CDLL:
     if not found:
         raise EmbreeUnavailable(f"no libembree4 beside embreex ({libs})")
     try:
-        lib = ctypes.CDLL(found[0])
+        lib = ctypes.PyDLL(found[0])
         for name, (res, args) in _SIGNATURES.items():
             fn = getattr(lib, name)
             fn.restype, fn.argtypes = res, args

@@ -15,9 +15,10 @@ import numpy as np
 
 from cosim.scenario.config.scenario import Scenario
 from cosim.world.geometry import make_transform
+from cosim.world.labels import CART_RIM, CART_WALL, COMBINE, TRACTOR, TYRE
 
-__all__ = ["CART_FLOOR_BOX", "CART_WALL_BOXES", "HITCH_HEIGHT_M", "EntityParts", "box_from_bounds", "cart_boxes",
-           "entity_parts", "wheel_contacts"]
+__all__ = ["CART_FLOOR_BOX", "CART_WALL_BOXES", "CART_RIM_BOXES", "HITCH_HEIGHT_M", "EntityParts", "box_from_bounds",
+           "cart_boxes", "entity_parts", "wheel_contacts"]
 
 #: combine: ground clearance of the body, header depth / bottom / top, cab height and width (m)
 COMBINE_CLEARANCE_M = 0.5
@@ -42,9 +43,10 @@ CART_WHEEL_WIDTH_M = 0.5
 CART_WHEEL_GAP_M = 0.05
 CART_TONGUE_HALF_WIDTH_M = 0.1
 CART_TONGUE_HEIGHT_M = 0.2
-#: indices of the floor and of the four walls in :func:`cart_boxes`
+#: indices of the floor, of the four walls and of the four rim bars in :func:`cart_boxes`
 CART_FLOOR_BOX = 0
 CART_WALL_BOXES = (1, 2, 3, 4)
+CART_RIM_BOXES = (5, 6, 7, 8)
 
 COMBINE_COLOUR = (0.20, 0.55, 0.15)
 TRACTOR_COLOUR = (0.25, 0.60, 0.20)
@@ -58,7 +60,9 @@ class EntityParts:
     ``box_colour`` (N, 3), ``box_hidden_top`` (N,) bool: the box's top (+z) face lies under other parts (the
     cart floor's under the grain surface and the walls, the walls' under the rim bars). Cylinders:
     ``cyl_p0``/``cyl_p1`` (M, 3) m, ``cyl_radius`` (M,) m, ``cyl_colour`` (M, 3). ``mesh_file`` replaces the
-    boxes when set (drawn with ``mesh_colour``)."""
+    boxes when set (drawn with ``mesh_colour``). ``box_label`` (N,), ``cyl_label`` (M,) and ``cyl_material``
+    (M,) uint8: each part's label and material (cosim.world.labels; the cylinders of an entity are its wheels,
+    material tyre)."""
 
     body_from_box: np.ndarray
     half_extents: np.ndarray
@@ -70,6 +74,9 @@ class EntityParts:
     mesh_file: Path | None
     mesh_colour: tuple[float, float, float]
     box_hidden_top: np.ndarray
+    box_label: np.ndarray | None = None
+    cyl_label: np.ndarray | None = None
+    cyl_material: np.ndarray | None = None
 
 
 def box_from_bounds(lo, hi) -> tuple[np.ndarray, np.ndarray]:
@@ -80,9 +87,11 @@ def box_from_bounds(lo, hi) -> tuple[np.ndarray, np.ndarray]:
     return make_transform(np.eye(3), (lo + hi) / 2.0), (hi - lo) / 2.0
 
 
-def _pack(boxes, colour, cyls, cyl_colour, mesh_file, hidden_top=()) -> EntityParts:
+def _pack(boxes, colour, cyls, cyl_colour, mesh_file, hidden_top=(), label=COMBINE, box_labels=None
+          ) -> EntityParts:
     """Stack ``boxes`` [(body_from_box, half_extents)] and ``cyls`` [(p0, p1, radius)]; ``hidden_top``: indices
-    of boxes whose top face is covered (see :class:`EntityParts`)."""
+    of boxes whose top face is covered (see :class:`EntityParts`); ``label``: every part's label, or
+    ``box_labels`` per box."""
     t = np.stack([b[0] for b in boxes])
     h = np.stack([b[1] for b in boxes])
     p0 = np.array([c[0] for c in cyls], dtype=np.float64).reshape(-1, 3)
@@ -90,8 +99,10 @@ def _pack(boxes, colour, cyls, cyl_colour, mesh_file, hidden_top=()) -> EntityPa
     r = np.array([c[2] for c in cyls], dtype=np.float64)
     hidden = np.zeros(len(h), dtype=bool)
     hidden[list(hidden_top)] = True
+    blabel = np.full(len(h), label, np.uint8) if box_labels is None else np.asarray(box_labels, np.uint8)
     return EntityParts(t, h, np.tile(np.array(colour, np.float32), (len(h), 1)), p0, p1, r,
-                       np.tile(np.array(cyl_colour, np.float32), (len(r), 1)), mesh_file, colour, hidden)
+                       np.tile(np.array(cyl_colour, np.float32), (len(r), 1)), mesh_file, colour, hidden,
+                       blabel, np.full(len(r), label, np.uint8), np.full(len(r), TYRE, np.uint8))
 
 
 def _wheel_pair(x: float, half_track: float, radius: float, width: float):
@@ -111,7 +122,7 @@ def _combine(s: Scenario) -> EntityParts:
                         (front, COMBINE_CAB_HALF_WIDTH_M, c.height_m)),
         box_from_bounds((front, -c.header_width_m / 2.0, HEADER_BOTTOM_M), (hl, c.header_width_m / 2.0, HEADER_TOP_M)),
     ]
-    return _pack(boxes, COMBINE_COLOUR, [], WHEEL_COLOUR, c.mesh_file)
+    return _pack(boxes, COMBINE_COLOUR, [], WHEEL_COLOUR, c.mesh_file, label=COMBINE)
 
 
 def _tractor(s: Scenario) -> EntityParts:
@@ -126,7 +137,7 @@ def _tractor(s: Scenario) -> EntityParts:
     wheels = (_wheel_pair(-hl + TRACTOR_REAR_WHEEL_RADIUS_M, hw, TRACTOR_REAR_WHEEL_RADIUS_M, TRACTOR_WHEEL_WIDTH_M)
               + _wheel_pair(hl - TRACTOR_FRONT_WHEEL_RADIUS_M, hw, TRACTOR_FRONT_WHEEL_RADIUS_M,
                             TRACTOR_WHEEL_WIDTH_M))
-    return _pack(boxes, TRACTOR_COLOUR, wheels, WHEEL_COLOUR, t.mesh_file)
+    return _pack(boxes, TRACTOR_COLOUR, wheels, WHEEL_COLOUR, t.mesh_file, label=TRACTOR)
 
 
 def cart_boxes(s: Scenario) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -162,7 +173,9 @@ def _cart(s: Scenario) -> EntityParts:
     hidden = [CART_FLOOR_BOX]
     if c.rim_width_m >= c.wall_thickness_m:
         hidden += list(CART_WALL_BOXES)
-    return _pack(cart_boxes(s), CART_COLOUR, wheels, WHEEL_COLOUR, c.mesh_file, hidden_top=hidden)
+    labels = [CART_RIM if k in CART_RIM_BOXES else CART_WALL for k in range(len(cart_boxes(s)))]
+    return _pack(cart_boxes(s), CART_COLOUR, wheels, WHEEL_COLOUR, c.mesh_file, hidden_top=hidden, label=CART_WALL,
+                 box_labels=labels)
 
 
 @functools.lru_cache(maxsize=8)

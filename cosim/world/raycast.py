@@ -78,7 +78,8 @@ def _cone_pairs(origin, d, centres, radii, best) -> tuple[np.ndarray, np.ndarray
     dist = np.linalg.norm(m, axis=1)
     rad = radii * (1.0 + _CULL_SLACK) + _CULL_SLACK
     inside = dist <= rad
-    u = m / np.where(inside, 1.0, dist)[:, None]
+    scale = np.where(inside, 1.0, dist)                 # u is unit outside a sphere, m itself inside it
+    u = m / scale[:, None]
     with np.errstate(invalid="ignore", divide="ignore"):
         cos_half = np.where(inside, -np.inf, np.sqrt(np.maximum(1.0 - (rad / dist) ** 2, 0.0)) - _CULL_SLACK)
     ks, rs = [], []
@@ -88,7 +89,7 @@ def _cone_pairs(origin, d, centres, radii, best) -> tuple[np.ndarray, np.ndarray
         # flat indices, then (primitive, ray): np.nonzero on a 2-D mask costs several times more
         f = np.flatnonzero(dots >= cos_half[:, None])
         k, r = np.divmod(f, dots.shape[1])
-        near = np.take(dots, f) * dist[k] - rad[k]                     # entry bound along the ray
+        near = np.take(dots, f) * scale[k] - rad[k]                    # entry bound along the ray (m . d - R)
         r += s0
         keep = near < best[r]
         ks.append(k[keep])

@@ -145,7 +145,7 @@ def scale_rig(rig: Rig, scale: float) -> Rig:
 
 
 def _fixed_rig(scenario: Scenario) -> Rig:
-    r, p = scenario.render, scenario.sensor.pattern
+    r, p = scenario.render, scenario.lidar.pattern
     hfov = math.radians(r.hfov_deg)
     yaw0 = math.radians(p.azimuth_min_deg + p.azimuth_max_deg) / 2.0
     pitch = math.radians(p.elevation_min_deg + p.elevation_max_deg) / 2.0
@@ -163,8 +163,8 @@ def plan_rig(scenario: Scenario) -> Rig:
     if scenario.render.rig == "fixed":
         rig = _fixed_rig(scenario)
     else:
-        el, az = beam_angles(scenario.sensor.pattern)
-        rig = plan_cameras(el, az, math.radians(scenario.sensor.max_angular_error_deg))
+        el, az = beam_angles(scenario.lidar.pattern)
+        rig = plan_cameras(el, az, math.radians(scenario.lidar.max_angular_error_deg))
     return scale_rig(rig, scenario.render.mock_scale) if scenario.renderer == "mock" else rig
 
 

@@ -13,6 +13,10 @@ rest moves or changes shape every frame and is kept as cheap to update as it can
 * a mesh that is no entity's (the terrain's patch on uneven ground, cosim.world.terrain) is a refittable
   prototype whose vertices are rewritten when the patch moves on (its name changes), placed per frame.
 
+An instance that encloses no volume (a prism of zero radius or length, a box of zero extent: :func:`has_volume`)
+is hidden for the frame, never given to Embree nor inverted: it has no surface a ray can meet except on a set of
+measure zero, and GL draws no fragment of it.
+
 Embree decides which triangle each ray hits first (float32, in the instance's frame); the range is then the
 float64 intersection of the ray with that triangle's plane, placed in the world, as in ``embree_cast``, so the
 two agree to rounding (tested beam for beam, ``tests/test_rigidcast.py``). Rays: ``origin`` (3,) and unit
@@ -21,6 +25,7 @@ two agree to rounding (tested beam for beam, ``tests/test_rigidcast.py``). Rays:
 """
 from __future__ import annotations
 
+import weakref
 from collections.abc import Mapping
 
 import numpy as np
@@ -30,9 +35,9 @@ from .heightfield import grid_triangles, grid_vertices, padded_heights
 from .meshes import CYLINDER_SIDES, orthonormal_frames, unit_cube, unit_cylinder
 from .parts import EntityParts
 from .raycast import T_MIN_M
-from .scene import Scene, load_mesh
+from .scene import MIN_SEGMENT_M, Scene, load_mesh
 
-__all__ = ["RigidCaster", "body_triangles"]
+__all__ = ["RigidCaster", "body_triangles", "has_volume"]
 
 #: Embree's miss marker is tfar left at its initial value (1e37); anything beyond this is a miss, m
 _MISS_M = 1e30
@@ -43,6 +48,12 @@ _NO_HIT = 1e37
 #: relative (and absolute, m) slack on the ground's range given to Embree as tfar: float32 rounding never hides
 #: a hit just before the ground (the float64 comparison after the traversal decides)
 _TFAR_SLACK = 1e-6
+_EYE3 = np.eye(3)
+#: an instance whose linear map has an axis shorter than this (a prism of zero radius or length, a box of zero
+#: extent) encloses no volume and is not cast, m (the scene's own threshold for stream segments)
+_MIN_SCALE_M = MIN_SEGMENT_M
+#: ... nor one whose axes are nearly coplanar: |det| below this share of the product of the axes' lengths
+_MIN_SHAPE = 1e-9
 
 
 def top_face_from_above(world_from_box: np.ndarray, half: np.ndarray, o: np.ndarray, d: np.ndarray
@@ -55,11 +66,23 @@ def top_face_from_above(world_from_box: np.ndarray, half: np.ndarray, o: np.ndar
     ob = rot.T @ (o - world_from_box[:3, 3])
     if not (ob[2] > half[2] and abs(ob[0]) < half[0] and abs(ob[1]) < half[1]):
         return None
-    db = d @ rot
+    db = d if np.array_equal(rot, _EYE3) else d @ rot       # a level slab: the product is d, exactly
     with np.errstate(divide="ignore", invalid="ignore"):
         t = (half[2] - ob[2]) / db[:, 2]
     inside = (db[:, 2] < 0.0) & (np.abs(ob[0] + t * db[:, 0]) <= half[0]) & (np.abs(ob[1] + t * db[:, 1]) <= half[1])
     return np.where(inside, t, np.inf)
+
+
+def has_volume(lin: np.ndarray, trans: np.ndarray) -> np.ndarray:
+    """Which instances (K,) bool enclose a volume Embree can be given: ``lin`` (K, 3, 3) and ``trans`` (K, 3)
+    finite, each axis (column) at least ``_MIN_SCALE_M`` long and the axes not nearly coplanar. The others (a
+    stream segment of zero radius, a prism of zero length) are flat or empty: Embree would invert their
+    transforms into infinities, and they have no plane to intersect in float64."""
+    finite = np.isfinite(lin).all(axis=(1, 2)) & np.isfinite(trans).all(axis=1)
+    safe = np.where(finite[:, None, None], lin, 0.0)
+    axes = np.linalg.norm(safe, axis=1)                                 # (K, 3) the columns' lengths
+    det = np.abs(np.linalg.det(safe))
+    return finite & (axes.min(axis=1) >= _MIN_SCALE_M) & (det > _MIN_SHAPE * axes.prod(axis=1))
 
 
 def body_triangles(parts: EntityParts, cylinders: bool = True) -> tuple[np.ndarray, np.ndarray]:
@@ -106,11 +129,21 @@ def _planes(v: np.ndarray, f: np.ndarray) -> np.ndarray:
     return np.concatenate([n, np.einsum("fi,fi->f", n, tri[:, 0])[:, None]], axis=1)
 
 
+def _release(holder: list, protos: list) -> None:
+    """Drop the embreex top scene and device (``holder``: the last references; the top scene releases its
+    instances), then release every prototype scene, then let their buffers go."""
+    holder.clear()
+    for proto in protos:
+        proto.release()
+    protos.clear()
+
+
 class _Proto:
-    """A prototype scene holding one geometry (its id: the prototype's index), instanced once in the top scene;
-    ``planes`` (F, 4) of its triangles in its own frame."""
+    """A prototype scene holding one geometry (its id ``k``: the prototype's index), instanced once in the top
+    scene; ``planes`` (F, 4) of its triangles in its own frame."""
 
     def __init__(self, device: int, top: int, geom_id: int, v: np.ndarray, f: np.ndarray, quality: int):
+        self.k = geom_id
         self.geom = emb.triangles(device, v, f, quality)
         self.scene = emb.prototype_scene(device, self.geom, geom_id)
         emb.api().rtcReleaseGeometry(self.geom.handle)      # the prototype scene holds it
@@ -148,6 +181,10 @@ class RigidCaster:
         self._top_obj = rtcore_scene.EmbreeScene(self._device_obj)
         self._top, self._dev = emb.handles(self._top_obj, self._device_obj)
         self._protos: list[_Proto] = []
+        # everything released in order (the instances with the top scene, then the prototypes, then the buffers
+        # they share) by close(), or when this caster is collected or the interpreter exits without it
+        self._holder = [self._top_obj, self._device_obj]
+        self._finalizer = weakref.finalize(self, _release, self._holder, self._protos)
         self._bodies: dict[str, _Proto] = {}
         self._n_boxes = self._n_cyl = 0
         cv, cf = unit_cube()
@@ -267,7 +304,7 @@ class RigidCaster:
         lin = np.tile(np.eye(3), (len(self._protos), 1, 1))
         trans = np.zeros((len(self._protos), 3))
         hf = scene.heightfield
-        idx = [self._protos.index(self._hf)]
+        idx = [self._hf.k]
         lin[idx[0]], trans[idx[0]] = hf.world_from_grid[:3, :3], hf.world_from_grid[:3, 3] - o
         for name, proto in self._bodies.items():
             boxes_only = self._tilted[name][0]
@@ -276,14 +313,14 @@ class RigidCaster:
                 proto = boxes_only
             elif boxes_only is not None:
                 boxes_only.hide()
-            k = self._protos.index(proto)
+            k = proto.k
             lin[k], trans[k] = scene.poses[name][:3, :3], scene.poses[name][:3, 3] - o
             idx.append(k)
-        ks = [self._protos.index(p) for p in cubes]
+        ks = [p.k for p in cubes]
         m = b.world_from_box[self._n_boxes:]
         lin[ks], trans[ks] = m[:, :3, :3] * b.half_extents[self._n_boxes:, None, :], m[:, :3, 3] - o
         idx += ks
-        ks = [self._protos.index(p) for p in prisms]
+        ks = [p.k for p in prisms]
         axis = c.p1[dyn] - c.p0[dyn]
         if ks:
             lin[ks] = orthonormal_frames(axis) * np.stack([c.radius[dyn], c.radius[dyn],
@@ -291,17 +328,22 @@ class RigidCaster:
             trans[ks] = c.p0[dyn] - o
         idx += ks
         for proto, m in meshes:
-            k = self._protos.index(proto)
+            k = proto.k
             lin[k], trans[k] = m[:3, :3], m[:3, 3] - o
             idx.append(k)
-        ground = None
+        ground, ground_k = None, -1
         if scene.ground_box is not None and scene.ground_box >= self._n_boxes:
             ground = top_face_from_above(b.world_from_box[scene.ground_box], b.half_extents[scene.ground_box], o, d)
-        for k in idx:
-            if ground is not None and k == self._protos.index(cubes[scene.ground_box - self._n_boxes]):
-                self._protos[k].hide()                     # the ground is the plane below: tfar, not a solid
-            else:
+            if ground is not None:                         # the ground is the plane below: tfar, not a solid
+                ground_k = cubes[scene.ground_box - self._n_boxes].k
+        idx = np.asarray(idx, np.int64)
+        solid = has_volume(lin[idx], trans[idx])
+        lin[idx[~solid]], trans[idx[~solid]] = np.eye(3), 0.0     # no volume: hidden, never inverted
+        for k, keep in zip(idx.tolist(), solid.tolist()):
+            if keep and k != ground_k:
                 self._protos[k].place(lin[k], trans[k])
+            else:
+                self._protos[k].hide()
         self._top_obj.is_committed = 0                     # run() commits the top scene
         tfar = None
         if ground is not None:                             # a hit before the ground is all Embree must find
@@ -319,7 +361,7 @@ class RigidCaster:
         hit = np.flatnonzero((geom >= 0) & (out["tfar"] < _MISS_M))
         if hit.size == 0:
             return t
-        k_hf = self._protos.index(self._hf)
+        k_hf = self._hf.k
         planes = self._planes_all
         planes[self._base[k_hf]:self._base[k_hf + 1]] = _grid_planes(self._hf_v, self._hf_f)
         inv = np.linalg.inv(lin)                                    # (K, 3, 3)
@@ -337,8 +379,7 @@ class RigidCaster:
         return t
 
     def close(self) -> None:
-        """Release the prototype scenes (the top scene and its instances go with its embreex object)."""
-        for proto in self._protos:
-            proto.release()
-        self._protos.clear()
+        """Release the top scene with its instances, then the prototype scenes and their shared buffers."""
+        self._top_obj = self._device_obj = None
         self._bodies.clear()
+        self._finalizer()

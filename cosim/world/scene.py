@@ -26,6 +26,7 @@ from cosim.scenario.config.scenario import Scenario
 from cosim.world.geometry import apply, cart_body_from_grid, entity_pose, make_transform, vehicle_pose
 from cosim.world.terrain import terrain_of
 
+from .labels import AUGER, GRAIN_MAT, GROUND, STEEL, STREAM, STUBBLE
 from .parts import EntityParts, entity_parts
 
 __all__ = [
@@ -49,7 +50,8 @@ __all__ = [
 STREAM_ROWS = 64
 #: thickness of the ground slab below z = 0, m (its top face is the ground plane)
 GROUND_THICKNESS_M = 0.5
-#: stream segments shorter than this are dropped (repeated polyline points), m
+#: stream segments shorter or thinner than this are dropped (repeated polyline points, the run-out's last
+#: frame of zero radius: no surface), m
 MIN_SEGMENT_M = 1e-9
 #: linear RGB colours of the shaded image
 GROUND_COLOUR = (0.35, 0.30, 0.18)
@@ -67,12 +69,15 @@ class Boxes:
     frame); ``colour`` (N, 3) float32 linear RGB in [0, 1]. ``hidden_top`` (N,) bool or None (none): boxes
     whose top (+z, box frame) face no camera outside the solids can see, because other parts cover it; the
     GL renderer skips those faces (llvmpipe pays for hidden fragments almost as much as for visible ones),
-    the ray caster need not."""
+    the ray caster need not. ``label`` and ``material`` (N,) uint8 or None: each box's label and material
+    (cosim.world.labels; None: unlabelled, as in hand-built test scenes)."""
 
     world_from_box: np.ndarray
     half_extents: np.ndarray
     colour: np.ndarray
     hidden_top: np.ndarray | None = None
+    label: np.ndarray | None = None
+    material: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.half_extents)
@@ -81,12 +86,14 @@ class Boxes:
 @dataclass(frozen=True)
 class Cylinders:
     """M capped cylinders from ``p0`` (M, 3) to ``p1`` (M, 3) (world, m) of ``radius`` (M,) m;
-    ``colour`` (M, 3) float32 linear RGB."""
+    ``colour`` (M, 3) float32 linear RGB; ``label`` and ``material`` (M,) uint8 or None as for :class:`Boxes`."""
 
     p0: np.ndarray
     p1: np.ndarray
     radius: np.ndarray
     colour: np.ndarray
+    label: np.ndarray | None = None
+    material: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.radius)
@@ -152,7 +159,8 @@ def _poses(state: Mapping[str, float]) -> dict[str, np.ndarray]:
 
 
 def _stream_cylinders(stream: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Segments between consecutive valid stream rows: (p0 (K, 3), p1 (K, 3), radius (K,)), K = n - 1."""
+    """Segments between consecutive valid stream rows: (p0 (K, 3), p1 (K, 3), radius (K,)), K <= n - 1 (those
+    shorter or thinner than ``MIN_SEGMENT_M`` dropped)."""
     s = np.asarray(stream, dtype=np.float64)
     if s.ndim != 2 or s.shape[1] != 4:
         raise ValueError(f"stream must be (rows, 4) [x, y, z, radius], got {s.shape}")
@@ -161,8 +169,9 @@ def _stream_cylinders(stream: np.ndarray, n_points: int) -> tuple[np.ndarray, np
         empty = np.zeros((0, 3))
         return empty, empty, np.zeros(0)
     pts = s[:n]
-    keep = np.linalg.norm(np.diff(pts[:, :3], axis=0), axis=1) > MIN_SEGMENT_M
-    return pts[:-1, :3][keep], pts[1:, :3][keep], (0.5 * (pts[:-1, 3] + pts[1:, 3]))[keep]
+    radius = 0.5 * (pts[:-1, 3] + pts[1:, 3])
+    keep = (np.linalg.norm(np.diff(pts[:, :3], axis=0), axis=1) > MIN_SEGMENT_M) & (radius > MIN_SEGMENT_M)
+    return pts[:-1, :3][keep], pts[1:, :3][keep], radius[keep]
 
 
 def scene_from_state(scenario: Scenario, state: Mapping[str, float], heightmap: np.ndarray,
@@ -182,8 +191,8 @@ def scene_from_state(scenario: Scenario, state: Mapping[str, float], heightmap: 
                          f"{scenario.grain.cell_m} m")
     poses = _poses(state)
     parts: dict[str, EntityParts] = entity_parts(scenario)
-    w_from_box, half, colour, hidden = [], [], [], []
-    c0, c1, rad, ccol = [], [], [], []
+    w_from_box, half, colour, hidden, blabel = [], [], [], [], []
+    c0, c1, rad, ccol, clabel, cmat = [], [], [], [], [], []
     meshes = []
     for name, p in parts.items():
         pose = poses[name]
@@ -195,10 +204,13 @@ def scene_from_state(scenario: Scenario, state: Mapping[str, float], heightmap: 
             half.append(p.half_extents)
             colour.append(p.box_colour)
             hidden.append(p.box_hidden_top)
+            blabel.append(p.box_label)
         c0.append(apply(pose, p.cyl_p0))
         c1.append(apply(pose, p.cyl_p1))
         rad.append(p.cyl_radius)
         ccol.append(p.cyl_colour)
+        clabel.append(p.cyl_label)
+        cmat.append(p.cyl_material)
     terrain = terrain_of(scenario)
     ground_box = None
     if terrain is None:
@@ -210,6 +222,7 @@ def scene_from_state(scenario: Scenario, state: Mapping[str, float], heightmap: 
         half.append(np.array([[size / 2.0, size / 2.0, GROUND_THICKNESS_M / 2.0]]))
         colour.append(np.array([GROUND_COLOUR], dtype=np.float32))
         hidden.append(np.zeros(1, dtype=bool))
+        blabel.append(np.array([GROUND], np.uint8))
     else:
         # the terrain's patch around the cart (cosim.world.terrain): the surface the wheels stand on
         name, verts, faces, origin = terrain.mesh((float(state["cart_x_m"]), float(state["cart_y_m"])))
@@ -221,6 +234,8 @@ def scene_from_state(scenario: Scenario, state: Mapping[str, float], heightmap: 
     c1.append(spout[None])
     rad.append(np.array([scenario.auger.tube_radius_m]))
     ccol.append(np.array([parts["combine"].box_colour[0]], dtype=np.float32))
+    clabel.append(np.array([AUGER], np.uint8))
+    cmat.append(np.array([STEEL], np.uint8))
     # the stream is drawn from its valid rows alone (grain still falls for a while after the auger stops); with
     # atmosphere.stream_particles it is no solid: the LiDAR's atmosphere meets its kernels (docs/field.md)
     solid = not scenario.atmosphere.stream_particles if stream_solid is None else stream_solid
@@ -229,12 +244,15 @@ def scene_from_state(scenario: Scenario, state: Mapping[str, float], heightmap: 
     c1.append(s1)
     rad.append(sr)
     ccol.append(np.tile(np.array(STREAM_COLOUR, dtype=np.float32), (len(sr), 1)))
+    clabel.append(np.full(len(sr), STREAM, np.uint8))
+    cmat.append(np.full(len(sr), GRAIN_MAT, np.uint8))
     hf = HeightField(poses["cart"] @ cart_body_from_grid(cart), h.astype(np.float32, copy=False),
                      scenario.grain.cell_m, cart.interior_length_m, cart.interior_width_m)
+    box_labels = np.concatenate(blabel)
     return Scene(
         Boxes(np.concatenate(w_from_box), np.concatenate(half), np.concatenate(colour).astype(np.float32),
-              np.concatenate(hidden)),
+              np.concatenate(hidden), box_labels, np.where(box_labels == GROUND, STUBBLE, STEEL).astype(np.uint8)),
         Cylinders(np.concatenate(c0), np.concatenate(c1), np.concatenate(rad),
-                  np.concatenate(ccol).astype(np.float32)),
+                  np.concatenate(ccol).astype(np.float32), np.concatenate(clabel), np.concatenate(cmat)),
         hf, tuple(meshes), ground_box, poses,
     )

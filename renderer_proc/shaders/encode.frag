@@ -11,7 +11,7 @@
 // perspective-correct 1/w, not the depth buffer. The depth-only pass therefore reads no varying at all; the
 // shaded image alone needs v_view and v_colour. The encoding is branch-free with one division per pixel (the
 // period count q = Z / beta straight from 1/w): llvmpipe runs it for every 4 x 4 block a visible triangle
-// covers, and it is about a quarter of a visible pixel's cost (bench/README.md, "Renderer").
+// covers, and it is about a quarter of a visible pixel's cost (bench/HISTORY.md, "Renderer").
 // (the codec uniforms and encode_q: codec.glsl, inserted before this text)
 uniform vec3 u_light;      // unit vector towards the light, GL view space
 #ifdef OUT_RGB

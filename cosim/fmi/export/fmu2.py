@@ -9,6 +9,7 @@ from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Slave, Inte
 from pythonfmu.enums import Fmi2Status, Fmi2Variability
 
 from cosim.fmi.export.world import StepRefused, WorldHost, inputs, outputs
+from cosim.fmi.pythonfmu_exit import binaries_of, release_at_exit
 
 _TYPES = {"Real": Real, "Integer": Integer, "Boolean": Boolean}
 #: every variable changes only at communication points (one per sensor frame)
@@ -21,6 +22,8 @@ class GrainWorld(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
+        for binary in binaries_of(self.resources, type(self).__name__):   # the wrapper's exit order
+            release_at_exit(binary)
         self.host = WorldHost(self.resources)
         host = self.host
         self.default_experiment = DefaultExperiment(0.0, host.scenario.duration_s, host.period_s)

@@ -19,6 +19,7 @@ from pythonfmu3 import (
 )
 
 from cosim.fmi.export.world import StepRefused, WorldHost, inputs, outputs
+from cosim.fmi.pythonfmu_exit import binaries_of, release_at_exit
 
 _TYPES = {"Real": Float64, "Integer": Int32, "Boolean": Boolean}
 #: every variable changes only at communication points (one per sensor frame)
@@ -31,6 +32,8 @@ class GrainWorld(Fmi3Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
+        for binary in binaries_of(self.resources, type(self).__name__):   # the wrapper's exit order
+            release_at_exit(binary)
         self.host = WorldHost(self.resources)
         host = self.host
         self.default_experiment = DefaultExperiment(0.0, host.scenario.duration_s, host.period_s)

@@ -5,9 +5,44 @@ from typing import Literal
 
 from pydantic import Field
 
-from .base import Model, PosFloat
+from .base import Fraction, Model, Mount, PosFloat
 
-__all__ = ["Render"]
+__all__ = ["Render", "Lighting", "WorkLight"]
+
+
+class WorkLight(Model):
+    """A work light on a machine: a point light at ``mount`` (its position is what counts) whose irradiance
+    falls off as 1 / r^2; ``intensity`` is the irradiance it gives at 1 m, in units of the full sun's (after
+    the cameras' exposure: at night a camera exposes for its work light)."""
+
+    mount: Mount = Mount(parent="combine", xyz_m=(-2.0, 5.5, 4.9))
+    """Where the light is (its position; on the auger by default)."""
+    intensity: PosFloat = 12.0
+    """Irradiance at 1 m, in units of the full sun's (falls off as 1 / r^2)."""
+
+
+class Lighting(Model):
+    """Light for the cameras' colour images (docs/cameras.md): the sun at ``sun_elevation_deg`` above the
+    horizon and ``sun_azimuth_deg`` from world +x (the harvest direction) towards +y (left); ``ambient`` is the
+    sky's share of the light on a surface facing up. With the sun at or below the horizon it is night: no sun,
+    ``night_ambient`` of sky glow, and the ``work_light`` (when given) is the light there is. The depth
+    images and the LiDAR do not depend on it."""
+
+    sun_elevation_deg: float = Field(default=60.0, ge=-90.0, le=90.0, allow_inf_nan=False)
+    """Sun above the horizon, deg (at or below 0: night)."""
+    sun_azimuth_deg: float = Field(default=53.13, ge=-360.0, le=360.0, allow_inf_nan=False)
+    """Sun's direction from world +x (the harvest direction) towards +y (left), deg."""
+    ambient: Fraction = 0.35
+    """The sky's share of the light by day."""
+    night_ambient: Fraction = 0.02
+    """The sky glow at night."""
+    work_light: WorkLight | None = None
+    """A work light on a machine (the light there is at night)."""
+
+    @property
+    def night(self) -> bool:
+        """Whether the sun is at or below the horizon."""
+        return self.sun_elevation_deg <= 0.0
 
 
 class Render(Model):
@@ -23,6 +58,7 @@ class Render(Model):
       about 5 us per pixel: the default rig at full size would take seconds per frame). The image blocks and
       perception follow the scaled rig.
     * ``ground_size_m``: side of the square ground plane, centred under the combine.
+    * ``lighting``: the sun (or night and a work light) for the cameras' colour images (:class:`Lighting`).
     """
 
     rig: Literal["auto", "fixed"] = "auto"
@@ -44,3 +80,5 @@ class Render(Model):
     """Resolution factor of the rig with the mock renderer (0-1]; images and perception follow the scaled rig."""
     ground_size_m: PosFloat = 400.0
     """Side of the square ground plane, centred under the combine, m."""
+    lighting: Lighting = Lighting()
+    """Light for the camera sensors' colour images: the sun, or night with a work light."""

@@ -8,6 +8,7 @@ from pydantic import Field, ValidationInfo, field_validator
 
 from .atmosphere import Atmosphere
 from .base import Model, PosFloat
+from .cameras import DEPTH_KINDS, Camera, LidarSensor, SensorMap, Sensors, StereoCamera
 from .control import Controller, Grain, Integrator
 from .fmu import Vehicles
 from .limits import key_error
@@ -147,7 +148,11 @@ class Scenario(Model):
     integrator: Integrator = Integrator()
     """Integration of the continuous vehicle states within a frame."""
     sensor: Sensor = Sensor()
-    """The LiDAR: mount, beam pattern, range limits, noise, depth codec."""
+    """The LiDAR of the one-LiDAR shorthand (used when sensors is empty): mount, beam pattern, range limits,
+    noise, depth codec."""
+    sensors: Sensors = {}
+    """Named sensors (docs/cameras.md): name -> a sensor whose kind is lidar, depth_camera, stereo_camera or
+    rgb_camera, each with its mount; empty: the one LiDAR of sensor, named lidar."""
     render: Render = Render()
     """Renderer options: camera rig, image sizes, mock scale."""
     perception: Perception = Perception()
@@ -211,6 +216,58 @@ class Scenario(Model):
                              f"cart.interior_length_m / grid_cell_m gives {cells}; use fewer sections or a finer "
                              "grid_cell_m")
         return controller
+
+    @field_validator("sensors")
+    @classmethod
+    def _sensor_set(cls, sensors: SensorMap, info: ValidationInfo) -> SensorMap:
+        if not sensors:
+            return sensors
+        lidars = [n for n, s in sensors.items() if s.kind == "lidar"]
+        if len(lidars) > 1:
+            raise ValueError(f"{len(lidars)} LiDARs ({', '.join(lidars)}): a scenario has at most one (its blocks "
+                             "beams_depth and lidar_points are single); add cameras beside it instead")
+        if info.data.get("sensor", Sensor()) != Sensor():
+            raise ValueError("both sensor: and sensors: are given; sensor: is the shorthand for one LiDAR, so put "
+                             "that LiDAR under sensors: with kind: lidar and remove sensor:")
+        if info.data.get("renderer") == "mock":
+            stereo = [n for n, s in sensors.items() if isinstance(s, StereoCamera)]
+            if stereo:
+                raise ValueError(f"stereo camera {stereo[0]!r} needs the GL renderer: the stereo matcher works on "
+                                 "textured left and right images, and the mock renderer's plain shading has no "
+                                 "texture to match; use renderer: gl (a depth_camera works with the mock)")
+        return sensors
+
+    @property
+    def sensor_set(self) -> dict[str, LidarSensor | Camera]:
+        """Every sensor by name, in declaration order: ``sensors``, or with none given the LiDAR of ``sensor:``
+        under the name ``lidar`` (a :class:`LidarSensor` copy of it)."""
+        if self.sensors:
+            return dict(self.sensors)
+        return {"lidar": LidarSensor(kind="lidar", **dict(self.sensor))}
+
+    @property
+    def lidar(self) -> Sensor | None:
+        """The LiDAR: ``sensor:`` itself when ``sensors`` is empty, else the one of kind lidar (None: no LiDAR)."""
+        if not self.sensors:
+            return self.sensor
+        return next((s for s in self.sensors.values() if s.kind == "lidar"), None)
+
+    @property
+    def lidar_name(self) -> str | None:
+        """The LiDAR's name (``lidar`` for the shorthand), None when there is none."""
+        if not self.sensors:
+            return "lidar"
+        return next((n for n, s in self.sensors.items() if s.kind == "lidar"), None)
+
+    @property
+    def cameras(self) -> dict[str, Camera]:
+        """The camera sensors by name, in declaration order."""
+        return {n: s for n, s in self.sensors.items() if isinstance(s, Camera)}
+
+    @property
+    def depth_sensors(self) -> tuple[str, ...]:
+        """Names of the sensors that give depth (the LiDAR, depth and stereo cameras), in declaration order."""
+        return tuple(n for n, s in self.sensor_set.items() if s.kind in DEPTH_KINDS)
 
     @property
     def frames(self) -> int:

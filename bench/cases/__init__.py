@@ -1,0 +1,2 @@
+"""The named benchmark cases, one module per subject; each registers its cases with ``harness.case``
+(``python bench/run.py --list``)."""

@@ -1,0 +1,76 @@
+"""The stereo camera's depth: disparity from OpenCV's block matchers on the rendered left and right images,
+depth Z = f B / d (docs/cameras.md). Pure functions around ``cv2``.
+
+The pair is rectified by construction (same pinhole, parallel axes, the right camera ``baseline_m`` along the
+left's +X), so a point at planar depth Z appears d = f B / Z pixels further left in the right image. The
+matchers run on the grey images (ITU-R BT.601 luma of the stored bytes): ``sgbm`` is ``cv2.StereoSGBM``
+(P1 = 8 cn b^2, P2 = 32 cn b^2 with cn = 1 and b the block size, OpenCV's recommended smoothness penalties),
+``bm`` is ``cv2.StereoBM``. OpenCV returns fixed-point disparities (1/16 px); a pixel whose disparity is not
+above ``min_disparity_px - 1`` (no match, or filtered as a speckle or by the uniqueness or left-right check)
+is invalid, and so is a disparity of 0 (a point at infinity). Nothing is added to the images or to the
+disparities: the depth error is the matcher's, on the renderer's textured images.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from cosim.scenario.config.cameras import StereoCamera
+
+__all__ = ["FIXED_POINT", "SGBM_MODES", "make_matcher", "grey", "disparity", "depth_from_disparity", "stereo_depth"]
+
+#: OpenCV's disparity fixed point: 16 steps per pixel
+FIXED_POINT = 16.0
+#: SGBM's smoothness penalties per unit of cn b^2 (OpenCV's documentation: 8 and 32)
+P1_PER_AREA, P2_PER_AREA = 8, 32
+#: ``sgbm_mode`` -> OpenCV's StereoSGBM mode
+SGBM_MODES = {"sgbm": cv2.STEREO_SGBM_MODE_SGBM, "3way": cv2.STEREO_SGBM_MODE_SGBM_3WAY,
+              "hh": cv2.STEREO_SGBM_MODE_HH}
+
+
+def make_matcher(cam: StereoCamera):
+    """The OpenCV matcher of ``cam`` (``sgbm`` or ``bm``) with its parameters."""
+    if cam.matcher == "bm":
+        m = cv2.StereoBM_create(numDisparities=cam.num_disparities, blockSize=cam.block_size)
+        m.setMinDisparity(cam.min_disparity_px)
+        m.setUniquenessRatio(cam.uniqueness_ratio)
+        m.setSpeckleWindowSize(cam.speckle_window_px)
+        m.setSpeckleRange(cam.speckle_range_px)
+        m.setDisp12MaxDiff(cam.disp12_max_diff_px)
+        return m
+    area = cam.block_size * cam.block_size
+    return cv2.StereoSGBM_create(minDisparity=cam.min_disparity_px, numDisparities=cam.num_disparities,
+                                 blockSize=cam.block_size, P1=P1_PER_AREA * area, P2=P2_PER_AREA * area,
+                                 disp12MaxDiff=cam.disp12_max_diff_px, uniquenessRatio=cam.uniqueness_ratio,
+                                 speckleWindowSize=cam.speckle_window_px, speckleRange=cam.speckle_range_px,
+                                 mode=SGBM_MODES[cam.sgbm_mode])
+
+
+def grey(rgba: np.ndarray) -> np.ndarray:
+    """(H, W) uint8 luma of an (H, W, 4) or (H, W, 3) uint8 RGB(A) image."""
+    return cv2.cvtColor(np.ascontiguousarray(rgba[..., :3]), cv2.COLOR_RGB2GRAY)
+
+
+def disparity(matcher, left: np.ndarray, right: np.ndarray, min_disparity_px: int = 0) -> np.ndarray:
+    """Disparity (H, W) float32 px of the left image, NaN where the matcher has no answer (or gives 0). ``left``,
+    ``right``: (H, W) uint8 grey images."""
+    raw = matcher.compute(left, right)
+    d = raw.astype(np.float32) / np.float32(FIXED_POINT)
+    d[(raw <= (min_disparity_px - 1) * FIXED_POINT) | (raw <= 0)] = np.nan
+    return d
+
+
+def depth_from_disparity(d: np.ndarray, focal_px: float, baseline_m: float) -> np.ndarray:
+    """Planar depth Z = f B / d (H, W) float32 m of disparities ``d`` (px, NaN invalid)."""
+    return (np.float32(focal_px * baseline_m) / d).astype(np.float32)
+
+
+def stereo_depth(matcher, cam: StereoCamera, focal_px: float, left_rgba: np.ndarray, right_rgba: np.ndarray
+                 ) -> np.ndarray:
+    """The stereo camera's planar depth (H, W) float32 m, NaN invalid or outside ``range_min_m`` ..
+    ``range_max_m``, from its left and right (H, W, 4) uint8 images."""
+    z = depth_from_disparity(disparity(matcher, grey(left_rgba), grey(right_rgba), cam.min_disparity_px),
+                             focal_px, cam.baseline_m)
+    with np.errstate(invalid="ignore"):
+        z[(z < cam.range_min_m) | (z > cam.range_max_m)] = np.nan
+    return z
