@@ -288,12 +288,10 @@ class RigidCaster:
         b, c = scene.boxes, scene.cylinders
         cubes = self._pool(self._cubes, "cube", len(b) - self._n_boxes)
         tilted = [n for n in self._bodies if scene.poses[n][2, 0] != 0.0 or scene.poses[n][2, 1] != 0.0]
-        dyn = np.arange(self._n_cyl, len(c))
+        dyn = slice(self._n_cyl, len(c))
         if tilted:
-            dyn = np.concatenate([np.arange(len(c))[self._tilted[n][1]] for n in tilted] + [dyn])
-        # a prism of no radius or no length is nothing (as in the exact reference); its transform would be singular
-        dyn = dyn[(c.radius[dyn] > 0.0) & np.any(c.p1[dyn] != c.p0[dyn], axis=1)]
-        prisms = self._pool(self._prisms, "prism", len(dyn))
+            dyn = np.concatenate([np.arange(len(c))[self._tilted[n][1]] for n in tilted] + [np.arange(len(c))[dyn]])
+        prisms = self._pool(self._prisms, "prism", len(c.radius[dyn]))
         for n in tilted:
             if self._tilted[n][0] is None:
                 self._tilted[n][0] = self._new(*body_triangles(self._parts[n], cylinders=False), emb.QUALITY_HIGH)
