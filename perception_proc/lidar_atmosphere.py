@@ -16,7 +16,7 @@ import numpy as np
 
 from cosim.scenario.config import Scenario
 
-from .atmosphere import DustModel, dust_model, hard_power
+from .atmosphere import DustModel, dust_blows, dust_model, hard_power
 from .stream_particles import STREAM_PARTICLES, beam_crossings, kernel_density, occlude
 
 __all__ = ["LidarAtmosphere", "lidar_atmosphere", "stream_row_time"]
@@ -50,8 +50,7 @@ class LidarAtmosphere:
         of frame ``frame``; ``state`` the frame's ``dyn_state`` (its time and flow), ``stream`` its ``stream``
         rows (M, 4) (world), ``world_from_sensor`` (4, 4). New array."""
         dust = self.dust
-        window = self.scenario.atmosphere.dust_window_s
-        if dust is not None and window is not None and not window[0] <= float(state.get("t_s", 0.0)) < window[1]:
+        if dust is not None and not dust_blows(self.scenario.atmosphere, float(state.get("t_s", 0.0))):
             dust = None                                              # outside the gust: clear air
         out = dust.returns(ranges) if dust is not None else np.array(ranges, np.float32)
         n_rows = int(state.get("stream_points", 0)) if state else 0
