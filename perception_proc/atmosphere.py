@@ -122,8 +122,8 @@ def _table(alpha: float, beta: float, tau_s: float, r1: float, r2: float, r_max:
 
 
 def dust_model(s: Scenario, range_max_m: float | None = None) -> DustModel | None:
-    """The scenario's :class:`DustModel` for a sensor reaching ``range_max_m`` m (None: ``sensor.range_max_m``,
-    the LiDAR's), None in dust-free air (nothing to apply)."""
+    """The scenario's :class:`DustModel` for a sensor reaching ``range_max_m`` m (None: ``sensor.range_max_m``),
+    None in dust-free air (nothing to apply)."""
     a, sensor = s.atmosphere, s.sensor
     alpha = a.extinction_per_m
     if alpha == 0.0:

@@ -112,4 +112,4 @@ def lidar_atmosphere(scenario: Scenario, directions: np.ndarray) -> LidarAtmosph
     """The run's :class:`LidarAtmosphere`, None when the air is clear and the stream solid (nothing to apply)."""
     if scenario.atmosphere.clear:
         return None
-    return LidarAtmosphere(scenario, directions, dust_model(scenario))
+    return LidarAtmosphere(scenario, directions, dust_model(scenario, scenario.lidar.range_max_m))
