@@ -48,7 +48,7 @@ from cosim.scenario.plugins import load_plugin
 
 from .control_protocol import ControllerCommand, ControllerInput, Delivery
 from .coping import mode, peak_sigma, rise_rate, slowed_section, unexplained_shift
-from .estimator import FillEstimate, FusionParams, initial_estimate, landing_on, predict, update
+from .estimator import FillEstimate, FusionParams, consistent, initial_estimate, landing_on, predict, update
 from .grainfill import GrainGrid, section_rows
 from .sections import inner_cells, min2x2, section_heights, section_pairing, section_valid
 from .strategies import Strategy
@@ -148,7 +148,8 @@ def _fusion(s: Scenario, nx: int, ny: int) -> FusionParams:
     f = s.controller.fusion
     grid = GrainGrid(nx, ny, s.controller.grid_cell_m, s.cart.interior_depth_m, math.tan(s.crop.repose_rad),
                      s.grain.deposit_radius_m)
-    return FusionParams(grid, f.flow_sigma, f.settle_sigma_m, f.measurement_sigma_m, s.timing.latency_frames)
+    return FusionParams(grid, f.flow_sigma, f.settle_sigma_m, f.measurement_sigma_m, s.timing.latency_frames,
+                        f.gate_sigma, f.gate_share)
 
 
 def _edge_cells(margin_m: float, cell_m: float, nx: int, ny: int) -> tuple[int, int]:
@@ -223,6 +224,8 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
         else:
             est = predict(est, 0.0, 0.0, 0.0, p.fusion)
     ok = None
+    if meas is not None and est is not None and not consistent(est, meas, p.fusion):
+        meas = None                                            # rejected whole: as if nothing was seen
     if meas is not None:
         m = np.asarray(meas, dtype=np.float64)
         if est is None:
