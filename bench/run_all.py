@@ -40,7 +40,7 @@ if str(BENCH) not in sys.path:
 from harness import ROOT, Arm, Result, get, run_cases  # noqa: E402
 from harness.report import table, to_json  # noqa: E402
 
-__all__ = ["ARMS", "figures", "main", "measure", "render_markdown"]
+__all__ = ["ARMS", "figures", "kept_suite_section", "main", "measure", "render_markdown"]
 
 #: the two arms of the headline comparison: the ground-truth run first (the baseline of the ratios)
 ARMS = (Arm("ground_truth", ROOT, ("feedback=ground_truth", "renderer=none")), Arm("perception", ROOT))
@@ -190,6 +190,14 @@ def render_markdown(res: dict, quick: bool = False) -> str:
     return "\n".join(lines)
 
 
+def kept_suite_section(results_md: Path) -> str:
+    """The field-conditions suite's section of an existing ``results_md`` (written by bench/field_suite.py from
+    its hours-long sweep, which this script does not rerun), or ""."""
+    heading = "## Field-conditions suite"
+    text = results_md.read_text() if results_md.exists() else ""
+    return "\n" + heading + text.split(heading, 1)[1] if heading in text else ""
+
+
 def measure(quick: bool = False, renderer: str = "gl", scenario: str = "default", curves: bool = True,
             command: str = "python bench/run_all.py") -> dict:
     """Every figure (the module docstring) as one JSON-able dict, with the harness's sessions under ``sessions``."""
@@ -233,6 +241,7 @@ def main(argv: list[str] | None = None) -> dict:
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / "results.json").write_text(json.dumps(res, indent=1, allow_nan=False) + "\n")
     md = render_markdown(res, a.quick)
+    md += kept_suite_section(a.out / "results.md")
     (a.out / "results.md").write_text(md)
     print(md)
     return res

@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -49,8 +48,9 @@ from cosim.scenario.plugins import load_plugin
 
 from .control_protocol import ControllerCommand, ControllerInput, Delivery
 from .coping import mode, peak_sigma, rise_rate, slowed_section, unexplained_shift
-from .estimator import FillEstimate, FusionParams, initial_estimate, landing_on, predict, update
+from .estimator import FillEstimate, FusionParams, consistent, initial_estimate, landing_on, predict, update
 from .grainfill import GrainGrid, section_rows
+from .sections import inner_cells, min2x2, section_heights, section_pairing, section_valid
 from .strategies import Strategy
 
 __all__ = ["BIAS_TAU_S", "SETTLE_S", "STRATEGY_POINT", "ControllerParams", "ControllerState", "Delivery",
@@ -148,7 +148,8 @@ def _fusion(s: Scenario, nx: int, ny: int) -> FusionParams:
     f = s.controller.fusion
     grid = GrainGrid(nx, ny, s.controller.grid_cell_m, s.cart.interior_depth_m, math.tan(s.crop.repose_rad),
                      s.grain.deposit_radius_m)
-    return FusionParams(grid, f.flow_sigma, f.settle_sigma_m, f.measurement_sigma_m, s.timing.latency_frames)
+    return FusionParams(grid, f.flow_sigma, f.settle_sigma_m, f.measurement_sigma_m, s.timing.latency_frames,
+                        f.gate_sigma, f.gate_share)
 
 
 def _edge_cells(margin_m: float, cell_m: float, nx: int, ny: int) -> tuple[int, int]:
@@ -179,62 +180,6 @@ class ControllerState:
     hold: int = 0                # hold reason code (cosim.runtime.outcome.HOLD_*), 0 not holding
     slowed: int = -1             # 0-based section the auger is slowed for (near full), -1 none
     spout_x: float = math.nan    # the spout's grid x at the last decision, m
-
-
-def min2x2(m: np.ndarray, next_row: np.ndarray | None = None) -> np.ndarray:
-    """NaN-ignoring minimum over each 2 x 2 block of cells, (nx, ny) float64 m; NaN only where the whole
-    block is NaN. A single noisy cell cannot raise it. ``next_row`` (nx,) int: the row paired with each row
-    (default i + 1, the last row with itself); the last column pairs with itself."""
-    m = np.asarray(m, dtype=np.float64)
-    nx, ny = m.shape
-    if next_row is None:
-        next_row = np.minimum(np.arange(nx) + 1, nx - 1)
-    col = np.minimum(np.arange(ny) + 1, ny - 1)
-    pair = np.fmin(m, m[next_row])                 # each cell with its row pair
-    return np.fmin(pair, pair[:, col])             # = fmin(fmin(m, down), fmin(m[:, col], down[:, col]))
-
-
-def _inner(m: np.ndarray, p: ControllerParams) -> np.ndarray:
-    """A float64 copy of ``m`` (nx, ny) m with the cells within the edge margin set to NaN."""
-    ex, ey = p.edge_cells
-    m = np.array(m, dtype=np.float64)
-    if ex:
-        m[:ex], m[-ex:] = np.nan, np.nan
-    if ey:
-        m[:, :ey], m[:, -ey:] = np.nan, np.nan
-    return m
-
-
-def section_valid(m: np.ndarray, p: ControllerParams) -> np.ndarray:
-    """Whether each section of ``m`` (nx, ny) m has at least ``min_section_cells`` valid cells inside the edge
-    margin, (N,) bool."""
-    valid = np.count_nonzero(~np.isnan(_inner(m, p)), axis=1)
-    return np.add.reduceat(valid, _section_pairing(p.nx, p.section_start_rows)[0]) >= p.min_section_cells
-
-
-@lru_cache(maxsize=8)
-def _section_pairing(nx: int, section_start_rows: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """(first row of each section (N,), row paired with each row (nx,)): the next one, the last row of a section
-    with itself, so that 2 x 2 blocks stay inside their section. Read-only, computed once per grid."""
-    starts = np.asarray(section_start_rows)
-    nxt = np.minimum(np.arange(nx) + 1, nx - 1)
-    last = np.append(starts[1:], nx) - 1
-    nxt[last] = last
-    starts.setflags(write=False)
-    nxt.setflags(write=False)
-    return starts, nxt
-
-
-def section_heights(m: np.ndarray, p: ControllerParams) -> np.ndarray:
-    """Robust peak per section: the highest 2 x 2 block minimum (blocks stay inside their section; cells within
-    the edge margin left out), (N,) float64 m; NaN where a section has fewer than ``min_section_cells`` valid
-    cells. Exact for a heap whose flat top spans 2 x 2 cells."""
-    m = _inner(m, p)
-    starts, nxt = _section_pairing(p.nx, p.section_start_rows)
-    rowmax = np.fmax.reduce(min2x2(m, nxt), axis=1)          # NaN only for all-NaN rows
-    peak = np.fmax.reduceat(rowmax, starts)
-    valid = np.add.reduceat(np.count_nonzero(~np.isnan(m), axis=1), starts)
-    return np.where(valid >= p.min_section_cells, peak, np.nan)
 
 
 def initial_controller(p: ControllerParams) -> ControllerState:
@@ -279,6 +224,8 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
         else:
             est = predict(est, 0.0, 0.0, 0.0, p.fusion)
     ok = None
+    if meas is not None and est is not None and not consistent(est, meas, p.fusion):
+        meas = None                                            # rejected whole: as if nothing was seen
     if meas is not None:
         m = np.asarray(meas, dtype=np.float64)
         if est is None:
@@ -308,7 +255,8 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
     target = _pick(p, full, heights, st.target) if seen else -1
     all_full = seen and target < 0
     slowed = slowed_section(target, st.slowed, full, heights, rate, actual_x + drift_x, p.full_lead_s,
-                            p.lead_allowance_m, p.full_level_m, p.centres_m, p.length_m / p.sections)
+                            p.lead_allowance_m, p.full_level_m, p.centres_m, p.length_m / p.sections,
+                            p.slow_flow if st.slowed >= 0 else 1.0)
     mode, hold, sigma = _mode(p, seen, target, ok, est)
     lo, hi = p.safe_margin_m, p.length_m - p.safe_margin_m
     if target >= 0:
@@ -362,9 +310,9 @@ def _mode(p: ControllerParams, seen: bool, target: int, ok: np.ndarray | None,
     """(mode, hold reason, target section's 1-sigma m) of a decision (:func:`dynamics_proc.coping.mode`)."""
     sigma = math.nan
     if seen and target >= 0 and est is not None and est.started:
-        starts, nxt = _section_pairing(p.nx, p.section_start_rows)
+        starts, nxt = section_pairing(p.nx, p.section_start_rows)
         rows = slice(int(starts[target]), int(starts[target + 1]) if target + 1 < p.sections else p.nx)
-        sigma = peak_sigma(min2x2(_inner(est.height, p), nxt), est.var, rows)
+        sigma = peak_sigma(min2x2(inner_cells(est.height, p), nxt), est.var, rows)
     seen_target = ok is not None and target >= 0 and bool(ok[target])
     return (*mode(seen, target, seen_target, est is not None, sigma, p.fallback_sigma_m), sigma)
 

@@ -12,7 +12,11 @@ centred at ((i + 0.5) c, (j + 0.5) c)). Each frame:
 * **update** (:func:`update`): every cell with a valid perceived height z is corrected with gain
   K = P / (P + R), R = ``measurement_sigma_m^2``. The measurement is L frames old (the feedback latency),
   so the innovation is taken against the estimate of that time: the estimate less the rises predicted
-  since (:attr:`FillEstimate.pending`), and the correction is applied to the current estimate.
+  since (:attr:`FillEstimate.pending`), and the correction is applied to the current estimate;
+* **gate** (:func:`consistent`): before the update, each valid cell's innovation is normalised by its
+  standard deviation sqrt(P + R); a map with more than ``gate_share`` of its cells beyond ``gate_sigma`` is
+  rejected whole (a cart "found" in a dust cloud, a misregistered frame: the cells disagree everywhere at once,
+  while grain the prediction misplaced disagrees in a few). A rejected map is no measurement.
 
 Why it helps (the paper's degradation, its Fig 10b): the section being filled is the one the falling stream
 hides and the spout's own geometry views at grazing angles, so a purely perceived peak lags or disappears
@@ -22,7 +26,11 @@ corrects the prediction wherever it sees, and the variance says how much to trus
 Where it stops being valid: the heap law assumes grain settles at the angle of repose around the impact, with
 no avalanching beyond its cone; a flow signal biased by ``b`` puts ``b`` of the delivered volume in the wrong
 place until perception sees it (tests show the result with a 15 % biased flow signal); a cell never seen keeps
-the level of its first-seen neighbours' median.
+the level of its first-seen neighbours' median. The gate trusts the estimate: were the estimate itself wrong by
+more than ``gate_sigma`` standard deviations over more than ``gate_share`` of the seen cells, every later map
+would be rejected too; the variance then grows each frame (``settle_sigma_m``) until the gate widens enough to
+let a map in, and meanwhile the controller's confidence rule (``controller.coping.fallback_sigma_m``) holds the
+auger.
 """
 from __future__ import annotations
 
@@ -33,7 +41,7 @@ import numpy as np
 from .auger import landing_xy
 from .grainfill import GrainGrid, deposit
 
-__all__ = ["FusionParams", "FillEstimate", "initial_estimate", "landing_on", "predict", "update",
+__all__ = ["FusionParams", "FillEstimate", "initial_estimate", "landing_on", "predict", "consistent", "update",
            "LANDING_ITERATIONS"]
 
 #: fixed-point iterations of the landing on the estimated surface (each moves it by the surface slope times
@@ -51,6 +59,8 @@ class FusionParams:
     settle_sigma_m: float
     measurement_sigma_m: float
     lag: int
+    gate_sigma: float = float("inf")
+    gate_share: float = 1.0
 
     @property
     def r(self) -> float:
@@ -111,6 +121,20 @@ def predict(e: FillEstimate, vol_m3: float, gx: float, gy: float, p: FusionParam
         var = var + (p.flow_sigma * rise) ** 2 + p.settle_sigma_m ** 2
     pending = (e.pending + (rise,))[-p.lag:] if p.lag > 0 else ()
     return FillEstimate(h, var, pending)
+
+
+def consistent(e: FillEstimate, z: np.ndarray, p: FusionParams) -> bool:
+    """Whether the perceived map ``z`` (nx, ny) m (NaN: no return, ``p.lag`` frames old) agrees with the estimate:
+    at most ``p.gate_share`` of its valid cells have an innovation beyond ``p.gate_sigma`` sqrt(P + R). Before the
+    first map, and for a map with no valid cell, True (nothing to compare)."""
+    z = np.asarray(z, dtype=np.float64)
+    ok = ~np.isnan(z)
+    if not e.started or not ok.any():
+        return True
+    then = e.height - sum(e.pending) if e.pending else e.height
+    innovation = np.abs(z[ok] - then[ok])
+    outside = innovation > p.gate_sigma * np.sqrt(e.var[ok] + p.r)
+    return float(np.count_nonzero(outside)) <= p.gate_share * innovation.size
 
 
 def update(e: FillEstimate, z: np.ndarray, p: FusionParams) -> FillEstimate:

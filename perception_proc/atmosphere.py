@@ -30,9 +30,9 @@ from functools import lru_cache
 
 import numpy as np
 
-from cosim.scenario.config import Scenario
+from cosim.scenario.config import Atmosphere, Scenario
 
-__all__ = ["C_MPS", "overlap", "hard_power", "soft_power", "DustModel", "dust_model"]
+__all__ = ["C_MPS", "overlap", "hard_power", "soft_power", "DustModel", "dust_model", "dust_blows"]
 
 #: speed of light, m/s
 C_MPS = 299_792_458.0
@@ -121,14 +121,23 @@ def _table(alpha: float, beta: float, tau_s: float, r1: float, r2: float, r_max:
     return grid, peak, at
 
 
-def dust_model(s: Scenario) -> DustModel | None:
-    """The scenario's :class:`DustModel`, None in dust-free air (nothing to apply)."""
+def dust_model(s: Scenario, range_max_m: float | None = None) -> DustModel | None:
+    """The scenario's :class:`DustModel` for a sensor reaching ``range_max_m`` m (None: ``sensor.range_max_m``),
+    None in dust-free air (nothing to apply)."""
     a, sensor = s.atmosphere, s.sensor
     alpha = a.extinction_per_m
     if alpha == 0.0:
         return None
+    r_max = sensor.range_max_m if range_max_m is None else float(range_max_m)
     beta = alpha / a.lidar_ratio_sr
     r1, r2 = a.overlap_m
-    p_min = float(hard_power(sensor.range_max_m, 0.0, a.detection_reflectivity, 0.0, 0.0))
-    grid, peak, at = _table(alpha, beta, a.pulse_half_power_ns * _NS, r1, r2, sensor.range_max_m)
+    p_min = float(hard_power(r_max, 0.0, a.detection_reflectivity, 0.0, 0.0))
+    grid, peak, at = _table(alpha, beta, a.pulse_half_power_ns * _NS, r1, r2, r_max)
     return DustModel(alpha, beta, a.target_reflectivity, r1, r2, p_min, a.return_mode == "last", grid, peak, at)
+
+
+def dust_blows(atmosphere: Atmosphere, t_s: float) -> bool:
+    """Whether the dust of ``atmosphere`` is in the air at run time ``t_s`` s: always, or inside its
+    ``dust_window_s`` [start, end) (a gust). Every sensor asks this, so the LiDAR and the cameras share the gust."""
+    window = atmosphere.dust_window_s
+    return window is None or window[0] <= float(t_s) < window[1]

@@ -5,13 +5,14 @@ ideal images and the depth and points perception uses.
 
 * ``images(images: CameraImages) -> CameraImages``: on the rendered images before the sensor's model (the
   colour images the stereo matcher sees, the exact depth the depth camera's model starts from): where
-  field conditions change what reaches the sensor (dust: contrast loss, speckle, blocked pixels);
+  field conditions change what reaches the sensor (dust: contrast loss and speckle on the colour images);
 * ``depth(images: CameraImages, depth_m) -> depth_m``: on the measured depth (H, W) float32 m (NaN invalid),
-  after the model (dust: invalid or false near depths).
+  after the model, with the exact images at hand (dust: the depth camera's invalid or false near depths).
 
 Both stages must be pure functions of their inputs and, for anything random, of a generator seeded from the
-scenario seed, the frame (``images.frame``) and the camera: a run stays byte-identical. The default effects
-change nothing (``NoEffects``); a scenario block describing the atmosphere plugs its effects in here.
+scenario seed, the frame (``images.frame``) and the camera, and for anything varying in time of the images'
+``t_s``: a run stays byte-identical. Clear air changes nothing (``NoEffects``); dust in ``atmosphere:``
+plugs in ``perception_proc.camera_dust``.
 """
 from __future__ import annotations
 
@@ -46,5 +47,11 @@ class NoEffects:
 
 
 def camera_effects(scenario: Scenario, name: str) -> CameraEffects:
-    """The effects camera ``name`` of ``scenario`` sees (today none: :class:`NoEffects`)."""
-    return NoEffects()
+    """The effects camera ``name`` of ``scenario`` sees: the dust of ``atmosphere:``
+    (:class:`perception_proc.camera_dust.CameraDust`) when the air has any, else none (:class:`NoEffects`: clear
+    air changes nothing, to the bit)."""
+    if scenario.atmosphere.extinction_per_m == 0.0:
+        return NoEffects()
+    from .camera_dust import CameraDust  # imports camera_pipeline, which imports this module
+
+    return CameraDust(scenario, name)

@@ -54,13 +54,15 @@ EDGE_BAND_RAD = 0.02
 @dataclass
 class CameraImages:
     """One camera's images of a frame (copies): ``rgb`` / ``right`` (H, W, 4) uint8, ``depth`` (H, W) float32
-    exact planar depth m, ``labels`` (H, W) uint8; each None where the camera has no such part."""
+    exact planar depth m, ``labels`` (H, W) uint8; each None where the camera has no such part; ``t_s`` the run
+    time of the state they show, s (what time-varying effects such as a dust gust go by)."""
 
     frame: int
     rgb: np.ndarray | None = None
     right: np.ndarray | None = None
     depth: np.ndarray | None = None
     labels: np.ndarray | None = None
+    t_s: float = 0.0
 
 
 class CameraPipeline:

@@ -11,7 +11,7 @@ the cameras due (the only read of their shared images: with overlap the rest run
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
@@ -106,8 +106,10 @@ class PerceptionCameras:
     def frames(self, gathered: list[tuple[CameraPipeline, CameraImages]], state: Mapping[str, float]
                ) -> list[tuple[SensorFrame, np.ndarray]]:
         """Run the due cameras' models; every camera's latest (SensorFrame, border flags), declaration order."""
+        t_s = float(state.get("t_s", 0.0)) if state else 0.0
         for p, images in gathered:
             t0 = time.perf_counter()
+            images = replace(images, t_s=t_s)
             depth = p.measure(images)
             lfp = self.level_from_parent(p.parent, state)
             level, ranges, border, record = p.points(depth, lfp)

@@ -16,7 +16,7 @@ import numpy as np
 
 from cosim.scenario.config import Scenario
 
-from .atmosphere import DustModel, dust_model, hard_power
+from .atmosphere import DustModel, dust_blows, dust_model, hard_power
 from .stream_particles import STREAM_PARTICLES, beam_crossings, kernel_density, occlude
 
 __all__ = ["LidarAtmosphere", "lidar_atmosphere", "stream_row_time"]
@@ -41,16 +41,18 @@ class LidarAtmosphere:
         a = scenario.atmosphere
         self.scenario, self.directions, self.dust = scenario, np.asarray(directions, np.float64), dust
         self.particles = a.stream_particles
-        self.alpha = dust.alpha if dust is not None else 0.0
         self.p_min = float(hard_power(scenario.lidar.range_max_m, 0.0, a.detection_reflectivity, 0.0, 0.0))
         self.last = a.return_mode == "last"
 
     def apply(self, ranges: np.ndarray, frame: int, state: Mapping[str, float], stream: np.ndarray | None,
               world_from_sensor: np.ndarray) -> np.ndarray:
         """The reported ranges (N,) float32 m (NaN: no return) for the exact first hits ``ranges`` (N,) float32 m
-        of frame ``frame``; ``state`` the frame's ``dyn_state`` (its flow), ``stream`` its ``stream`` rows (M, 4)
-        (world), ``world_from_sensor`` (4, 4). New array."""
-        out = self.dust.returns(ranges) if self.dust is not None else np.array(ranges, np.float32)
+        of frame ``frame``; ``state`` the frame's ``dyn_state`` (its time and flow), ``stream`` its ``stream``
+        rows (M, 4) (world), ``world_from_sensor`` (4, 4). New array."""
+        dust = self.dust
+        if dust is not None and not dust_blows(self.scenario.atmosphere, float(state.get("t_s", 0.0))):
+            dust = None                                              # outside the gust: clear air
+        out = dust.returns(ranges) if dust is not None else np.array(ranges, np.float32)
         n_rows = int(state.get("stream_points", 0)) if state else 0
         flow = float(state.get("flow_m3ps", 0.0)) if state else 0.0
         if not self.particles or stream is None or n_rows < 2 or flow <= 0.0:
@@ -70,39 +72,39 @@ class LidarAtmosphere:
                                            a.beam_divergence_mrad * 1e-3, rng)
         if ids.size == 0:
             return out
-        ext = np.exp(-2.0 * self.alpha * kr)
+        alpha = dust.alpha if dust is not None else 0.0
         with np.errstate(divide="ignore", invalid="ignore"):
-            kp = (a.kernel_reflectivity / math.pi) * took * ext / (kr * kr)
+            kp = (a.kernel_reflectivity / math.pi) * took * np.exp(-2.0 * alpha * kr) / (kr * kr)
         kp = np.where(kr > 0.0, kp, 0.0)
-        hp = hard_power(r0[ids], self.alpha, a.target_reflectivity, 0.0, 0.0) * left
-        out[ids] = self._choose(ids, row, kr, kp, r0[ids], hp)
+        hp = hard_power(r0[ids], alpha, a.target_reflectivity, 0.0, 0.0) * left
+        out[ids] = self._choose(row, kr, kp, r0[ids], hp, dust)
         return out
 
-    def _choose(self, ids: np.ndarray, row: np.ndarray, kr: np.ndarray, kp: np.ndarray, r0: np.ndarray,
-                hp: np.ndarray) -> np.ndarray:
-        """Per beam with kernels: the reported range among its kernels, its target and (with dust) the dust's
-        choice, strongest or last above the detection limit."""
+    def _choose(self, row: np.ndarray, kr: np.ndarray, kp: np.ndarray, r0: np.ndarray, hp: np.ndarray,
+                dust: DustModel | None) -> np.ndarray:
+        """Per beam with kernels (``row``: each kernel's beam, 0..B-1; ``r0``, ``hp`` (B,) its target's range and
+        power): the reported range among its kernels, its target and the dust, strongest or last above the
+        detection limit."""
+        n = len(r0)
         seen = kp >= self.p_min
-        res = np.full(len(ids), np.nan)
-        best = np.full(len(ids), -1.0)
+        best = np.full(n, -1.0)
         if self.last:                                                 # the farthest detected return
-            far = np.full(len(ids), -np.inf)
+            far = np.full(n, -np.inf)
             np.maximum.at(far, row[seen], kr[seen])
-            res = np.where(np.isfinite(far), far, np.nan)
-            res = np.where(hp >= self.p_min, r0, res)
+            res = np.where(hp >= self.p_min, r0, np.where(np.isfinite(far), far, np.nan))
         else:                                                         # the strongest detected return
+            res = np.full(n, np.nan)
             np.maximum.at(best, row[seen], kp[seen])
             pick = seen & (kp == best[row])
             res[row[pick]] = kr[pick]
-            target = (hp >= self.p_min) & (hp >= best)
-            res = np.where(target, r0, res)
+            res = np.where((hp >= self.p_min) & (hp >= best), r0, res)
             best = np.maximum(best, np.where(hp >= self.p_min, hp, -1.0))
-        if self.dust is not None:                                    # the dust's near return may still win
-            k = np.clip(np.searchsorted(self.dust.grid, np.nan_to_num(np.nanmin(np.c_[res, r0], axis=1),
-                        nan=self.dust.grid[-1]), side="right") - 1, 0, len(self.dust.grid) - 1)
-            s = self.dust.peak[k]
+        if dust is not None:                                         # the dust's near return may still win
+            reach = np.nan_to_num(np.fmin(res, r0), nan=dust.grid[-1])
+            k = np.clip(np.searchsorted(dust.grid, reach, side="right") - 1, 0, len(dust.grid) - 1)
+            s = dust.peak[k]
             wins = (s >= self.p_min) & ((s > best) if not self.last else ~np.isfinite(res))
-            res = np.where(wins, self.dust.peak_at[k], res)
+            res = np.where(wins, dust.peak_at[k], res)
         return res.astype(np.float32)
 
 
@@ -110,4 +112,4 @@ def lidar_atmosphere(scenario: Scenario, directions: np.ndarray) -> LidarAtmosph
     """The run's :class:`LidarAtmosphere`, None when the air is clear and the stream solid (nothing to apply)."""
     if scenario.atmosphere.clear:
         return None
-    return LidarAtmosphere(scenario, directions, dust_model(scenario))
+    return LidarAtmosphere(scenario, directions, dust_model(scenario, scenario.lidar.range_max_m))

@@ -124,3 +124,12 @@ def test_the_stream_as_particles_in_a_lidar_frame():
     assert 4.84 < out[0] < 5.16 and out[1] == np.float32(9.0)       # the stream's kernels, and a beam that misses
     assert np.array_equal(out, atm.apply(np.array([9.0, 9.0], np.float32), 3, state, rows, pose))
     assert atm.apply(np.array([9.0, 9.0], np.float32), 3, {"stream_points": 0}, rows, pose)[0] == 9.0
+
+
+def test_a_dust_gust_blows_only_over_its_window():
+    s = Scenario.model_validate_json('{"format_version": 1, "atmosphere": {"visibility_m": 25.0, '
+                                     '"dust_window_s": [10.0, 20.0]}}')
+    atm = lidar_atmosphere(s, np.array([[0.0, 0.0, 1.0]]))
+    r = np.array([9.0], np.float32)
+    before, during = atm.apply(r, 1, {"t_s": 9.9}, None, np.eye(4)), atm.apply(r, 1, {"t_s": 10.0}, None, np.eye(4))
+    assert before[0] == 9.0 and 1.0 < during[0] < 6.0 and atm.apply(r, 1, {"t_s": 20.0}, None, np.eye(4))[0] == 9.0

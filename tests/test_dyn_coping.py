@@ -54,6 +54,9 @@ def test_slowing_starts_near_full_at_a_high_rise_only_and_lasts_until_the_impact
     assert slowed_section(1, 0, done, heights, np.zeros(3), 2.1, **args) == -1                # arrived
     assert slowed_section(1, 0, full, heights, np.zeros(3), 1.9, **args) == -1                # 0 left unfilled
     assert slowed_section(0, -1, full, heights, np.array([1.0, 0, 0]), 1.0, **{**args, "lead_s": 0.0}) == -1
+    # a rise measured at the slowed flow of the section before counts at the nominal flow
+    assert slowed_section(0, -1, full, heights, np.array([0.05, 0, 0]), 1.0, **args, flow_fraction=0.3) == 0
+    assert slowed_section(0, -1, full, heights, np.array([0.015, 0, 0]), 1.0, **args, flow_fraction=0.3) == -1
 
 
 def test_modes_and_hold_reasons():
@@ -157,3 +160,28 @@ def test_feedforward_keeps_the_spout_over_the_cart_centreline_in_a_tight_turn():
         rms[ff] = float(np.sqrt(np.mean(off ** 2)))
         assert _outcome(s, r)["status"] == "filled"
     assert rms[True] < 0.06 and rms[False] > 0.2, rms
+
+
+def _dusty(bogus_every: int, t0_s: float = 40.0, t1_s: float = 70.0, period_s: float = 0.1):
+    """Truth outside [t0, t1) s; inside, nothing seen but every ``bogus_every``-th frame a map of a "cart" found
+    in a dust cloud: 1.8 m over every cell (what the controller would read as nine full sections)."""
+    def measure(truth, frame):
+        t = frame * period_s
+        if not t0_s <= t < t1_s:
+            return truth
+        return np.full_like(truth, 1.8) if frame % bogus_every == 0 else None
+    return measure
+
+
+def test_a_map_that_disagrees_with_the_estimate_everywhere_is_rejected_whole():
+    """A cart 'found' in dust (a bogus map every 2 s of a 30 s gust) would latch sections full that got no grain
+    (the run ends declared full with sections short of the target); the estimator's gate rejects such maps and
+    the controller fills on by dead reckoning. Without the gate (gate_sigma 1e6) the same run fails."""
+    s = scen()
+    r = simulate(s, measure=_dusty(20))
+    assert _outcome(s, r)["status"] == "filled"
+    assert np.all(r.series["dyn_state.control_mode"][(r.series["dyn_state.t_s"] >= 41.0)
+                                                     & (r.series["dyn_state.t_s"] < 70.0)] != MODE_MEASURED)
+    open_gate = scen(controller={"fusion": {"gate_sigma": 1e6}})
+    out = _outcome(open_gate, simulate(open_gate, measure=_dusty(20)))
+    assert out["status"] != "filled", out

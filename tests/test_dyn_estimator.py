@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from cosim.scenario.config import Scenario
 from dynamics_proc.auger import landing_point
 from dynamics_proc.closed_loop import occluded_measurement, simulate
-from dynamics_proc.estimator import FusionParams, initial_estimate, landing_on, predict, update
+from dynamics_proc.estimator import FusionParams, consistent, initial_estimate, landing_on, predict, update
 from dynamics_proc.grainfill import GrainGrid, max_slope
 from dynamics_proc.summary import summarize
 
@@ -126,3 +126,23 @@ def test_fused_estimator_reaches_target_without_overfill_or_spill(bias):
     peaks = np.array(sm["fill"]["section_peak_height_m"])
     assert np.all(np.abs(peaks - 1.9) <= 0.05), peaks
     assert sm["mass_balance"]["relative_error"] <= 1e-9
+
+
+def test_the_gate_rejects_a_map_whose_cells_disagree_beyond_the_share():
+    """consistent(): cells beyond gate_sigma sqrt(P + R) counted against gate_share; before the first map and
+    for an empty map there is nothing to compare."""
+    p, e = started(1.0)
+    p = replace(p, gate_sigma=5.0, gate_share=0.5)
+    s = math.sqrt(float(e.var[0, 0]) + p.r)
+    z = np.full_like(e.height, 1.0)
+    assert consistent(e, z, p) and consistent(e, np.full_like(z, np.nan), p)
+    assert consistent(initial_estimate(p), z + 9.0, p)
+    far = z.copy()
+    n = far.size
+    far.flat[: n // 2] += 5.01 * s                      # exactly half beyond the gate: still consistent
+    assert consistent(e, far, p)
+    far.flat[n // 2] += 5.01 * s                        # one more cell: rejected
+    assert not consistent(e, far, p)
+    near = z + 4.99 * s                                  # every cell inside the gate
+    assert consistent(e, near, p)
+    assert consistent(e, far, replace(p, gate_sigma=1e6))

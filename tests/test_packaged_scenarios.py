@@ -18,7 +18,8 @@ NAMES = sorted(packaged_scenarios())
 def test_the_packaged_set_is_complete():
     assert {"default", "back_to_front", "lowest_first", "curved_pass", "soybeans", "stiff_drivetrain",
             "high_flow", "fast_harvest", "misaligned_start", "heavy_noise", "grazing_sensor",
-            "near_alpha"} <= set(NAMES)
+            "near_alpha", "rough_terrain", "side_slope", "gnss_noise", "stop_and_go", "headland_turn", "dusty",
+            "dense_dust"} <= set(NAMES)
 
 
 @pytest.mark.parametrize("name", NAMES)

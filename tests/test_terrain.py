@@ -197,3 +197,42 @@ def test_the_mock_renderers_rigid_cast_agrees_with_the_exact_reference_on_uneven
         hit = np.isfinite(a)
         assert np.array_equal(hit, np.isfinite(b)) and np.abs(a[hit] - b[hit]).max() < 1e-9
     caster.close()
+
+
+def test_a_stream_of_no_radius_is_nothing_to_the_rigid_cast_as_to_the_reference():
+    """The last frame of a run-out can end at flow 0 with grain still in the air: its rows have radius 0."""
+    pytest.importorskip("embreex")
+    from cosim.world.camera import beam_directions
+    from cosim.world.fastcast import cast_from, make_caster
+    from cosim.world.parts import entity_parts
+    from cosim.world.patterns import beam_table
+    from renderer_proc.projection import world_from_sensor
+
+    s = scen({"cross_slope_pct": 4.0}, renderer="mock")
+    p = ModelParams.from_scenario(s)
+    w = initial_world(s, p)
+    state = {**signals(w, p), "stream_points": 64}
+    stream = np.array(w.stream, np.float32)
+    stream[:, 3] = 0.0
+    scene = scene_from_state(s, state, np.asarray(w.heights, np.float32), stream)
+    ws = world_from_sensor(s, state)
+    el, az = beam_table(s.sensor.pattern)
+    d = beam_directions(el, az) @ ws[:3, :3].T
+    caster = make_caster(entity_parts(s))
+    a, b = caster.cast(scene, ws[:3, 3], d), cast_from(scene, ws[:3, 3], d)
+    caster.close()
+    hit = np.isfinite(a)
+    assert np.array_equal(hit, np.isfinite(b)) and np.abs(a[hit] - b[hit]).max() < 1e-9
+
+
+def test_a_height_map_file_is_the_ground_and_holds_its_edges(tmp_path):
+    import json
+
+    heights = np.add.outer(np.arange(5) * 0.1, np.arange(4) * 0.02)   # z = 0.1 i + 0.02 j every 2 m
+    np.save(tmp_path / "field.npy", heights)
+    s = Scenario.model_validate_json(json.dumps({"format_version": 1, "terrain": {
+        "height_map_file": str(tmp_path / "field.npy"), "cell_m": 2.0, "origin_xy_m": [-4.0, -2.0]}}))
+    t = terrain_of(s)
+    assert t.height(-4.0 + 2.0 * 3, -2.0 + 2.0 * 2) == pytest.approx(0.34)           # a sample
+    assert t.height(-4.0 + 3.0, -2.0 + 1.0) == pytest.approx(0.15 + 0.01)            # linear between samples
+    assert t.height(100.0, -50.0) == pytest.approx(0.4)                               # beyond: the edge holds

@@ -249,7 +249,8 @@ def build_runs(base_text: str, base_file: str, base_label: str, fixed: list[Over
                     problems.add(p)
                 continue
             params = {o.path: o.value for o in point}
-            runs.append(RunSpec(run_id(base_label, fixed_plain, params, seed.value), params, seed.value, scenario,
+            named = {**labels[j], **params} if labels else params          # a suite's runs are named by case
+            runs.append(RunSpec(run_id(base_label, fixed_plain, named, seed.value), params, seed.value, scenario,
                                 dict(labels[j]) if labels else {}))
     return runs, sorted(problems, key=lambda p: (p.file != seeds[0].mark.file, p.file, p.line, p.col, p.path))
 
@@ -268,16 +269,12 @@ def load_sweep(path: str | os.PathLike) -> Sweep:
     doc, spec = _parse_structure(text, str(path))
     if spec is None:
         raise ScenarioError(doc.problems)
-    base_arg = spec.base if (path.parent / spec.base).suffix == "" else str(path.parent / spec.base)
-    try:
-        base = resolve_scenario_arg(base_arg)
-    except ScenarioError:
-        m = doc.values.get(("base",), doc.values[()])
-        raise ScenarioError([Problem(m.file, m.line, m.col, "base", f"no such packaged scenario or file "
-                                     f"{spec.base!r} (a path is relative to the sweep file)")]) from None
+    names = spec.base if isinstance(spec.base, list) else [spec.base]
+    bases = [_resolve_base(path, doc, name, ("base", i) if isinstance(spec.base, list) else ("base",))
+             for i, name in enumerate(names)]
     fixed = [Override(k, v, doc.values[("set", k)], f"set.{k}", doc.keys[("set", k)], f"set.{k}")
              for k, v in spec.set.items()]
-    total = _run_count(spec)
+    total = _run_count(spec) * len(bases)
     if total > MAX_RUNS:                     # counted before anything is expanded or drawn
         m = doc.values[()]
         raise ScenarioError([Problem(m.file, m.line, m.col, "", f"{total:,} runs: a sweep has at most "
@@ -288,10 +285,16 @@ def load_sweep(path: str | os.PathLike) -> Sweep:
              for i, s in enumerate(spec.seed_list)]
     # plug-in modules beside the sweep file are found when the base is a packaged scenario (a base file's own
     # folder is searched for its plug-ins otherwise), unless the sweep sets plugin_dir itself
-    packaged = base.resolve() in {p.resolve() for p in packaged_scenarios().values()}
-    plugin_dir = str(path.parent.resolve()) if packaged and "plugin_dir" not in spec.set else None
-    runs, problems = build_runs(read_scenario(base), str(base), spec.base, fixed, points, seeds,
-                                path.parent.resolve(), plugin_dir=plugin_dir)
+    runs, problems = [], []
+    packaged_files = {p.resolve() for p in packaged_scenarios().values()}
+    for name, base in zip(names, bases):
+        packaged = base.resolve() in packaged_files
+        plugin_dir = str(path.parent.resolve()) if packaged and "plugin_dir" not in spec.set else None
+        labels = [{"base": name}] * len(points) if len(bases) > 1 else None
+        r, p = build_runs(read_scenario(base), str(base), name, fixed, points, seeds, path.parent.resolve(),
+                          labels=labels, plugin_dir=plugin_dir)
+        runs += r
+        problems += [q for q in p if q not in problems]
     seen = {(p.file, p.line, p.col) for p in doc.problems}      # a value refused as such is reported once
     problems = sorted(set(doc.problems) | {p for p in problems if (p.file, p.line, p.col) not in seen},
                       key=lambda p: (p.file != str(path), p.file, p.line, p.col))
@@ -302,4 +305,17 @@ def load_sweep(path: str | os.PathLike) -> Sweep:
                                 "a value is repeated"))
     if problems:
         raise ScenarioError(problems)
-    return Sweep(spec.name or path.stem, tuple(spec.grid) + tuple(spec.zip) + tuple(spec.random), tuple(runs))
+    return Sweep(spec.name or path.stem, tuple(spec.grid) + tuple(spec.zip) + tuple(spec.random), tuple(runs),
+                 ("base",) if len(bases) > 1 else ())
+
+
+def _resolve_base(path: Path, doc: Doc, name: str, loc: tuple) -> Path:
+    """The scenario file of base ``name`` (a packaged name or a path relative to the sweep file ``path``);
+    ScenarioError at its mark ``loc`` when there is none."""
+    arg = name if (path.parent / name).suffix == "" else str(path.parent / name)
+    try:
+        return resolve_scenario_arg(arg)
+    except ScenarioError:
+        m = doc.values.get(loc, doc.values[()])
+        raise ScenarioError([Problem(m.file, m.line, m.col, dotted(loc), f"no such packaged scenario or file "
+                                     f"{name!r} (a path is relative to the sweep file)")]) from None

@@ -14,10 +14,12 @@ __all__ = ["Atmosphere"]
 
 class Atmosphere(Model):
     """Dust in the air and the grain stream as particles, for the LiDAR (the model of Hahner et al. 2021 for fog,
-    with dust's constants; the stream after Hahner et al. 2022's snowfall).
+    with dust's constants; the stream after Hahner et al. 2022's snowfall); the dust also for the cameras (haze,
+    speckle, a depth camera's pixels through the LiDAR's dust model; docs/cameras.md).
 
     * ``visibility_m``: meteorological optical range (MOR) of the dust, m; extinction alpha = ln(20) / MOR. Or
       ``dust_mass_g_m3`` with ``mass_extinction_m2_per_g``: alpha = mass x that. Both unset / 0: clear air;
+    * ``dust_window_s``: the dust blows only over [start, end) s of the run (a gust), None all the time;
     * ``lidar_ratio_sr``: extinction-to-backscatter ratio of the dust, sr (backscatter beta = alpha / it; Saharan
       dust: 50 +- 5 sr at 532 nm, 63 +- 13 sr at 1064 nm, Haarig et al. 2022);
     * ``return_mode``: the return a LiDAR reports, the ``strongest`` or the ``last`` above its detection limit;
@@ -25,7 +27,7 @@ class Atmosphere(Model):
     * ``overlap_m``: the receiver's field of view meets the beam from the first distance, fully from the second;
     * ``target_reflectivity``: Lambertian reflectivity of every hard target (the renderer gives ranges, not
       materials); ``detection_reflectivity``: the sensor detects a target of this reflectivity at its
-      ``sensor.range_max_m`` in clear air and nothing weaker;
+      ``sensor.range_max_m`` (a depth camera: its own ``range_max_m``) in clear air and nothing weaker;
     * ``stream_particles``: the grain stream is no solid cylinder for the LiDAR but its kernels
       (``kernel_diameter_m``, reflectivity ``kernel_reflectivity``, ``packing_fraction`` of the stream's bulk
       volume), each occluding its share of a beam ``beam_divergence_mrad`` wide.
@@ -37,6 +39,8 @@ class Atmosphere(Model):
     """Dust mass concentration, g/m^3 (used when visibility_m is not given; 0: none)."""
     mass_extinction_m2_per_g: PosFloat = 0.5
     """Extinction per mass of the dust, m^2/g (mineral dust about 0.3-1; an assumption, see docs/field.md)."""
+    dust_window_s: tuple[float, float] | None = None
+    """The dust blows only from the first to the second time, s (None: all the run): a gust over the cart."""
     lidar_ratio_sr: PosFloat = 60.0
     """Extinction-to-backscatter ratio of the dust, sr."""
     return_mode: Literal["strongest", "last"] = "strongest"

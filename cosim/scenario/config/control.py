@@ -41,7 +41,11 @@ class Fusion(Model):
     * ``settle_sigma_m``: per-frame 1-sigma drift of every cell (settling the heap law does not model);
     * ``measurement_sigma_m``: 1-sigma of a perceived cell height;
     * ``flow_meter_bias``: relative error of the flow signal the estimator is given (0: calibrated), a study
-      knob for model mismatch; the grain delivered is unchanged.
+      knob for model mismatch; the grain delivered is unchanged;
+    * ``gate_sigma``, ``gate_share``: a perceived map is rejected whole when more than ``gate_share`` of its valid
+      cells lie more than ``gate_sigma`` standard deviations (estimate and measurement together) from the
+      estimate: a cart found in dust or debris, a misregistered frame. The controller then goes on by dead
+      reckoning as when nothing was seen.
     """
 
     flow_sigma: NonNegFloat = 0.2
@@ -53,6 +57,12 @@ class Fusion(Model):
     flow_meter_bias: float = Field(default=0.0, ge=-0.9, le=10.0, allow_inf_nan=False)
     """Relative error of the flow signal the estimator is given (0: calibrated; -0.9 to 10); the grain delivered
     is unchanged."""
+    gate_sigma: PosFloat = 5.0
+    """Innovation gate of a perceived cell, in standard deviations of estimate and measurement together (a
+    large value, e.g. 1e6: no gate)."""
+    gate_share: Fraction = 0.5
+    """A perceived map is rejected whole when more than this share of its valid cells fall outside the gate
+    (0 to 1)."""
 
 
 class Coping(Model):

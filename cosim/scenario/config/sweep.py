@@ -73,8 +73,9 @@ class SweepFile(Model):
     """Version of the sweep file format: 1."""
     name: str | None = None
     """Name of the sweep (default: the file's stem)."""
-    base: str = "default"
-    """The scenario every run starts from: a packaged name or a path relative to the sweep file."""
+    base: str | list[str] = "default"
+    """The scenario every run starts from: a packaged name or a path relative to the sweep file; a list of them
+    runs every point over each (a suite of cases: the table's ``base`` column names each run's)."""
     set: dict[str, Any] = Field(default_factory=dict)
     """Overrides every run gets: dotted scenario key -> value."""
     grid: dict[str, NonEmptyList] = Field(default_factory=dict)
