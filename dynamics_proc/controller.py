@@ -255,8 +255,7 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
     target = _pick(p, full, heights, st.target) if seen else -1
     all_full = seen and target < 0
     slowed = slowed_section(target, st.slowed, full, heights, rate, actual_x + drift_x, p.full_lead_s,
-                            p.lead_allowance_m, p.full_level_m, p.centres_m, p.length_m / p.sections,
-                            p.slow_flow if st.slowed >= 0 else 1.0)
+                            p.lead_allowance_m, p.full_level_m, p.centres_m, p.length_m / p.sections)
     mode, hold, sigma = _mode(p, seen, target, ok, est)
     lo, hi = p.safe_margin_m, p.length_m - p.safe_margin_m
     if target >= 0:

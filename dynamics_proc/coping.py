@@ -61,21 +61,18 @@ def peak_sigma(blocks: np.ndarray, var: np.ndarray, rows: slice) -> float:
 
 def slowed_section(target: int, slowed: int, full: np.ndarray, heights: np.ndarray, rate: np.ndarray,
                    impact_x: float, lead_s: float, allowance_m: float, full_level_m: float,
-                   centres_m: tuple[float, ...], section_m: float, flow_fraction: float = 1.0) -> int:
+                   centres_m: tuple[float, ...], section_m: float) -> int:
     """The section (0-based) the auger is slowed for, -1 none: the ``target`` once its level ``heights[target]``
-    plus its rise over the lead at the nominal flow, ``max(rate, 0) / flow_fraction * lead_s``, reaches
-    ``full_level_m`` while that rise exceeds ``allowance_m`` (a high flow; latched while it stays the target,
-    ``slowed`` the last answer), and that section, once ``full``, until the predicted ``impact_x`` (grid x, m) is
-    within half a section (``section_m``) of the next target's centre (at a high flow the grain dropped on the way
-    lands on the full section). ``flow_fraction`` (0, 1]: the flow the rate was measured at, a fraction of the
-    nominal (the rise rate is proportional to the flow: a section reached at the slowed flow of the one before
-    would rise that much faster once the flow is back). ``heights``, ``rate`` (N,) m, m/s; ``full`` (N,) bool;
-    ``lead_s`` 0 switches it off."""
+    plus its rise over the lead, ``max(rate, 0) * lead_s``, reaches ``full_level_m`` while that rise exceeds
+    ``allowance_m`` (a high flow; latched while it stays the target, ``slowed`` the last answer), and that
+    section, once ``full``, until the predicted ``impact_x`` (grid x, m) is within half a section (``section_m``)
+    of the next target's centre (at a high flow the grain dropped on the way lands on the full section).
+    ``heights``, ``rate`` (N,) m, m/s; ``full`` (N,) bool; ``lead_s`` 0 switches it off."""
     if target < 0 or lead_s <= 0.0:
         return -1
     if slowed == target:
         return target
-    rise = max(float(rate[target]), 0.0) / flow_fraction * lead_s
+    rise = max(float(rate[target]), 0.0) * lead_s
     if rise > allowance_m and heights[target] + rise >= full_level_m:
         return target
     arrived = abs(impact_x - centres_m[target]) <= 0.5 * section_m

@@ -54,9 +54,6 @@ def test_slowing_starts_near_full_at_a_high_rise_only_and_lasts_until_the_impact
     assert slowed_section(1, 0, done, heights, np.zeros(3), 2.1, **args) == -1                # arrived
     assert slowed_section(1, 0, full, heights, np.zeros(3), 1.9, **args) == -1                # 0 left unfilled
     assert slowed_section(0, -1, full, heights, np.array([1.0, 0, 0]), 1.0, **{**args, "lead_s": 0.0}) == -1
-    # a rise measured at the slowed flow of the section before counts at the nominal flow
-    assert slowed_section(0, -1, full, heights, np.array([0.05, 0, 0]), 1.0, **args, flow_fraction=0.3) == 0
-    assert slowed_section(0, -1, full, heights, np.array([0.015, 0, 0]), 1.0, **args, flow_fraction=0.3) == -1
 
 
 def test_modes_and_hold_reasons():
