@@ -27,7 +27,7 @@ from .studies.commands import add_sweep_parser, out_options, study_command, swee
 __all__ = ["main", "build_parser", "run_extras", "required_exit", "VERBS", "EXIT_NOT_FILLED"]
 
 VERBS = ("run", "validate", "schema", "compare", "study", "view", "replay", "report", "list", "sweep",
-         "export-fmu")
+         "export-fmu", "export")
 EXIT_RUN_ERROR = 1
 EXIT_SCENARIO = 2
 #: ``run --require-filled``: the run completed but its outcome is not ``filled`` (summary.json ``outcome``)
@@ -106,7 +106,7 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("report", help="draw a run directory's figures (a failed or stopped run's too)")
     rep.add_argument("run_dir", type=Path, help="run directory")
     sub.add_parser("list", help="list the packaged scenarios (run them by name) with their descriptions")
-    exp = sub.add_parser("export-fmu", help="write the scenario's world, sensors and perception as a co-simulation "
+    exp = sub.add_parser("export-fmu", aliases=["export"], help="write the scenario's world, sensors and perception as a co-simulation "
                          "FMU (docs/fmu.md)")
     _scenario_options(exp)
     exp.add_argument("--out", type=Path, required=True, metavar="NAME.fmu", help="the FMU file to write")
@@ -313,7 +313,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     if args.verb == "study":
         return study_command(args, scenario)
-    if args.verb == "export-fmu":
+    if args.verb in ("export-fmu", "export"):
         from cosim.fmi.export.build import export_command
 
         return export_command(args, scenario)

@@ -199,3 +199,12 @@ def test_main_in_process_leaves_the_signal_handlers_as_found(monkeypatch):
         assert main(["validate", "default"]) == 130
     assert "interrupted" in err.getvalue()
     assert (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) == before
+
+
+def test_export_is_export_fmu(tmp_path):
+    """``launch.py export`` is the same verb as ``export-fmu`` (its help, its refusals)."""
+    code, out, _ = call(["export", "--help"])
+    assert code == 0 and "--fmi" in out and out == call(["export-fmu", "--help"])[1]
+    code, _, err = call(["export", "default"])
+    assert code == 2 and "--out" in err
+
