@@ -38,7 +38,7 @@ from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
 
 from .beam_mock import check_target
 from .codec import BYTE_MAX, CM_PER_M
-from .gl_backend import SHADER_DIR, GLResources, GroundImage, _Buffers, begin_frame
+from .gl_backend import SHADER_DIR, GLResources, GroundImage, _Buffers, begin_frame, upload_instances
 from .projection import far_plane_m
 from .surface_gl import Surface
 from .surface_gl import mat_bytes as _mat
@@ -242,15 +242,6 @@ class GLBeamRenderer(GLResources):
             clears.append((self._m(ctx.framebuffer([atts[-1]])), SKY_RGBA))
         return _Buffers(self._m(ctx.framebuffer(atts, depth)), clears)
 
-    @staticmethod
-    def _upload(unit: list, records: np.ndarray) -> None:
-        data = np.ascontiguousarray(records, dtype=np.float32)
-        if data.nbytes > unit[1].size:
-            unit[1].orphan(data.nbytes)
-        if data.nbytes:
-            unit[1].write(data)
-        unit[2] = len(data)
-
     def set_scene(self, scene: Scene) -> None:
         """Upload one frame: box (the ground slab among them) and cylinder instances, mesh poses, grain heights."""
         self.make_current()
@@ -262,15 +253,15 @@ class GLBeamRenderer(GLResources):
             ground[scene.ground_box] = True
             self._ground = (scene.boxes.world_from_box[scene.ground_box], scene.boxes.half_extents[scene.ground_box])
         hidden = np.zeros(len(boxes), bool) if scene.boxes.hidden_top is None else scene.boxes.hidden_top
-        self._upload(self._units["box"], boxes[~ground & ~hidden])
-        self._upload(self._units["box_open"], boxes[~ground & hidden])    # top covered: bounded by its sides
-        self._upload(self._units["ground"], boxes[ground])
-        self._upload(self._units["cyl"], cylinder_instances(scene.cylinders, self._origin))
+        upload_instances(self._units["box"], boxes[~ground & ~hidden])
+        upload_instances(self._units["box_open"], boxes[~ground & hidden])    # top covered: bounded by its sides
+        upload_instances(self._units["ground"], boxes[ground])
+        upload_instances(self._units["cyl"], cylinder_instances(scene.cylinders, self._origin))
         self._surface.upload(scene, self._origin)
         for mesh in scene.meshes:
             if mesh.name not in self._meshes:
                 self._meshes[mesh.name] = self._instanced(mesh.vertices, mesh.faces, reserve=1)
-            self._upload(self._meshes[mesh.name],
+            upload_instances(self._meshes[mesh.name],
                          pack_instances(mesh.world_from_mesh[None], np.array([mesh.colour]), self._origin))
         self._mesh_names = [m.name for m in scene.meshes]
 

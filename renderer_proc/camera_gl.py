@@ -24,7 +24,7 @@ from cosim.world.lighting import sun_direction
 from cosim.world.meshes import box_instances, cylinder_instances, pack_instances, unit_cube, unit_cylinder
 from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, Scene
 
-from .gl_backend import SHADER_DIR, GLResources
+from .gl_backend import SHADER_DIR, GLResources, upload_instances
 from .projection import NEAR_M, gl_projection, gl_view
 from .surface_gl import Surface, mat_bytes
 
@@ -124,13 +124,7 @@ class GLCameraRenderer(GLResources):
                      mat_bytes(gl_projection(pin, NEAR_M, FAR_M)))
 
     def _upload(self, key: str, records: np.ndarray) -> None:
-        vao, buf, _ = self._unit[key]
-        data = np.ascontiguousarray(records, dtype=np.float32)
-        if data.nbytes > buf.size:
-            buf.orphan(data.nbytes)
-        if data.nbytes:
-            buf.write(data)
-        self._unit[key][2] = len(data)
+        upload_instances(self._unit[key], records)
 
     def set_scene(self, scene: Scene, light: np.ndarray | None = None) -> None:
         """Upload one frame (instances with labels and materials, grain heights); ``light``: the work light's

@@ -45,7 +45,7 @@ from .projection import NEAR_M, far_plane_m, gl_projection, gl_view
 from .surface_gl import Surface
 from .surface_gl import mat_bytes as _mat
 
-__all__ = ["GL_REQUIRE", "SHADER_DIR", "GLResources", "GLRenderer", "create_gl_context"]
+__all__ = ["GL_REQUIRE", "SHADER_DIR", "GLResources", "GLRenderer", "create_gl_context", "upload_instances"]
 
 #: directory of the GLSL sources
 SHADER_DIR = Path(__file__).with_name("shaders")
@@ -138,6 +138,17 @@ class _Target:
     rgb_attachment: int
     zf_attachment: int
     ground: GroundImage = field(default_factory=GroundImage)
+
+
+def upload_instances(unit: list, records: np.ndarray) -> None:
+    """Write a frame's instance ``records`` (N, F) into a draw unit ``[vao, buffer, count]`` (float32, the buffer
+    grown when they do not fit) and set its instance count to N."""
+    data = np.ascontiguousarray(records, dtype=np.float32)
+    if data.nbytes > unit[1].size:
+        unit[1].orphan(data.nbytes)
+    if data.nbytes:
+        unit[1].write(data)
+    unit[2] = len(data)
 
 
 class GLResources:
@@ -244,13 +255,7 @@ class GLRenderer(GLResources):
                        1 if self.rgb else -1, (2 if self.rgb else 1) if self.float_depth else -1)
 
     def _upload(self, key: str, records: np.ndarray) -> None:
-        vao, buf, _ = self._unit[key]
-        data = np.ascontiguousarray(records, dtype=np.float32)
-        if data.nbytes > buf.size:
-            buf.orphan(data.nbytes)
-        if data.nbytes:
-            buf.write(data)
-        self._unit[key][2] = len(data)
+        upload_instances(self._unit[key], records)
 
     def _mesh(self, mesh) -> None:
         if mesh.name not in self._meshes:

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from cosim.scenario.loader import load_scenario_text
+from cosim.testing.stereo_plane import textured_plane_pair
 from perception_proc.atmosphere import hard_power, soft_power
 from perception_proc.camera_dust import (
     AIRLIGHT_RGB,
@@ -161,32 +162,10 @@ def test_the_stereo_matchers_correct_share_falls_as_the_visibility_drops(ctx):
     5 % of the exact one falls monotonically with the visibility, from clear air's (the ideal images') to none at
     1 m, and the wrong share among the valid rises: the matcher, not painted noise, fails on the degraded images.
     Same scenario, same bytes."""
-    from cosim.scenario.config.rendering import Lighting
-    from cosim.world.geometry import body_from_camera_axes, make_transform, rpy_matrix
-    from cosim.world.labels import GRAIN_MAT, GROUND
-    from cosim.world.scene import Boxes, Cylinders, HeightField, Scene
-    from renderer_proc.camera_gl import GLCameraRenderer
-
     clear = CameraPipeline(_scenario(STEREO), "st", 0)
     pin, cam = clear.pin, clear.spec
-    t = make_transform(np.eye(3), (0.0, 0.0, -0.5))
-    boxes = Boxes(t[None], np.array([[100.0, 100.0, 0.5]]), np.array([[0.85, 0.7, 0.2]], np.float32),
-                  label=np.array([GROUND], np.uint8), material=np.array([GRAIN_MAT], np.uint8))
-    far = make_transform(np.eye(3), (500.0, 500.0, 0.0))
-    scene = Scene(boxes, Cylinders(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3), np.float32)),
-                  HeightField(far, np.zeros((2, 2), np.float32), 0.5, 1.0, 1.0))
-    left = make_transform(rpy_matrix(0.0, math.radians(40.0), 0.0), (0.0, 0.0, 3.0)) @ body_from_camera_axes()
-    right = left @ make_transform(np.eye(3), (cam.baseline_m, 0.0, 0.0))
-    r = GLCameraRenderer([pin, pin], Lighting(), context=ctx)
-    r.set_scene(scene)
-    img = [np.empty((pin.height, pin.width, 4), np.uint8) for _ in range(2)]
-    z = np.empty((pin.height, pin.width), np.float32)
-    for k, pose in enumerate((left, right)):
-        r.draw(k, pose)
-        r.read_rgb(k, img[k])
-    r.draw(0, left)
-    r.read_depth(0, z)
-    r.close()
+    img = textured_plane_pair(ctx, pin, cam.baseline_m)
+    z = img[2]
     images = CameraImages(5, rgb=img[0], right=img[1])
     cols = slice(cam.min_disparity_px + cam.num_disparities, None)       # where a match is possible
     exact = z[:, cols]

@@ -9,11 +9,8 @@ import pytest
 from scipy.stats import norm
 
 from cosim.scenario.config.cameras import DepthCamera, StereoCamera
-from cosim.scenario.config.rendering import Lighting
+from cosim.testing.stereo_plane import textured_plane_pair
 from cosim.world.camera import Pinhole
-from cosim.world.geometry import body_from_camera_axes, make_transform, rpy_matrix
-from cosim.world.labels import GRAIN_MAT, GROUND
-from cosim.world.scene import Boxes, Cylinders, HeightField, Scene
 from perception_proc.stereo import disparity, grey, make_matcher
 from perception_proc.tof import axial_sigma, frame_generator, tof_depth
 
@@ -80,29 +77,10 @@ def test_stereo_depth_error_follows_z_squared_over_f_b(ctx, matcher):
     the exact planar depth, the RMS depth error grows as Z^2 (log-log slope 2 +- 0.35), and each bin's
     disparity error dd = dZ f B / Z^2 stays within a factor 2.2 of the one fitted to dZ = dd Z^2 / (f B) over
     3-9 m (SGBM: dd = 0.26 px; BM: 0.18 px). Nothing is added to the images: the error is the matcher's."""
-    from renderer_proc.camera_gl import GLCameraRenderer
-
-    t = make_transform(np.eye(3), (0.0, 0.0, -0.5))
-    boxes = Boxes(t[None], np.array([[100.0, 100.0, 0.5]]), np.array([[0.85, 0.7, 0.2]], np.float32),
-                  label=np.array([GROUND], np.uint8), material=np.array([GRAIN_MAT], np.uint8))
-    far = make_transform(np.eye(3), (500.0, 500.0, 0.0))
-    scene = Scene(boxes, Cylinders(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3), np.float32)),
-                  HeightField(far, np.zeros((2, 2), np.float32), 0.5, 1.0, 1.0))
     cam = StereoCamera(kind="stereo_camera", profile="oak_d", mount={"parent": "world"}, matcher=matcher)
     pin = Pinhole(cam.width_px, cam.height_px, math.radians(cam.hfov_deg))
-    left = make_transform(rpy_matrix(0.0, math.radians(40.0), 0.0), (0.0, 0.0, 3.0)) @ body_from_camera_axes()
-    right = left @ make_transform(np.eye(3), (cam.baseline_m, 0.0, 0.0))
-    r = GLCameraRenderer([pin, pin], Lighting(), context=ctx)
-    r.set_scene(scene)
-    img = [np.empty((pin.height, pin.width, 4), np.uint8) for _ in range(2)]
-    z = np.empty((pin.height, pin.width), np.float32)
-    for k, pose in enumerate((left, right)):
-        r.draw(k, pose)
-        r.read_rgb(k, img[k])
-    r.read_depth(1, z)                    # the right view's depth was read last: draw the left again for it
-    r.draw(0, left)
-    r.read_depth(0, z)
-    r.close()
+    img = textured_plane_pair(ctx, pin, cam.baseline_m)
+    z = img[2]
     d = disparity(make_matcher(cam), grey(img[0]), grey(img[1]), cam.min_disparity_px)
     d[:, :cam.num_disparities] = np.nan                                     # no match is possible there
     fb = pin.f * cam.baseline_m

@@ -1,0 +1,54 @@
+"""A rectified stereo pair of a textured plane, rendered by the GL camera renderer, for tests of the stereo
+camera's matcher (its error law, its failure in dust).
+
+The plane is the ground at z = 0 covered by the grain material (a procedural texture the matcher can lock on),
+seen from ``height_m`` above it, pitched ``pitch_deg`` down; the right camera sits ``baseline_m`` along the left
+camera's x axis (the rectified pair). Nothing else is in view.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from cosim.scenario.config.rendering import Lighting
+from cosim.world.camera import Pinhole
+from cosim.world.geometry import body_from_camera_axes, make_transform, rpy_matrix
+from cosim.world.labels import GRAIN_MAT, GROUND
+from cosim.world.scene import Boxes, Cylinders, HeightField, Scene
+
+__all__ = ["textured_plane_pair"]
+
+
+def _plane_scene() -> Scene:
+    """The ground slab (100 x 100 m, top at z = 0, the grain material) and an empty grain grid far away."""
+    slab = make_transform(np.eye(3), (0.0, 0.0, -0.5))
+    boxes = Boxes(slab[None], np.array([[100.0, 100.0, 0.5]]), np.array([[0.85, 0.7, 0.2]], np.float32),
+                  label=np.array([GROUND], np.uint8), material=np.array([GRAIN_MAT], np.uint8))
+    far = make_transform(np.eye(3), (500.0, 500.0, 0.0))
+    return Scene(boxes, Cylinders(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3), np.float32)),
+                 HeightField(far, np.zeros((2, 2), np.float32), 0.5, 1.0, 1.0))
+
+
+def textured_plane_pair(ctx: Any, pin: Pinhole, baseline_m: float, pitch_deg: float = 40.0,
+                        height_m: float = 3.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(left, right, depth): the pair's RGBA8 images (H, W, 4) uint8 and the left camera's exact planar depth
+    (H, W) float32 m (NaN: sky), drawn in the moderngl context ``ctx`` (lent: nothing of it is released)."""
+    from renderer_proc.camera_gl import GLCameraRenderer
+
+    left = make_transform(rpy_matrix(0.0, math.radians(pitch_deg), 0.0), (0.0, 0.0, height_m)) @ body_from_camera_axes()
+    right = left @ make_transform(np.eye(3), (baseline_m, 0.0, 0.0))
+    r = GLCameraRenderer([pin, pin], Lighting(), context=ctx)
+    try:
+        r.set_scene(_plane_scene())
+        img = [np.empty((pin.height, pin.width, 4), np.uint8) for _ in range(2)]
+        for k, pose in enumerate((left, right)):
+            r.draw(k, pose)
+            r.read_rgb(k, img[k])
+        z = np.empty((pin.height, pin.width), np.float32)
+        r.draw(0, left)                                  # the left view's depth: drawn last
+        r.read_depth(0, z)
+    finally:
+        r.close()
+    return img[0], img[1], z
