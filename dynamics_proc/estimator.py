@@ -123,6 +123,11 @@ def predict(e: FillEstimate, vol_m3: float, gx: float, gy: float, p: FusionParam
     return FillEstimate(h, var, pending)
 
 
+def _estimate_then(e: FillEstimate) -> np.ndarray:
+    """The estimate of the time a ``lag`` frames old measurement was taken: today's less the rises since."""
+    return e.height - sum(e.pending) if e.pending else e.height
+
+
 def consistent(e: FillEstimate, z: np.ndarray, p: FusionParams) -> bool:
     """Whether the perceived map ``z`` (nx, ny) m (NaN: no return, ``p.lag`` frames old) agrees with the estimate:
     at most ``p.gate_share`` of its valid cells have an innovation beyond ``p.gate_sigma`` sqrt(P + R). Before the
@@ -131,8 +136,7 @@ def consistent(e: FillEstimate, z: np.ndarray, p: FusionParams) -> bool:
     ok = ~np.isnan(z)
     if not e.started or not ok.any():
         return True
-    then = e.height - sum(e.pending) if e.pending else e.height
-    innovation = np.abs(z[ok] - then[ok])
+    innovation = np.abs(z[ok] - _estimate_then(e)[ok])
     outside = innovation > p.gate_sigma * np.sqrt(e.var[ok] + p.r)
     return float(np.count_nonzero(outside)) <= p.gate_share * innovation.size
 
@@ -152,7 +156,7 @@ def update(e: FillEstimate, z: np.ndarray, p: FusionParams) -> FillEstimate:
         h = np.where(ok, z, fill)
         var = np.where(ok, p.r, float(np.var(seen)) + p.r)
         return FillEstimate(h, var, e.pending)
-    then = e.height - sum(e.pending) if e.pending else e.height
+    then = _estimate_then(e)
     gain = np.where(ok, e.var / (e.var + p.r), 0.0)
     innovation = np.where(ok, z - then, 0.0)
     h = e.height + gain * innovation
