@@ -50,7 +50,7 @@ from .control_protocol import ControllerCommand, ControllerInput, Delivery
 from .coping import mode, peak_sigma, rise_rate, slowed_section, unexplained_shift
 from .estimator import FillEstimate, FusionParams, consistent, initial_estimate, landing_on, predict, update
 from .grainfill import GrainGrid, section_rows
-from .sections import inner_cells, min2x2, section_heights, section_pairing, section_valid
+from .sections import min2x2, section_blocks, section_heights, section_pairing, section_valid
 from .strategies import Strategy
 
 __all__ = ["BIAS_TAU_S", "SETTLE_S", "STRATEGY_POINT", "ControllerParams", "ControllerState", "Delivery",
@@ -237,8 +237,10 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
             est = update(est, m, p.fusion)
         last_valid = np.where(ok, t, last_valid)
         seen = seen or bool(ok.any())                          # an all-NaN map is no measurement
-    if est is not None and est.started:
-        heights = section_heights(est.height, p)
+    # the estimate's 2 x 2 block minima: its section peaks and the target's sigma read them
+    blocks = section_blocks(est.height, p) if est is not None and est.started else None
+    if blocks is not None:
+        heights = section_heights(est.height, p, blocks)
     rate = st.rate if st.rate is not None else np.zeros(p.sections)
     if p.full_lead_s > 0.0:
         rate = rise_rate(rate, st.heights, heights, p.frame_dt_s, p.rise_tau_s)
@@ -256,7 +258,7 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
     all_full = seen and target < 0
     slowed = slowed_section(target, st.slowed, full, heights, rate, actual_x + drift_x, p.full_lead_s,
                             p.lead_allowance_m, p.full_level_m, p.centres_m, p.length_m / p.sections)
-    mode, hold, sigma = _mode(p, seen, target, ok, est)
+    mode, hold, sigma = _mode(p, seen, target, ok, est, blocks)
     lo, hi = p.safe_margin_m, p.length_m - p.safe_margin_m
     if target >= 0:
         desired = min(max(p.centres_m[target] - drift_x, lo - drift_x), hi - drift_x)
@@ -305,13 +307,14 @@ def _over_overfull(p: ControllerParams, heights: np.ndarray, target: int, impact
 
 
 def _mode(p: ControllerParams, seen: bool, target: int, ok: np.ndarray | None,
-          est: FillEstimate | None) -> tuple[int, int, float]:
-    """(mode, hold reason, target section's 1-sigma m) of a decision (:func:`dynamics_proc.coping.mode`)."""
+          est: FillEstimate | None, blocks: tuple[np.ndarray, np.ndarray] | None) -> tuple[int, int, float]:
+    """(mode, hold reason, target section's 1-sigma m) of a decision (:func:`dynamics_proc.coping.mode`);
+    ``blocks``: :func:`section_blocks` of the started estimate, else None."""
     sigma = math.nan
-    if seen and target >= 0 and est is not None and est.started:
-        starts, nxt = section_pairing(p.nx, p.section_start_rows)
+    if seen and target >= 0 and blocks is not None:
+        starts = section_pairing(p.nx, p.section_start_rows)[0]
         rows = slice(int(starts[target]), int(starts[target + 1]) if target + 1 < p.sections else p.nx)
-        sigma = peak_sigma(min2x2(inner_cells(est.height, p), nxt), est.var, rows)
+        sigma = peak_sigma(blocks[1], est.var, rows)
     seen_target = ok is not None and target >= 0 and bool(ok[target])
     return (*mode(seen, target, seen_target, est is not None, sigma, p.fallback_sigma_m), sigma)
 

@@ -8,7 +8,7 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["min2x2", "section_valid", "section_heights", "section_pairing", "inner_cells"]
+__all__ = ["min2x2", "section_blocks", "section_valid", "section_heights", "section_pairing", "inner_cells"]
 
 
 def min2x2(m: np.ndarray, next_row: np.ndarray | None = None) -> np.ndarray:
@@ -55,13 +55,22 @@ def section_pairing(nx: int, section_start_rows: tuple[int, ...]) -> tuple[np.nd
     return starts, nxt
 
 
-def section_heights(m: np.ndarray, p) -> np.ndarray:
+def section_blocks(m: np.ndarray, p) -> tuple[np.ndarray, np.ndarray]:
+    """(``m`` with the edge margin NaN (:func:`inner_cells`), its 2 x 2 block minima kept inside their sections
+    (:func:`min2x2`)), both (nx, ny) float64 m: what :func:`section_heights` reads, for a caller that also needs
+    the blocks (the estimate's peak sigma)."""
+    m = inner_cells(m, p)
+    return m, min2x2(m, section_pairing(p.nx, p.section_start_rows)[1])
+
+
+def section_heights(m: np.ndarray, p, blocks: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Robust peak per section: the highest 2 x 2 block minimum (blocks stay inside their section; cells within
     the edge margin left out), (N,) float64 m; NaN where a section has fewer than ``min_section_cells`` valid
-    cells. Exact for a heap whose flat top spans 2 x 2 cells."""
-    m = inner_cells(m, p)
-    starts, nxt = section_pairing(p.nx, p.section_start_rows)
-    rowmax = np.fmax.reduce(min2x2(m, nxt), axis=1)          # NaN only for all-NaN rows
+    cells. Exact for a heap whose flat top spans 2 x 2 cells. ``blocks``: :func:`section_blocks` of ``m``, where
+    the caller has them already."""
+    m, b = section_blocks(m, p) if blocks is None else blocks
+    starts = section_pairing(p.nx, p.section_start_rows)[0]
+    rowmax = np.fmax.reduce(b, axis=1)                       # NaN only for all-NaN rows
     peak = np.fmax.reduceat(rowmax, starts)
     valid = np.add.reduceat(np.count_nonzero(~np.isnan(m), axis=1), starts)
     return np.where(valid >= p.min_section_cells, peak, np.nan)

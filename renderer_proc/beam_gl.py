@@ -120,9 +120,11 @@ def _assemble(name: str, *parts: str, defines: tuple[str, ...] = ()) -> str:
 
 
 def _set(prog, name: str, value) -> None:
-    """Set a uniform where the program keeps it (the compiler drops unused ones)."""
-    if name in prog:
-        prog[name].value = value
+    """Set a uniform where the program keeps it (the compiler drops unused ones). ``prog.get`` is a dict look-up;
+    ``name in prog`` would walk every member."""
+    uniform = prog.get(name, None)
+    if uniform is not None:
+        uniform.value = value
 
 
 def ground_key(world_from_slab: np.ndarray, half: np.ndarray, world_from_sensor: np.ndarray,

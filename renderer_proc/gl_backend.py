@@ -232,8 +232,9 @@ class GLRenderer(GLResources):
 
     @staticmethod
     def _set(prog, name: str, value) -> None:
-        if name in prog:
-            prog[name].value = value
+        uniform = prog.get(name, None)                # a dict look-up; ``name in prog`` walks every member
+        if uniform is not None:
+            uniform.value = value
 
     def _buffers(self, size: tuple[int, int]) -> _Buffers:
         ctx = self.ctx

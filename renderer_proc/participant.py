@@ -4,8 +4,8 @@ writes the image blocks.
 Thin shell: ``start`` makes the LiDAR's backend (GL context or the numpy mock; none without a LiDAR) and the
 cameras' (``renderer_proc.cameras``, sharing the GL context) and binds the segment's views; ``step(frame)``
 checks the state's frame stamp, rebuilds the :class:`~cosim.world.scene.Scene`, uploads it (poses as
-instance records, grain heights as a buffer write), then per LiDAR camera (or the beams target) and per
-camera sensor view draws and reads straight into the shared-memory blocks under their seqlocks.
+instance records, grain heights as a buffer write where they changed), then per LiDAR camera (or the beams
+target) and per camera sensor view draws and reads straight into the shared-memory blocks under their seqlocks.
 """
 from __future__ import annotations
 

@@ -2,8 +2,8 @@
 
 The surface is :class:`~renderer_proc.hfmesh.SurfaceMesh`'s: the height field's grid with its flat blocks merged,
 exactly the piecewise-linear surface of :func:`cosim.world.heightfield.surface_height` (same diagonal). Vertex
-heights are written every frame, the index list only when the flat blocks change, the model matrix relative to
-the renderer's origin.
+heights are written when the grain heights change, the index list only when the flat blocks change, the model
+matrix relative to the renderer's origin every frame.
 
 Two index lists: :meth:`SurfaceMesh.triangles` (the camera renderer, and the beam-native triangle path
 ``beam.geom`` -> ``beam.frag``), or :meth:`SurfaceMesh.quads` (``quads=True``, the beam-native default: four
@@ -43,6 +43,7 @@ class Surface:
         self._mode = moderngl.LINES_ADJACENCY if quads else moderngl.TRIANGLES
         self.mesh: SurfaceMesh | None = None
         self._heights = self._vao = self._indices = None
+        self._uploaded: bytes | None = None       # the grain heights' bytes on the GPU (None: none yet)
         self.count = 0                           # indices drawn per frame
 
     def _build(self, hf) -> None:
@@ -61,12 +62,25 @@ class Surface:
         return self.count // (4 if self.quads else 3)
 
     def upload(self, scene: Scene, origin: np.ndarray) -> None:
-        """Vertex heights every frame, the index list when the flat blocks change, the model matrix relative to
-        ``origin`` (3,) m (the renderer's world-frame origin)."""
+        """Vertex heights and the index list when the grain heights' bytes change (a quarter of the default run's
+        frames keep them: the auger off), the index list only when the flat blocks change too, the model matrix
+        relative to ``origin`` (3,) m (the renderer's world-frame origin) every frame."""
         hf = scene.heightfield
-        hp = padded_heights(np.asarray(hf.heights, dtype=np.float32))
-        if self.mesh is None or self.mesh.shape != hf.heights.shape:
+        heights = np.asarray(hf.heights, dtype=np.float32)
+        if self.mesh is None or self.mesh.shape != heights.shape:
             self._build(hf)
+            self._uploaded = None
+        raw = heights.tobytes()                  # bytes, not values: -0.0 and 0.0 stay apart
+        if raw != self._uploaded:
+            self._upload_heights(padded_heights(heights))
+            self._uploaded = raw
+        local = hf.world_from_grid.copy()
+        local[:3, 3] -= origin
+        self._prog["u_model"].write(mat_bytes(local))
+
+    def _upload_heights(self, hp: np.ndarray) -> None:
+        """Write the vertex heights of ``hp`` (nx + 2, ny + 2) float32 m (:func:`padded_heights`), and the index
+        list where its flat blocks changed."""
         self._heights.write(self.mesh.heights(hp))
         idx, changed = self.mesh.quads(hp) if self.quads else self.mesh.triangles(hp)
         if changed:
@@ -74,9 +88,6 @@ class Surface:
                 self._indices.orphan(idx.nbytes)
             self._indices.write(idx)
             self.count = idx.size
-        local = hf.world_from_grid.copy()
-        local[:3, 3] -= origin
-        self._prog["u_model"].write(mat_bytes(local))
 
     def render(self) -> None:
         """Draw the surface (into the framebuffer in use)."""
