@@ -47,15 +47,17 @@ def total(path: Path) -> int:
 
 
 def instructions(args: Sequence[str], cwd: Path, env: Mapping[str, str] | None = None, toggle: str | None = None,
-                 warm: bool = True) -> int:
+                 warm: bool = True, options: Sequence[str] = ()) -> int:
     """Instructions of ``python ARGS`` (run in ``cwd``) under callgrind; ``toggle``: collect only inside that C
-    function; ``warm``: run it natively first, so that every module's bytecode is cached."""
+    function; ``warm``: run it natively first, so that every module's bytecode is cached; ``options``: more
+    callgrind options (e.g. ``--collect-atstart=no`` where the program toggles collection itself)."""
     env = {**(env or os.environ), "PYTHONHASHSEED": "0"}
     if warm:
         subprocess.run([sys.executable, *args], cwd=cwd, env=env, check=True, stdout=subprocess.DEVNULL)
     with tempfile.TemporaryDirectory(prefix="bench-cg-") as tmp:
         out = Path(tmp) / "callgrind.out"
         extra = [f"--toggle-collect={toggle}"] if toggle else []
+        extra += list(options)
         subprocess.run(["valgrind", "--tool=callgrind", *extra, f"--callgrind-out-file={out}", sys.executable, *args],
                        cwd=cwd, env=env, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         return total(out)
