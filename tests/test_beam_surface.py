@@ -151,3 +151,30 @@ def test_surface_benchmark_counts_fewer_fragments_for_quads(ctx):
     assert all(0.0 < v < 0.75 for v in ratio.values()), ratio
     checks = res["quads against triangles, checks"]
     assert all(c["% beams byte-identical (worst frame)"] > 99.0 for c in checks.values()), checks
+
+
+@pytest.mark.gl
+def test_unchanged_heights_are_not_uploaded_again_and_changed_ones_are(ctx):
+    # Surface.upload writes the heights only when their bytes change: frames alternating between two height fields
+    # (and repeating one) give each field's own image, and a repeat writes nothing
+    from renderer_proc.beam_gl import GLBeamRenderer
+
+    pattern = Pattern(preset="grid", azimuth_min_deg=-60, azimuth_max_deg=60, azimuth_count=120,
+                      elevation_min_deg=-60, elevation_max_deg=5, elevation_count=80)
+    lay = beam_layout(pattern)
+    a, b = rough((30, 20), 1, step_m=0.2), rough((30, 20), 2, step_m=0.2)
+    r = GLBeamRenderer(lay, CODEC, context=ctx)
+    writes = []
+    r._surface._upload_heights = (lambda f: lambda hp: (writes.append(1), f(hp)))(r._surface._upload_heights)
+    images = []
+    for h in (a, b, b, a, a):
+        img = np.zeros(lay.shape + (4,), np.uint8)
+        r.set_scene(surface_scene(h, (-1.0, -1.0 - float(h.max()), 1.0)))
+        r.draw(0, np.eye(4))
+        r.read_depth(0, img)
+        images.append(img)
+    r.close()
+    assert len(writes) == 3                                        # a, b, a: the repeats wrote nothing
+    assert not np.array_equal(images[0], images[1])
+    assert np.array_equal(images[1], images[2]) and np.array_equal(images[0], images[3])
+    assert np.array_equal(images[3], images[4])
