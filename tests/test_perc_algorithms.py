@@ -12,7 +12,7 @@ from cosim.world.camera import beam_directions
 from cosim.world.geometry import apply, body_from_camera_axes, cart_body_from_grid, mount_transform, vehicle_pose
 from cosim.world.patterns import beam_table, pattern_shape
 from perception_proc.heightmap import _cell_index, grid_shape, height_map
-from perception_proc.impact import blank_under_stream, find_impact
+from perception_proc.impact import blank_under_stream, find_impact, line_fits
 from perception_proc.lidar import apply_noise_and_limits, frame_generator
 from perception_proc.rim import border_beams, find_cart
 
@@ -415,3 +415,18 @@ def test_cell_index_matches_the_integer_reference():
         assert got.dtype == np.float64
         np.testing.assert_array_equal(got.astype(np.int64), ref)
         np.testing.assert_array_equal(got, ref.astype(np.float64))
+
+
+@pytest.mark.parametrize("m", [2, 3, 6, 57, 400])
+def test_line_fits_are_numpys_polyfits(m):
+    """The stream's shared-matrix line fits against ``np.polyfit`` one by one: the same float64 bits, signed
+    zeros, a steep and a level line included."""
+    rng = np.random.default_rng(m)
+    z = 1.0 + rng.random(m) * (0.3 if m % 2 else 2.0)
+    x = 0.05 * rng.normal(size=m) + 2.0
+    y = 3.0 * z - 1.0
+    z[0], x[-1] = -0.0, -0.0
+    for ys in ((x, y), (y,), (np.full(m, 0.5), x)):
+        got = line_fits(z, ys)
+        want = [tuple(np.polyfit(z, v, 1)) for v in ys]
+        assert np.array(got).tobytes() == np.array(want).tobytes()
