@@ -15,7 +15,8 @@ What it measures (each figure names its source in the Markdown):
 * case ``beam_native``: the render + LiDAR step of ``sensor.method: beam_native`` against ``camera_rig`` on the same
   sample frames: CPU ms per frame and the ratio;
 * case ``mock_cast``: the mock renderer's frame (rigid bodies built once) against the GL renderer's;
-* cases ``curves`` and ``sweep_throughput`` (``--no-curves`` leaves them out): CPU per frame against beams and the
+* cases ``curves`` and ``sweep_throughput`` (``--no-curves`` leaves them out and keeps the curves of the
+  results.md it replaces, marked with the run that measured them): CPU per frame against beams and the
   grain grid, sweep runs per hour with 1 and 2 local workers.
 
 ``--quick`` is a check of the script (short runs, one round, few frames): its numbers are not the headline
@@ -28,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import shlex
 import statistics
 import sys
@@ -190,12 +192,41 @@ def render_markdown(res: dict, quick: bool = False) -> str:
     return "\n".join(lines)
 
 
+#: the headings of the sections an earlier results.md keeps when this run does not measure them
+SUITE_HEADING, CURVES_HEADING = "## Field-conditions suite", "## How the cost grows"
+KEPT = "Kept from results.md as written"
+
+
+def _section(text: str, heading: str) -> str:
+    """The section of Markdown ``text`` from ``heading`` to the next second-level heading (or the end), or ""."""
+    if heading not in text:
+        return ""
+    body = text.split(heading, 1)[1]
+    nxt = body.find("\n## ")
+    return heading + (body if nxt < 0 else body[:nxt + 1])
+
+
 def kept_suite_section(results_md: Path) -> str:
     """The field-conditions suite's section of an existing ``results_md`` (written by bench/field_suite.py from
     its hours-long sweep, which this script does not rerun), or ""."""
-    heading = "## Field-conditions suite"
     text = results_md.read_text() if results_md.exists() else ""
-    return "\n" + heading + text.split(heading, 1)[1] if heading in text else ""
+    section = _section(text, SUITE_HEADING)
+    return "\n" + section if section else ""
+
+
+def kept_curves_section(results_md: Path) -> str:
+    """The cost curves' section of an existing ``results_md``, for a run with ``--no-curves``, its heading naming
+    the run that measured it (the time and commit of that file's "Written by" line), or ""."""
+    text = results_md.read_text() if results_md.exists() else ""
+    section = _section(text, CURVES_HEADING)
+    if not section:
+        return ""
+    if KEPT in section:                                          # kept once already: its origin stands
+        return "\n" + section
+    stamp = re.search(r"^Written by .*? at (\S+) from commit `(\w+)`", text, re.M)
+    origin = f"at {stamp[1]} from commit `{stamp[2]}`" if stamp else "by an earlier run"
+    head, rest = section.split("\n", 1)
+    return f"\n{head}\n\n{KEPT} {origin}: this run left the curves out.\n{rest}"
 
 
 def measure(quick: bool = False, renderer: str = "gl", scenario: str = "default", curves: bool = True,
@@ -235,12 +266,14 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--scenario", default="default")
     ap.add_argument("--renderer", default="gl", choices=("gl", "mock"), help="of the default run and the step")
     ap.add_argument("--out", type=Path, default=ROOT / "bench", help="folder of results.json and results.md")
-    ap.add_argument("--no-curves", dest="curves", action="store_false", help="leave the cost curves out")
+    ap.add_argument("--no-curves", dest="curves", action="store_false", help="leave the cost curves out (the last results.md's are kept, with their origin)")
     a = ap.parse_args(argv)
     res = measure(a.quick, a.renderer, a.scenario, a.curves, "python bench/run_all.py " + shlex.join(argv))
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / "results.json").write_text(json.dumps(res, indent=1, allow_nan=False) + "\n")
     md = render_markdown(res, a.quick)
+    if not a.curves:
+        md += kept_curves_section(a.out / "results.md")
     md += kept_suite_section(a.out / "results.md")
     (a.out / "results.md").write_text(md)
     print(md)

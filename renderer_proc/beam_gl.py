@@ -43,7 +43,8 @@ from .projection import far_plane_m
 from .surface_gl import Surface
 from .surface_gl import mat_bytes as _mat
 
-__all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "ROW_BINS", "GLBeamRenderer", "ground_key", "max_rects", "row_bounds"]
+__all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "ROW_BINS", "GLBeamRenderer", "ground_key", "max_rects", "row_bounds",
+           "slicing_pays"]
 
 #: slack of every angular bound in the geometry shader, rad (every angle there is an atan: llvmpipe's is within
 #: 3.5e-6 rad, its asin off by up to 3.9e-4 rad, so none is used; a beam pitch is ~5e-3 rad): only widens the
@@ -69,6 +70,10 @@ SLICE_COST_PX = 100.0
 #: rectangles of the prisms' (cylinders') geometry shader: 2, unsliced (see docs/lidar.md: slicing the auger tube
 #: saves fewer fragments than the longer geometry shader costs on the 30 prisms of the default scene)
 PRISM_RECTS = 2
+#: rectangles of the boxes' geometry shader where no CPU rasteriser draws (:func:`slicing_pays`): unsliced
+UNSLICED_RECTS = 2
+#: GL_RENDERER substrings of the CPU rasterisers (Mesa's), where fragments are dear and slicing the boxes pays
+CPU_RASTERISERS = ("llvmpipe", "softpipe", "swr")
 #: vertices of one rectangle of beam pixels (a triangle strip)
 RECT_VERTICES = 4
 #: inclusive slack of the fragment's inside-triangle test, barycentric: closes float32 cracks on shared edges
@@ -100,6 +105,15 @@ def max_rects(rgb: bool) -> int:
     13 with it."""
     components = SOLID_VERTEX_COMPONENTS + (SOLID_RGB_COMPONENTS if rgb else 0)
     return GEOMETRY_OUTPUT_COMPONENTS // components // RECT_VERTICES
+
+
+def slicing_pays(gl_renderer: str) -> bool:
+    """Whether the boxes are bounded in slices (up to :func:`max_rects` rectangles) on the GL implementation named
+    ``gl_renderer`` (GL_RENDERER): on a CPU rasteriser, where a fragment costs more than bounding one more slice;
+    a GPU shades the few thousand extra fragments for nothing, and NVIDIA's GLSL compiler (driver 580) crashes
+    on the slicing loop. The image is the same either way (solid.frag clips every beam against the whole solid)."""
+    name = gl_renderer.lower()
+    return any(cpu in name for cpu in CPU_RASTERISERS)
 
 
 def _solid_geom(defines: tuple[str, ...], rects: int) -> str:
@@ -165,10 +179,11 @@ class GLBeamRenderer(GLResources):
                                              geometry_shader=geom, fragment_shader=frag))
         self.prog_hf = self._m(ctx.program(vertex_shader=_assemble("beam_heightfield.vert", ANGLES),
                                            geometry_shader=geom, fragment_shader=frag))
-        # convex solids (boxes, cylinders as prisms): one point per instance, boxes bounded in slices, prisms
-        # whole, each beam clipped against the whole solid
+        # convex solids (boxes, cylinders as prisms): one point per instance, boxes bounded in slices (on a CPU
+        # rasteriser), prisms whole, each beam clipped against the whole solid
+        box_rects = max_rects(rgb) if slicing_pays(ctx.info["GL_RENDERER"]) else UNSLICED_RECTS
         self.prog_box = self._m(ctx.program(vertex_shader=_src("solid.vert"),
-                                            geometry_shader=_solid_geom(defines, max_rects(rgb)),
+                                            geometry_shader=_solid_geom(defines, box_rects),
                                             fragment_shader=_assemble("solid.frag", CODEC, defines=defines)))
         self.prog_prism = self._m(ctx.program(
             vertex_shader=_src("solid.vert"), geometry_shader=_solid_geom(defines, PRISM_RECTS),

@@ -242,3 +242,13 @@ def test_empty_cart_floor_stays_exact(ctx):
     ok = np.isfinite(got)
     assert ok.sum() > 0.9 * lay.n_beams
     assert np.abs(got[ok] - exact[ok]).max() <= CODEC.bound_m + GL_F32_M
+
+
+def test_boxes_are_sliced_on_cpu_rasterisers_only(ctx):
+    from renderer_proc.beam_gl import slicing_pays
+    # llvmpipe shades every fragment on the CPU: slicing pays there; a GPU draws the boxes unsliced (the same
+    # bytes, test above), and NVIDIA's compiler is never given the slicing loop it crashes on
+    assert slicing_pays(ctx.info["GL_RENDERER"]) == ("llvmpipe" in ctx.info["GL_RENDERER"])
+    assert slicing_pays("llvmpipe (LLVM 15.0.6, 256 bits)")
+    assert not slicing_pays("NVIDIA H100 80GB HBM3/PCIe/SSE2")
+    assert not slicing_pays("AMD Radeon RX 7900 XTX (radeonsi, navi31, LLVM 15.0.7, DRM 3.54)")

@@ -92,3 +92,21 @@ def test_quick_mode_writes_both_files(tmp_path):
     md = (tmp_path / "results.md").read_text()
     assert "Quick mode" in md and "CPU per frame against beams" in md and "runs per hour" in md
     assert res["curves"]["curves"]["median"]["CPU per frame against beams (ms)"]["100 x 100"]["beams"] == 10_000
+
+
+def test_a_run_without_curves_keeps_the_last_curves_with_their_origin(tmp_path):
+    ra = _module()
+    results = tmp_path / "results.md"
+    assert ra.kept_curves_section(results) == ""                       # nothing to keep
+    results.write_text("# Current benchmark results\n\nWritten by `python bench/run_all.py ` at 2026-11-27T19:54:58"
+                       "+00:00 from commit `0c06f38704`: 2 cores.\n\nheadline\n\n"
+                       f"{ra.CURVES_HEADING} (cases `curves`)\n\n### beams\n\n| a | b |\n\n"
+                       f"{ra.SUITE_HEADING}\n\nsuite table\n")
+    kept = ra.kept_curves_section(results)
+    assert kept.startswith(f"\n{ra.CURVES_HEADING} (cases `curves`)\n")
+    assert "as written at 2026-11-27T19:54:58+00:00 from commit `0c06f38704`" in kept
+    assert "### beams" in kept and ra.SUITE_HEADING not in kept               # up to the next section only
+    assert ra.kept_suite_section(results).strip() == f"{ra.SUITE_HEADING}\n\nsuite table"
+    # kept again by a later --no-curves run: the origin stays that of the run that measured them
+    results.write_text("Written by `x` at 2026-11-28T00:00:00+00:00 from commit `abcdef1234`: 2 cores.\n" + kept)
+    assert ra.kept_curves_section(results) == kept

@@ -11,7 +11,9 @@
 // that enters through the top meets the covering part first (or at the same range), one that enters otherwise
 // enters through a side face the origin is outside of. The renderer prepends #defines: MAX_RECTS (rectangles
 // one solid may emit: one per piece, two across the back seam; 2 = unsliced), MAX_VERTICES (4 per rectangle),
-// SLICE_COST_PX (one more slice's cost in fragments), OUT_RGB.
+// SLICE_COST_PX (one more slice's cost in fragments), OUT_RGB. With MAX_RECTS 2 the slicing code is left out
+// of the source: NVIDIA's GLSL compiler (driver 580) crashes on the slicing loop, even where MAX_RECTS makes it
+// dead code.
 layout(points) in;
 layout(triangle_strip, max_vertices = MAX_VERTICES) out;
 in mat4 v_sensor_from_unit[];
@@ -94,6 +96,10 @@ void emit_bound(vec4 b) {
 // rectangles: when the next slice would leave fewer than 2, the rest goes as one piece
 void emit_slices(vec3 c, vec3 u, vec3 v, vec3 w, int budget) {
     vec4 b = piece_bound(c, u, v, w);
+#if MAX_RECTS <= 2                                          // unsliced: the loop below is not compiled at all
+    emit_bound(b);
+}
+#else
     int n = slices(c, u, v, w, b, budget - 1);
     if (n == 1) {
         emit_bound(b);
@@ -112,6 +118,7 @@ void emit_slices(vec3 c, vec3 u, vec3 v, vec3 w, int budget) {
         used += rects(b);
     }
 }
+#endif
 
 void main() {
     f_unit_from_sensor = v_unit_from_sensor[0];
