@@ -145,3 +145,25 @@ def test_points_kernel_matches_its_reference_bit_for_bit(n):
     assert to_points(basis, r64).tobytes() == to_points_reference(basis, r64).tobytes()
     strided = np.empty((n, 8), np.float32)[:, :4]
     assert to_points(basis, r, out=strided).tobytes() == to_points_reference(basis, r).tobytes()
+
+
+
+@pytest.mark.parametrize("sigma, dropout", [(0.0, 0.0), (0.05, 0.0), (0.0, 0.1)])
+def test_noisy_seeds_a_generator_only_for_a_model_that_draws(monkeypatch, sigma, dropout):
+    """Perception.noisy makes the frame's generator only where the noise model draws from it; the ranges are
+    those of apply_noise_and_limits with the frame's generator either way (a quiet model: the limits alone)."""
+    from cosim.scenario.config import Scenario
+    from perception_proc import pipeline
+
+    sc = Scenario(format_version=1, sensor={"method": "beam_native", "noise": {"range_sigma_m": sigma,
+                                                                             "dropout": dropout}})
+    perc = pipeline.Perception(sc, None)
+    made = []
+    monkeypatch.setattr(pipeline, "frame_generator", lambda seed, frame: made.append(frame) or
+                        frame_generator(seed, frame))
+    r = np.linspace(0.0, 200.0, perc.n_beams, dtype=np.float32)
+    r[::7] = np.nan
+    got = perc.noisy(r.copy(), 11)
+    assert made == ([] if sigma == 0.0 and dropout == 0.0 else [11])
+    want = apply_noise_and_limits(r.copy(), sc.lidar, frame_generator(sc.seed, 11))
+    assert got.tobytes() == want.tobytes()
