@@ -76,6 +76,17 @@ class HeightMap:
     coverage: float
 
 
+#: np.take mode for indices that lie in range by construction (from np.flatnonzero, an argsort, a cell index):
+#: numpy's wrapping gather skips the per-index bounds check of the default (the same values, ~25 % fewer
+#: instructions than a[idx])
+_IN_RANGE = "wrap"
+
+
+def _gather(a: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """``a[idx]`` for a 1-D ``a`` and int64 indices ``idx`` known to lie in range."""
+    return np.take(a, idx, mode=_IN_RANGE)
+
+
 def _interior_points(p: np.ndarray, level_from_grid: np.ndarray, z_lo: float, z_hi: float,
                      xy_box: tuple[float, float, float, float]) -> np.ndarray:
     """Level-frame points (N, 3) into the grid frame, R^T (p - t), keeping those with grid z in (z_lo, z_hi)
@@ -102,7 +113,7 @@ def _interior_points(p: np.ndarray, level_from_grid: np.ndarray, z_lo: float, z_
             gy += r[1, 1] * dy
             np.subtract(p[:, 2], t[2], out=gz)
             keep = (gz > z_lo) & (gz < z_hi) & (gx > x_lo) & (gx < x_hi) & (gy > y_lo) & (gy < y_hi)
-            return np.take(rows, np.flatnonzero(keep), axis=1)
+            return np.take(rows, np.flatnonzero(keep), axis=1, mode=_IN_RANGE)
         gz = r[0, 2] * (p[:, 0] - t[0]) + r[1, 2] * (p[:, 1] - t[1]) + r[2, 2] * (p[:, 2] - t[2])
         sel = np.flatnonzero((gz > z_lo) & (gz < z_hi))
         x, y, z = (p[:, k][sel] - t[k] for k in range(3))
@@ -143,6 +154,23 @@ def _stream_cells(heights: np.ndarray) -> np.ndarray:
     return out
 
 
+def _cell_index(gx: np.ndarray, gy: np.ndarray, per_m_x: float, per_m_y: float,
+                shape: tuple[int, int]) -> np.ndarray:
+    """Flat grid cell ``i * ny + j`` (M,) float64 (whole numbers, exact) of grid-frame points ``gx``, ``gy`` (M,)
+    m, at ``per_m_x``, ``per_m_y`` cells per m, each index truncated and clipped to the last cell of ``shape``
+    (nx, ny): the numbers of ``np.minimum((gx * per_m_x).astype(np.int64), nx - 1)`` and its y twin, in float64
+    (truncation, clipping and the small products are exact there), so that the cell serves the sort key
+    as it is and takes one cast to int64 (numpy's int64 minimum has no vector loop)."""
+    nx, ny = shape
+    i = np.trunc(gx * per_m_x)
+    np.minimum(i, nx - 1, out=i)
+    j = np.trunc(gy * per_m_y)
+    np.minimum(j, ny - 1, out=j)
+    i *= ny
+    i += j
+    return i
+
+
 def grid_shape(cart: Cart, cell_m: float) -> tuple[int, int]:
     """(nx, ny) cells of a grid of ``cell_m`` over the cart interior (:meth:`Cart.grid_shape`)."""
     return cart.grid_shape(cell_m)
@@ -168,18 +196,17 @@ def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart
     counts = np.zeros((nx, ny), np.int32)
     if g.shape[0] == 0:
         return HeightMap(heights, counts, g, np.zeros(0, bool), 0.0)
-    i = np.minimum((gx * (nx / L)).astype(np.int64), nx - 1)
-    j = np.minimum((gy * (ny / W)).astype(np.int64), ny - 1)
-    cell = i * ny + j
+    cell_f = _cell_index(gx, gy, nx / L, ny / W, (nx, ny))
+    cell = cell_f.astype(np.int64)
     low = np.flatnonzero(~high)
     # one sort by (cell, z): z lies in (-1, top + HEAP_MAX) < Z_SPAN_M, so cell * Z_SPAN_M + z + 1 orders both.
     # Stable (numpy: timsort, which takes ordered runs as they come): the points arrive scan line by scan
     # line, so the keys hold ordered runs. The keys are positive floats, whose IEEE bit patterns read as
     # int64 order the same way and compare faster (no NaN rule): the same order at about half the cost of
     # the default quicksort on the floats
-    key = cell * Z_SPAN_M + (gz + 1.0)
-    order = low[np.argsort(key[low].view(np.int64), kind="stable")]
-    cs, zs = cell[order], gz[order]
+    key = cell_f * Z_SPAN_M + (gz + 1.0)
+    order = _gather(low, np.argsort(_gather(key, low).view(np.int64), kind="stable"))
+    cs, zs = _gather(cell, order), _gather(gz, order)
     if cs.size == 0:
         return HeightMap(heights, counts, g, high.copy(), 0.0)
     start = np.flatnonzero(np.concatenate(([True], cs[1:] != cs[:-1])))
@@ -201,6 +228,6 @@ def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart
     above = heights + np.float32(STREAM_MIN_HEIGHT_M + CLUSTER_NOISE_SIGMAS * noise_sigma_m)
     above[stream_cell] = -np.inf
     with np.errstate(invalid="ignore"):
-        stream = high | (gz > np.take(above.reshape(-1), cell))
+        stream = high | (gz > _gather(above.reshape(-1), cell))
     coverage = float(np.count_nonzero(np.isfinite(heights)) / heights.size)
     return HeightMap(heights, counts, g, stream, coverage)

@@ -11,13 +11,14 @@ no answer.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from .orderstats import median_sorted, percentile_sorted
 
-__all__ = ["Impact", "find_impact", "blank_under_stream", "MIN_STREAM_POINTS", "FIT_SPAN_M", "CLUSTER_RADIUS_M"]
+__all__ = ["Impact", "find_impact", "blank_under_stream", "line_fits", "MIN_STREAM_POINTS", "FIT_SPAN_M", "CLUSTER_RADIUS_M"]
 
 #: fewest stream returns for an answer
 MIN_STREAM_POINTS = 6
@@ -75,6 +76,25 @@ def _polyval(coef: tuple, x):
     return (0.0 * x + a) * x + b
 
 
+def line_fits(z: np.ndarray, ys: tuple[np.ndarray, ...]) -> list[tuple]:
+    """``tuple(np.polyfit(z, y, 1))`` (slope, intercept) for each y of ``ys`` (M,) over the same ``z`` (M,), M >= 2:
+    numpy's own steps (the column-scaled Vandermonde matrix, ``lstsq`` at polyfit's rcond, the solution
+    unscaled, its rank warning), with the matrix and its scale built once for all of them: the same numbers
+    (tested against ``np.polyfit``) for about two thirds of the instructions of two polyfits."""
+    x = np.asarray(z) + 0.0
+    lhs = np.vander(x, 2)
+    scale = np.sqrt((lhs * lhs).sum(axis=0))
+    lhs /= scale
+    rcond = len(x) * np.finfo(x.dtype).eps
+    fits = []
+    for y in ys:
+        c, _, rank, _ = np.linalg.lstsq(lhs, np.asarray(y) + 0.0, rcond)
+        if rank != 2:
+            warnings.warn("Polyfit may be poorly conditioned", np.exceptions.RankWarning, stacklevel=2)
+        fits.append(tuple((c.T / scale).T))
+    return fits
+
+
 def find_impact(grid_points: np.ndarray, stream: np.ndarray, heights: np.ndarray, cell_m: tuple[float, float],
                 search_radius_m: float, sensor_xy: tuple[float, float] | None = None) -> Impact:
     """Impact point from ``grid_points`` (M, 3) grid frame, their ``stream`` flags (M,) bool, the height map
@@ -96,8 +116,7 @@ def find_impact(grid_points: np.ndarray, stream: np.ndarray, heights: np.ndarray
     if np.ptp(z) < MIN_FIT_SPREAD_M or low.shape[0] < 3:
         coef_x, coef_y = (0.0, float(low[:, 0].mean())), (0.0, float(low[:, 1].mean()))
     else:
-        coef_x = tuple(np.polyfit(z, low[:, 0], 1))
-        coef_y = tuple(np.polyfit(z, low[:, 1], 1))
+        coef_x, coef_y = line_fits(z, (low[:, 0], low[:, 1]))
     foot = np.array([_polyval(coef_x, z_low), _polyval(coef_y, z_low)])
     nx, ny = heights.shape
     dx, dy = cell_m

@@ -363,14 +363,16 @@ def find_cart(points: np.ndarray, border: np.ndarray, cart: Cart, heading_xy=(1.
     bd = border[cand[g]]
     centre = []
     partial = False
-    for coord, known in ((s, lo_len), (t, lo_wid)):
-        lo, hi = percentiles(coord, (0.5, 99.5))
+    # each coordinate's 0.5 and 99.5 percentiles once: an axis's span, and the other axis's for its ends
+    axes = ((s, lo_len), (t, lo_wid))
+    spans = [percentiles(coord, (0.5, 99.5)) for coord, _ in axes]
+    for a, (coord, known) in enumerate(axes):
+        lo, hi = spans[a]
         if hi - lo >= known - FULL_SPAN_TOL_M:
             centre.append(0.5 * (lo + hi))
             continue
         partial = True
-        other = t if coord is s else s
-        o_lo, o_hi = percentiles(other, (0.5, 99.5))
+        other, (o_lo, o_hi) = axes[1 - a][0], spans[1 - a]
         at_lo, at_hi = coord <= lo + END_STRIP_M, coord >= hi - END_STRIP_M
         cut_lo = _end_is_cut(bd[at_lo], other[at_lo], o_lo, o_hi)
         cut_hi = _end_is_cut(bd[at_hi], other[at_hi], o_lo, o_hi)

@@ -11,8 +11,8 @@ from cosim.testing.synthetic import Box, cart_shapes, raycast
 from cosim.world.camera import beam_directions
 from cosim.world.geometry import apply, body_from_camera_axes, cart_body_from_grid, mount_transform, vehicle_pose
 from cosim.world.patterns import beam_table, pattern_shape
-from perception_proc.heightmap import grid_shape, height_map
-from perception_proc.impact import blank_under_stream, find_impact
+from perception_proc.heightmap import _cell_index, grid_shape, height_map
+from perception_proc.impact import blank_under_stream, find_impact, line_fits
 from perception_proc.lidar import apply_noise_and_limits, frame_generator
 from perception_proc.rim import border_beams, find_cart
 
@@ -395,3 +395,38 @@ def test_roof_cell_bound_holds_and_changes_no_answer(seed):
         assert roofed(above, centre, u, sides[0], sides[1], bound) == plain
         answers.append(plain)
     assert 0 < sum(answers) < len(answers)
+
+
+def test_cell_index_matches_the_integer_reference():
+    """The height map's float64 cell index against its integer form (truncate, clip to the last cell,
+    i * ny + j), at cell edges, the far walls, tiny and one-point inputs."""
+    nx, ny, length, width = 60, 30, 6.3, 3.1
+    rng = np.random.default_rng(3)
+    edges_x = np.arange(nx + 1) * (length / nx)
+    edges_y = np.arange(ny + 1) * (width / ny)
+    gx = np.concatenate([rng.random(5000) * length, edges_x, np.nextafter(edges_x, 0), [length, 1e-300]])
+    gy = np.concatenate([rng.random(5000) * width, np.resize(edges_y, edges_x.size),
+                         np.resize(np.nextafter(edges_y, np.inf), edges_x.size), [width, 0.0]])
+    for sl in (slice(None), slice(0, 1), slice(0, 0)):
+        x, y = gx[sl], gy[sl]
+        ref = np.minimum((x * (nx / length)).astype(np.int64), nx - 1) * ny \
+            + np.minimum((y * (ny / width)).astype(np.int64), ny - 1)
+        got = _cell_index(x, y, nx / length, ny / width, (nx, ny))
+        assert got.dtype == np.float64
+        np.testing.assert_array_equal(got.astype(np.int64), ref)
+        np.testing.assert_array_equal(got, ref.astype(np.float64))
+
+
+@pytest.mark.parametrize("m", [2, 3, 6, 57, 400])
+def test_line_fits_are_numpys_polyfits(m):
+    """The stream's shared-matrix line fits against ``np.polyfit`` one by one: the same float64 bits, signed
+    zeros, a steep and a level line included."""
+    rng = np.random.default_rng(m)
+    z = 1.0 + rng.random(m) * (0.3 if m % 2 else 2.0)
+    x = 0.05 * rng.normal(size=m) + 2.0
+    y = 3.0 * z - 1.0
+    z[0], x[-1] = -0.0, -0.0
+    for ys in ((x, y), (y,), (np.full(m, 0.5), x)):
+        got = line_fits(z, ys)
+        want = [tuple(np.polyfit(z, v, 1)) for v in ys]
+        assert np.array(got).tobytes() == np.array(want).tobytes()

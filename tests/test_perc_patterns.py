@@ -19,7 +19,7 @@ from cosim.world.patterns import (
     pattern_shape,
     validate_table,
 )
-from perception_proc.lidar import apply_noise_and_limits, frame_generator, to_points
+from perception_proc.lidar import apply_noise_and_limits, frame_generator, point_basis, to_points, to_points_reference
 
 
 def test_grid_is_uniform_with_both_ends_in_image_order():
@@ -118,3 +118,52 @@ def test_points_record_rows():
     assert np.shares_memory(res, out)
     np.testing.assert_array_equal(res[0], [0, 0, 2, 2])
     assert np.isnan(res[1]).all()
+
+
+@pytest.mark.parametrize("n", [0, 1, 7, 38_400])
+def test_points_kernel_matches_its_reference_bit_for_bit(n):
+    """The OpenCV record (basis x range in four channels) against the numpy column loop: the same float32 bits,
+    NaN, infinities, signed zeros and all-invalid frames included, written into ``out`` itself."""
+    rng = np.random.default_rng(n)
+    d = rng.normal(size=(n, 3))
+    d /= np.maximum(np.linalg.norm(d, axis=1), 1e-12)[:, None]
+    basis = point_basis(d)
+    r = (rng.random(n) * 80.0).astype(np.float32)
+    r[::5] = np.nan
+    r[1::11] = np.inf
+    r[2::13] = -0.0
+    r[3::17] = 0.0
+    for ranges in (r, np.full(n, np.nan, np.float32)):
+        out = np.empty((n, 4), np.float32)
+        res = to_points(basis, ranges, out=out)
+        assert res is out
+        ref = to_points_reference(basis, ranges)
+        assert res.tobytes() == ref.tobytes()
+        assert to_points(basis, ranges).tobytes() == ref.tobytes()
+    # another layout or dtype takes the reference path, with its numbers
+    r64 = r.astype(np.float64)
+    assert to_points(basis, r64).tobytes() == to_points_reference(basis, r64).tobytes()
+    strided = np.empty((n, 8), np.float32)[:, :4]
+    assert to_points(basis, r, out=strided).tobytes() == to_points_reference(basis, r).tobytes()
+
+
+
+@pytest.mark.parametrize("sigma, dropout", [(0.0, 0.0), (0.05, 0.0), (0.0, 0.1)])
+def test_noisy_seeds_a_generator_only_for_a_model_that_draws(monkeypatch, sigma, dropout):
+    """Perception.noisy makes the frame's generator only where the noise model draws from it; the ranges are
+    those of apply_noise_and_limits with the frame's generator either way (a quiet model: the limits alone)."""
+    from cosim.scenario.config import Scenario
+    from perception_proc import pipeline
+
+    sc = Scenario(format_version=1, sensor={"method": "beam_native", "noise": {"range_sigma_m": sigma,
+                                                                             "dropout": dropout}})
+    perc = pipeline.Perception(sc, None)
+    made = []
+    monkeypatch.setattr(pipeline, "frame_generator", lambda seed, frame: made.append(frame) or
+                        frame_generator(seed, frame))
+    r = np.linspace(0.0, 200.0, perc.n_beams, dtype=np.float32)
+    r[::7] = np.nan
+    got = perc.noisy(r.copy(), 11)
+    assert made == ([] if sigma == 0.0 and dropout == 0.0 else [11])
+    want = apply_noise_and_limits(r.copy(), sc.lidar, frame_generator(sc.seed, 11))
+    assert got.tobytes() == want.tobytes()
