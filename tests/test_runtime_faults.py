@@ -580,28 +580,3 @@ def test_a_stop_signal_in_the_entrys_last_instructions_is_never_a_traceback(wher
     out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60)
     assert out.returncode == 130, (out.returncode, out.stderr)
     assert "Traceback" not in out.stderr
-
-
-def test_a_child_whose_worker_thread_runs_is_busy_not_hung():
-    # the process's state is its main thread's: asleep (S) while a worker thread runs; the watch reads the threads
-    from cosim.runtime.liveness import runnable_threads
-    code = ("import threading, time\n"
-            "def spin():\n    while True: pass\n"
-            "threading.Thread(target=spin, daemon=True).start()\n"
-            "print('ready', flush=True)\nthreading.Event().wait()\n")
-    busy = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
-    idle = subprocess.Popen([sys.executable, "-c", "import time; print('ready', flush=True); time.sleep(60)"],
-                            stdout=subprocess.PIPE, text=True)
-    try:
-        assert busy.stdout.readline().strip() == "ready" and idle.stdout.readline().strip() == "ready"
-        deadline = time.monotonic() + 5.0
-        while process_state(busy.pid) != "S" and time.monotonic() < deadline:   # the main thread parked
-            time.sleep(0.01)
-        assert process_state(busy.pid) == "S"
-        assert max(runnable_threads(busy.pid) for _ in range(20)) >= 1
-        assert runnable_threads(idle.pid) == 0 and process_state(idle.pid) == "S"
-        assert runnable_threads(2 ** 22 + 12345) == 0                               # no such process
-    finally:
-        for p in (busy, idle):
-            p.kill()
-            p.wait()

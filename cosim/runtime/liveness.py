@@ -26,8 +26,8 @@ from cosim.errors import ParticipantCrashed, ParticipantDied, ParticipantHung, R
 from shm_schema import Phase, Segment
 from shm_schema.layout import SLOT_WORD
 
-__all__ = ["BEAT_S", "STALL_S", "CONFIRM_S", "Heartbeat", "Watch", "process_state", "cpu_ticks", "runnable_threads",
-           "is_stopped", "end_process", "stop_processes", "child_failure", "ring_holder"]
+__all__ = ["BEAT_S", "STALL_S", "CONFIRM_S", "Heartbeat", "Watch", "process_state", "cpu_ticks", "is_stopped",
+           "end_process", "stop_processes", "child_failure", "ring_holder"]
 
 #: period of a child's liveness beat, s
 BEAT_S = 0.1
@@ -95,26 +95,6 @@ def cpu_ticks(pid: int) -> int:
     return _proc_stat(pid)[1]
 
 
-def runnable_threads(pid: int) -> int:
-    """Threads of ``pid`` the kernel reports running or waiting for a core (state ``R``); 0 when none or when
-    they cannot be read. The process's own state is its main thread's: a main thread asleep on a lock held by a
-    worker that a loaded machine has not scheduled yet (llvmpipe's rasteriser threads) reads ``S``."""
-    try:
-        tids = os.listdir(f"/proc/{pid}/task")
-    except OSError:
-        return 0
-    runnable = 0
-    for tid in tids:
-        try:
-            with open(f"/proc/{pid}/task/{tid}/stat", "rb") as f:
-                raw = f.read()
-        except OSError:
-            continue
-        end = raw.rfind(b")")
-        runnable += raw[end + 2:end + 3] == b"R"
-    return runnable
-
-
 def is_stopped(pid: int) -> bool:
     """Whether ``pid`` is stopped by a signal (SIGSTOP, SIGTSTP) or a tracer."""
     return process_state(pid) in ("T", "t")
@@ -149,11 +129,9 @@ class Watch:
                 self._suspect.pop(name, None)
                 continue
             seen = self._suspect.get(name)
-            # a stale beat in a child that runs (state R, or any of its threads waiting for a core on a loaded
-            # machine) or whose CPU time still goes is a busy child (one long call that keeps the GIL): slow, not
-            # hung; the hand-off timeout covers it
-            busy = not stopped and (state == "R" or (seen is not None and ticks != seen[1])
-                                    or runnable_threads(pid) > 0)
+            # a stale beat in a child that runs (state R) or whose CPU time still goes is a busy child (one long
+            # call that keeps the GIL): slow, not hung; the hand-off timeout covers it
+            busy = not stopped and (state == "R" or (seen is not None and ticks != seen[1]))
             if seen is None or seen[0] != beat or busy:
                 self._suspect[name] = (beat, ticks, now)
                 continue
