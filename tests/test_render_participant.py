@@ -9,13 +9,14 @@ import pytest
 
 from cosim.errors import FrameMismatch, RendererUnavailable
 from cosim.scenario.config import Scenario
+from cosim.testing.renderer_inputs import dynamics_blocks, publish
 from cosim.world.fastcast import CASTERS, embree_available
 from cosim.world.rig import plan_rig
 from renderer_proc.blocks import declare_blocks
 from renderer_proc.codec import decode_depth
 from renderer_proc.participant import create
 from renderer_proc.sample import sample_frame
-from shm_schema import ArrayBlock, Field, Schema, Segment, StructBlock
+from shm_schema import Schema, Segment
 
 SMALL = {"rig": "fixed", "cameras": 2, "width_px": 64, "height_px": 48, "hfov_deg": 60.0}
 
@@ -24,27 +25,11 @@ def scenario(**kw) -> Scenario:
     return Scenario.model_validate({"format_version": 1, **kw})
 
 
-def dynamics_blocks(state, heights):
-    """The dynamics blocks the renderer reads, declared with the CONTRACTS.md names."""
-    fields = tuple(Field(k, "", "i8" if k == "stream_points" else "f8") for k in state)
-    return [StructBlock("dyn_state", "dynamics", fields), ArrayBlock("heightmap_truth", "dynamics", "f4", heights.shape),
-            ArrayBlock("stream", "dynamics", "f4", (64, 4))]
-
-
 def segment_for(s: Scenario, frame: int = 0):
     state, heights, stream = sample_frame(s)
     seg = Segment.local(Schema(dynamics_blocks(state, heights) + declare_blocks(s), ["dynamics", "renderer"]))
     publish(seg, state, heights, stream, frame)
     return seg, state
-
-
-def publish(seg, state, heights, stream, frame):
-    with seg.write("dyn_state", frame) as v:
-        v.update({k: int(x) if k == "stream_points" else x for k, x in state.items()})
-    with seg.write("heightmap_truth", frame) as v:
-        v[...] = heights
-    with seg.write("stream", frame) as v:
-        v[...] = stream
 
 
 def test_blocks_follow_rig_and_options():

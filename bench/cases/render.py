@@ -74,19 +74,17 @@ def renderer_frames(s, frames: int, source=None, grain: bool = True) -> dict:
     """Median wall ms, best wall ms and median process CPU ms (llvmpipe's threads included) per frame of the renderer
     participant of scenario ``s``; ``source``: the frames' (state, heights, stream), default the sample frame moving
     along; ``grain=False``: the grain surface not drawn."""
+    from cosim.testing.renderer_inputs import dynamics_blocks, publish
     from cosim.world.rig import plan_rig
     from renderer_proc.blocks import declare_blocks
     from renderer_proc.participant import create
     from renderer_proc.sample import sample_frame
-    from shm_schema import ArrayBlock, Field, Schema, Segment, StructBlock
+    from shm_schema import Schema, Segment
 
     if source is None:
         source = [sample_frame(s, t_s=0.1 * k) for k in range(frames + WARMUP_FRAMES)]
     state, heights, stream = source[0]
-    dyn = [StructBlock("dyn_state", "dynamics", tuple(Field(k, "", "i8" if k == "stream_points" else "f8")
-                                                      for k in state)),
-           ArrayBlock("heightmap_truth", "dynamics", "f4", heights.shape), ArrayBlock("stream", "dynamics", "f4", (64, 4))]
-    seg = Segment.local(Schema(dyn + declare_blocks(s), ["dynamics", "renderer"]))
+    seg = Segment.local(Schema(dynamics_blocks(state, heights) + declare_blocks(s), ["dynamics", "renderer"]))
     p = create(s)
     p.start(seg)
     if not grain:
@@ -94,13 +92,7 @@ def renderer_frames(s, frames: int, source=None, grain: bool = True) -> dict:
     times, cpu = [], []
     try:
         for k in range(frames + WARMUP_FRAMES):
-            state, heights, stream = source[k]
-            with seg.write("dyn_state", k) as v:
-                v.update({n: int(x) if n == "stream_points" else x for n, x in state.items()})
-            with seg.write("heightmap_truth", k) as v:
-                v[...] = heights
-            with seg.write("stream", k) as v:
-                v[...] = stream
+            publish(seg, *source[k], k)
             t0, c0 = time.perf_counter(), time.process_time()
             p.step(k)
             if k >= WARMUP_FRAMES:
