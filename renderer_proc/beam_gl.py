@@ -38,7 +38,7 @@ from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
 
 from .beam_mock import check_target
 from .codec import BYTE_MAX, CM_PER_M
-from .gl_backend import SHADER_DIR, GLResources, GroundImage, _Buffers, begin_frame, upload_instances
+from .gl_backend import SHADER_DIR, GLResources, GroundImage, _Buffers, begin_frame, set_uniform, upload_instances
 from .projection import far_plane_m
 from .surface_gl import Surface
 from .surface_gl import mat_bytes as _mat
@@ -133,14 +133,6 @@ def _assemble(name: str, *parts: str, defines: tuple[str, ...] = ()) -> str:
     return "\n".join([head, *defines, *(_src(p) for p in parts), body])
 
 
-def _set(prog, name: str, value) -> None:
-    """Set a uniform where the program keeps it (the compiler drops unused ones). ``prog.get`` is a dict look-up;
-    ``name in prog`` would walk every member."""
-    uniform = prog.get(name, None)
-    if uniform is not None:
-        uniform.value = value
-
-
 def ground_key(world_from_slab: np.ndarray, half: np.ndarray, world_from_sensor: np.ndarray,
                reach_m: float) -> tuple | None:
     """What the ground slab looks like from the LiDAR, or None when a cached image cannot be used.
@@ -212,9 +204,9 @@ class GLBeamRenderer(GLResources):
         values["u_pitch"] = (values["u_daz"], float(row_el[0] - row_el[-1]) / (rows - 1) if rows > 1 else 1.0)
         for prog in self._progs:
             for name, value in values.items():
-                _set(prog, name, value)
-        _set(self.prog_box, "u_z0", -1.0)                      # the unit cube's hull: itself
-        _set(self.prog_prism, "u_z0", 0.0)                     # the unit prism's hull: [-1, 1]^2 x [0, 1]
+                set_uniform(prog, name, value)
+        set_uniform(self.prog_box, "u_z0", -1.0)                      # the unit cube's hull: itself
+        set_uniform(self.prog_prism, "u_z0", 0.0)                     # the unit prism's hull: [-1, 1]^2 x [0, 1]
         self._row_tex = self._m(ctx.texture((len(table), 1), 2, table.tobytes(), dtype="f4"))
         self._dir_tex = self._m(ctx.texture((cols, rows), 3, layout.direction_image().tobytes(), dtype="f4"))
         for tex in (self._row_tex, self._dir_tex):
@@ -294,7 +286,7 @@ class GLBeamRenderer(GLResources):
         for prog in self._progs:
             prog["u_sensor_from_local"].write(_mat(sensor_from_local))
             for name, value in (("u_front", front), ("u_cull", True), ("u_light", light)):
-                _set(prog, name, value)
+                set_uniform(prog, name, value)
         self.ctx.enable(self._depth_test)
         self.ctx.disable(self.ctx.CULL_FACE)
         self._row_tex.use(0)
@@ -307,14 +299,14 @@ class GLBeamRenderer(GLResources):
         self._render("box_open")
         if key is None:
             self._render("ground")
-        _set(self.prog_inst, "u_cull", False)                  # mesh files have unknown winding: two-sided
+        set_uniform(self.prog_inst, "u_cull", False)                  # mesh files have unknown winding: two-sided
         for name in self._mesh_names:
             self._meshes[name][0].render(instances=1)
 
     def _render(self, name: str) -> None:
         vao, _, n = self._units[name]
         if n:
-            _set(self.prog_box, "u_open_top", name == "box_open")
+            set_uniform(self.prog_box, "u_open_top", name == "box_open")
             vao.render(mode=self._points, vertices=n)
 
     def _check(self, out: np.ndarray) -> None:

@@ -45,7 +45,7 @@ from .projection import NEAR_M, far_plane_m, gl_projection, gl_view
 from .surface_gl import Surface
 from .surface_gl import mat_bytes as _mat
 
-__all__ = ["GL_REQUIRE", "SHADER_DIR", "GLResources", "GLRenderer", "create_gl_context", "upload_instances"]
+__all__ = ["GL_REQUIRE", "SHADER_DIR", "GLResources", "GLRenderer", "create_gl_context", "set_uniform", "upload_instances"]
 
 #: directory of the GLSL sources
 SHADER_DIR = Path(__file__).with_name("shaders")
@@ -184,6 +184,14 @@ class GLResources:
         self.ctx = None
 
 
+def set_uniform(prog: Any, name: str, value) -> None:
+    """Set uniform ``name`` of ``prog`` where the program keeps it (the compiler drops unused ones). ``prog.get`` is
+    a dict look-up; ``name in prog`` would walk every member."""
+    uniform = prog.get(name, None)
+    if uniform is not None:
+        uniform.value = value
+
+
 class GLRenderer(GLResources):
     """Renders :class:`Scene` frames for every camera of ``rig``. ``set_scene`` uploads a frame (instance
     buffers, grain heights), ``draw(k, world_from_camera)`` renders camera k, ``read_*`` read it out."""
@@ -199,11 +207,11 @@ class GLRenderer(GLResources):
         self.prog_inst = self._m(ctx.program(vertex_shader=_source("instanced.vert"), fragment_shader=frag))
         self.prog_hf = self._m(ctx.program(vertex_shader=_source("heightfield.vert"), fragment_shader=frag))
         for prog in (self.prog_inst, self.prog_hf):
-            self._set(prog, "u_q_per_m", CM_PER_M / codec.beta_cm)
-            self._set(prog, "u_q_max", codec.alpha_cm / codec.beta_cm)
-            self._set(prog, "u_r_per_period", BYTE_MAX * codec.beta_cm / codec.alpha_cm)
-            self._set(prog, "u_gamma", codec.gamma)
-        self._set(self.prog_hf, "u_colour", GRAIN_COLOUR)
+            set_uniform(prog, "u_q_per_m", CM_PER_M / codec.beta_cm)
+            set_uniform(prog, "u_q_max", codec.alpha_cm / codec.beta_cm)
+            set_uniform(prog, "u_r_per_period", BYTE_MAX * codec.beta_cm / codec.alpha_cm)
+            set_uniform(prog, "u_gamma", codec.gamma)
+        set_uniform(self.prog_hf, "u_colour", GRAIN_COLOUR)
         self._surface = Surface(ctx, self._m, self.prog_hf)
         self._unit = {}
         units = {"box": unit_cube(), "box_open": unit_cube(open_top=True), "ground": unit_cube(),
@@ -229,12 +237,6 @@ class GLRenderer(GLResources):
         if "in_colour" in self.prog_inst:
             return (buf, "16f 3f/i", "in_model", "in_colour")
         return (buf, "16f 12x/i", "in_model")
-
-    @staticmethod
-    def _set(prog, name: str, value) -> None:
-        uniform = prog.get(name, None)                # a dict look-up; ``name in prog`` walks every member
-        if uniform is not None:
-            uniform.value = value
 
     def _buffers(self, size: tuple[int, int]) -> _Buffers:
         ctx = self.ctx
@@ -328,7 +330,7 @@ class GLRenderer(GLResources):
         for prog in (self.prog_inst, self.prog_hf):
             prog["u_view"].write(_mat(view))
             prog["u_proj"].write(t.proj)
-            self._set(prog, "u_light", tuple(view[:3, :3] @ SUN_WORLD))
+            set_uniform(prog, "u_light", tuple(view[:3, :3] @ SUN_WORLD))
         # closed, outward-wound solids and the height field (seen from above only) cull their back faces;
         # mesh files have unknown winding and are drawn two-sided
         self.ctx.enable(self._cull)
