@@ -39,6 +39,7 @@ BENCH = Path(__file__).resolve().parent
 if str(BENCH) not in sys.path:
     sys.path.insert(0, str(BENCH))
 
+from field_suite import SECTION as SUITE_HEADING  # noqa: E402
 from harness import ROOT, Arm, Result, get, run_cases  # noqa: E402
 from harness.report import table, to_json  # noqa: E402
 
@@ -184,7 +185,7 @@ def render_markdown(res: dict, quick: bool = False) -> str:
                   f"{mf['frames']} sample frames interleaved: {mf['mock_cpu_ms']:.2f} against {mf['gl_cpu_ms']:.2f} ms "
                   f"CPU: **{mf['ratio_cpu']:.2f}x** (target: at most 1x; case `mock_cast`).", ""]
     if res.get("curves"):
-        lines += ["## How the cost grows (cases `curves` and `sweep_throughput`)", ""]
+        lines += [f"{CURVES_HEADING} (cases `curves` and `sweep_throughput`)", ""]
         for name, c in res["curves"].items():
             for title, rows in c["median"].items():
                 lines += [f"### {title}" + (f" ({name})" if name != "curves" else ""), ""]
@@ -192,8 +193,8 @@ def render_markdown(res: dict, quick: bool = False) -> str:
     return "\n".join(lines)
 
 
-#: the headings of the sections an earlier results.md keeps when this run does not measure them
-SUITE_HEADING, CURVES_HEADING = "## Field-conditions suite", "## How the cost grows"
+#: the heading of the cost curves' section, which a run with ``--no-curves`` keeps from the earlier results.md
+CURVES_HEADING = "## How the cost grows"
 KEPT = "Kept from results.md as written"
 
 
