@@ -20,14 +20,18 @@ import numpy as np
 from .spec import ArrayBlock, Block, Field, SchemaError, StructBlock, check_name
 
 __all__ = [
-    "ALIGN", "MAGIC", "LAYOUT_VERSION", "MAX_PROCS", "ERROR_BYTES", "PROC_DTYPE", "HEADER_DTYPE",
+    "ALIGN", "MAGIC", "LAYOUT_VERSION", "ACTIVITY_BYTES", "MAX_PROCS", "ERROR_BYTES", "PROC_DTYPE", "HEADER_DTYPE",
     "BLOCK_HEADER_DTYPE", "BLOCK_WORD", "SLOT_WORD", "BlockLayout", "Schema", "align_up",
 ]
 
 ALIGN = 64
 MAGIC = b"COSIMSHM"
-#: 2: process slots gained ``alive_ns`` (the liveness heartbeat, beside the per-step ``heartbeat_ns``)
-LAYOUT_VERSION = 2
+#: 2: process slots gained ``alive_ns`` (the liveness heartbeat, beside the per-step ``heartbeat_ns``); 3: and
+#: ``beat_tid`` (the heartbeat thread, left out of the CPU evidence of progress) and ``activity`` (what a starting
+#: process is doing, for the start-up report)
+LAYOUT_VERSION = 3
+#: bytes of a process slot's ``activity`` text (UTF-8, NUL-padded)
+ACTIVITY_BYTES = 48
 #: process slots in the header: the ring participants plus the supervisor and spares for stand-ins
 MAX_PROCS = 6
 #: bytes reserved per process for a msgpack-encoded error report (type, message, traceback)
@@ -45,6 +49,10 @@ PROC_DTYPE = np.dtype(
         #: CLOCK_MONOTONIC ns of the process's last liveness beat (a thread beside its frame work,
         #: cosim.runtime.liveness); ``heartbeat_ns`` is the time of its last step boundary
         ("alive_ns", "<i8"),
+        #: the kernel's thread id of the heartbeat thread (its CPU time is not evidence of the process's progress)
+        ("beat_tid", "<i8"),
+        #: what the process is doing while it starts ("compiling shaders"), set by cosim.runtime.participant.activity
+        ("activity", f"S{ACTIVITY_BYTES}"),
         ("error_len", "<i8"),
         ("error", f"S{ERROR_BYTES}"),
     ],

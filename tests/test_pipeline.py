@@ -236,12 +236,20 @@ def test_a_stopped_child_is_named_within_2_s_under_the_pipeline(tmp_path, shm_cl
     assert not children_of(os.getpid())
 
 
-def test_a_hang_meets_the_handoff_timeout_naming_who_waits_for_whom(tmp_path, shm_clean):
-    res = launch(scenario(handoff_timeout_s=1.0), tmp_path / "run",
-                 specs=fakes.pipelined_specs(renderer={"hang_at": 2}), console_log=False)
-    assert isinstance(res.error, HandoffTimeout)
-    assert "renderer is stepping frame 2" in str(res.error) and "for renderer's frame 2" in str(res.error)
+def test_a_blocked_member_is_named_under_the_pipeline_not_who_waits_for_it(tmp_path, shm_clean):
+    res = launch(scenario(), tmp_path / "run", specs=fakes.pipelined_specs(renderer={"hang_at": 2}),
+                 console_log=False)
+    assert isinstance(res.error, ParticipantHung) and res.error.process == "renderer", res.error
+    assert "is blocked during frame 2" in str(res.error)
     assert res.summary["frames"] <= 2
+    assert not children_of(os.getpid())
+
+
+def test_a_runaway_meets_its_cpu_budget_under_the_pipeline(tmp_path, shm_clean):
+    res = launch(scenario(handoff_timeout_s=1.0), tmp_path / "run", specs=fakes.pipelined_specs(renderer={"spin_at": 2}),
+                 console_log=False)
+    assert type(res.error) is HandoffTimeout and res.error.process == "renderer", res.error
+    assert "did not finish frame 2 within its CPU budget" in str(res.error)
     assert not children_of(os.getpid())
 
 

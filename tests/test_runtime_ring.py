@@ -12,9 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.errors import FrameMismatch, HandoffTimeout, ParticipantCrashed, ParticipantDied
+from cosim.errors import FrameMismatch, HandoffTimeout, ParticipantCrashed, ParticipantDied, ParticipantHung
 from cosim.runtime.inprocess import simulate
 from cosim.runtime.launcher import EXIT_INTERRUPTED, EXIT_RUN_ERROR, launch
+from cosim.runtime.liveness import IDLE_S
 from cosim.runtime.lockstep import RingPlan, Token
 from cosim.scenario.config import Scenario
 from cosim.testing import fakes
@@ -106,17 +107,29 @@ def test_kill9_is_named_and_stops_fast(role, tmp_path, shm_clean):
 
 
 @pytest.mark.parametrize("role", ROLES)
-def test_hang_times_out_naming_the_stuck_process(role, tmp_path, shm_clean):
-    timeout = 1.0
+def test_a_blocked_member_is_named_hung_not_its_waiting_peers(role, tmp_path, shm_clean):
+    """It beats but its working threads sleep without CPU time (a lock that is never released): named as blocked
+    within about IDLE_S, whatever the hand-off timeout."""
     t0 = time.monotonic()
-    res = launch(scenario(handoff_timeout_s=timeout), tmp_path / "run",
-                 specs=fakes.specs(**{role: {"hang_at": 2}}), console_log=False)
+    res = launch(scenario(), tmp_path / "run", specs=fakes.specs(**{role: {"hang_at": 2}}), console_log=False)
     took = time.monotonic() - t0
-    assert isinstance(res.error, HandoffTimeout)
-    assert f"{role} is stepping frame 2" in str(res.error)
+    assert isinstance(res.error, ParticipantHung) and res.error.process == role, res.error
+    assert f"{role} (pid " in str(res.error) and "is blocked during frame 2 (stepping)" in str(res.error)
     assert res.summary["frames"] == 2
-    # start-up (3 interpreters) + 2 frames + the timeout + at most STOP_WITHIN_S to stop
-    assert took < timeout + STOP_WITHIN_S + 8
+    # start-up (3 interpreters) + 2 frames + IDLE_S + at most STOP_WITHIN_S to stop
+    assert took < IDLE_S + STOP_WITHIN_S + 8
+    assert not children_of(os.getpid())
+
+
+@pytest.mark.parametrize("role", ROLES)
+def test_a_runaway_meets_its_cpu_budget_naming_it(role, tmp_path, shm_clean):
+    """A loop that never ends beats and uses CPU time: it is stopped once it has spent the hand-off timeout of
+    its own CPU time on one frame."""
+    res = launch(scenario(handoff_timeout_s=1.0), tmp_path / "run", specs=fakes.specs(**{role: {"spin_at": 2}}),
+                 console_log=False)
+    assert type(res.error) is HandoffTimeout and res.error.process == role, res.error
+    assert f"{role} (pid " in str(res.error) and "did not finish frame 2 within its CPU budget" in str(res.error)
+    assert "timing.handoff_timeout_s = 1 s" in str(res.error)
     assert not children_of(os.getpid())
 
 

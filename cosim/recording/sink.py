@@ -18,8 +18,10 @@ every frame put and finish the file. If the launcher itself is killed, the recor
 every frame counted in the slots' shared count (told of or not: the batching loses nothing; its mapping of the
 slots outlives their name) and finishes the file. A recording failure (disk full, a dead, stopped or stalled
 recorder) is logged once, in one line, the recorder is ended (SIGTERM, then SIGKILL) and recording stops; the
-run goes on. ``close`` never waits on a recorder that is stopped (STALL_S) or makes no progress
-(STALL_TIMEOUT_S): an observer can never hold the run.
+run goes on. A recorder that is only slow (a busy machine; it runs at a lower priority) holds the ring back
+through the credits, however long, so the recording stays whole; one that makes no progress (stopped, or its
+threads without CPU time for RECORDER_IDLE_S while it has frames to write: cosim.runtime.liveness.Evidence) is
+given up on, by the sink and by ``close`` alike: an observer that has stopped can never hold the run.
 """
 from __future__ import annotations
 
@@ -32,7 +34,7 @@ from pathlib import Path
 
 from cosim.errors import RecordingFailed
 from cosim.runtime.files import write_error
-from cosim.runtime.liveness import STALL_S, cpu_ticks, end_process, is_stopped
+from cosim.runtime.liveness import CONFIRM_S, IDLE_S, Evidence, end_process, is_stopped
 from cosim.runtime.spawning import start_process
 from shm_schema import Schema, Segment
 
@@ -46,17 +48,19 @@ from .writer import (
     frame_data,
 )
 
-__all__ = ["McapRecorder", "mcap_sink", "slot_count", "CREDIT_POLL_S", "CLOSE_TIMEOUT_S", "QUEUE_BYTES", "MIN_SLOTS",
+__all__ = ["McapRecorder", "mcap_sink", "slot_count", "CREDIT_POLL_S", "CLOSE_CPU_S", "RECORDER_IDLE_S", "QUEUE_BYTES",
+           "MIN_SLOTS",
            "MAX_SLOTS", "NOTIFY_FRAMES", "NOTIFY_S", "RELEASE_FRAMES"]
 
 log = logging.getLogger("cosim.recording")
 
-#: slice of the sink's wait for a credit, s: bounds how late a dead recorder is noticed
-CREDIT_POLL_S = 0.5
-#: how long ``close`` waits for the recorder to write what it was sent and finish the file, s
-CLOSE_TIMEOUT_S = 120.0
-#: a recorder that gives no slot back and writes nothing for this long is ended (by the sink or ``close``), s
-STALL_TIMEOUT_S = 10.0
+#: slice of the sink's wait for a credit, s: bounds how late a dead or stopped recorder is noticed
+CREDIT_POLL_S = 0.1
+#: CPU time the recorder may spend finishing after ``close`` (writing what it was sent), s of its CPU time
+CLOSE_CPU_S = 120.0
+#: a recorder with frames to write whose threads use no CPU time and wait for no core or disk for this long is
+#: ended (by the sink or ``close``), s
+RECORDER_IDLE_S = 2 * IDLE_S
 #: grace between SIGTERM and SIGKILL when ending the recorder, s
 END_GRACE_S = 1.0
 #: exit status of a recorder that stopped on a write error (it printed the error in one line)
@@ -175,6 +179,8 @@ class McapRecorder:
         self._stamps: dict[str, int] = {}
         #: times the sink found every slot full and the ring waited for the recorder, and how long in all, s
         self.waits, self.wait_s = 0, 0.0
+        #: when the recorder was first seen stopped while the sink waited (time.monotonic(), s), 0 when not
+        self._stopped_at = 0.0
         n_slots = slot_count(self.options, sum(segment.schema.block(n).nbytes for n in self.recorded.names))
         if n_slots == 0:
             self._writer = McapWriter(scenario, segment.schema, self.path, self.options, segment.run_id,
@@ -223,8 +229,9 @@ class McapRecorder:
                 self._tell()  # every full slot must be known to the recorder before the ring waits for one
                 t0 = time.perf_counter()
                 self.waits += 1
+                evidence = Evidence(self._proc.pid)
                 while not self._credits.acquire(timeout=CREDIT_POLL_S):
-                    self._check_recorder(time.perf_counter() - t0)
+                    self._check_recorder(evidence)
                 self.wait_s += time.perf_counter() - t0
             slot = self._sent % self._slots.slots  # credits come back in order: this slot is free
             self._slots.put(seg, slot, frame, names)
@@ -243,17 +250,23 @@ class McapRecorder:
             self._problem = (f"{type(exc).__name__}: {exc}", frame)
             log.exception("recording to %s failed at frame %d; the run goes on without recording", self.path, frame)
 
-    def _check_recorder(self, waited_s: float) -> None:
-        """Raise :class:`RecorderGone` if the recorder died, is stopped, or has given nothing back for
-        STALL_TIMEOUT_S (called while the sink waits for a free slot)."""
+    def _check_recorder(self, evidence: Evidence) -> None:
+        """Raise :class:`RecorderGone` if the recorder died, is stopped, or makes no progress (called while the
+        sink waits for a free slot: the recorder has frames to write)."""
         p = self._proc
         if not p.is_alive():
             how = "a write error" if p.exitcode == EXIT_WRITE_FAILED else f"exit {p.exitcode}"
             raise RecorderGone(f"the recorder process ended ({how})")
-        if is_stopped(p.pid) and waited_s > STALL_S:
-            raise RecorderGone(f"the recorder process (pid {p.pid}) is stopped (SIGSTOP)")
-        if waited_s > STALL_TIMEOUT_S:
-            raise RecorderGone(f"the recorder process (pid {p.pid}) gave no frame slot back in {waited_s:.0f} s")
+        if is_stopped(p.pid):
+            self._stopped_at = self._stopped_at or time.monotonic()
+            if time.monotonic() - self._stopped_at > CONFIRM_S:
+                raise RecorderGone(f"the recorder process (pid {p.pid}) is stopped (SIGSTOP)")
+            return
+        self._stopped_at = 0.0
+        idle = evidence.idle_s()
+        if idle > RECORDER_IDLE_S:
+            raise RecorderGone(f"the recorder process (pid {p.pid}) made no progress: no CPU time in {idle:.1f} s "
+                               "with frames to write")
 
     def _why(self, exc: Exception) -> str:
         if isinstance(exc, ConnectionError) and self._proc is not None:  # the pipe to a recorder that ended
@@ -268,31 +281,27 @@ class McapRecorder:
             end_process(self._proc, END_GRACE_S)
 
     def _wait_recorder(self) -> str:
-        """Wait for the recorder to end; "" when it did, else why it was given up on: stopped for STALL_S, no
-        progress (slots given back, file growth, CPU time) for STALL_TIMEOUT_S, or CLOSE_TIMEOUT_S in all."""
-        p, t0 = self._proc, time.monotonic()
-        progress, t_progress, t_stopped = None, t0, None
+        """Wait for the recorder to end; "" when it did, else why it was given up on: stopped, no progress for
+        RECORDER_IDLE_S (cosim.runtime.liveness.Evidence), or CLOSE_CPU_S of its CPU time spent finishing. A
+        recorder slowed by a busy machine is waited for: the recording is whole."""
+        p = self._proc
+        evidence, t_stopped = Evidence(p.pid), None
         while True:
-            p.join(CREDIT_POLL_S / 5)
+            p.join(CREDIT_POLL_S)
             if p.exitcode is not None:
                 return ""
             now = time.monotonic()
             if is_stopped(p.pid):
                 t_stopped = t_stopped or now
-                if now - t_stopped > STALL_S:
+                if now - t_stopped > CONFIRM_S:
                     return "is stopped (SIGSTOP)"
-            else:
-                t_stopped = None
-            try:
-                mark = (self._credits.get_value(), self.path.stat().st_size, cpu_ticks(p.pid))
-            except (OSError, NotImplementedError):
-                mark = None
-            if mark != progress:
-                progress, t_progress = mark, now
-            elif now - t_progress > STALL_TIMEOUT_S:
-                return f"made no progress in {STALL_TIMEOUT_S:.0f} s"
-            if now - t0 > CLOSE_TIMEOUT_S:
-                return f"did not finish in {CLOSE_TIMEOUT_S:.0f} s"
+                continue
+            t_stopped = None
+            idle = evidence.idle_s()
+            if idle > RECORDER_IDLE_S:
+                return f"made no progress (no CPU time in {idle:.1f} s)"
+            if evidence.cpu_s > CLOSE_CPU_S:
+                return f"did not finish within {CLOSE_CPU_S:.0f} s of its CPU time"
 
     def _note(self, why: str) -> None:
         """Keep the first reason the recording is not whole."""

@@ -25,12 +25,14 @@ from typing import Mapping
 from cosim.errors import RunError
 from cosim.scenario.config import Scenario
 from shm_schema import Phase, Segment
+from shm_schema.layout import ACTIVITY_BYTES
 
 from .heap import keep_heap
 from .liveness import Heartbeat
 from .lockstep import RingPlan, Token, member_loop
 from .logs import configure_logging
 from .pipeline import Gates, PipePlan
+from .participant import activity, set_activity
 from .pipeline import member_loop as pipelined_loop
 from .specs import ParticipantSpec
 
@@ -51,8 +53,6 @@ class ChildArgs:
     semaphores: Mapping[str, object]
     log_path: str
     parent_pid: int
-    startup_timeout_s: float
-    handoff_timeout_s: float
     #: wall-clock time (time.time(), s) at which the launcher started this process, for the start-up log line
     spawned_at_s: float
 
@@ -80,6 +80,11 @@ def _drop_fork_server_link() -> None:
         except OSError:
             pass
         server._forkserver_alive_fd = None
+
+
+def _say(slot, text: str) -> None:
+    """Write ``text`` into the slot's ``activity`` (cut to its size, whole UTF-8 characters)."""
+    slot["activity"] = text.encode("utf-8")[:ACTIVITY_BYTES].decode("utf-8", "ignore").encode("utf-8")
 
 
 def _on_sigterm(signum, frame) -> None:
@@ -117,23 +122,27 @@ def child_main(args: ChildArgs) -> None:
             raise RunError(f"{name}: the launcher (pid {args.parent_pid}) is gone", process=name,
                            frame=int(slot["frame"]))
 
+    set_activity(lambda text: _say(slot, text))
     try:
         scenario = Scenario.model_validate_json(args.scenario_json)
         t_create = time.time()
+        activity("loading its models")
         participant = args.spec.create(scenario)
         t_start = time.time()
+        activity("starting")
         participant.start(seg)
         t_ready = time.time()
         log.info("started (pid %d) %.2f s after its spawn: interpreter and imports %.2f s, create %.2f s, start %.2f s",
                  os.getpid(), t_ready - args.spawned_at_s, t_main - args.spawned_at_s, t_start - t_create,
                  t_ready - t_start)
+        set_activity(None)
+        # no deadline on the waits: the launcher's watch judges the members' progress (cosim.runtime.liveness)
         if isinstance(args.plan, PipePlan):
             pipelined_loop(name, participant, seg, Gates(seg, args.plan, args.semaphores, name, check), args.plan,
-                           startup_timeout_s=args.startup_timeout_s, handoff_timeout_s=args.handoff_timeout_s)
+                           startup_timeout_s=None, handoff_timeout_s=None)
         else:
             member_loop(name, participant, seg, Token(seg, args.semaphores), args.plan,
-                        startup_timeout_s=args.startup_timeout_s, handoff_timeout_s=args.handoff_timeout_s,
-                        check=check)
+                        startup_timeout_s=None, handoff_timeout_s=None, check=check)
         log.info("finished %d frames (cpu %.2f s)", args.plan.frames + 1, time.process_time())
     except BaseException as exc:  # noqa: BLE001 - every failure must reach the launcher with its traceback
         code = 143 if isinstance(exc, SystemExit) else 1

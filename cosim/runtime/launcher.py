@@ -10,8 +10,9 @@ the final summary, unlinks the segment and draws the figures of a completed run.
 :class:`cosim.runtime.runstate.RunState`.
 
 Whatever happens the run ends cleanly: a child's exception comes back with its traceback; a dead child, or one
-that stops beating (SIGSTOP, a deadlock: cosim.runtime.liveness), stops the run within 2 s naming the process,
-the frame and the cause; a child that beats but does not finish its frame meets the hand-off timeout; any number
+that makes no progress (SIGSTOP, a deadlock, a wait that never ends: cosim.runtime.liveness), stops the run within
+2 s naming the process, the frame and the cause; a child that spends more than its CPU budget on one frame is a
+runaway; a child that is only slow (a busy machine) is waited for; any number
 of SIGINT/SIGTERM at any moment stop it the same way (cosim.runtime.signals); a write error (a full disk) is
 named with its path. Afterwards no child is left running and the segment is unlinked; the run directory holds
 everything up to the last completed frame. The launcher is back within 2 s of any fault (docs/reliability.md).
@@ -183,8 +184,7 @@ def _set_up(run: RunState, console_log: bool, observers: Sequence[ObserverSpec],
     for spec in run.ring:
         stop.check(-1)
         args = ChildArgs(spec, scenario_json, name, schema.fingerprint, plan, run.sems, str(run.log_path),
-                         os.getpid(), scenario.timing.startup_timeout_s, scenario.timing.handoff_timeout_s + 5.0,
-                         time.time())
+                         os.getpid(), time.time())
         run.procs[spec.name] = start_process(child_main, (args,), name=f"cosim-{spec.name}", ctx=ring_ctx)
     run.recorder = Recorder(seg, plan.members, deferred=bool(plan.deferred) or pipelined,
                             schedule="pipelined" if pipelined else "sequential")
@@ -206,11 +206,13 @@ def _plan(scenario: Scenario, ring: list[ParticipantSpec], *, hold: bool) -> tup
 def _supervise(run: RunState, progress: Progress | None) -> None:
     """Close the ring for every frame (and the flush turn): record, feed the sinks, append rows, report progress.
 
-    Between wait slices it checks, in this order: a stop signal, a child that stopped beating or is stopped
-    (named within ~1.5 s, cosim.runtime.liveness), a child that exited. Raises the RunError that ends the run."""
+    Between wait slices it checks, in this order: a stop signal, a child stopped, blocked or running away (the
+    evidence of progress, cosim.runtime.liveness: named within ~1.5 s on a quiet machine), a child that exited.
+    Raises the RunError that ends the run."""
     scenario, seg, plan, recorder, stop = run.scenario, run.seg, run.plan, run.recorder, run.stop
     sup = seg.slot(SUPERVISOR)
-    watch = Watch(seg, run.procs)
+    watch = Watch(seg, run.procs, frame_cpu_s=scenario.timing.handoff_timeout_s,
+                  startup_cpu_s=scenario.timing.startup_timeout_s, report=log.info)
     finished: set[str] = set()
     warned: set[str] = set()
 
@@ -236,10 +238,7 @@ def _supervise(run: RunState, progress: Progress | None) -> None:
     phase, frame_word, heartbeat = SLOT_WORD["phase"], SLOT_WORD["frame"], SLOT_WORD["heartbeat_ns"]
     for frame in range(plan.frames + 1):
         sw[phase] = Phase.WAITING
-        timeout = scenario.timing.handoff_timeout_s
-        if frame == 0:
-            timeout += scenario.timing.startup_timeout_s
-        token.take(SUPERVISOR, frame, timeout, check)
+        token.take(SUPERVISOR, frame, None, check)  # no deadline: the watch in ``check`` judges progress
         turn = time.monotonic_ns() - t_turn
         if frame == 0:
             run.t_first = time.perf_counter()
@@ -262,7 +261,7 @@ def _supervise(run: RunState, progress: Progress | None) -> None:
         # the deferred members publish their last frame's outputs
         sw[phase] = Phase.WAITING
         token.give(plan.flush_next_of(SUPERVISOR), plan.flush_frame)
-        token.take(SUPERVISOR, plan.flush_frame, scenario.timing.handoff_timeout_s, check)
+        token.take(SUPERVISOR, plan.flush_frame, None, check)
         sw[phase] = Phase.STEPPING
         recorder.record_flush()
         for sink in run.frame_sinks:
@@ -288,8 +287,7 @@ def _supervise_pipelined(run: RunState, progress: Progress | None, check: Callab
         if progress is not None:
             progress(frame, plan.frames, frame * scenario.timing.sensor_period_s, time.perf_counter() - run.t_start)
 
-    supervise(seg, plan, Gates(seg, plan, run.sems, SUPERVISOR, check),
-              startup_timeout_s=scenario.timing.startup_timeout_s, handoff_timeout_s=scenario.timing.handoff_timeout_s,
+    supervise(seg, plan, Gates(seg, plan, run.sems, SUPERVISOR, check), startup_timeout_s=None, handoff_timeout_s=None,
               on_take=recorder.take, on_frame=on_frame)
 
 

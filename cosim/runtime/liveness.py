@@ -1,15 +1,27 @@
-"""Liveness apart from slowness (docs/architecture.md): heartbeats, stopped processes, bounded ends.
+"""Liveness by evidence of progress (docs/reliability.md): heartbeats, CPU time, stopped processes, bounded ends.
 
-A child beats from a thread of its own (:class:`Heartbeat`): every ``BEAT_S`` it stamps CLOCK_MONOTONIC (one
-clock for every process of the machine) into its slot's ``alive_ns``, whatever its frame work does, so a long
-frame still beats. A process stopped by SIGSTOP stops every thread, and one deadlocked while holding the GIL
-stops the beating thread too: its beat ages. :class:`Watch` (run by the supervisor between wait slices) names
-such a process once its beat is older than ``STALL_S`` and it neither ran nor used CPU time for ``CONFIRM_S``
-more (so a supervisor that was itself descheduled does not blame a child that was not, and a child busy in one
-long call that keeps the GIL - a big GL draw - counts as slow, not hung), and names a process the kernel reports
-stopped
-(``/proc/<pid>/stat`` state ``T``) as soon as it is, before it ever beat included. A process that beats but does
-not finish its frame is left to the hand-off timeout (cosim.runtime.lockstep).
+A busy machine (a laptop with a browser open, a shared CI runner) slows every process; only a process that makes
+no progress is at fault. The evidence is the kernel's:
+
+* A child beats from a thread of its own (:class:`Heartbeat`): every ``BEAT_S`` it stamps CLOCK_MONOTONIC into its
+  slot's ``alive_ns`` and, once, its kernel thread id into ``beat_tid``. A beat that ages says the process is not
+  running Python (stopped, deadlocked while holding the GIL, busy in one long call that keeps it, or starved).
+* The working threads' CPU time (every thread of the process but the heartbeat's, from
+  ``/proc/<pid>/task/<tid>/schedstat``, nanoseconds) and their states (``R`` runnable, ``D`` in I/O) say which: a
+  process whose working threads gain CPU time, or wait for a core, or wait for the disk, makes progress, however
+  slowly; one whose working threads all sleep without CPU time is blocked.
+
+:class:`Watch` (run by the supervisor between wait slices) names a ring member as hung when:
+
+* the kernel reports it stopped (``T``: SIGSTOP, Ctrl-Z, a debugger), confirmed ``CONFIRM_S`` later;
+* it is starting or stepping and its working threads gained no CPU time, and none was runnable, for ``IDLE_S``
+  (a GIL deadlock: its beat ages too; a lock deadlock or a wait on something outside the run: it still beats);
+* it spent more than the scenario's ``timing.handoff_timeout_s`` of its own CPU time on one frame (a runaway
+  loop; :class:`cosim.errors.HandoffTimeout`), or more than ``timing.startup_timeout_s`` of CPU time starting.
+
+A member that waits for a peer is never judged: the peer is. So no wait of the ring has a wall-clock deadline: a
+starved member is waited for, a hung one is named on the right member. While members start, the watch reports
+every ``STARTUP_REPORT_S`` what they do (``activity``: "compiling shaders"), how long and how much CPU so far.
 
 :func:`end_process` ends any child in bounded time: SIGTERM, then SIGKILL (which also ends a stopped process).
 """
@@ -20,30 +32,50 @@ import os
 import signal
 import threading
 import time
+from dataclasses import dataclass
 from typing import Callable, Mapping, Sequence
 
-from cosim.errors import ParticipantCrashed, ParticipantDied, ParticipantHung, RunError
+from cosim.errors import HandoffTimeout, ParticipantCrashed, ParticipantDied, ParticipantHung, RunError
 from shm_schema import Phase, Segment
 from shm_schema.layout import SLOT_WORD
 
-__all__ = ["BEAT_S", "STALL_S", "CONFIRM_S", "Heartbeat", "Watch", "process_state", "cpu_ticks", "is_stopped",
-           "end_process", "stop_processes", "child_failure", "ring_holder"]
+__all__ = ["BEAT_S", "STALL_S", "CONFIRM_S", "IDLE_S", "LOOK_AFTER_S", "STARTUP_REPORT_S", "Heartbeat", "Watch",
+           "Progress", "Evidence", "process_state", "cpu_ticks", "is_stopped", "threads_progress", "end_process",
+           "stop_processes", "child_failure", "ring_holder"]
 
 #: period of a child's liveness beat, s
 BEAT_S = 0.1
-#: a beat older than this means the process is not running (stopped, deadlocked), s
+#: a beat older than this says the process is not running Python (stopped, deadlocked, starved, in a long call), s
 STALL_S = 1.0
-#: a stall is confirmed only if it still holds this much later (the supervisor may itself have been paused), s
+#: a stop seen by the kernel is confirmed only if it still holds this much later, s
 CONFIRM_S = 0.25
+#: a starting or stepping member whose working threads gain no CPU time and wait for no core for this long is
+#: hung, s
+IDLE_S = 1.0
+#: a member is looked at (its threads read from /proc) only once it has been in one phase and frame this long, s:
+#: a healthy ring moves on far sooner, so the supervisor reads nothing on its hot path
+LOOK_AFTER_S = 0.25
+#: how often a member under look is sampled, s
+SAMPLE_S = 0.1
+#: while members start, the watch reports their activity after this long and every this long again, s
+STARTUP_REPORT_S = 5.0
+#: CPU time below this over IDLE_S is no progress (a timer thread of a library), ns
+_EPS_NS = 2_000_000
 
 log = logging.getLogger("cosim.runtime.liveness")
 
-_ALIVE = SLOT_WORD["alive_ns"]
+_ALIVE, _TID = SLOT_WORD["alive_ns"], SLOT_WORD["beat_tid"]
+_PHASE, _FRAME, _HEARTBEAT = SLOT_WORD["phase"], SLOT_WORD["frame"], SLOT_WORD["heartbeat_ns"]
 _NS = 1e9
+_TICK_NS = 1e9 / os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 1e7
+#: phases in which a member does its own work (judged); a waiting member waits for a peer (not judged)
+_WORKING = (Phase.IDLE, Phase.STARTING, Phase.STEPPING)
+_STARTING = (Phase.IDLE, Phase.STARTING)
 
 
 class Heartbeat:
-    """A daemon thread stamping ``time.monotonic_ns()`` into ``words[alive_ns]`` every ``period_s``."""
+    """A daemon thread stamping ``time.monotonic_ns()`` into ``words[alive_ns]`` every ``period_s``, its kernel
+    thread id into ``words[beat_tid]`` first."""
 
     def __init__(self, words: memoryview, period_s: float = BEAT_S):
         self._words = words
@@ -58,6 +90,7 @@ class Heartbeat:
 
     def _run(self) -> None:
         words, clock = self._words, time.monotonic_ns
+        words[_TID] = threading.get_native_id()
         while not self._stop.wait(self._period):
             words[_ALIVE] = clock()
 
@@ -68,16 +101,23 @@ class Heartbeat:
             self._thread.join(2 * self._period)
 
 
+def _read(path: str) -> bytes:
+    with open(path, "rb") as f:
+        return f.read()
+
+
+def _stat_fields(raw: bytes) -> list[bytes]:
+    """The fields of a /proc stat line after ``comm`` (which may hold spaces and parentheses): state first."""
+    return raw[raw.rfind(b")") + 2:].split()
+
+
 def _proc_stat(pid: int) -> tuple[str, int]:
     """(one-letter state, user + system CPU clock ticks) of ``pid``; ("", -1) when it cannot be read."""
     try:
-        with open(f"/proc/{pid}/stat", "rb") as f:
-            raw = f.read()
+        fields = _stat_fields(_read(f"/proc/{pid}/stat"))
     except OSError:
         return "", -1
-    # "pid (comm) S ppid ...": comm may hold spaces and parentheses; the state follows the last ')', and utime,
-    # stime are fields 14 and 15 (the 12th and 13th after the state)
-    fields = raw[raw.rfind(b")") + 2:].split()
+    # utime, stime are fields 14 and 15 of the line (the 12th and 13th after the state)
     try:
         return fields[0].decode("ascii", "replace"), int(fields[11]) + int(fields[12])
     except (IndexError, ValueError):
@@ -100,57 +140,184 @@ def is_stopped(pid: int) -> bool:
     return process_state(pid) in ("T", "t")
 
 
-class Watch:
-    """Names a ring child that stopped running; call :meth:`check` between wait slices (it raises)."""
+def threads_progress(pid: int, skip_tid: int = 0) -> tuple[int, bool]:
+    """(CPU time of ``pid``'s threads but ``skip_tid``, ns; whether one of them is runnable or in I/O: ``R`` or
+    ``D``). CPU time from each thread's ``schedstat`` (exact), or its ``stat`` ticks where there is none. (-1,
+    False) when the process cannot be read (gone)."""
+    try:
+        tids = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return -1, False
+    cpu, busy = 0, False
+    for tid in tids:
+        if int(tid) == skip_tid:
+            continue
+        base = f"/proc/{pid}/task/{tid}/"
+        try:
+            fields = _stat_fields(_read(base + "stat"))
+            busy = busy or fields[0] in (b"R", b"D")
+            try:
+                cpu += int(_read(base + "schedstat").split()[0])
+            except (OSError, IndexError, ValueError):
+                cpu += int((int(fields[11]) + int(fields[12])) * _TICK_NS)
+        except (OSError, IndexError, ValueError):  # a thread that ended meanwhile
+            continue
+    return cpu, busy
 
-    def __init__(self, seg: Segment, procs: Mapping[str, object], clock: Callable[[], int] = time.monotonic_ns):
+
+@dataclass
+class Progress:
+    """What the watch knows of one member since it entered its current (phase, frame, step): when, and the CPU
+    evidence sampled since."""
+
+    key: tuple[int, int, int]
+    since_ns: int
+    cpu0_ns: int = -1
+    cpu_ns: int = -1
+    moved_ns: int = 0
+    sampled_ns: int = 0
+    stopped_ns: int = 0
+    reported_ns: int = 0
+
+    def sample(self, now: int, cpu: int, busy: bool) -> None:
+        """Take one sample: progress when the working threads gained CPU time or one wants a core."""
+        if self.cpu0_ns < 0:
+            self.cpu0_ns, self.moved_ns = cpu, now
+        elif busy or cpu - self.cpu_ns > _EPS_NS:
+            self.moved_ns = now
+        if busy or cpu - self.cpu_ns > _EPS_NS or self.cpu_ns < 0:
+            self.cpu_ns = cpu
+        self.sampled_ns = now
+
+    @property
+    def cpu_s(self) -> float:
+        """CPU time of the working threads since the first sample, s."""
+        return max(0, self.cpu_ns - self.cpu0_ns) / _NS if self.cpu0_ns >= 0 else 0.0
+
+
+class Evidence:
+    """The progress of one process outside the ring (a recorder) by its threads' CPU time and states."""
+
+    def __init__(self, pid: int, skip_tid: int = 0, clock: Callable[[], int] = time.monotonic_ns):
+        self.pid, self._skip, self._clock = pid, skip_tid, clock
+        self._p = Progress((0, 0, 0), clock())
+
+    def idle_s(self) -> float:
+        """Seconds since its working threads last gained CPU time or waited for a core or the disk (0 at the first
+        call; 0 when it cannot be read: a process that ended is for its exit status to tell)."""
+        now = self._clock()
+        cpu, busy = threads_progress(self.pid, self._skip)
+        if cpu < 0:
+            return 0.0
+        self._p.sample(now, cpu, busy)
+        return (now - self._p.moved_ns) / _NS
+
+    @property
+    def cpu_s(self) -> float:
+        """CPU time of its working threads since the first :meth:`idle_s`, s."""
+        return self._p.cpu_s
+
+
+class Watch:
+    """Names a ring member that makes no progress; call :meth:`check` between wait slices (it raises).
+
+    ``frame_cpu_s`` / ``startup_cpu_s``: the CPU time a member may spend on one frame / on starting before it is
+    a runaway (:class:`HandoffTimeout`); ``report(text)`` receives the start-up lines."""
+
+    def __init__(self, seg: Segment, procs: Mapping[str, object], *, frame_cpu_s: float = float("inf"),
+                 startup_cpu_s: float = float("inf"), report: Callable[[str], None] | None = None,
+                 clock: Callable[[], int] = time.monotonic_ns):
         self._seg = seg
         self._procs = procs
         self._clock = clock
+        self._frame_cpu_s, self._startup_cpu_s = frame_cpu_s, startup_cpu_s
+        self._report = report
         self._words = {n: seg.slot_words(n) for n in procs}
-        #: name -> (beat seen stale, its CPU ticks then, when it was first seen so) for the confirmation
-        self._suspect: dict[str, tuple[int, int, int]] = {}
+        self._progress: dict[str, Progress] = {}
 
     def check(self) -> None:
-        """Raise :class:`ParticipantHung` for a child stopped by a signal, or whose beat stalled (confirmed)."""
+        """Raise :class:`ParticipantHung` for a member stopped or blocked, :class:`HandoffTimeout` for a runaway."""
         now = self._clock()
         for name, proc in self._procs.items():
             pid = getattr(proc, "pid", None)
             if pid is None or getattr(proc, "exitcode", None) is not None:
                 continue
-            words = self._words[name]
-            if int(words[SLOT_WORD["phase"]]) in (Phase.DONE, Phase.CLOSED, Phase.FAILED):
+            w = self._words[name]
+            phase = int(w[_PHASE])
+            if phase in (Phase.DONE, Phase.CLOSED, Phase.FAILED):
                 continue
-            beat = int(words[_ALIVE])
-            state, ticks = _proc_stat(pid)
-            stopped = state in ("T", "t")
-            stale = beat > 0 and (now - beat) / _NS > STALL_S
-            if not (stopped or stale):
-                self._suspect.pop(name, None)
+            # start-up is one span, from before the attach (IDLE) to ready
+            key = (Phase.STARTING if phase in _STARTING else phase, int(w[_FRAME]), int(w[_HEARTBEAT]))
+            p = self._progress.get(name)
+            if p is None or p.key != key:
+                p = self._progress[name] = Progress(key, now)
+            if is_stopped(pid):
+                p.stopped_ns = p.stopped_ns or now
+                if (now - p.stopped_ns) / _NS >= CONFIRM_S:
+                    raise self._hung(name, pid, w, now, stopped=True)
                 continue
-            seen = self._suspect.get(name)
-            # a stale beat in a child that runs (state R) or whose CPU time still goes is a busy child (one long
-            # call that keeps the GIL): slow, not hung; the hand-off timeout covers it
-            busy = not stopped and (state == "R" or (seen is not None and ticks != seen[1]))
-            if seen is None or seen[0] != beat or busy:
-                self._suspect[name] = (beat, ticks, now)
+            p.stopped_ns = 0
+            if phase not in _WORKING or (now - p.since_ns) / _NS < LOOK_AFTER_S:
                 continue
-            if (now - seen[2]) / _NS < CONFIRM_S:
-                continue
-            raise self._hung(name, pid, words, beat, now, stopped)
+            if (now - p.sampled_ns) / _NS >= SAMPLE_S:
+                cpu, busy = threads_progress(pid, int(w[_TID]))
+                if cpu >= 0:
+                    p.sample(now, cpu, busy)
+            self._judge(name, pid, w, p, now, phase)
 
-    def _hung(self, name: str, pid: int, words, beat: int, now: int, stopped: bool) -> ParticipantHung:
-        frame = int(words[SLOT_WORD["frame"]])
-        phase = int(words[SLOT_WORD["phase"]])
+    def _judge(self, name: str, pid: int, w, p: Progress, now: int, phase: int) -> None:
+        if p.cpu0_ns < 0:
+            return
+        if (now - p.moved_ns) / _NS >= IDLE_S:
+            raise self._hung(name, pid, w, now, stopped=False, idle_s=(now - p.moved_ns) / _NS)
+        starting = phase in _STARTING
+        limit = self._startup_cpu_s if starting else self._frame_cpu_s
+        if p.cpu_s > limit:
+            frame = int(w[_FRAME])
+            what = "starting" if starting else f"frame {frame}"
+            key = "timing.startup_timeout_s" if starting else "timing.handoff_timeout_s"
+            raise HandoffTimeout(f"{name} (pid {pid}) did not finish {what} within its CPU budget: "
+                                 f"{p.cpu_s:.1f} s of its own CPU time ({key} = {limit:g} s); a loop that never "
+                                 "ends?", process=name, frame=frame)
+        if starting and self._report is not None:
+            self._report_startup(name, w, p, now)
+
+    def _report_startup(self, name: str, w, p: Progress, now: int) -> None:
+        since = (now - p.since_ns) / _NS
+        if since < STARTUP_REPORT_S or (now - p.reported_ns) / _NS < STARTUP_REPORT_S:
+            return
+        p.reported_ns = now
+        doing = _activity(self._seg, name) or "importing its modules"
+        self._report(f"{name}: {doing}, {since:.0f} s so far ({p.cpu_s:.1f} s of CPU time): waiting for it")
+
+    def _hung(self, name: str, pid: int, w, now: int, *, stopped: bool, idle_s: float = 0.0) -> ParticipantHung:
+        frame, phase = int(w[_FRAME]), int(w[_PHASE])
+        beat = int(w[_ALIVE])
         label = Phase.NAMES[phase] if 0 <= phase < len(Phase.NAMES) else str(phase)
-        where = f"during frame {frame} ({label})" if frame >= 0 else f"before frame 0 ({label})"
-        since = f"its last heartbeat was {(now - beat) / _NS:.1f} s ago" if beat > 0 else "it never beat"
+        if phase in _STARTING:
+            doing = _activity(self._seg, name)
+            where = "in start-up" + (f" ({doing})" if doing else "") + ", before frame 0"
+        elif frame >= 0:
+            where = f"during frame {frame} ({label})"
+        else:
+            where = f"before frame 0 ({label})"
+        age = (now - beat) / _NS if beat > 0 else float("inf")
+        since = f"its last heartbeat was {age:.1f} s ago" if beat > 0 else "it never beat"
         if stopped:
             text = f"{name} (pid {pid}) is stopped {where} (by SIGSTOP, Ctrl-Z or a debugger); {since}"
-        else:
+        elif age > STALL_S:
             text = (f"{name} (pid {pid}) stopped beating {where}: deadlocked, or blocked in code that holds the "
-                    f"GIL; {since}")
+                    f"GIL; {since} and its threads used no CPU time for {idle_s:.1f} s")
+        else:
+            text = (f"{name} (pid {pid}) is blocked {where}: it beats, but its working threads used no CPU time "
+                    f"for {idle_s:.1f} s (a deadlock on a lock, or a wait on something outside the run)")
         return ParticipantHung(text, process=name, frame=frame)
+
+
+def _activity(seg: Segment, name: str) -> str:
+    """What ``name`` says it is doing (its slot's ``activity``), "" when nothing."""
+    raw = bytes(seg.slot(name)["activity"])
+    return raw.rstrip(b"\0").decode("utf-8", "replace")
 
 
 def end_process(proc, grace_s: float) -> None:

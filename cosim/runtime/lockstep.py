@@ -2,8 +2,10 @@
 
 One turn per frame: dynamics -> renderer -> perception -> supervisor -> dynamics ... Each member blocks on its
 own semaphore; the sender writes the frame id into the receiver's header slot before releasing it, and the
-receiver checks it. Every wait has a deadline and raises a named error. Waits are sliced (``POLL_S``) only to
-check liveness between slices; nothing spins and nothing sleeps to synchronise. A deferred member
+receiver checks it. Waits are sliced (``POLL_S``) to check liveness between slices; nothing spins and nothing
+sleeps to synchronise. In a launched run no wait has a wall-clock deadline: the launcher's liveness watch
+(cosim.runtime.liveness) names a member that makes no progress, so a slow member on a busy machine is waited for;
+in-process callers may give a deadline, which raises a named error. A deferred member
 (``RingPlan.deferred``, see cosim.runtime.participant) passes the token on before the rest of its step, so its work
 overlaps the next members' turns; a flush turn after the last frame lets it publish its final outputs.
 
@@ -23,7 +25,7 @@ from shm_schema.layout import SLOT_WORD
 _TOKEN, _PHASE, _FRAME = SLOT_WORD["token"], SLOT_WORD["phase"], SLOT_WORD["frame"]
 _HEARTBEAT, _STEP = SLOT_WORD["heartbeat_ns"], SLOT_WORD["step_ns"]
 
-__all__ = ["POLL_S", "RingPlan", "Token", "member_loop", "describe_stall", "InProcessRing", "run_inprocess"]
+__all__ = ["POLL_S", "RingPlan", "Token", "member_loop", "describe_stall", "wait_for", "InProcessRing", "run_inprocess"]
 
 #: slice of every blocking wait, s: bounds how late a dead peer or a stop request is noticed
 POLL_S = 0.05
@@ -78,27 +80,17 @@ class Token:
         self._words[to][_TOKEN] = frame
         self._sems[to].release()
 
-    def take(self, me: str, frame: int, timeout_s: float, check: Callable[[], None] | None = None) -> None:
+    def take(self, me: str, frame: int, timeout_s: float | None, check: Callable[[], None] | None = None) -> None:
         """Block until ``me`` holds the token for ``frame``.
 
-        ``check`` runs between wait slices and raises to abort (a dead peer, a stop request). Raises
-        :class:`HandoffTimeout` after ``timeout_s`` and :class:`FrameMismatch` for a token of another frame.
+        ``check`` runs between wait slices and raises to abort (a dead or hung peer, a stop request: the
+        launcher's liveness watch). ``timeout_s`` None waits as long as ``check`` lets it (the launched ring:
+        progress, not the clock, decides); a number raises :class:`HandoffTimeout` after that long (in-process
+        tests). Raises :class:`FrameMismatch` for a token of another frame.
         """
-        sem = self._sems[me]
-        if sem.acquire(timeout=POLL_S):
-            self._check_frame(me, frame)
-            return
-        deadline = time.monotonic() + timeout_s - POLL_S
-        if check is not None:
-            check()
-        while not sem.acquire(timeout=min(POLL_S, max(0.0, deadline - time.monotonic()))):
-            if check is not None:
-                check()
-            if time.monotonic() >= deadline:
-                raise HandoffTimeout(
-                    f"{me} waited {timeout_s:g} s for the token of frame {frame}: "
-                    + describe_stall(self._seg, exclude=me),
-                    process=me, frame=frame)
+        wait_for(self._sems[me], timeout_s, check,
+                 lambda: HandoffTimeout(f"{me} waited {timeout_s:g} s for the token of frame {frame}: "
+                                        + describe_stall(self._seg, exclude=me), process=me, frame=frame))
         self._check_frame(me, frame)
 
     def _check_frame(self, me: str, frame: int) -> None:
@@ -106,6 +98,25 @@ class Token:
         if got != frame:
             raise FrameMismatch(f"{me} expected the token of frame {frame} but received frame {got}",
                                 process=me, frame=frame)
+
+
+def wait_for(sem, timeout_s: float | None, check: Callable[[], None] | None,
+             timed_out: Callable[[], Exception]) -> None:
+    """Acquire ``sem`` in ``POLL_S`` slices, running ``check`` between them; after ``timeout_s`` (None: never)
+    raise ``timed_out()``."""
+    if sem.acquire(timeout=POLL_S):
+        return
+    deadline = None if timeout_s is None else time.monotonic() + timeout_s - POLL_S
+    if check is not None:
+        check()
+    while True:
+        left = POLL_S if deadline is None else min(POLL_S, max(0.0, deadline - time.monotonic()))
+        if sem.acquire(timeout=left):
+            return
+        if check is not None:
+            check()
+        if deadline is not None and time.monotonic() >= deadline:
+            raise timed_out()
 
 
 def describe_stall(seg: Segment, exclude: str = "") -> str:
@@ -125,7 +136,7 @@ def describe_stall(seg: Segment, exclude: str = "") -> str:
 
 
 def member_loop(name: str, participant, seg: Segment, token: Token, plan: RingPlan, *,
-                startup_timeout_s: float, handoff_timeout_s: float, check: Callable[[], None] | None = None) -> None:
+                startup_timeout_s: float | None, handoff_timeout_s: float | None, check: Callable[[], None] | None = None) -> None:
     """Run one ring member for frames 0..plan.frames: take the token, step, pass it on; a deferred member runs
     the rest of its step after passing the token, and takes part in the flush turn at the end."""
     w = seg.slot_words(name)

@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Callable, Protocol, runtime_checkable
 if TYPE_CHECKING:
     from shm_schema.segment import Segment
 
-__all__ = ["Participant", "PARTICIPANTS", "PERCEPTION_TAKEN_FRAMES_BACK", "dynamics_reads", "perception_overlaps",
+__all__ = ["Participant", "PARTICIPANTS", "activity", "set_activity", "PERCEPTION_TAKEN_FRAMES_BACK", "dynamics_reads", "perception_overlaps",
            "perception_reads", "renderer_reads"]
 
 #: every participant name, in ring order
@@ -94,3 +94,22 @@ def perception_reads(scenario) -> dict[str, int]:
     """Perception at frame m reads the renderer's images I(m) and the dynamics state S(m) (the sensor's parent
     pose, and the truth on accuracy frames)."""
     return {"renderer": 0, "dynamics": 0} if "renderer" in scenario.participants else {"dynamics": 0}
+
+
+#: where :func:`activity` writes: set by the process that runs a participant (cosim.runtime.child)
+_activity_sink: Callable[[str], None] | None = None
+
+
+def activity(text: str) -> None:
+    """Say what this participant is doing while it starts ("compiling shaders"): the launcher's start-up report
+    shows it while it waits, and names it if the start-up hangs. A no-op in-process."""
+    if _activity_sink is not None:
+        _activity_sink(text)
+
+
+def set_activity(sink: Callable[[str], None] | None) -> None:
+    """Install (or, with None, remove after clearing) the sink of :func:`activity`."""
+    global _activity_sink
+    if sink is None and _activity_sink is not None:
+        _activity_sink("")
+    _activity_sink = sink

@@ -18,9 +18,9 @@ supervisor reads every member at lag 0. A member:
 So each block holds one frame at a time, and the frames in flight are the readers' own copies: a producer runs
 up to one frame ahead of its slowest reader. At latency L >= 2 dynamics of frame k + 2, the renderer of k + 1 and
 perception of k can run at once; at L = 1, dynamics of frame k + 1 runs beside the renderer of k, which needs
-P(k - 1) and S(k) only. Every wait is sliced (``POLL_S``) to check liveness and stops, and has the hand-off
-timeout (the start-up timeout at frame 0); a timeout names the waiting member, the frame and the member it
-waits for. Data flow is the token ring's, so results are byte-identical.
+P(k - 1) and S(k) only. Every wait is sliced (``POLL_S``) to check liveness and stops; in a launched run it has no
+wall-clock deadline (the launcher's liveness watch judges progress, cosim.runtime.liveness), and an in-process
+caller's deadline names the waiting member, the frame and the member it waits for. Data flow is the token ring's, so results are byte-identical.
 """
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ from cosim.errors import FrameMismatch, HandoffTimeout
 from shm_schema import Phase, Segment
 from shm_schema.layout import SLOT_WORD
 
-from .lockstep import POLL_S, describe_stall
+from .lockstep import describe_stall, wait_for
 
 __all__ = ["Edge", "Gates", "PipePlan", "effective_schedule", "member_loop", "supervise"]
 
@@ -146,19 +146,10 @@ class Gates:
         self._inputs, self._outputs = plan.inputs(me), plan.outputs(me)
         self._blocks = {m: [b.name for b in seg.schema.blocks if b.writer == m] for m in plan.members}
 
-    def _wait(self, name: str, timeout_s: float, what: str, frame: int) -> None:
-        sem = self._sems[name]
-        if sem.acquire(timeout=POLL_S):
-            return
-        deadline = time.monotonic() + timeout_s - POLL_S
-        if self.check is not None:
-            self.check()
-        while not sem.acquire(timeout=min(POLL_S, max(0.0, deadline - time.monotonic()))):
-            if self.check is not None:
-                self.check()
-            if time.monotonic() >= deadline:
-                raise HandoffTimeout(f"{self.me} waited {timeout_s:g} s for {what}: "
-                                     + describe_stall(self.seg, exclude=self.me), process=self.me, frame=frame)
+    def _wait(self, name: str, timeout_s: float | None, what: str, frame: int) -> None:
+        wait_for(self._sems[name], timeout_s, self.check,
+                 lambda: HandoffTimeout(f"{self.me} waited {timeout_s:g} s for {what}: "
+                                        + describe_stall(self.seg, exclude=self.me), process=self.me, frame=frame))
 
     def take(self, edge: Edge, frame: int, timeout_s: float) -> None:
         """Wait until ``edge``'s producer has published ``frame`` (its blocks' newest stamp must say so)."""
@@ -223,7 +214,7 @@ class _FrameGate:
 
 
 def member_loop(name: str, participant, seg: Segment, gates: Gates, plan: PipePlan, *,
-                startup_timeout_s: float, handoff_timeout_s: float) -> None:
+                startup_timeout_s: float | None, handoff_timeout_s: float | None) -> None:
     """Run one member for frames 0..plan.frames under the pipelined schedule (the module docstring)."""
     w = seg.slot_words(name)
     clock = time.monotonic_ns
@@ -257,7 +248,8 @@ def member_loop(name: str, participant, seg: Segment, gates: Gates, plan: PipePl
     w[_PHASE] = Phase.DONE
 
 
-def supervise(seg: Segment, plan: PipePlan, gates: Gates, *, startup_timeout_s: float, handoff_timeout_s: float,
+def supervise(seg: Segment, plan: PipePlan, gates: Gates, *, startup_timeout_s: float | None,
+              handoff_timeout_s: float | None,
               on_take: Callable[[str, int], None], on_frame: Callable[[int, int], None]) -> None:
     """The supervisor's side: for every frame, each member's outputs as soon as published (``on_take(member,
     frame)``, then given back unless ``plan.hold``), then ``on_frame(frame, turn_ns)`` (turn_ns: since the
@@ -266,7 +258,7 @@ def supervise(seg: Segment, plan: PipePlan, gates: Gates, *, startup_timeout_s: 
     edges = plan.inputs(plan.supervisor)
     t_prev = time.monotonic_ns()
     for frame in range(plan.frames + 1):
-        timeout = handoff_timeout_s + (startup_timeout_s if frame == 0 else 0.0)
+        timeout = None if handoff_timeout_s is None else handoff_timeout_s + (startup_timeout_s if frame == 0 else 0.0)
         for e in edges:
             sw[_PHASE] = Phase.WAITING
             gates.take(e, frame, timeout)

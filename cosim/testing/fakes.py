@@ -4,7 +4,8 @@ Each role writes a struct, a trace array (frame, monotonic ns) and, for the rend
 chosen per role with keyword arguments: ``crash_at`` (raise), ``kill_at`` (SIGKILL itself), ``exit_at``
 (os._exit without report), ``hang_at`` (block far longer than any timeout, still beating), ``stop_at`` (SIGSTOP
 itself; ``stop_at=-2``: in ``start``, before frame 0), ``deadlock_at`` (sleep in C holding the GIL, so its
-heartbeat thread stops too), ``busy_at`` (``busy_s`` of CPU in one C call that keeps the GIL: slow, not hung);
+heartbeat thread stops too), ``busy_at`` (``busy_s`` of CPU in one C call that keeps the GIL: slow, not hung), ``spin_at`` (a Python loop
+that never ends: it beats and uses CPU time, a runaway);
 ``stamp_file`` receives the monotonic time of a ``kill_at``/``stop_at``/``deadlock_at`` fault.
 
 :func:`real_specs` puts the same faults into the real participants (dynamics, renderer, perception): a run that
@@ -49,14 +50,14 @@ class Fake:
     """One stand-in role; the fault keywords pick the frame at which it misbehaves (-1: never)."""
 
     def __init__(self, scenario, role, crash_at=-1, kill_at=-1, exit_at=-1, hang_at=-1, start_delay_s=0.0,
-                 stamp_file="", defer=False, rest_s=0.0, stop_at=-1, deadlock_at=-1, busy_at=-1, busy_s=0.0):
+                 stamp_file="", defer=False, rest_s=0.0, stop_at=-1, deadlock_at=-1, busy_at=-1, busy_s=0.0, spin_at=-1):
         self.name = role
         #: perception only: publish one turn late and return the rest of the step (cosim.runtime.participant);
         #: ``rest_s``: how long that rest takes (a sleep: lets a test see it overlap the next frame)
         self.defer, self.rest_s, self.pending = defer, rest_s, None
         self.scenario = scenario
         self.faults = dict(crash_at=crash_at, kill_at=kill_at, exit_at=exit_at, hang_at=hang_at, stop_at=stop_at,
-                           deadlock_at=deadlock_at, busy_at=busy_at)
+                           deadlock_at=deadlock_at, busy_at=busy_at, spin_at=spin_at)
         self.busy_s = busy_s
         self.start_delay_s = start_delay_s
         self.stamp_file = stamp_file
@@ -76,7 +77,7 @@ class Fake:
                 f.write(repr(time.monotonic()))
 
     def _faults(self, frame):
-        if frame in (self.faults["crash_at"], self.faults["hang_at"]):
+        if frame in (self.faults["crash_at"], self.faults["hang_at"], self.faults["spin_at"]):
             self._stamp()
         if frame == self.faults["crash_at"]:
             raise ValueError(f"injected crash in {self.name} at frame {frame}")
@@ -94,6 +95,9 @@ class Fake:
             os.kill(os.getpid(), signal.SIGSTOP)
         if frame == self.faults["busy_at"]:
             _busy_holding_the_gil(self.busy_s)
+        if frame == self.faults["spin_at"]:
+            while True:
+                pass
         if frame == self.faults["deadlock_at"]:
             self._stamp()
             ctypes.PyDLL(None).sleep(3600)  # a PyDLL call keeps the GIL: no Python thread runs meanwhile

@@ -70,10 +70,13 @@ class Timing(Model):
     neighbouring frames at once. Both give the same results; a run with one process (no renderer or perception)
     or on one core runs sequential."""
     handoff_timeout_s: PosFloat = 30.0
-    """Longest wait for one lockstep hand-off before the run stops with HandoffTimeout naming the stuck process,
-    s."""
+    """CPU time one process may spend on one frame before the run stops with HandoffTimeout naming it (a loop
+    that never ends), s of the process's own CPU time, not of the clock: a process slowed by a busy machine is
+    waited for, and one that makes no progress at all is named hung within about a second
+    (docs/reliability.md)."""
     startup_timeout_s: PosFloat = 120.0
-    """Longest wait for every process to start and attach, s."""
+    """CPU time one process may spend starting (imports, models, GL context, shaders) before the run stops with
+    HandoffTimeout naming it, s of its own CPU time; a start-up that makes no progress is named hung."""
 
     @field_validator("dynamics_dt_s")
     @classmethod
