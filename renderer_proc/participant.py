@@ -10,12 +10,14 @@ target) and per camera sensor view draws and reads straight into the shared-memo
 from __future__ import annotations
 
 import logging
+import os
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
 from cosim.errors import FrameMismatch
+from cosim.runtime.participant import activity
 from cosim.scenario.config.scenario import Scenario
 from cosim.world.beamtarget import BEAMS_DEPTH_BLOCK, BEAMS_RGB_BLOCK, beam_layout
 from cosim.world.fastcast import CASTERS
@@ -41,6 +43,19 @@ INPUT_BLOCKS = ("dyn_state", "heightmap_truth", "stream")
 _WORD = np.dtype("<u4")
 _ALPHA_SET = 1 << 24
 _MS_PER_S = 1000.0
+
+
+def shader_activity(env: Mapping[str, str] | None = None) -> str:
+    """What a starting GL renderer says it does (cosim.runtime.participant.activity): compiling shaders, and
+    whether Mesa's on-disk shader cache (``MESA_SHADER_CACHE_DIR``, else ``$XDG_CACHE_HOME`` or ``~/.cache``) is
+    still empty, which makes the first run on a machine compile every program from scratch (10-30 s on llvmpipe
+    under load)."""
+    env = os.environ if env is None else env
+    root = env.get("MESA_SHADER_CACHE_DIR") or os.path.join(
+        env.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "mesa_shader_cache")
+    candidates = [root, root + "_db"] if not env.get("MESA_SHADER_CACHE_DIR") else [root]
+    warm = any(os.path.isdir(c) and any(os.scandir(c)) for c in candidates)
+    return "compiling shaders" if warm else "compiling shaders (empty cache: first run)"
 
 
 def make_backend(scenario: Scenario, rig, context: Any = None):
@@ -114,6 +129,8 @@ class RendererParticipant:
                 segment.view(block)            # raises KeyError naming the missing block
             self._outputs.append(outs)
         self._caster_code = None
+        if self.scenario.renderer == "gl":
+            activity(shader_activity())
         if self.has_lidar:
             self.backend = make_backend(self.scenario, self.rig)
             caster = getattr(self.backend, "caster", None)

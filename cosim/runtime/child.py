@@ -31,8 +31,8 @@ from .heap import keep_heap
 from .liveness import Heartbeat
 from .lockstep import RingPlan, Token, member_loop
 from .logs import configure_logging
-from .pipeline import Gates, PipePlan
 from .participant import activity, set_activity
+from .pipeline import Gates, PipePlan
 from .pipeline import member_loop as pipelined_loop
 from .specs import ParticipantSpec
 

@@ -366,11 +366,16 @@ def ring_holder(seg: Segment, members: Sequence[str]) -> str | None:
 
 
 def stop_processes(procs: Mapping[str, object], *, graceful: bool, join_timeout_s: float, grace_s: float,
-                   hung: Sequence[str] = ()) -> None:
+                   hung: Sequence[str] = (), by_progress: bool = False) -> None:
     """Join children after a clean finish; otherwise (or past ``join_timeout_s``) end them: SIGTERM, ``grace_s``,
-    then SIGKILL, which also ends a stopped one. The ``hung`` ones (stopped or deadlocked: SIGTERM cannot reach
-    their code) and any stopped one get SIGKILL at once. Never leaves one, never waits unbounded."""
-    if graceful:
+    then SIGKILL, which also ends a stopped one. ``by_progress`` (ring members): after a clean finish a child
+    closing (GL teardown, files) is waited for while it makes progress (:class:`Evidence`: CPU time, a wait for a
+    core or the disk) and has used less than ``join_timeout_s`` of CPU time closing, so a busy machine never turns
+    a clean end into a kill. The ``hung`` ones (stopped or deadlocked: SIGTERM cannot reach their code) and any stopped one get
+    SIGKILL at once. Never leaves one, never waits on one that makes no progress."""
+    if graceful and by_progress:
+        _join_while_progressing(procs, join_timeout_s)
+    elif graceful:
         deadline = time.monotonic() + join_timeout_s
         for p in procs.values():
             p.join(max(0.0, deadline - time.monotonic()))
@@ -392,3 +397,26 @@ def stop_processes(procs: Mapping[str, object], *, graceful: bool, join_timeout_
         if p.is_alive():
             log.warning("%s (pid %s) did not end on SIGTERM; killing it", p.name, p.pid)
             end_process(p, 0.0)
+
+
+#: slice of the wait for children that close after a clean finish, s
+_JOIN_POLL_S = 0.05
+
+
+def _join_while_progressing(procs: Mapping[str, object], cpu_budget_s: float) -> None:
+    """Wait for every child to exit while each one still running makes progress and stays within
+    ``cpu_budget_s`` of CPU time; return as soon as all exited or one does not."""
+    evidence = {n: Evidence(p.pid) for n, p in procs.items() if p.pid is not None and p.exitcode is None}
+    while evidence:
+        for n in list(evidence):
+            p = procs[n]
+            p.join(_JOIN_POLL_S / len(evidence))
+            if p.exitcode is not None:
+                del evidence[n]
+                continue
+            idle = evidence[n].idle_s()
+            if is_stopped(p.pid) or idle > IDLE_S or evidence[n].cpu_s > cpu_budget_s:
+                log.warning("%s (pid %s) %s while closing after the run; ending it", p.name, p.pid,
+                            "is stopped" if is_stopped(p.pid) else f"made no progress for {idle:.1f} s"
+                            if idle > IDLE_S else f"used {evidence[n].cpu_s:.1f} s of CPU time")
+                return

@@ -34,7 +34,8 @@ __all__ = ["tear_down", "at_fault", "write_run_json", "EXIT_OK", "EXIT_RUN_ERROR
 log = logging.getLogger("cosim.runtime.launcher")
 
 EXIT_OK, EXIT_RUN_ERROR, EXIT_INTERRUPTED = 0, 1, 130
-#: how long a child may take to close after the last frame (GL teardown) before it is terminated, s
+#: CPU time a child may spend closing after the last frame (GL teardown) before it is terminated, s; a child that
+#: makes progress closing is waited for, one that makes none is ended (cosim.runtime.liveness.stop_processes)
 JOIN_TIMEOUT_S = 10.0
 #: how long a terminated child gets before SIGKILL, s
 TERMINATE_GRACE_S = 0.5
@@ -84,7 +85,7 @@ def tear_down(run: RunState, error: RunError | None) -> tuple[dict, RunError | N
     sink_error = _close_sinks(run)
     hung = (error.process,) if isinstance(error, ParticipantHung) else ()
     stop_processes(run.procs, graceful=error is None, join_timeout_s=JOIN_TIMEOUT_S, grace_s=TERMINATE_GRACE_S,
-                   hung=hung)
+                   hung=hung, by_progress=True)
     # the segment is final: tell the observers now (a viewer shows the last frame), end them after the outputs
     observers_until = time.monotonic() + (OBSERVER_GRACE_S if error is None else TERMINATE_GRACE_S)
     _tell_observers(run.watchers)
