@@ -5,7 +5,9 @@ chosen per role with keyword arguments: ``crash_at`` (raise), ``kill_at`` (SIGKI
 (os._exit without report), ``hang_at`` (block far longer than any timeout, still beating), ``stop_at`` (SIGSTOP
 itself; ``stop_at=-2``: in ``start``, before frame 0), ``deadlock_at`` (sleep in C holding the GIL, so its
 heartbeat thread stops too), ``busy_at`` (``busy_s`` of CPU in one C call that keeps the GIL: slow, not hung), ``spin_at`` (a Python loop
-that never ends: it beats and uses CPU time, a runaway);
+that never ends: it beats and uses CPU time, a runaway); in ``start``: ``start_busy_s`` (that much CPU time, like
+compiling shaders: slow, not hung) and ``start_block`` (wait forever on an event: a start-up that makes no
+progress); both say their activity (cosim.runtime.participant.activity);
 ``stamp_file`` receives the monotonic time of a ``kill_at``/``stop_at``/``deadlock_at`` fault.
 
 :func:`real_specs` puts the same faults into the real participants (dynamics, renderer, perception): a run that
@@ -22,6 +24,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from cosim.runtime.participant import activity
 from cosim.runtime.specs import ParticipantSpec
 from shm_schema import ArrayBlock, Field, StructBlock, image_block
 
@@ -49,7 +52,7 @@ def blocks_perception(scenario):
 class Fake:
     """One stand-in role; the fault keywords pick the frame at which it misbehaves (-1: never)."""
 
-    def __init__(self, scenario, role, crash_at=-1, kill_at=-1, exit_at=-1, hang_at=-1, start_delay_s=0.0,
+    def __init__(self, scenario, role, crash_at=-1, kill_at=-1, exit_at=-1, hang_at=-1, start_busy_s=0.0, start_block=False,
                  stamp_file="", defer=False, rest_s=0.0, stop_at=-1, deadlock_at=-1, busy_at=-1, busy_s=0.0, spin_at=-1):
         self.name = role
         #: perception only: publish one turn late and return the rest of the step (cosim.runtime.participant);
@@ -59,7 +62,7 @@ class Fake:
         self.faults = dict(crash_at=crash_at, kill_at=kill_at, exit_at=exit_at, hang_at=hang_at, stop_at=stop_at,
                            deadlock_at=deadlock_at, busy_at=busy_at, spin_at=spin_at)
         self.busy_s = busy_s
-        self.start_delay_s = start_delay_s
+        self.start_busy_s, self.start_block = start_busy_s, start_block
         self.stamp_file = stamp_file
         self.seg = None
 
@@ -68,8 +71,13 @@ class Fake:
         if self.faults["stop_at"] == -2:
             self._stamp()
             os.kill(os.getpid(), signal.SIGSTOP)
-        if self.start_delay_s:
-            time.sleep(self.start_delay_s)
+        if self.start_busy_s:
+            activity("compiling shaders (a stand-in)")
+            _busy_holding_the_gil(self.start_busy_s)
+        if self.start_block:
+            activity("waiting for a licence server")
+            self._stamp()
+            threading.Event().wait(3600.0)
 
     def _stamp(self):
         if self.stamp_file:  # CLOCK_MONOTONIC is system-wide: the test compares it with its own clock

@@ -1,0 +1,133 @@
+"""Liveness by evidence of progress: start-up as its own phase, and no false faults on a busy machine.
+
+The busy machine is real: ten processes spinning beside the run (cosim.testing.load.busy), so every member of
+the ring gets a fraction of a core, as on a user's laptop with a browser open. A healthy run must complete; a
+real hang must still be named on the right member (within IDLE_S + a few seconds under that load).
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import pytest
+
+from cosim.errors import ParticipantHung
+from cosim.runtime import liveness
+from cosim.runtime.launcher import EXIT_RUN_ERROR, launch
+from cosim.runtime.liveness import IDLE_S, STALL_S, Evidence, threads_progress
+from cosim.scenario.config import Scenario
+from cosim.testing import fakes
+from cosim.testing.load import busy
+
+#: busy processes beside the loaded runs (2 cores: a load of 12 or more)
+BUSY = 10
+#: a hang under that load is named, and the launcher back, within this long of the fault
+NAMED_UNDER_LOAD_S = 6.0
+#: ... and on a quiet machine
+NAMED_QUIET_S = 2.0
+
+
+def scenario(duration_s: float = 1.0) -> Scenario:
+    return Scenario(format_version=1, duration_s=duration_s, renderer="mock")
+
+
+def since(stamp: Path) -> float:
+    return time.monotonic() - float(stamp.read_text())
+
+
+def test_threads_progress_sees_cpu_time_and_leaves_out_the_named_thread():
+    import os
+    import threading
+
+    me = os.getpid()
+    cpu0, _ = threads_progress(me)
+    t_end = time.process_time() + 0.05
+    while time.process_time() < t_end:
+        pass
+    cpu1, busy_now = threads_progress(me)
+    assert cpu1 - cpu0 >= 40_000_000 and busy_now  # this thread ran (R) and gained >= 40 ms
+    # a thread left out contributes nothing: leave out this (the only working) thread, then spin again
+    tid = threading.get_native_id()
+    rest0, _ = threads_progress(me, skip_tid=tid)
+    t_end = time.process_time() + 0.05
+    while time.process_time() < t_end:
+        pass
+    rest1, _ = threads_progress(me, skip_tid=tid)
+    assert rest1 - rest0 < 20_000_000
+    assert threads_progress(2**22 + 12345)[0] == -1  # no such process
+
+
+def test_evidence_tells_a_sleeping_process_from_a_spinning_one():
+    import subprocess
+    import sys
+
+    sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    spinner = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        time.sleep(0.5)  # both interpreters up
+        ev_sleep, ev_spin = Evidence(sleeper.pid), Evidence(spinner.pid)
+        ev_sleep.idle_s(), ev_spin.idle_s()
+        t_end = time.monotonic() + 1.2 * IDLE_S
+        while time.monotonic() < t_end:
+            time.sleep(0.1)
+            idle_spin = ev_spin.idle_s()
+        assert ev_sleep.idle_s() > IDLE_S
+        assert idle_spin < 0.5 and ev_spin.cpu_s > 0.3
+    finally:
+        sleeper.kill(), spinner.kill()
+        sleeper.wait(), spinner.wait()
+
+
+def test_a_start_up_that_makes_progress_is_waited_for_and_reported(tmp_path, shm_clean, monkeypatch, caplog):
+    """The renderer burns 2.5 s of CPU in ``start`` in one call that keeps the GIL (its beat ages): slow, not
+    hung; the launcher says what it waits for."""
+    monkeypatch.setattr(liveness, "STARTUP_REPORT_S", 1.0)
+    caplog.set_level("INFO", logger="cosim.runtime.launcher")
+    res = launch(scenario(), tmp_path / "run", specs=fakes.specs(renderer={"start_busy_s": 2.5 * STALL_S}),
+                 console_log=False)
+    assert res.error is None and res.completed
+    log = (tmp_path / "run" / "log.txt").read_text()
+    assert "renderer: compiling shaders (a stand-in), " in log and "waiting for it" in log
+
+
+@pytest.mark.parametrize("pipelined", [False, True])
+def test_a_start_up_that_makes_no_progress_is_named_on_the_stuck_member(pipelined, tmp_path, shm_clean):
+    stamp = tmp_path / "stamp"
+    make = fakes.pipelined_specs if pipelined else fakes.specs
+    res = launch(scenario(), tmp_path / "run",
+                 specs=make(perception={"start_block": True, "stamp_file": str(stamp)}), console_log=False)
+    took = since(stamp)
+    assert isinstance(res.error, ParticipantHung) and res.error.process == "perception", res.error
+    assert "is blocked in start-up (waiting for a licence server), before frame 0" in str(res.error)
+    assert res.exit_code == EXIT_RUN_ERROR and res.summary["frames"] == 0
+    assert took < NAMED_QUIET_S + IDLE_S  # the start-up is looked at LOOK_AFTER_S after it began
+
+
+def test_a_healthy_run_on_a_busy_machine_completes(tmp_path, shm_clean):
+    """Every member starved (ten busy processes on the cores), a member also in a 2.5 s call that keeps the GIL:
+    no fault."""
+    with busy(BUSY):
+        res = launch(scenario(duration_s=2.0), tmp_path / "run",
+                     specs=fakes.pipelined_specs(renderer={"busy_at": 3, "busy_s": 2.5 * STALL_S}), console_log=False)
+    assert res.error is None and res.completed, res.error
+
+
+#: fault -> words of the message; every fault under both schedules (three in the quick suite, the rest -m slow)
+HANGS = {"deadlock_at": "stopped beating during frame 3", "hang_at": "is blocked during frame 3",
+         "stop_at": "is stopped during frame 3"}
+QUICK = {("deadlock_at", False), ("hang_at", True), ("stop_at", True)}
+
+
+@pytest.mark.parametrize("fault,pipelined", [
+    pytest.param(f, p, marks=() if (f, p) in QUICK else pytest.mark.slow) for f in HANGS for p in (False, True)])
+def test_a_real_hang_on_a_busy_machine_is_named_on_the_right_member(fault, pipelined, tmp_path, shm_clean):
+    words = HANGS[fault]
+    stamp = tmp_path / "stamp"
+    make = fakes.pipelined_specs if pipelined else fakes.specs
+    with busy(BUSY):
+        res = launch(scenario(duration_s=3.0), tmp_path / "run",
+                     specs=make(dynamics={fault: 3, "stamp_file": str(stamp)}), console_log=False)
+        took = since(stamp)
+    assert isinstance(res.error, ParticipantHung) and res.error.process == "dynamics", res.error
+    assert words in str(res.error)
+    assert took < NAMED_UNDER_LOAD_S, f"named {took:.1f} s after the fault"
