@@ -18,6 +18,7 @@ from cosim.runtime.specs import DEFAULT_SPECS, ring_specs
 from cosim.scenario.config import Scenario
 from cosim.scenario.loader import load_scenario, packaged_scenarios
 from cosim.testing import fakes
+from cosim.testing.load import loaded, promised
 from cosim.testing.processes import ring_children
 from shm_schema import Field, Schema, Segment, StructBlock
 
@@ -178,7 +179,9 @@ def test_threads_read_exactly_their_frames_and_overlap(latency):
     def overlap(a, b):
         return min(spans[a][1], spans[b][1]) - max(spans[a][0], spans[b][0]) > 0.0
 
-    if latency >= 1:       # most frames (a loaded host may delay a thread past its neighbour's work now and then)
+    # most frames (a loaded host may delay a thread past its neighbour's work now and then); on a busy machine
+    # (more runnable work than cores) threads cannot run side by side, so the overlap is asked of a quiet one
+    if latency >= 1 and not loaded():
         ks = range(2, frames - 1)
         assert sum(overlap(("dynamics", k + 1), ("renderer", k)) for k in ks) > len(ks) / 2
         assert sum(overlap(("renderer", k + 1), ("perception", k)) for k in ks) > len(ks) / 2
@@ -221,7 +224,7 @@ def test_kill9_is_named_within_2_s_under_the_pipeline(tmp_path, shm_clean):
     returned = time.monotonic()
     assert isinstance(res.error, ParticipantDied) and res.error.process == "renderer"
     assert "SIGKILL" in str(res.error) and "frame 30" in str(res.error)
-    assert returned - float(stamp.read_text()) < STOP_WITHIN_S
+    assert returned - float(stamp.read_text()) < promised(STOP_WITHIN_S)
     assert not children_of(os.getpid())
 
 
@@ -232,7 +235,7 @@ def test_a_stopped_child_is_named_within_2_s_under_the_pipeline(tmp_path, shm_cl
     took = time.monotonic() - float(stamp.read_text())
     assert isinstance(res.error, ParticipantHung) and res.error.process == "perception"
     assert "is stopped during frame 5" in str(res.error)
-    assert took < STOP_WITHIN_S
+    assert took < promised(STOP_WITHIN_S)
     assert not children_of(os.getpid())
 
 

@@ -14,6 +14,7 @@ import pytest
 
 import cosim.scenario.probe as probe
 from cosim.cli import main
+from cosim.testing.load import promised
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -62,7 +63,7 @@ def test_an_import_that_hangs_is_refused_after_the_time_limit(tmp_path, capsys, 
     path, name = _scenario(tmp_path, "import time\ntime.sleep(600)\n")
     t = time.monotonic()
     assert main(["validate", str(path)]) == 2
-    assert time.monotonic() - t < 30.0
+    assert time.monotonic() - t < promised(30.0, 120.0)
     err = capsys.readouterr().err
     assert f"controller.strategy: plug-in '{name}:f': importing module '{name}' did not finish within 1 s" in err
 

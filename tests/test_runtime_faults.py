@@ -24,6 +24,7 @@ from cosim.runtime.liveness import STALL_S, process_state
 from cosim.runtime.rundir import LOCK_NAME, RunDirError
 from cosim.scenario.config import Scenario
 from cosim.testing import fakes
+from cosim.testing.load import promised
 
 REPO = Path(__file__).resolve().parent.parent
 #: the promise: a stopped or deadlocked child is named, and the launcher has returned, within this long
@@ -52,7 +53,7 @@ def test_a_child_that_stops_running_is_named_within_2_s(role, fault, at, words, 
     took = since_stamp(stamp)
     assert isinstance(res.error, ParticipantHung), res.error
     assert res.error.process == role and words in str(res.error)
-    assert took < NAMED_WITHIN_S
+    assert took < promised(NAMED_WITHIN_S)
     assert res.exit_code == EXIT_RUN_ERROR
     assert res.summary["frames"] == max(at, 0) and res.summary["status"] == "failed"
     assert all(code is not None for code in res.children.values())
@@ -106,7 +107,7 @@ def test_a_stopped_recorder_never_holds_the_run(stop_at, tmp_path, shm_clean, ca
     t0 = time.monotonic()
     res = launch(scenario(), tmp_path / "run", specs=fakes.specs(), console_log=True, sinks=[_faulty_recording(stop_at, signal.SIGSTOP)])
     _check_ran_without_its_recording(res, "is stopped (SIGSTOP)")
-    assert time.monotonic() - t0 < 20
+    assert time.monotonic() - t0 < promised(20, 80)
     log = (tmp_path / "run" / "log.txt").read_text()
     assert "is stopped (SIGSTOP)" in log and "Traceback" not in log
     assert "Traceback" not in capfd.readouterr().err
@@ -120,7 +121,7 @@ def test_a_stopped_viewer_is_ended_with_the_run(tmp_path, shm_clean):
     res = launch(scenario(), tmp_path / "run", specs=fakes.specs(), console_log=False,
                  observers=[ObserverSpec("stopped", "cosim.testing.fakes:observe", {"stop_self": True}),
                             ObserverSpec("idle", "cosim.testing.fakes:observe")])
-    assert res.completed and time.monotonic() - t0 < 15
+    assert res.completed and time.monotonic() - t0 < promised(15, 60)
     from test_runtime_ring import children_of
 
     assert not children_of(os.getpid())

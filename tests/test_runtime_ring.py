@@ -19,6 +19,7 @@ from cosim.runtime.liveness import IDLE_S
 from cosim.runtime.lockstep import RingPlan, Token
 from cosim.scenario.config import Scenario
 from cosim.testing import fakes
+from cosim.testing.load import promised
 from cosim.testing.processes import ring_children
 from shm_schema import Field, Schema, Segment, StructBlock
 
@@ -82,7 +83,7 @@ def test_os_ring_trace_is_strictly_ordered(tmp_path, shm_clean):
 def test_crash_comes_back_with_traceback(role, tmp_path, shm_clean):
     t0 = time.monotonic()
     res = launch(scenario(), tmp_path / "run", specs=fakes.specs(**{role: {"crash_at": 4}}), console_log=False)
-    assert time.monotonic() - t0 < 15
+    assert time.monotonic() - t0 < promised(15, 60)
     assert res.exit_code == EXIT_RUN_ERROR and not res.completed
     assert isinstance(res.error, ParticipantCrashed)
     assert res.error.process == role and res.error.frame == 4
@@ -102,7 +103,7 @@ def test_kill9_is_named_and_stops_fast(role, tmp_path, shm_clean):
     assert res.error.process == role and res.error.frame == 3
     assert "SIGKILL" in str(res.error) and "frame 3" in str(res.error)
     assert res.summary["frames"] == 3
-    assert res.summary["wall_time_s"] < 10
+    assert res.summary["wall_time_s"] < promised(10, 40)
     assert not children_of(os.getpid())
 
 
@@ -117,7 +118,7 @@ def test_a_blocked_member_is_named_hung_not_its_waiting_peers(role, tmp_path, sh
     assert f"{role} (pid " in str(res.error) and "is blocked during frame 2 (stepping)" in str(res.error)
     assert res.summary["frames"] == 2
     # start-up (3 interpreters) + 2 frames + IDLE_S + at most STOP_WITHIN_S to stop
-    assert took < IDLE_S + STOP_WITHIN_S + 8
+    assert took < IDLE_S + promised(STOP_WITHIN_S + 8, 40)
     assert not children_of(os.getpid())
 
 
@@ -146,7 +147,7 @@ def test_detection_latency_after_death(tmp_path, shm_clean):
                  console_log=False)
     returned = time.monotonic()
     assert isinstance(res.error, ParticipantDied)
-    assert returned - float(stamp.read_text()) < STOP_WITHIN_S
+    assert returned - float(stamp.read_text()) < promised(STOP_WITHIN_S)
     assert res.summary["frames"] == 40
     log = (tmp_path / "run" / "log.txt").read_text()
     assert "died with signal SIGKILL during frame 40" in log
@@ -225,7 +226,7 @@ def test_signal_stops_cleanly(sig, tmp_path, shm_clean):
     t0 = time.monotonic()
     proc.send_signal(sig)
     code = proc.wait(timeout=10)
-    assert time.monotonic() - t0 < STOP_WITHIN_S
+    assert time.monotonic() - t0 < promised(STOP_WITHIN_S)
     assert code == EXIT_INTERRUPTED
     import json
 
