@@ -4,8 +4,9 @@
   holding the GIL) themselves and stamp CLOCK_MONOTONIC; the figure is the time from that stamp to the launcher's
   return (named, every child ended, outputs written).
 * ``return``: the same for the real participants of the packaged default (mock renderer, perception feedback;
-  ``cosim.testing.fakes.real_specs``) for each child and each kind of fault (raise, SIGSTOP, a GIL deadlock, a hang
-  past a 1.5 s hand-off timeout, timed from the timeout's end) at frame 4.
+  ``cosim.testing.fakes.real_specs``) for each child and each kind of fault (raise, SIGSTOP, a GIL deadlock, a lock
+  never released, and a runaway loop past 1.5 s of CPU time on one frame, timed from the end of that budget) at
+  frame 4.
 * ``kill9``: a ground-truth run (renderer none) is SIGKILLed 2.5-4.5 s into its frames; frames lost = the
   supervisor's last frame (read from the segment just before the kill) + 1 - rows in timeseries.csv.
 
@@ -46,7 +47,7 @@ DETECT = textwrap.dedent("""
 DETECT_CASES = (("renderer", "stop_at", -2, "SIGSTOP before frame 0"), ("perception", "stop_at", 5, "SIGSTOP mid-run"),
                 ("dynamics", "deadlock_at", 5, "deadlock holding the GIL"))
 #: fault kinds of ``return``: label -> fakes keyword
-FAULTS = {"crash": "crash_at", "stop": "stop_at", "deadlock": "deadlock_at", "hang": "hang_at"}
+FAULTS = {"crash": "crash_at", "stop": "stop_at", "deadlock": "deadlock_at", "hang": "hang_at", "runaway": "spin_at"}
 
 
 def detect(tree: Path) -> dict:
@@ -81,7 +82,7 @@ def fault_return(ctx: Context) -> dict:
                 stamp = out.with_suffix(".stamp")
                 res = launch(sc, out, specs=fakes.real_specs(sc, **{role: {keyword: frame, "stamp_file": str(stamp)}}),
                              console_log=False)
-                took = time.monotonic() - float(stamp.read_text()) - (handoff_s if kind == "hang" else 0)
+                took = time.monotonic() - float(stamp.read_text()) - (handoff_s if kind == "runaway" else 0)
                 if res.error is None or res.error.process != role:
                     raise RuntimeError(f"{role} {kind}: the launcher named {res.error!r}")
                 rows.setdefault(role, {})[f"{kind} s"] = took
