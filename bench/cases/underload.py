@@ -142,7 +142,7 @@ def underload(ctx: Context) -> dict:
     with tempfile.TemporaryDirectory(prefix="bench-underload-") as tmp, busy(int(ctx["busy"])):
         tmp_path = Path(tmp)
         (tmp_path / "mesa-warm").mkdir()
-        time.sleep(5.0)  # noqa: let the load average see the busy processes
+        time.sleep(5.0)  # let the load average see the busy processes
         load0 = load_average()
         for part in ctx["parts"].split(","):
             if part == "scenarios":
