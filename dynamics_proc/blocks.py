@@ -8,10 +8,9 @@
 from __future__ import annotations
 
 from cosim.scenario.config import Scenario
+from dynamics_proc.auger import STREAM_ROWS
+from dynamics_proc.grainfill import GrainGrid
 from shm_schema import ArrayBlock, Block, Field, StructBlock
-
-from .auger import STREAM_ROWS
-from .grainfill import GrainGrid
 
 __all__ = ["WRITER", "STATE_FIELDS", "SECTION_FIELD", "state_fields", "declare_blocks"]
 

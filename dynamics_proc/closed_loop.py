@@ -14,9 +14,8 @@ from typing import Callable
 import numpy as np
 
 from cosim.scenario.config import Scenario
-
-from .fmus import open_fmus
-from .model import ModelParams, World, initial_world, signals, step_frame, truth_measurement
+from dynamics_proc.fmus import open_fmus
+from dynamics_proc.model import ModelParams, World, initial_world, signals, step_frame, truth_measurement
 
 __all__ = ["SimResult", "simulate", "Measure", "noisy_measurement", "occluded_measurement", "DONE_GRACE_FRAMES"]
 

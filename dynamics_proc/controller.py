@@ -45,13 +45,20 @@ from cosim.errors import PluginFault
 from cosim.runtime.outcome import HOLD_NO_MEASUREMENT
 from cosim.scenario.config import Scenario
 from cosim.scenario.plugins import load_plugin
-
-from .control_protocol import ControllerCommand, ControllerInput, Delivery
-from .coping import mode, peak_sigma, rise_rate, slowed_section, unexplained_shift
-from .estimator import FillEstimate, FusionParams, consistent, initial_estimate, landing_on, predict, update
-from .grainfill import GrainGrid, section_rows
-from .sections import min2x2, section_blocks, section_heights, section_pairing, section_valid
-from .strategies import Strategy
+from dynamics_proc.control_protocol import ControllerCommand, ControllerInput, Delivery
+from dynamics_proc.coping import mode, peak_sigma, rise_rate, slowed_section, unexplained_shift
+from dynamics_proc.estimator import (
+    FillEstimate,
+    FusionParams,
+    consistent,
+    initial_estimate,
+    landing_on,
+    predict,
+    update,
+)
+from dynamics_proc.grainfill import GrainGrid, section_rows
+from dynamics_proc.sections import min2x2, section_blocks, section_heights, section_pairing, section_valid
+from dynamics_proc.strategies import Strategy
 
 __all__ = ["BIAS_TAU_S", "SETTLE_S", "STRATEGY_POINT", "ControllerParams", "ControllerState", "Delivery",
            "min2x2", "section_heights", "section_valid", "initial_controller", "controller_step",

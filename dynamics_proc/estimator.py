@@ -38,8 +38,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .auger import landing_xy
-from .grainfill import GrainGrid, deposit
+from dynamics_proc.auger import landing_xy
+from dynamics_proc.grainfill import GrainGrid, deposit
 
 __all__ = ["FusionParams", "FillEstimate", "initial_estimate", "landing_on", "predict", "consistent", "update",
            "LANDING_ITERATIONS"]

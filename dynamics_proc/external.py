@@ -22,15 +22,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+import dynamics_proc.auger as ag
 from cosim.errors import FrameMismatch
 from cosim.scenario.config import Scenario
 from cosim.world.geometry import cart_grid_from_body, invert, vehicle_pose
 from cosim.world.terrain import terrain_of
-
-from . import auger as ag
-from .blocks import SECTION_FIELD, STATE_FIELDS, WRITER, state_fields
-from .grainfill import GrainGrid, deposit, initial_heights, volume
-from .vehicles import CX, CY, CYAW, VehicleParams, cart_pose, initial_state, tractor_pose
+from dynamics_proc.blocks import SECTION_FIELD, STATE_FIELDS, WRITER, state_fields
+from dynamics_proc.grainfill import GrainGrid, deposit, initial_heights, volume
+from dynamics_proc.vehicles import CX, CY, CYAW, VehicleParams, cart_pose, initial_state, tractor_pose
 
 if TYPE_CHECKING:
     from shm_schema import Segment

@@ -27,9 +27,8 @@ import math
 import numpy as np
 
 from cosim.world.geometry import apply, invert, vehicle_pose
-
-from .machine_sync import tractor_offset
-from .vehicles import VehicleParams
+from dynamics_proc.machine_sync import tractor_offset
+from dynamics_proc.vehicles import VehicleParams
 
 __all__ = ["SECANT_STEPS", "steady_cart_offset", "turn_compensation"]
 

@@ -24,11 +24,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from cosim.scenario.config import Scenario
-
-from .fieldnoise import FLOW_STREAM, GNSS_STREAM, SLIP_STREAM, draws, gm_coefficients, gm_start, gm_step
-from .integrators import integrate, step_exponential_values
-from .machine_sync import SyncGains, sync_command
-from .vehicles import CX, CY, CYAW, DELTA, TX, TY, V, VehicleParams, combine_advance
+from dynamics_proc.fieldnoise import FLOW_STREAM, GNSS_STREAM, SLIP_STREAM, draws, gm_coefficients, gm_start, gm_step
+from dynamics_proc.integrators import integrate, step_exponential_values
+from dynamics_proc.machine_sync import SyncGains, sync_command
+from dynamics_proc.vehicles import CX, CY, CYAW, DELTA, TX, TY, V, VehicleParams, combine_advance
 
 __all__ = ["FieldParams", "FieldState", "initial_field", "advance_noise", "combine_motion", "measured_state",
            "advance_vehicles", "flow_factor", "speed_change", "SLIP_MAX"]

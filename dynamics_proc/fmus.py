@@ -37,11 +37,23 @@ from cosim.fmi.describe import describe
 from cosim.fmi.roles import CONTROLLER, STRATEGY, VEHICLE, expand, frame_clock, step_mode
 from cosim.fmi.slave import PROCESS, FmuSlave, FmuStepError
 from cosim.scenario.config import FMU_REF, Fmu, Scenario
-
-from .control_protocol import ControllerCommand, ControllerInput
-from .controller import ControllerParams, section_heights
-from .machine_sync import SyncGains, sync_command
-from .vehicles import CX, CY, CYAW, DELTA, PYAW, TX, TY, TYAW, V, VehicleParams, combine_advance, initial_state
+from dynamics_proc.control_protocol import ControllerCommand, ControllerInput
+from dynamics_proc.controller import ControllerParams, section_heights
+from dynamics_proc.machine_sync import SyncGains, sync_command
+from dynamics_proc.vehicles import (
+    CX,
+    CY,
+    CYAW,
+    DELTA,
+    PYAW,
+    TX,
+    TY,
+    TYAW,
+    V,
+    VehicleParams,
+    combine_advance,
+    initial_state,
+)
 
 __all__ = ["FmuVehicle", "FmuStrategy", "FmuController", "Fmus", "open_fmus", "VEHICLE_LABEL", "CONTROLLER_LABEL"]
 

@@ -27,8 +27,7 @@ from cosim.scenario.config import Scenario
 from cosim.world.geometry import body_pose, invert
 from cosim.world.parts import HITCH_HEIGHT_M, wheel_contacts
 from cosim.world.terrain import Terrain, terrain_of
-
-from .vehicles import CX, CY, CYAW, cart_pose, tractor_pose
+from dynamics_proc.vehicles import CX, CY, CYAW, cart_pose, tractor_pose
 
 __all__ = ["Stance", "Pose3", "stance_of", "plane_pose", "machine_poses", "planar_poses", "spout_on_terrain"]
 

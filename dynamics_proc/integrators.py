@@ -17,7 +17,16 @@ from typing import Literal
 
 import numpy as np
 
-from .vehicles import DELTA, V, VehicleParams, derivative, lag_exact, lag_exact_pair, lag_integral, towing_rates
+from dynamics_proc.vehicles import (
+    DELTA,
+    V,
+    VehicleParams,
+    derivative,
+    lag_exact,
+    lag_exact_pair,
+    lag_integral,
+    towing_rates,
+)
 
 __all__ = ["METHODS", "step_rk4", "step_exponential", "step_exponential_values", "step_ivp", "integrate"]
 

@@ -21,8 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cosim.scenario.config import Scenario
-
-from .vehicles import CX, CY, CYAW, TX, TY, TYAW, V, VehicleParams, cart_pose
+from dynamics_proc.vehicles import CX, CY, CYAW, TX, TY, TYAW, V, VehicleParams, cart_pose
 
 __all__ = ["V_STEER_MIN_MPS", "W_HEADING_MIN_MPS", "SyncGains", "tractor_offset", "sync_command", "cart_offset",
            "wrap_angle"]

@@ -13,14 +13,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+import dynamics_proc.auger as ag
 from cosim.errors import PluginFault
 from cosim.scenario.config import FMU_REF, Scenario
 from cosim.scenario.plugins import load_plugin
 from cosim.world.geometry import cart_grid_from_body, invert, vehicle_pose
-
-from . import auger as ag
-from .blocks import SECTION_FIELD
-from .control_protocol import (
+from dynamics_proc.blocks import SECTION_FIELD
+from dynamics_proc.control_protocol import (
     CONTROLLER_POINT,
     ControllerCommand,
     ControllerInput,
@@ -28,9 +27,9 @@ from .control_protocol import (
     OffloadingController,
     check_command,
 )
-from .controller import ControllerParams, plugin_dir
-from .feedforward import turn_compensation
-from .fieldsync import (
+from dynamics_proc.controller import ControllerParams, plugin_dir
+from dynamics_proc.feedforward import turn_compensation
+from dynamics_proc.fieldsync import (
     FieldParams,
     FieldState,
     advance_noise,
@@ -41,13 +40,13 @@ from .fieldsync import (
     measured_state,
     speed_change,
 )
-from .fmus import Fmus
-from .grainfill import GrainGrid, deposit, initial_heights, resample, volume
-from .ground import Stance, spout_on_terrain, stance_of
-from .integrators import integrate, step_exponential_values
-from .machine_sync import SyncGains, sync_command
-from .tilt import Tilt, deposit_tilted, settle, tilt_of, tilted_cap
-from .vehicles import CX, CY, CYAW, VehicleParams, cart_pose, initial_state
+from dynamics_proc.fmus import Fmus
+from dynamics_proc.grainfill import GrainGrid, deposit, initial_heights, resample, volume
+from dynamics_proc.ground import Stance, spout_on_terrain, stance_of
+from dynamics_proc.integrators import integrate, step_exponential_values
+from dynamics_proc.machine_sync import SyncGains, sync_command
+from dynamics_proc.tilt import Tilt, deposit_tilted, settle, tilt_of, tilted_cap
+from dynamics_proc.vehicles import CX, CY, CYAW, VehicleParams, cart_pose, initial_state
 
 __all__ = ["ModelParams", "World", "SpoutGeometry", "initial_world", "step_frame", "truth_measurement", "signals",
            "spout_grid", "SECTION_FIELD"]
@@ -330,4 +329,4 @@ def _advance_vehicles(x: np.ndarray, setpoint: tuple[float, float], p: ModelPara
     return x
 
 
-from .record import signals  # noqa: E402 - the dyn_state record of a world (re-exported: CONTRACTS.md)
+from dynamics_proc.record import signals  # noqa: E402 - the dyn_state record of a world (re-exported: CONTRACTS.md)

@@ -19,11 +19,10 @@ import numpy as np
 
 from cosim.errors import FrameMismatch
 from cosim.scenario.config import Scenario
-
-from .blocks import WRITER, state_fields
-from .fmus import Fmus, open_fmus
-from .inputs import INPUTS, apply_input
-from .model import ModelParams, World, initial_world, signals, step_frame, truth_measurement
+from dynamics_proc.blocks import WRITER, state_fields
+from dynamics_proc.fmus import Fmus, open_fmus
+from dynamics_proc.inputs import INPUTS, apply_input
+from dynamics_proc.model import ModelParams, World, initial_world, signals, step_frame, truth_measurement
 
 if TYPE_CHECKING:
     from shm_schema import Segment

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .grainfill import GrainGrid, _heap_height
+from dynamics_proc.grainfill import GrainGrid, _heap_height
 
 __all__ = ["Tilt", "tilt_of", "tilted_cap", "l1_envelope", "deposit_tilted", "settle"]
 

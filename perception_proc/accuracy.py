@@ -22,9 +22,8 @@ import numpy as np
 
 from cosim.scenario.config import Cart, Scenario
 from cosim.world.geometry import apply, cart_body_from_grid, entity_pose, invert
-
-from .blocks import RANGE_BANDS_M, band_name
-from .orderstats import median_sorted, percentile_sorted
+from perception_proc.blocks import RANGE_BANDS_M, band_name
+from perception_proc.orderstats import median_sorted, percentile_sorted
 
 __all__ = ["range_error_stats", "exact_ranges", "sample_beams", "ACCURACY_STREAM", "true_corners_sensor", "corner_error", "truth_on_grid",
            "heightmap_error", "impact_error", "world_from_parent", "ABOVE_M", "WORKING_RANGE_M"]

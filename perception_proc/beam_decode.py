@@ -13,9 +13,8 @@ import numpy as np
 
 from cosim.scenario.config.sensing import Codec
 from cosim.world.beamtarget import BeamLayout
-
-from .codec import decode_lut, decode_words
-from .resample import words_of
+from perception_proc.codec import decode_lut, decode_words
+from perception_proc.resample import words_of
 
 __all__ = ["BeamDecoder"]
 

@@ -20,9 +20,8 @@ import math
 import numpy as np
 
 from cosim.world.camera import Pinhole
-
-from .accuracy import ABOVE_M, P99, sample_beams
-from .orderstats import median_sorted, percentile_sorted
+from perception_proc.accuracy import ABOVE_M, P99, sample_beams
+from perception_proc.orderstats import median_sorted, percentile_sorted
 
 __all__ = ["sample_pixels", "exact_depths", "depth_error_stats", "fill_error", "NAN_STATS", "NAN_FILL"]
 

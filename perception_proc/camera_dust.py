@@ -30,9 +30,8 @@ import numpy as np
 from cosim.scenario.config.cameras import DepthCamera
 from cosim.scenario.config.scenario import Scenario
 from cosim.world.sensors import camera_pinhole
-
-from .atmosphere import DustModel, dust_blows, dust_model
-from .camera_pipeline import SIGMA_DISTANCE_M, CameraImages
+from perception_proc.atmosphere import DustModel, dust_blows, dust_model
+from perception_proc.camera_pipeline import SIGMA_DISTANCE_M, CameraImages
 
 __all__ = ["AIRLIGHT_RGB", "DUST_GRAIN_DIAMETER_M", "GEOMETRIC_SHARE", "DUST_CAMERA_STREAM", "transmission",
            "hazed", "speckle_share", "speckled", "dusty_depth", "speckle_generator", "CameraDust"]

@@ -23,7 +23,7 @@ import numpy as np
 from cosim.scenario.config.scenario import Scenario
 
 if TYPE_CHECKING:
-    from .camera_pipeline import CameraImages
+    from perception_proc.camera_pipeline import CameraImages
 
 __all__ = ["CameraEffects", "NoEffects", "camera_effects"]
 
@@ -52,6 +52,6 @@ def camera_effects(scenario: Scenario, name: str) -> CameraEffects:
     air changes nothing, to the bit)."""
     if scenario.atmosphere.extinction_per_m == 0.0:
         return NoEffects()
-    from .camera_dust import CameraDust  # imports camera_pipeline, which imports this module
+    from perception_proc.camera_dust import CameraDust  # imports camera_pipeline, which imports this module
 
     return CameraDust(scenario, name)

@@ -32,11 +32,10 @@ from cosim.world.sensors import (
     level_from_sensor,
     points_stride,
 )
-
-from .camera_effects import camera_effects
-from .rim import FOV_EDGE, border_beams
-from .stereo import make_matcher, stereo_depth
-from .tof import frame_generator, tof_depth
+from perception_proc.camera_effects import camera_effects
+from perception_proc.rim import FOV_EDGE, border_beams
+from perception_proc.stereo import make_matcher, stereo_depth
+from perception_proc.tof import frame_generator, tof_depth
 
 __all__ = ["CameraImages", "CameraPipeline", "SIGMA_DISTANCE_M", "STEREO_DISPARITY_SIGMA_PX"]
 

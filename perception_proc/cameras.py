@@ -16,15 +16,14 @@ from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 
+import perception_proc.camera_accuracy as cacc
 from cosim.errors import FrameMismatch
 from cosim.scenario.config.scenario import Scenario
 from cosim.world.geometry import invert
 from cosim.world.sensors import world_from_parent
-
-from . import camera_accuracy as cacc
-from .blocks import WRITER, camera_output_blocks
-from .camera_pipeline import CameraImages, CameraPipeline
-from .protocol import SensorFrame
+from perception_proc.blocks import WRITER, camera_output_blocks
+from perception_proc.camera_pipeline import CameraImages, CameraPipeline
+from perception_proc.protocol import SensorFrame
 
 if TYPE_CHECKING:
     from shm_schema import Segment

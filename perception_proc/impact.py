@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .orderstats import median_sorted, percentile_sorted
+from perception_proc.orderstats import median_sorted, percentile_sorted
 
 __all__ = ["Impact", "find_impact", "blank_under_stream", "line_fits", "MIN_STREAM_POINTS", "FIT_SPAN_M", "CLUSTER_RADIUS_M"]
 

@@ -15,9 +15,8 @@ from typing import Mapping
 import numpy as np
 
 from cosim.scenario.config import Scenario
-
-from .atmosphere import DustModel, dust_blows, dust_model, hard_power
-from .stream_particles import STREAM_PARTICLES, beam_crossings, kernel_density, occlude
+from perception_proc.atmosphere import DustModel, dust_blows, dust_model, hard_power
+from perception_proc.stream_particles import STREAM_PARTICLES, beam_crossings, kernel_density, occlude
 
 __all__ = ["LidarAtmosphere", "lidar_atmosphere", "stream_row_time"]
 

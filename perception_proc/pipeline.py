@@ -25,17 +25,23 @@ from cosim.world.beamtarget import beam_layout
 from cosim.world.camera import Rig, beam_directions
 from cosim.world.geometry import body_from_camera_axes, mount_transform
 from cosim.world.patterns import beam_table, pattern_shape
-
-from .beam_decode import BeamDecoder
-from .camera_pipeline import CameraPipeline
-from .fusion import merge
-from .heightmap import HeightMap, grid_shape
-from .impact import Impact
-from .lidar import apply_noise_and_limits, frame_generator, point_basis, to_points
-from .protocol import ALGORITHM_POINT, PerceptionContext, PerceptionInput, SensorFrame, StageSet, check_output
-from .resample import beam_words, build_table, resample, resample_words
-from .resample_offset import build_offset_table, is_offset, resample_offset
-from .rim import CartEstimate, border_beams
+from perception_proc.beam_decode import BeamDecoder
+from perception_proc.camera_pipeline import CameraPipeline
+from perception_proc.fusion import merge
+from perception_proc.heightmap import HeightMap, grid_shape
+from perception_proc.impact import Impact
+from perception_proc.lidar import apply_noise_and_limits, frame_generator, point_basis, to_points
+from perception_proc.protocol import (
+    ALGORITHM_POINT,
+    PerceptionContext,
+    PerceptionInput,
+    SensorFrame,
+    StageSet,
+    check_output,
+)
+from perception_proc.resample import beam_words, build_table, resample, resample_words
+from perception_proc.resample_offset import build_offset_table, is_offset, resample_offset
+from perception_proc.rim import CartEstimate, border_beams
 
 __all__ = ["Perception", "FrameResult", "own_vehicle_box", "OWN_BOX_MARGIN_M"]
 

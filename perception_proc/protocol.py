@@ -35,10 +35,9 @@ import numpy as np
 
 from cosim.errors import PluginFault
 from cosim.scenario.config import Scenario
-
-from .heightmap import HeightMap
-from .impact import Impact
-from .rim import CartEstimate
+from perception_proc.heightmap import HeightMap
+from perception_proc.impact import Impact
+from perception_proc.rim import CartEstimate
 
 __all__ = ["PerceptionContext", "PerceptionInput", "PerceptionOutput", "SensorFrame", "StageSet", "ALGORITHM_POINT",
            "STAGE_POINTS", "check_cart", "check_heightmap", "check_impact", "check_output"]

@@ -32,8 +32,7 @@ import numpy as np
 
 from cosim.scenario.config import Codec
 from cosim.world.camera import Rig
-
-from .codec import decode_lut, decode_words
+from perception_proc.codec import decode_lut, decode_words
 
 __all__ = [
     "CameraTable", "ResampleTable", "build_table", "gather_depth", "resample", "beam_pixels",

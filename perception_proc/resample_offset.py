@@ -54,9 +54,8 @@ import numpy as np
 
 from cosim.scenario.config import Codec
 from cosim.world.camera import Rig, beam_directions
-
-from .codec import decode_lut, decode_words, lut_key
-from .resample import DISCONTINUITY_REL, words_of
+from perception_proc.codec import decode_lut, decode_words, lut_key
+from perception_proc.resample import DISCONTINUITY_REL, words_of
 
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree

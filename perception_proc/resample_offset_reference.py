@@ -25,10 +25,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from cosim.scenario.config import Codec
-
-from .codec import decode_depth
-from .resample import DISCONTINUITY_REL
-from .resample_offset import OffsetTable
+from perception_proc.codec import decode_depth
+from perception_proc.resample import DISCONTINUITY_REL
+from perception_proc.resample_offset import OffsetTable
 
 __all__ = ["resample_offset_reference"]
 

@@ -39,10 +39,9 @@ import numpy as np
 
 from cosim.scenario.config import Cart
 from cosim.world.geometry import cart_body_from_grid, make_transform, rot_z
-
-from .neighbours import has_neighbour as _has_neighbour
-from .orderstats import percentiles
-from .roof import roof_cells_bound, roofed
+from perception_proc.neighbours import has_neighbour as _has_neighbour
+from perception_proc.orderstats import percentiles
+from perception_proc.roof import roof_cells_bound, roofed
 
 __all__ = ["CartEstimate", "find_cart", "border_beams", "RIM_BAND_M", "RASTER_M", "SIZE_TOL_M", "NO_CART",
            "FOV_EDGE", "OCCLUDED", "BAND_NOISE_SIGMAS"]

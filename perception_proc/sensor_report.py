@@ -13,12 +13,12 @@ from typing import Mapping
 
 import numpy as np
 
-from . import accuracy as acc
-from . import camera_accuracy as cacc
-from .blocks import SENSOR_FIELDS
-from .cameras import PerceptionCameras
-from .heightmap import height_map
-from .pipeline import FrameResult, Perception
+import perception_proc.accuracy as acc
+import perception_proc.camera_accuracy as cacc
+from perception_proc.blocks import SENSOR_FIELDS
+from perception_proc.cameras import PerceptionCameras
+from perception_proc.heightmap import height_map
+from perception_proc.pipeline import FrameResult, Perception
 
 __all__ = ["sensor_values", "record_of"]
 

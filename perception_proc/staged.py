@@ -14,10 +14,9 @@ from dataclasses import replace
 import numpy as np
 
 from cosim.errors import PluginFault
-
-from .heightmap import HeightMap, height_map
-from .impact import Impact, blank_under_stream, find_impact
-from .protocol import (
+from perception_proc.heightmap import HeightMap, height_map
+from perception_proc.impact import Impact, blank_under_stream, find_impact
+from perception_proc.protocol import (
     STAGE_POINTS,
     PerceptionContext,
     PerceptionInput,
@@ -26,7 +25,7 @@ from .protocol import (
     check_heightmap,
     check_impact,
 )
-from .rim import CartEstimate, find_cart
+from perception_proc.rim import CartEstimate, find_cart
 
 __all__ = ["staged", "rim_stage", "heightmap_stage", "impact_stage", "NO_IMPACT_REASON"]
 

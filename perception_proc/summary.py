@@ -13,11 +13,10 @@ from typing import Mapping
 
 import numpy as np
 
+import perception_proc.accuracy as acc
+import perception_proc.camera_accuracy as cacc
 from cosim.scenario.config import Scenario
-
-from . import accuracy as acc
-from . import camera_accuracy as cacc
-from .blocks import RANGE_BANDS_M, SENSOR_FIELDS, band_name, sensor_state_block
+from perception_proc.blocks import RANGE_BANDS_M, SENSOR_FIELDS, band_name, sensor_state_block
 
 __all__ = ["summarize", "clean_json", "evaluation_caster", "evaluation_note", "sensor_blocks"]
 

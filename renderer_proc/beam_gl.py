@@ -35,13 +35,20 @@ from cosim.scenario.config.sensing import Codec
 from cosim.world.beamtarget import BeamLayout
 from cosim.world.meshes import CYLINDER_SIDES, INSTANCE_FLOATS, box_instances, cylinder_instances, pack_instances
 from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
-
-from .beam_mock import check_target
-from .codec import BYTE_MAX, CM_PER_M
-from .gl_backend import SHADER_DIR, GLResources, GroundImage, _Buffers, begin_frame, set_uniform, upload_instances
-from .projection import far_plane_m
-from .surface_gl import Surface
-from .surface_gl import mat_bytes as _mat
+from renderer_proc.beam_mock import check_target
+from renderer_proc.codec import BYTE_MAX, CM_PER_M
+from renderer_proc.gl_backend import (
+    SHADER_DIR,
+    GLResources,
+    GroundImage,
+    _Buffers,
+    begin_frame,
+    set_uniform,
+    upload_instances,
+)
+from renderer_proc.projection import far_plane_m
+from renderer_proc.surface_gl import Surface
+from renderer_proc.surface_gl import mat_bytes as _mat
 
 __all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "ROW_BINS", "GLBeamRenderer", "ground_key", "max_rects", "row_bounds",
            "slicing_pays"]

@@ -19,9 +19,8 @@ from cosim.scenario.config.sensing import Codec
 from cosim.world.beamtarget import BeamLayout
 from cosim.world.fastcast import Backend, cast_from, make_caster
 from cosim.world.scene import SKY_RGBA, SUN_WORLD, Scene
-
-from .codec import encode_depth
-from .mock_backend import AMBIENT, DIFFUSE, MOCK_GREY
+from renderer_proc.codec import encode_depth
+from renderer_proc.mock_backend import AMBIENT, DIFFUSE, MOCK_GREY
 
 __all__ = ["MockBeamRenderer", "beam_ranges", "check_target"]
 

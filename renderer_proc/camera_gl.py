@@ -23,10 +23,9 @@ from cosim.world.labels import GRAIN, GRAIN_MAT, NONE, STEEL, mesh_label, mesh_m
 from cosim.world.lighting import sun_direction
 from cosim.world.meshes import box_instances, cylinder_instances, pack_instances, unit_cube, unit_cylinder
 from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, Scene
-
-from .gl_backend import SHADER_DIR, GLResources, upload_instances
-from .projection import NEAR_M, gl_projection, gl_view
-from .surface_gl import Surface, mat_bytes
+from renderer_proc.gl_backend import SHADER_DIR, GLResources, upload_instances
+from renderer_proc.projection import NEAR_M, gl_projection, gl_view
+from renderer_proc.surface_gl import Surface, mat_bytes
 
 __all__ = ["FAR_M", "GLCameraRenderer", "camera_fragment_source"]
 

@@ -39,11 +39,10 @@ from cosim.world.meshes import (
     unit_cylinder,
 )
 from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
-
-from .codec import BYTE_MAX, CM_PER_M
-from .projection import NEAR_M, far_plane_m, gl_projection, gl_view
-from .surface_gl import Surface
-from .surface_gl import mat_bytes as _mat
+from renderer_proc.codec import BYTE_MAX, CM_PER_M
+from renderer_proc.projection import NEAR_M, far_plane_m, gl_projection, gl_view
+from renderer_proc.surface_gl import Surface
+from renderer_proc.surface_gl import mat_bytes as _mat
 
 __all__ = ["GL_REQUIRE", "SHADER_DIR", "GLResources", "GLRenderer", "create_gl_context", "set_uniform", "upload_instances"]
 

@@ -15,9 +15,8 @@ from cosim.scenario.config.sensing import Codec
 from cosim.world.camera import Rig
 from cosim.world.fastcast import make_caster
 from cosim.world.scene import SKY_RGBA, SUN_WORLD, Scene
-
-from .codec import encode_depth, valid_depth_mask
-from .projection import NEAR_M, far_plane_m, pixel_rays
+from renderer_proc.codec import encode_depth, valid_depth_mask
+from renderer_proc.projection import NEAR_M, far_plane_m, pixel_rays
 
 __all__ = ["AMBIENT", "DIFFUSE", "MOCK_GREY", "MockRenderer"]
 

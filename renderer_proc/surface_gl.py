@@ -20,8 +20,7 @@ import numpy as np
 
 from cosim.world.heightfield import padded_heights
 from cosim.world.scene import Scene
-
-from .hfmesh import SurfaceMesh
+from renderer_proc.hfmesh import SurfaceMesh
 
 __all__ = ["Surface", "mat_bytes"]
 
