@@ -4,7 +4,7 @@
 world over one sensor period (``steps_per_frame`` held-input steps of ``dynamics_dt_s``), and
 :func:`signals` flattens a world into the ``dyn_state`` fields. Pure: no segment, no I/O, deterministic (with
 the built-in controller; a ``controller.model`` plug-in may keep memory of its own, see
-dynamics_proc.control_protocol).
+dynamics_proc.control.protocol).
 """
 from __future__ import annotations
 
@@ -13,13 +13,15 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-import dynamics_proc.auger as ag
+import dynamics_proc.grain.auger as ag
 from cosim.errors import PluginFault
 from cosim.scenario.config import FMU_REF, Scenario
 from cosim.scenario.plugins import load_plugin
 from cosim.world.geometry import cart_grid_from_body, invert, vehicle_pose
 from dynamics_proc.blocks import SECTION_FIELD
-from dynamics_proc.control_protocol import (
+from dynamics_proc.control.controller import ControllerParams, plugin_dir
+from dynamics_proc.control.feedforward import turn_compensation
+from dynamics_proc.control.protocol import (
     CONTROLLER_POINT,
     ControllerCommand,
     ControllerInput,
@@ -27,9 +29,10 @@ from dynamics_proc.control_protocol import (
     OffloadingController,
     check_command,
 )
-from dynamics_proc.controller import ControllerParams, plugin_dir
-from dynamics_proc.feedforward import turn_compensation
-from dynamics_proc.fieldsync import (
+from dynamics_proc.fmu.models import Fmus
+from dynamics_proc.grain.fill import GrainGrid, deposit, initial_heights, resample, volume
+from dynamics_proc.grain.tilt import Tilt, deposit_tilted, settle, tilt_of, tilted_cap
+from dynamics_proc.vehicles.fieldsync import (
     FieldParams,
     FieldState,
     advance_noise,
@@ -40,13 +43,10 @@ from dynamics_proc.fieldsync import (
     measured_state,
     speed_change,
 )
-from dynamics_proc.fmus import Fmus
-from dynamics_proc.grainfill import GrainGrid, deposit, initial_heights, resample, volume
-from dynamics_proc.ground import Stance, spout_on_terrain, stance_of
-from dynamics_proc.integrators import integrate, step_exponential_values
-from dynamics_proc.machine_sync import SyncGains, sync_command
-from dynamics_proc.tilt import Tilt, deposit_tilted, settle, tilt_of, tilted_cap
-from dynamics_proc.vehicles import CX, CY, CYAW, VehicleParams, cart_pose, initial_state
+from dynamics_proc.vehicles.ground import Stance, spout_on_terrain, stance_of
+from dynamics_proc.vehicles.integrators import integrate, step_exponential_values
+from dynamics_proc.vehicles.machine_sync import SyncGains, sync_command
+from dynamics_proc.vehicles.motion import CX, CY, CYAW, VehicleParams, cart_pose, initial_state
 
 __all__ = ["ModelParams", "World", "SpoutGeometry", "initial_world", "step_frame", "truth_measurement", "signals",
            "spout_grid", "SECTION_FIELD"]
@@ -78,14 +78,14 @@ class ModelParams:
     flow_meter_bias: float           # relative error of the flow signal the fused estimator is given
     controller: OffloadingController  # controller.model, made by its factory
     controller_ref: str              # controller.model as the scenario names it
-    fmus: Fmus | None = None         # FMUs in place of built-in models (dynamics_proc.fmus)
+    fmus: Fmus | None = None         # FMUs in place of built-in models (dynamics_proc.fmu.models)
     feedforward_lead_s: float = 0.0  # controller.coping.feedforward_lead_s: the turn anticipated this far ahead, s
-    stance: Stance | None = None     # the machines on the terrain (dynamics_proc.ground), None on flat ground
-    field: FieldParams | None = None  # Machine Sync and flow in a field (dynamics_proc.fieldsync), None: ideal
+    stance: Stance | None = None     # the machines on the terrain (dynamics_proc.vehicles.ground), None on flat ground
+    field: FieldParams | None = None  # Machine Sync and flow in a field (dynamics_proc.vehicles.fieldsync), None: ideal
 
     @classmethod
     def from_scenario(cls, s: Scenario, fmus: Fmus | None = None) -> "ModelParams":
-        """The parameters of ``s``; ``fmus``: the run's open FMUs (:func:`dynamics_proc.fmus.open_fmus`) where the
+        """The parameters of ``s``; ``fmus``: the run's open FMUs (:func:`dynamics_proc.fmu.models.open_fmus`) where the
         scenario names any (without them, a scenario that does builds parameters that fail when first used)."""
         a = ag.AugerParams.from_scenario(s)
         spout_x = a.pivot[0] + a.arm[0]
@@ -119,7 +119,7 @@ def _make_controller(factory, control: ControllerParams, s: Scenario) -> Offload
     missing = [m for m in ("initial_state", "step") if not callable(getattr(c, m, None))]
     if missing:
         raise PluginFault(ref, CONTROLLER_POINT, f"the controller made by the factory has no method "
-                          f"{' or '.join(missing)} (dynamics_proc.control_protocol)")
+                          f"{' or '.join(missing)} (dynamics_proc.control.protocol)")
     return c
 
 
@@ -129,7 +129,7 @@ class World:
 
     frame: int
     t_s: float
-    x: np.ndarray                    # (9,) vehicle state, see vehicles.py
+    x: np.ndarray                    # (9,) vehicle state, see dynamics_proc.vehicles.motion
     flow_level: float                # 0..1
     heights: np.ndarray              # (nx, ny) float64 m, grain grid
     initial_m3: float
@@ -144,7 +144,7 @@ class World:
     stream_points: int
     spout: SpoutGeometry             # spout_grid(x), derived from x once per frame (the next frame starts from it)
     nudges: int = 0                  # nudges made so far
-    field: FieldState | None = None  # the field conditions' memory (dynamics_proc.fieldsync), None: ideal
+    field: FieldState | None = None  # the field conditions' memory (dynamics_proc.vehicles.fieldsync), None: ideal
 
 
 def _grid_from_world(x: np.ndarray, p: ModelParams) -> np.ndarray:
@@ -153,7 +153,7 @@ def _grid_from_world(x: np.ndarray, p: ModelParams) -> np.ndarray:
 
 def spout_grid(x: np.ndarray, p: ModelParams) -> SpoutGeometry:
     """(spout world (3,), exit velocity world (3,), spout grid (3,), grid_from_world (4, 4)) for state x (on the
-    terrain: dynamics_proc.ground.spout_on_terrain)."""
+    terrain: dynamics_proc.vehicles.ground.spout_on_terrain)."""
     if p.stance is not None:
         return spout_on_terrain(x, p.vehicles, p.auger, p.grid_from_cart_body, p.stance)
     sp = ag.spout_world(float(x[CX]), float(x[CY]), float(x[CYAW]), p.auger)
@@ -197,7 +197,7 @@ def truth_measurement(h: np.ndarray, p: ModelParams) -> np.ndarray:
 
 
 def _tilt(spout: SpoutGeometry) -> Tilt | None:
-    """The cart's tilt (dynamics_proc.tilt) from the grid_from_world of ``spout``, None when level."""
+    """The cart's tilt (dynamics_proc.grain.tilt) from the grid_from_world of ``spout``, None when level."""
     g = spout[3]
     return tilt_of(invert(g)) if g[2, 0] != 0.0 or g[2, 1] != 0.0 else None
 
@@ -268,7 +268,7 @@ def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
 
 def _flow(level: float, out: ControllerCommand, p: ModelParams, fs: FieldState | None) -> tuple[float, float]:
     """(flow level, volume delivered m^3) over the frame: the auger's ramps step by step, times the field's
-    flow factor (the yield variation and the start surge, dynamics_proc.fieldsync) where there is one."""
+    flow factor (the yield variation and the start surge, dynamics_proc.vehicles.fieldsync) where there is one."""
     vol = 0.0
     for _ in range(p.steps):
         level, dv = ag.flow_advance(level, out.auger_on, p.dt_s, p.auger, out.flow)
@@ -283,7 +283,7 @@ def _since_start(before: float, after: float, since: float, dt: float) -> float:
 
 def _turn_feedforward(w: World, p: ModelParams) -> tuple[tuple[float, float], float]:
     """((now, ahead) spout shifts along grid x m, lateral setpoint correction m ahead) of the combine's turn at
-    ``w.t_s`` and ``feedforward_lead_s`` later (dynamics_proc.feedforward); ((0, 0), 0) on a straight path."""
+    ``w.t_s`` and ``feedforward_lead_s`` later (dynamics_proc.control.feedforward); ((0, 0), 0) on a straight path."""
     now, ahead = (combine_motion(p.field, p.vehicles, t) for t in (w.t_s, w.t_s + p.feedforward_lead_s))
     if now[1] == 0.0 and ahead[1] == 0.0:
         return (0.0, 0.0), 0.0

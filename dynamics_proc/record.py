@@ -9,11 +9,11 @@ import numpy as np
 
 from cosim.world.geometry import POSE_3D_FIELDS
 from dynamics_proc.blocks import SECTION_FIELD
-from dynamics_proc.fieldsync import SLIP_MAX, combine_motion, flow_factor
-from dynamics_proc.grainfill import volume
-from dynamics_proc.ground import machine_poses, planar_poses
-from dynamics_proc.machine_sync import cart_offset
-from dynamics_proc.vehicles import CX, CY, CYAW, DELTA, V, cart_pose, tractor_pose
+from dynamics_proc.grain.fill import volume
+from dynamics_proc.vehicles.fieldsync import SLIP_MAX, combine_motion, flow_factor
+from dynamics_proc.vehicles.ground import machine_poses, planar_poses
+from dynamics_proc.vehicles.machine_sync import cart_offset
+from dynamics_proc.vehicles.motion import CX, CY, CYAW, DELTA, V, cart_pose, tractor_pose
 
 if TYPE_CHECKING:
     from dynamics_proc.model import ModelParams, World

@@ -49,11 +49,11 @@ def make_backend(scenario: Scenario, rig, context: Any = None):
         return _beam_backend(scenario, context)
     opts = dict(rgb=wants_rgb(scenario), float_depth=scenario.render.float_depth)
     if scenario.renderer == "gl":
-        from renderer_proc.gl_backend import GLRenderer
+        from renderer_proc.gl.backend import GLRenderer
 
         return GLRenderer(rig, scenario.lidar.codec, context=context, **opts)
     if scenario.renderer == "mock":
-        from renderer_proc.mock_backend import MockRenderer
+        from renderer_proc.mock.backend import MockRenderer
 
         return MockRenderer(rig, scenario.lidar.codec, parts=entity_parts(scenario), **opts)
     raise ValueError(f"scenario.renderer is {scenario.renderer!r}: this scenario runs no renderer")
@@ -64,11 +64,11 @@ def _beam_backend(scenario: Scenario, context: Any = None):
     patterns) or ``MockBeamRenderer`` (mock; gl with a CSV pattern)."""
     layout, codec, rgb = beam_layout(scenario.lidar.pattern), scenario.lidar.codec, wants_rgb(scenario)
     if scenario.renderer == "gl" and layout.gridded:
-        from renderer_proc.beam_gl import GLBeamRenderer
+        from renderer_proc.gl.beam import GLBeamRenderer
 
         return GLBeamRenderer(layout, codec, rgb=rgb, context=context)
     if scenario.renderer in ("gl", "mock"):       # a CSV table has no angle grid: its exact ray cast under gl too
-        from renderer_proc.beam_mock import MockBeamRenderer
+        from renderer_proc.mock.beam import MockBeamRenderer
 
         return MockBeamRenderer(layout, codec, rgb=rgb, parts=entity_parts(scenario))
     raise ValueError(f"scenario.renderer is {scenario.renderer!r}: this scenario runs no renderer")

@@ -8,7 +8,7 @@ import pytest
 
 from cosim.scenario.config import Scenario
 from dynamics_proc.closed_loop import noisy_measurement, simulate
-from dynamics_proc.grainfill import GrainGrid, max_slope
+from dynamics_proc.grain.fill import GrainGrid, max_slope
 from dynamics_proc.summary import summarize
 
 PEAK_TOL_M = 0.05
@@ -148,7 +148,7 @@ def test_forced_auger_spill_is_accounted(monkeypatch, where, surface):
     slides over a wall top, is spill, and delivered = in cart + spilled still holds."""
     from dataclasses import replace
 
-    from dynamics_proc.controller import SectionFillController
+    from dynamics_proc.control.controller import SectionFillController
 
     real = SectionFillController.step
 

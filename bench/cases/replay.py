@@ -13,8 +13,8 @@ single-threaded, as in a run's processes (``cosim.runtime.threadpools``).
 ``meter=callgrind`` runs the stages under ``valgrind --tool=callgrind`` and counts each stage's instructions
 (``harness.callgrind``); ``focus`` (``STAGE:MODULE:FUNCTION`` or ``STAGE:MODULE:Class.method``, ``;``-separated) adds
 the inclusive count of one function within a stage. ``save`` writes the replay's outputs; ``check`` compares them
-bit for bit with saved ones. The stages look their functions up in their modules (``perception_proc.rim``,
-``.heightmap``, ``.impact``) at each call, so a focus names e.g. ``cart:perception_proc.rim:find_cart``.
+bit for bit with saved ones. The stages look their functions up in their modules (``perception_proc.estimates.rim``,
+``.heightmap``, ``.impact``) at each call, so a focus names e.g. ``cart:perception_proc.estimates.rim:find_cart``.
 """
 from __future__ import annotations
 

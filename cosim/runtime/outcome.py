@@ -15,7 +15,7 @@ with a ``reason`` in words and numbers ("perception never found the cart: 0 of 1
 "overfill 15 cm in section 9"). Pure: no I/O.
 
 The controller's hold reasons (:data:`HOLD_REASONS`) are the contract between the controller (which writes the
-code into ``dyn_state.hold_reason``, dynamics_proc.coping) and this judge.
+code into ``dyn_state.hold_reason``, dynamics_proc.control.coping) and this judge.
 """
 from __future__ import annotations
 

@@ -3,11 +3,11 @@ foreign master (docs/fmu.md, "Export").
 
 :class:`WorldHost` runs in the master's process (the FMU's Python, see docs/fmu.md): it loads the scenario the FMU
 carries, sets up the ring over the in-process transport (a segment in ordinary memory, nothing spawned) with the
-dynamics role played by :class:`dynamics_proc.external.ExternalDynamicsParticipant` and the scenario's renderer and
+dynamics role played by :class:`dynamics_proc.fmu.external.ExternalDynamicsParticipant` and the scenario's renderer and
 perception as in a launched run, and steps it one sensor frame per ``doStep``.
 
 Variables (:func:`inputs` and :func:`outputs`, our names; units in them): the inputs are what a vehicle-and-
-controller model produces (:class:`dynamics_proc.external.WorldInputs`), the outputs what a controller consumes:
+controller model produces (:class:`dynamics_proc.fmu.external.WorldInputs`), the outputs what a controller consumes:
 perceived per-section peak heights and fullness (the built-in controller's robust section peak of the perceived
 height map, NaN where a section has too few valid cells or the cart was not found), the perceived cart pose,
 impact point and coverage, and the ground-truth values beside them. Per-section outputs are N values
@@ -30,9 +30,9 @@ from cosim.runtime.lockstep import InProcessRing
 from cosim.runtime.specs import DEFAULT_SPECS, ParticipantSpec, build_schema
 from cosim.scenario.config import Scenario
 from cosim.scenario.loader import load_scenario
-from dynamics_proc.controller import ControllerParams, section_heights
-from dynamics_proc.external import WorldInputs, initial_inputs
-from dynamics_proc.grainfill import resample
+from dynamics_proc.control.controller import ControllerParams, section_heights
+from dynamics_proc.fmu.external import WorldInputs, initial_inputs
+from dynamics_proc.grain.fill import resample
 from dynamics_proc.summary import section_stats
 from shm_schema import Segment
 
@@ -45,7 +45,7 @@ STEP_RTOL = 1e-6
 #: frames the in-process ring is sized for: the world runs as long as the master steps it
 MAX_FRAMES = 2**40
 #: the dynamics role when the vehicles and the controller are outside
-EXTERNAL_DYNAMICS = ParticipantSpec("dynamics", "dynamics_proc.external:create", "dynamics_proc.blocks:declare_blocks")
+EXTERNAL_DYNAMICS = ParticipantSpec("dynamics", "dynamics_proc.fmu.external:create", "dynamics_proc.blocks:declare_blocks")
 
 
 class StepRefused(ValueError):
