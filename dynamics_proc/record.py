@@ -16,7 +16,7 @@ from dynamics_proc.vehicles.machine_sync import cart_offset
 from dynamics_proc.vehicles.motion import CX, CY, CYAW, DELTA, V, cart_pose, tractor_pose
 
 if TYPE_CHECKING:
-    from dynamics_proc.model import ModelParams, World
+    from dynamics_proc.state import ModelParams, World
 
 __all__ = ["signals"]
 

@@ -42,7 +42,6 @@ from pathlib import Path
 import numpy as np
 
 from cosim.errors import PluginFault
-from cosim.runtime.outcome import HOLD_NO_MEASUREMENT
 from cosim.scenario.config import Scenario
 from cosim.scenario.plugins import load_plugin
 from dynamics_proc.control.coping import mode, peak_sigma, rise_rate, slowed_section, unexplained_shift
@@ -55,7 +54,7 @@ from dynamics_proc.control.estimator import (
     predict,
     update,
 )
-from dynamics_proc.control.protocol import ControllerCommand, ControllerInput, Delivery
+from dynamics_proc.control.protocol import HOLD_NO_MEASUREMENT, ControllerCommand, ControllerInput, Delivery
 from dynamics_proc.control.sections import min2x2, section_blocks, section_heights, section_pairing, section_valid
 from dynamics_proc.control.strategies import Strategy
 from dynamics_proc.grain.fill import GrainGrid, section_rows
@@ -184,7 +183,7 @@ class ControllerState:
     all_full: bool
     nudges: int
     rate: np.ndarray | None = None  # (N,) m/s, filtered rise rate of each section's peak (coping)
-    hold: int = 0                # hold reason code (cosim.runtime.outcome.HOLD_*), 0 not holding
+    hold: int = 0                # hold reason code (dynamics_proc.control.protocol.HOLD_*), 0 not holding
     slowed: int = -1             # 0-based section the auger is slowed for (near full), -1 none
     spout_x: float = math.nan    # the spout's grid x at the last decision, m
 

@@ -11,7 +11,7 @@
   variance says how far it can be trusted. The 1-sigma of the cell that sets the target section's peak is
   compared with
   ``fallback_sigma_m``; beyond it the controller switches the auger off and holds
-  (:data:`cosim.runtime.outcome.HOLD_LOST`).
+  (:data:`dynamics_proc.control.protocol.HOLD_LOST`).
 * **Modes** reported in ``dyn_state.control_mode``: :data:`MODE_MEASURED` (the target section was seen in the
   latest measurement), :data:`MODE_DEAD_RECKONING` (it was not; the estimate carries on), :data:`MODE_HOLD`
   (auger off, no nudges; ``dyn_state.hold_reason`` says why).
@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 
-from cosim.runtime.outcome import HOLD_LOST, HOLD_NO_MEASUREMENT, HOLD_NONE
+from dynamics_proc.control.protocol import HOLD_LOST, HOLD_NO_MEASUREMENT, HOLD_NONE
 
 __all__ = ["MODE_MEASURED", "MODE_DEAD_RECKONING", "MODE_HOLD", "rise_rate", "peak_sigma", "slowed_section", "mode",
            "unexplained_shift"]
@@ -81,10 +81,10 @@ def slowed_section(target: int, slowed: int, full: np.ndarray, heights: np.ndarr
 
 def mode(seen: bool, target: int, target_seen: bool, fused: bool, sigma_m: float,
          fallback_sigma_m: float) -> tuple[int, int]:
-    """(mode, hold reason) of a decision: holding (:data:`~cosim.runtime.outcome.HOLD_NO_MEASUREMENT`) before any
+    """(mode, hold reason) of a decision: holding (:data:`~dynamics_proc.control.protocol.HOLD_NO_MEASUREMENT`) before any
     measurement; measured while there is no target or the latest map shows it (``target_seen``); else dead
     reckoning on the ``fused`` estimate while the target's 1-sigma ``sigma_m`` stays within ``fallback_sigma_m``
-    (m), holding (:data:`~cosim.runtime.outcome.HOLD_LOST`) beyond. Without a fused estimate (the paper's
+    (m), holding (:data:`~dynamics_proc.control.protocol.HOLD_LOST`) beyond. Without a fused estimate (the paper's
     estimator) there is nothing to reckon with: it goes on with the last heights (its stale-target rule)."""
     if not seen:
         return MODE_HOLD, HOLD_NO_MEASUREMENT

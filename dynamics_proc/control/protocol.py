@@ -34,9 +34,10 @@ from typing import Any, Callable, Protocol, runtime_checkable
 import numpy as np
 
 from cosim.errors import PluginFault
+from cosim.scenario.config.holds import HOLD_LOST, HOLD_NO_MEASUREMENT, HOLD_NONE, HOLD_REASONS
 
 __all__ = ["ControllerInput", "ControllerCommand", "Delivery", "OffloadingController", "ControllerFactory",
-           "check_command", "CONTROLLER_POINT"]
+           "check_command", "CONTROLLER_POINT", "HOLD_NONE", "HOLD_NO_MEASUREMENT", "HOLD_LOST", "HOLD_REASONS"]
 
 #: the scenario key of this plug-in point (named in faults)
 CONTROLLER_POINT = "controller.model"
@@ -118,7 +119,7 @@ class ControllerCommand:
     * ``all_full``: the controller considers the cart full (a closed loop may stop early on it);
     * ``seen``: a measurement has been used; ``bias_m``: a learnt steady-state offset, m;
     * ``mode``: 0 measured, 1 dead reckoning, 2 holding (dynamics_proc.control.coping); ``hold_reason``: why it holds, a
-      code of ``cosim.runtime.outcome.HOLD_REASONS`` (0 not holding): the run's outcome names it, so a controller
+      code of :data:`HOLD_REASONS` (0 not holding): the run's outcome names it, so a controller
       that stops on purpose should say why; ``sigma_m``: the stated 1-sigma of its estimate of the target
       section, m (NaN unknown); ``lead_m``: the lead added to the target section's level, m.
     """

@@ -24,6 +24,7 @@ import numpy as np
 
 import dynamics_proc.grain.auger as ag
 from cosim.errors import FrameMismatch
+from cosim.fmi.export.contract import TERRAIN_REFUSED
 from cosim.scenario.config import Scenario
 from cosim.world.geometry import cart_grid_from_body, invert, vehicle_pose
 from cosim.world.terrain import terrain_of
@@ -38,9 +39,6 @@ __all__ = ["BODIES", "TERRAIN_REFUSED", "WorldInputs", "GrainWorld", "GrainParam
            "initial_grain", "step_grain", "external_signals", "ExternalDynamicsParticipant", "create"]
 
 
-#: why a scenario with terrain cannot be driven from outside
-TERRAIN_REFUSED = ("the world driven from outside stands on flat ground: its inputs are planar poses, which do not "
-                   "say how the machines stand on the scenario's terrain; export a scenario without terrain")
 #: the bodies whose planar poses the inputs give
 BODIES = ("combine", "tractor", "cart")
 

@@ -6,7 +6,7 @@ the effects of one camera (:class:`CameraDust`).
   ``I = I0 t + A (1 - t)`` (A the dust's brightness, per channel; no surface: ``t = 0``). Where the camera has
   an exact depth image (the depth camera, with its colour image) d is each pixel's range; the stereo and colour
   cameras have none (the renderer writes only their colour images), so their images lose contrast as at the
-  camera's typical working distance (``perception_proc.cameras.pipeline.SIGMA_DISTANCE_M``), an approximation
+  camera's typical working distance (``perception_proc.cameras.images.SIGMA_DISTANCE_M``), an approximation
   the docs state.
 * **Speckle**: a lit dust grain closer to the lens than ``DUST_GRAIN_DIAMETER_M x f`` (f the focal length in
   pixels) covers a whole pixel, which then shows the airlight's brightness. A ray meets one there with
@@ -31,7 +31,7 @@ from cosim.scenario.config.cameras import DepthCamera
 from cosim.scenario.config.scenario import Scenario
 from cosim.world.sensors import camera_pinhole
 from perception_proc.atmosphere.dust import DustModel, dust_blows, dust_model
-from perception_proc.cameras.pipeline import SIGMA_DISTANCE_M, CameraImages
+from perception_proc.cameras.images import SIGMA_DISTANCE_M, CameraImages
 
 __all__ = ["AIRLIGHT_RGB", "DUST_GRAIN_DIAMETER_M", "GEOMETRIC_SHARE", "DUST_CAMERA_STREAM", "transmission",
            "hazed", "speckle_share", "speckled", "dusty_depth", "speckle_generator", "CameraDust"]

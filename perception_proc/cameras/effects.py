@@ -21,9 +21,10 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 
 from cosim.scenario.config.scenario import Scenario
+from perception_proc.atmosphere.camera import CameraDust
 
 if TYPE_CHECKING:
-    from perception_proc.cameras.pipeline import CameraImages
+    from perception_proc.cameras.images import CameraImages
 
 __all__ = ["CameraEffects", "NoEffects", "camera_effects"]
 
@@ -52,6 +53,4 @@ def camera_effects(scenario: Scenario, name: str) -> CameraEffects:
     air changes nothing, to the bit)."""
     if scenario.atmosphere.extinction_per_m == 0.0:
         return NoEffects()
-    from perception_proc.atmosphere.camera import CameraDust  # imports camera_pipeline, which imports this module
-
     return CameraDust(scenario, name)

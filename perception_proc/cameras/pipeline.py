@@ -18,8 +18,6 @@ its stride cell). Per frame:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from cosim.scenario.config.cameras import Camera, DepthCamera, StereoCamera
@@ -33,35 +31,19 @@ from cosim.world.sensors import (
     points_stride,
 )
 from perception_proc.cameras.effects import camera_effects
+from perception_proc.cameras.images import SIGMA_DISTANCE_M, CameraImages
 from perception_proc.cameras.stereo import make_matcher, stereo_depth
 from perception_proc.cameras.tof import frame_generator, tof_depth
 from perception_proc.estimates.rim import FOV_EDGE, border_beams
 
 __all__ = ["CameraImages", "CameraPipeline", "SIGMA_DISTANCE_M", "STEREO_DISPARITY_SIGMA_PX"]
 
-#: distance at which a camera's typical depth 1-sigma is quoted to the built-in algorithm (the cart seen
-#: from a spout or a mast), m
-SIGMA_DISTANCE_M = 3.0
 #: disparity 1-sigma assumed for that typical figure, px (a matcher on textured images does about this well)
 STEREO_DISPARITY_SIGMA_PX = 0.25
 #: angular width of the band along the edge of a camera's field whose points are flagged as on the field's edge
 #: (``rim.FOV_EDGE``), rad: a camera's points are far denser than a LiDAR's beams, so the rim finder's test of an
 #: end cut by the field (a share of its end strip on the edge) needs a band, not one row of points
 EDGE_BAND_RAD = 0.02
-
-
-@dataclass
-class CameraImages:
-    """One camera's images of a frame (copies): ``rgb`` / ``right`` (H, W, 4) uint8, ``depth`` (H, W) float32
-    exact planar depth m, ``labels`` (H, W) uint8; each None where the camera has no such part; ``t_s`` the run
-    time of the state they show, s (what time-varying effects such as a dust gust go by)."""
-
-    frame: int
-    rgb: np.ndarray | None = None
-    right: np.ndarray | None = None
-    depth: np.ndarray | None = None
-    labels: np.ndarray | None = None
-    t_s: float = 0.0
 
 
 class CameraPipeline:
