@@ -159,7 +159,7 @@ def test_forced_auger_spill_is_accounted(monkeypatch, where, surface):
     lat = {"ground": 3.0, "rim": None, "near_wall": 6.75}[where]
     if where == "rim":
         # put the left rim band under the stream's landing point at rim height (closed-form parabola)
-        from dynamics_proc import auger as ag
+        from dynamics_proc.grain import auger as ag
         s0 = scen()
         a = ag.AugerParams.from_scenario(s0)
         lp = ag.landing_point(ag.spout_world(0, 0, 0, a), ag.exit_velocity_world(0, a),

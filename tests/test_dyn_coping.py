@@ -12,10 +12,10 @@ from cosim.cli import main
 from cosim.runtime.outcome import HOLD_LOST, HOLD_NO_MEASUREMENT, judge
 from cosim.scenario.config import Scenario
 from cosim.scenario.loader import load_scenario, packaged_scenarios
-from dynamics_proc import auger as ag
 from dynamics_proc.closed_loop import simulate
 from dynamics_proc.control.coping import MODE_DEAD_RECKONING, MODE_HOLD, MODE_MEASURED, mode, rise_rate, slowed_section
 from dynamics_proc.control.feedforward import _spout_grid, steady_cart_offset, turn_compensation
+from dynamics_proc.grain import auger as ag
 from dynamics_proc.model import ModelParams
 from dynamics_proc.summary import summarize
 from dynamics_proc.vehicles.integrators import step_exponential_values

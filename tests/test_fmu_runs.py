@@ -230,7 +230,7 @@ def test_example_builds_and_runs_launched(tmp_path, built_fmus, shm_clean, examp
 def test_adapters_follow_the_roles_signal_order():
     """The adapters read the FMU's values by position in the role's signal order (cosim.fmi.roles)."""
     from cosim.fmi.roles import CONTROLLER, VEHICLE
-    from dynamics_proc import fmus
+    from dynamics_proc.fmu import models as fmus
 
     assert list(fmus._STATE_INDEX) == [s.name for s in VEHICLE.outputs]
     assert list(fmus._CONTROLLER_INPUTS) == [s.name for s in CONTROLLER.inputs[1:]]

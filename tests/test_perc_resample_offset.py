@@ -14,7 +14,7 @@ from cosim.scenario.config import Codec, Pattern
 from cosim.testing.synthetic import Box, Plane, encode_linear, raycast, render_depth, stitched_rig
 from cosim.world.camera import beam_directions
 from cosim.world.patterns import beam_table, pattern_shape
-from perception_proc import resample_offset as ro
+from perception_proc.lidar import resample_offset as ro
 from perception_proc.lidar.resample import beam_pixels, build_table, resample
 
 CODEC = Codec()

@@ -9,7 +9,7 @@ import pytest
 from cosim.scenario.config import Codec, Pattern
 from cosim.testing.synthetic import Box, Plane, encode_linear, render_depth, stitched_rig
 from cosim.world.patterns import beam_table, pattern_shape
-from perception_proc import resample_offset as ro
+from perception_proc.lidar import resample_offset as ro
 from perception_proc.lidar.resample_offset_reference import resample_offset_reference
 
 CODEC = Codec()

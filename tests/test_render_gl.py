@@ -297,7 +297,7 @@ def test_merged_flat_blocks_render_like_the_full_grid(ctx, monkeypatch):
     pixel falls through a seam to the floor below (both agree with the exact cast)."""
     import functools
 
-    from renderer_proc import surface_gl
+    from renderer_proc.gl import surface as surface_gl
     from renderer_proc.gl.hfmesh import SurfaceMesh
 
     s = Scenario(format_version=1)

@@ -39,8 +39,8 @@ def frame_costs(s, frames: int) -> dict:
     """ms per frame (arrays over frames) of the whole frame step and of its parts, on the states of a run."""
     import numpy as np
 
-    from dynamics_proc import auger as ag
     from dynamics_proc.control.controller import Delivery, controller_step
+    from dynamics_proc.grain import auger as ag
     from dynamics_proc.grain.fill import deposit
     from dynamics_proc.model import ModelParams, initial_world, signals, spout_grid, step_frame, truth_measurement
     from dynamics_proc.vehicles.integrators import integrate

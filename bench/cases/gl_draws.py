@@ -113,7 +113,7 @@ def _surface_renderers(lay, codec, ctx, quads: bool):
     """(renderer, counting twin) for one surface path."""
     from unittest import mock
 
-    from renderer_proc import beam_gl
+    from renderer_proc.gl import beam as beam_gl
 
     real = beam_gl.GLBeamRenderer(lay, codec, context=ctx, surface_quads=quads)
     src = beam_gl._src

@@ -327,8 +327,8 @@ def offset_accuracy(ctx: Context) -> dict:
     """Range errors of ``resample_offset`` on each scene (module docstring), ``range_error_stats``' beams."""
     import numpy as np
 
-    from perception_proc import resample_offset as mod
     from perception_proc.accuracy.stage import range_error_stats
+    from perception_proc.lidar import resample_offset as mod
 
     cases = {"default scene": _default_offset_case, **{f"synthetic {w}x{h}": (lambda w=w, h=h: _synthetic_offset_case(w, h))
                                                         for w, h in SIZES}}
