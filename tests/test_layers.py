@@ -5,7 +5,9 @@ packages (at any depth: module level, inside functions, under ``TYPE_CHECKING``)
 * a participant imports of ``cosim.runtime`` only ``cosim.runtime.participant``;
 * participants never import each other;
 * no import cycle among the modules;
-* at most :data:`TOP_MODULES_MAX` modules at the top of each participant package.
+* at most :data:`TOP_MODULES_MAX` modules at the top of each participant package;
+* every import of a first-party name (in the packages, tests, bench and examples) names a module that exists, or a
+  name its package binds (an installed copy of an older tree would otherwise answer a stale name silently).
 """
 from __future__ import annotations
 
@@ -157,6 +159,53 @@ def test_participant_packages_show_their_blocks(package):
     assert len(top) <= TOP_MODULES_MAX, f"{package} has {len(top)} modules at its top: {top}"
 
 
+def _bound_names(init: Path) -> set[str]:
+    """Names a package's ``__init__.py`` binds at module level (assignments, imports, definitions, ``__all__``)."""
+    names: set[str] = set()
+    for node in ast.parse(init.read_text(encoding="utf-8")).body:
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            names |= {(a.asname or a.name).split(".")[0] for a in node.names}
+        elif isinstance(node, (ast.FunctionDef, ast.ClassDef, ast.AsyncFunctionDef)):
+            names.add(node.name)
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            names |= {n.id for tg in targets for n in ast.walk(tg) if isinstance(n, ast.Name)}
+            if any(isinstance(tg, ast.Name) and tg.id == "__all__" for tg in targets):
+                names |= {e.value for e in ast.walk(node.value) if isinstance(e, ast.Constant)}
+    return names
+
+
+def stale_imports(root: Path = ROOT) -> list[str]:
+    """Imports of first-party names that exist neither as a module nor as a name bound by their package."""
+    modules = first_party_modules(root)
+    packages = {n: p for n, p in modules.items() if p.name == "__init__.py"}
+    files = [p for d in ("tests", "bench", "examples", *PACKAGES) for p in sorted((root / d).rglob("*.py"))
+             if "build" not in p.relative_to(root).parts]
+    bad = []
+    for path in files:
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
+            if isinstance(node, ast.Import):
+                wanted = [(a.name, None) for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                wanted = [(node.module, a.name) for a in node.names]
+            else:
+                continue
+            for mod, name in wanted:
+                if mod.split(".")[0] not in PACKAGES:
+                    continue
+                if mod not in modules:
+                    bad.append(f"{path.relative_to(root)}:{node.lineno}: no module {mod}")
+                elif (name not in (None, "*") and mod in packages and f"{mod}.{name}" not in modules
+                      and name not in _bound_names(packages[mod])):
+                    bad.append(f"{path.relative_to(root)}:{node.lineno}: {mod} has no module or name {name}")
+    return bad
+
+
+def test_first_party_imports_name_what_exists():
+    bad = stale_imports()
+    assert not bad, "imports of names that do not exist in this tree:\n" + "\n".join(bad)
+
+
 def _tree(tmp_path: Path, files: dict[str, str]) -> dict[str, list[tuple[str, int]]]:
     for rel, text in files.items():
         p = tmp_path / rel
@@ -185,3 +234,11 @@ def test_the_scan_finds_late_relative_and_type_checking_imports(tmp_path):
     assert not any(b.startswith(("cosim.testing", "dynamics_proc.model:4")) for b in bad)
     assert len(bad) == 3
     assert import_cycles(g) == [["dynamics_proc.model", "dynamics_proc.record"]]
+
+
+def test_stale_imports_are_found(tmp_path):
+    _tree(tmp_path, {"dynamics_proc/grain/__init__.py": "", "dynamics_proc/grain/auger.py": "",
+                     "tests/test_x.py": "from dynamics_proc import auger\nfrom dynamics_proc.grain import auger\n"
+                                        "import dynamics_proc.controller\n"})
+    assert stale_imports(tmp_path) == ["tests/test_x.py:1: dynamics_proc has no module or name auger",
+                                       "tests/test_x.py:3: no module dynamics_proc.controller"]
