@@ -8,10 +8,9 @@
 from __future__ import annotations
 
 from cosim.scenario.config import Scenario
+from dynamics_proc.grain.auger import STREAM_ROWS
+from dynamics_proc.grain.fill import GrainGrid
 from shm_schema import ArrayBlock, Block, Field, StructBlock
-
-from .auger import STREAM_ROWS
-from .grainfill import GrainGrid
 
 __all__ = ["WRITER", "STATE_FIELDS", "SECTION_FIELD", "state_fields", "declare_blocks"]
 
@@ -77,8 +76,8 @@ STATE_FIELDS: tuple[tuple[str, str, str, str], ...] = (
     ("measurement_seen", "", "i8", "controller: a height-map measurement has arrived"),
     ("control_bias_m", "m", "f8", "controller: learnt steady-state auger offset"),
     ("target_fill_m", "m", "f8", "controller: target grain height (a run-time input, dynamics_proc.inputs)"),
-    ("control_mode", "", "i8", "controller: 0 measured, 1 dead reckoning, 2 holding (dynamics_proc.coping)"),
-    ("hold_reason", "", "i8", "controller: why it holds (cosim.runtime.outcome.HOLD_REASONS), 0 not holding"),
+    ("control_mode", "", "i8", "controller: 0 measured, 1 dead reckoning, 2 holding (dynamics_proc.control.coping)"),
+    ("hold_reason", "", "i8", "controller: why it holds (cosim.scenario.config.holds.HOLD_REASONS), 0 not holding"),
     ("estimate_sigma_m", "m", "f8", "controller: stated 1-sigma of its estimate of the target section"),
     ("full_lead_m", "m", "f8", "controller: lead added to the target section's level (rise rate x lead)"),
     ("lateral_feedforward_m", "m", "f8", "controller: correction of the lateral setpoint ahead of a turn"),

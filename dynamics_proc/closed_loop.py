@@ -14,9 +14,8 @@ from typing import Callable
 import numpy as np
 
 from cosim.scenario.config import Scenario
-
-from .fmus import open_fmus
-from .model import ModelParams, World, initial_world, signals, step_frame, truth_measurement
+from dynamics_proc.fmu.models import open_fmus
+from dynamics_proc.model import ModelParams, World, initial_world, signals, step_frame, truth_measurement
 
 __all__ = ["SimResult", "simulate", "Measure", "noisy_measurement", "occluded_measurement", "DONE_GRACE_FRAMES"]
 
@@ -74,7 +73,7 @@ def simulate(scenario: Scenario, frames: int | None = None, measure: Measure | N
     """Run frames 0..``frames`` (default ``scenario.frames``) with height-map feedback.
 
     ``stop_when_done``: end early, DONE_GRACE_FRAMES after the cart is declared full and the flow stopped.
-    The scenario's FMUs (dynamics_proc.fmus) are opened for the run and freed after it (unless ``params``
+    The scenario's FMUs (dynamics_proc.fmu.models) are opened for the run and freed after it (unless ``params``
     are given: then they hold them).
     """
     fmus = open_fmus(scenario) if params is None else None

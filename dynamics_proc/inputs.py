@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Callable
 from cosim.scenario.config import Scenario
 
 if TYPE_CHECKING:
-    from .model import ModelParams, World
+    from dynamics_proc.state import ModelParams, World
 
 __all__ = ["INPUTS", "apply_input"]
 

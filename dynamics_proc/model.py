@@ -4,34 +4,33 @@
 world over one sensor period (``steps_per_frame`` held-input steps of ``dynamics_dt_s``), and
 :func:`signals` flattens a world into the ``dyn_state`` fields. Pure: no segment, no I/O, deterministic (with
 the built-in controller; a ``controller.model`` plug-in may keep memory of its own, see
-dynamics_proc.control_protocol).
+dynamics_proc.control.protocol).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
+import dynamics_proc.grain.auger as ag
 from cosim.errors import PluginFault
-from cosim.scenario.config import FMU_REF, Scenario
-from cosim.scenario.plugins import load_plugin
-from cosim.world.geometry import cart_grid_from_body, invert, vehicle_pose
-
-from . import auger as ag
-from .blocks import SECTION_FIELD
-from .control_protocol import (
+from cosim.scenario.config import Scenario
+from cosim.world.geometry import invert, vehicle_pose
+from dynamics_proc.blocks import SECTION_FIELD
+from dynamics_proc.control.feedforward import turn_compensation
+from dynamics_proc.control.protocol import (
     CONTROLLER_POINT,
     ControllerCommand,
     ControllerInput,
     Delivery,
-    OffloadingController,
     check_command,
 )
-from .controller import ControllerParams, plugin_dir
-from .feedforward import turn_compensation
-from .fieldsync import (
-    FieldParams,
+from dynamics_proc.grain.fill import deposit, initial_heights, resample, volume
+from dynamics_proc.grain.tilt import Tilt, deposit_tilted, settle, tilt_of, tilted_cap
+from dynamics_proc.record import signals
+from dynamics_proc.state import ModelParams, SpoutGeometry, World
+from dynamics_proc.vehicles.fieldsync import (
     FieldState,
     advance_noise,
     advance_vehicles,
@@ -41,112 +40,13 @@ from .fieldsync import (
     measured_state,
     speed_change,
 )
-from .fmus import Fmus
-from .grainfill import GrainGrid, deposit, initial_heights, resample, volume
-from .ground import Stance, spout_on_terrain, stance_of
-from .integrators import integrate, step_exponential_values
-from .machine_sync import SyncGains, sync_command
-from .tilt import Tilt, deposit_tilted, settle, tilt_of, tilted_cap
-from .vehicles import CX, CY, CYAW, VehicleParams, cart_pose, initial_state
+from dynamics_proc.vehicles.ground import spout_on_terrain
+from dynamics_proc.vehicles.integrators import integrate, step_exponential_values
+from dynamics_proc.vehicles.machine_sync import sync_command
+from dynamics_proc.vehicles.motion import CX, CY, CYAW, cart_pose, initial_state
 
 __all__ = ["ModelParams", "World", "SpoutGeometry", "initial_world", "step_frame", "truth_measurement", "signals",
-           "spout_grid", "SECTION_FIELD"]
-
-#: (spout world (3,) m, exit velocity world (3,) m/s, spout grid (3,) m, grid_from_world (4, 4)), see spout_grid
-SpoutGeometry = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
-
-
-@dataclass(frozen=True)
-class ModelParams:
-    """Everything the frame step needs, derived once from the scenario."""
-
-    vehicles: VehicleParams
-    gains: SyncGains
-    auger: ag.AugerParams
-    grid: GrainGrid
-    control: ControllerParams
-    cap: np.ndarray
-    grid_from_cart_body: np.ndarray
-    method: str
-    rtol: float
-    atol: float
-    dt_s: float
-    steps: int
-    frame_dt_s: float
-    lateral_offset_m: float
-    signal_offset_m: float           # nudge signal = setpoint long + this (spout grid x at the setpoint)
-    density_kgpm3: float
-    flow_meter_bias: float           # relative error of the flow signal the fused estimator is given
-    controller: OffloadingController  # controller.model, made by its factory
-    controller_ref: str              # controller.model as the scenario names it
-    fmus: Fmus | None = None         # FMUs in place of built-in models (dynamics_proc.fmus)
-    feedforward_lead_s: float = 0.0  # controller.coping.feedforward_lead_s: the turn anticipated this far ahead, s
-    stance: Stance | None = None     # the machines on the terrain (dynamics_proc.ground), None on flat ground
-    field: FieldParams | None = None  # Machine Sync and flow in a field (dynamics_proc.fieldsync), None: ideal
-
-    @classmethod
-    def from_scenario(cls, s: Scenario, fmus: Fmus | None = None) -> "ModelParams":
-        """The parameters of ``s``; ``fmus``: the run's open FMUs (:func:`dynamics_proc.fmus.open_fmus`) where the
-        scenario names any (without them, a scenario that does builds parameters that fail when first used)."""
-        a = ag.AugerParams.from_scenario(s)
-        spout_x = a.pivot[0] + a.arm[0]
-        fmus = fmus or Fmus()
-        control = ControllerParams.from_scenario(s, fmus.strategy_for(s))
-        if s.controller.model == FMU_REF:
-            controller = fmus.controller_for(s)
-        else:
-            factory = load_plugin("controllers", s.controller.model, base_dir=plugin_dir(s),
-                                  options=s.controller.model_options)
-            controller = _make_controller(factory, control, s)
-        return cls(VehicleParams.from_scenario(s), SyncGains.from_scenario(s), a, GrainGrid.from_scenario(s),
-                   control, GrainGrid.from_scenario(s).cap(), cart_grid_from_body(s.cart),
-                   s.integrator.method, s.integrator.rtol, s.integrator.atol, s.timing.dynamics_dt_s,
-                   s.timing.steps_per_frame, s.timing.sensor_period_s, s.machine_sync.lateral_offset_m,
-                   s.cart.interior_length_m / 2.0 - spout_x, s.crop.density, s.controller.fusion.flow_meter_bias,
-                   controller, s.controller.model, fmus if fmus.vehicle or fmus.strategy else None,
-                   s.controller.coping.feedforward_lead_s,
-                   stance_of(s, s.tractor.rear_axle_x_m - s.tractor.hitch_offset_m), FieldParams.from_scenario(s))
-
-
-def _make_controller(factory, control: ControllerParams, s: Scenario) -> OffloadingController:
-    """``factory(control, s)``, checked to have the protocol's methods (PluginFault naming the plug-in)."""
-    ref = s.controller.model
-    try:
-        c = factory(control, s)
-    except PluginFault:
-        raise
-    except Exception as e:  # noqa: BLE001 - a plug-in's failure is reported with its name
-        raise PluginFault(ref, CONTROLLER_POINT, f"making the controller raised {type(e).__name__}: {e}") from e
-    missing = [m for m in ("initial_state", "step") if not callable(getattr(c, m, None))]
-    if missing:
-        raise PluginFault(ref, CONTROLLER_POINT, f"the controller made by the factory has no method "
-                          f"{' or '.join(missing)} (dynamics_proc.control_protocol)")
-    return c
-
-
-@dataclass(frozen=True)
-class World:
-    """Ground truth after frame ``frame`` (time ``t_s``)."""
-
-    frame: int
-    t_s: float
-    x: np.ndarray                    # (9,) vehicle state, see vehicles.py
-    flow_level: float                # 0..1
-    heights: np.ndarray              # (nx, ny) float64 m, grain grid
-    initial_m3: float
-    delivered_m3: float
-    spilled_m3: float
-    spilled_outside_m3: float         # part of the spill that never reached the interior
-    setpoint: tuple[float, float]    # Machine Sync cart offset (long, lat), m
-    ctrl: object                     # the controller's state (ControllerState for the built-in)
-    out: ControllerCommand           # its last command (fullness always (N,))
-    impact: ag.Impact
-    stream: np.ndarray               # (64, 4) float32 world rows [x, y, z, radius]
-    stream_points: int
-    spout: SpoutGeometry             # spout_grid(x), derived from x once per frame (the next frame starts from it)
-    nudges: int = 0                  # nudges made so far
-    field: FieldState | None = None  # the field conditions' memory (dynamics_proc.fieldsync), None: ideal
-
+           "spout_grid", "frame0_state", "SECTION_FIELD"]
 
 def _grid_from_world(x: np.ndarray, p: ModelParams) -> np.ndarray:
     return p.grid_from_cart_body @ invert(vehicle_pose(*cart_pose(x, p.vehicles)))
@@ -154,7 +54,7 @@ def _grid_from_world(x: np.ndarray, p: ModelParams) -> np.ndarray:
 
 def spout_grid(x: np.ndarray, p: ModelParams) -> SpoutGeometry:
     """(spout world (3,), exit velocity world (3,), spout grid (3,), grid_from_world (4, 4)) for state x (on the
-    terrain: dynamics_proc.ground.spout_on_terrain)."""
+    terrain: dynamics_proc.vehicles.ground.spout_on_terrain)."""
     if p.stance is not None:
         return spout_on_terrain(x, p.vehicles, p.auger, p.grid_from_cart_body, p.stance)
     sp = ag.spout_world(float(x[CX]), float(x[CY]), float(x[CYAW]), p.auger)
@@ -192,13 +92,28 @@ def initial_world(s: Scenario, p: ModelParams | None = None) -> World:
                  field=field)
 
 
+def frame0_state(s: Scenario) -> tuple[dict, np.ndarray]:
+    """The ``dyn_state`` fields and the truth height map ((nx, ny) float32 m) of frame 0 of ``s``, from the scenario
+    alone: the built-in controller and vehicle model stand in for any plug-in or FMU (nothing of the user's is opened
+    or stepped; the scenario checks, cosim.scenario.plausibility, look at this world's geometry)."""
+    geometry = s.model_copy(update={
+        "controller": s.controller.model_copy(update={"model": "section_fill", "model_options": {},
+                                                      "strategy": "front_to_back", "strategy_options": {}, "fmu": None}),
+        "vehicles": type(s.vehicles)()})
+    p = ModelParams.from_scenario(geometry)
+    w = initial_world(geometry, p)
+    state = signals(w, p)
+    state["stream_points"] = 0
+    return state, np.asarray(w.heights, dtype=np.float32)
+
+
 def truth_measurement(h: np.ndarray, p: ModelParams) -> np.ndarray:
     """Ground-truth height map resampled to the controller grid, (nxc, nyc) float64 m."""
     return resample(h, p.grid.cell_m, p.control.grid_cell_m, p.grid.length_m, p.grid.width_m)
 
 
 def _tilt(spout: SpoutGeometry) -> Tilt | None:
-    """The cart's tilt (dynamics_proc.tilt) from the grid_from_world of ``spout``, None when level."""
+    """The cart's tilt (dynamics_proc.grain.tilt) from the grid_from_world of ``spout``, None when level."""
     g = spout[3]
     return tilt_of(invert(g)) if g[2, 0] != 0.0 or g[2, 1] != 0.0 else None
 
@@ -269,7 +184,7 @@ def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
 
 def _flow(level: float, out: ControllerCommand, p: ModelParams, fs: FieldState | None) -> tuple[float, float]:
     """(flow level, volume delivered m^3) over the frame: the auger's ramps step by step, times the field's
-    flow factor (the yield variation and the start surge, dynamics_proc.fieldsync) where there is one."""
+    flow factor (the yield variation and the start surge, dynamics_proc.vehicles.fieldsync) where there is one."""
     vol = 0.0
     for _ in range(p.steps):
         level, dv = ag.flow_advance(level, out.auger_on, p.dt_s, p.auger, out.flow)
@@ -284,7 +199,7 @@ def _since_start(before: float, after: float, since: float, dt: float) -> float:
 
 def _turn_feedforward(w: World, p: ModelParams) -> tuple[tuple[float, float], float]:
     """((now, ahead) spout shifts along grid x m, lateral setpoint correction m ahead) of the combine's turn at
-    ``w.t_s`` and ``feedforward_lead_s`` later (dynamics_proc.feedforward); ((0, 0), 0) on a straight path."""
+    ``w.t_s`` and ``feedforward_lead_s`` later (dynamics_proc.control.feedforward); ((0, 0), 0) on a straight path."""
     now, ahead = (combine_motion(p.field, p.vehicles, t) for t in (w.t_s, w.t_s + p.feedforward_lead_s))
     if now[1] == 0.0 and ahead[1] == 0.0:
         return (0.0, 0.0), 0.0
@@ -329,5 +244,3 @@ def _advance_vehicles(x: np.ndarray, setpoint: tuple[float, float], p: ModelPara
                       p.atol)
     return x
 
-
-from .record import signals  # noqa: E402 - the dyn_state record of a world (re-exported: CONTRACTS.md)

@@ -19,11 +19,10 @@ import numpy as np
 
 from cosim.errors import FrameMismatch
 from cosim.scenario.config import Scenario
-
-from .blocks import WRITER, state_fields
-from .fmus import Fmus, open_fmus
-from .inputs import INPUTS, apply_input
-from .model import ModelParams, World, initial_world, signals, step_frame, truth_measurement
+from dynamics_proc.blocks import WRITER, state_fields
+from dynamics_proc.fmu.models import Fmus, open_fmus
+from dynamics_proc.inputs import INPUTS, apply_input
+from dynamics_proc.model import ModelParams, World, initial_world, signals, step_frame, truth_measurement
 
 if TYPE_CHECKING:
     from shm_schema import Segment
@@ -56,7 +55,7 @@ class DynamicsParticipant:
     # -- contract ----------------------------------------------------------------------------------------
     def start(self, segment: "Segment") -> None:
         """Bind the views this participant writes and, with perception feedback, reads; open the scenario's
-        FMUs (dynamics_proc.fmus)."""
+        FMUs (dynamics_proc.fmu.models)."""
         self._fmus = open_fmus(self.scenario)
         if self._fmus is not None:
             self.params = ModelParams.from_scenario(self.scenario, self._fmus)

@@ -8,16 +8,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from cosim.world.geometry import POSE_3D_FIELDS
-
-from .blocks import SECTION_FIELD
-from .fieldsync import SLIP_MAX, combine_motion, flow_factor
-from .grainfill import volume
-from .ground import machine_poses, planar_poses
-from .machine_sync import cart_offset
-from .vehicles import CX, CY, CYAW, DELTA, V, cart_pose, tractor_pose
+from dynamics_proc.blocks import SECTION_FIELD
+from dynamics_proc.grain.fill import volume
+from dynamics_proc.vehicles.fieldsync import SLIP_MAX, combine_motion, flow_factor
+from dynamics_proc.vehicles.ground import machine_poses, planar_poses
+from dynamics_proc.vehicles.machine_sync import cart_offset
+from dynamics_proc.vehicles.motion import CX, CY, CYAW, DELTA, V, cart_pose, tractor_pose
 
 if TYPE_CHECKING:
-    from .model import ModelParams, World
+    from dynamics_proc.state import ModelParams, World
 
 __all__ = ["signals"]
 

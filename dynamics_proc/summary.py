@@ -9,8 +9,7 @@ import math
 import numpy as np
 
 from cosim.scenario.config import Scenario
-
-from .grainfill import section_rows
+from dynamics_proc.grain.fill import section_rows
 
 __all__ = ["summarize", "section_stats"]
 

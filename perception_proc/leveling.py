@@ -2,7 +2,7 @@
 
 On flat ground the algorithms work in the sensor's parent body frame (the *level frame*, perception_proc.pipeline):
 the cart's rim is level there at a known height. On the terrain the combine and the cart tilt and heave apart, and
-a rim a few degrees off level in the parent's frame leaves the rim band (perception_proc.rim). The machines know
+a rim a few degrees off level in the parent's frame leaves the rim band (perception_proc.estimates.rim). The machines know
 their attitude and height (an inclination sensor on each, RTK heights; the cart's come over Machine Sync), so the
 points are moved into a frame that stands on the cart's ground plane under the parent, with the parent's heading:
 

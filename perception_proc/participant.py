@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+import perception_proc.accuracy.stage as acc
 from cosim.errors import FrameMismatch
 from cosim.runtime.participant import perception_overlaps
 from cosim.scenario.config import Scenario
@@ -37,14 +38,12 @@ from cosim.world.beamtarget import BEAMS_DEPTH_BLOCK
 from cosim.world.camera import Rig
 from cosim.world.geometry import invert
 from cosim.world.sensors import world_from_parent
-
-from . import accuracy as acc
-from .blocks import ACCURACY_FIELDS, HEIGHTS_BLOCK, POINTS_BLOCK, STATE_BLOCK, WRITER, sensor_state_block
-from .cameras import PerceptionCameras
-from .leveling import level_from_parent
-from .lidar_atmosphere import lidar_atmosphere
-from .pipeline import FrameResult, Perception
-from .sensor_report import record_of, sensor_values
+from perception_proc.atmosphere.lidar import lidar_atmosphere
+from perception_proc.blocks import ACCURACY_FIELDS, HEIGHTS_BLOCK, POINTS_BLOCK, STATE_BLOCK, WRITER, sensor_state_block
+from perception_proc.cameras.sensors import PerceptionCameras
+from perception_proc.leveling import level_from_parent
+from perception_proc.pipeline import FrameResult, Perception
+from perception_proc.sensor_report import record_of, sensor_values
 
 if TYPE_CHECKING:
     from shm_schema import Segment

@@ -25,17 +25,23 @@ from cosim.world.beamtarget import beam_layout
 from cosim.world.camera import Rig, beam_directions
 from cosim.world.geometry import body_from_camera_axes, mount_transform
 from cosim.world.patterns import beam_table, pattern_shape
-
-from .beam_decode import BeamDecoder
-from .camera_pipeline import CameraPipeline
-from .fusion import merge
-from .heightmap import HeightMap, grid_shape
-from .impact import Impact
-from .lidar import apply_noise_and_limits, frame_generator, point_basis, to_points
-from .protocol import ALGORITHM_POINT, PerceptionContext, PerceptionInput, SensorFrame, StageSet, check_output
-from .resample import beam_words, build_table, resample, resample_words
-from .resample_offset import build_offset_table, is_offset, resample_offset
-from .rim import CartEstimate, border_beams
+from perception_proc.cameras.pipeline import CameraPipeline
+from perception_proc.estimates.heightmap import HeightMap, grid_shape
+from perception_proc.estimates.impact import Impact
+from perception_proc.estimates.rim import CartEstimate, border_beams
+from perception_proc.fusion import merge
+from perception_proc.lidar.beam_decode import BeamDecoder
+from perception_proc.lidar.resample import beam_words, build_table, resample, resample_words
+from perception_proc.lidar.resample_offset import build_offset_table, is_offset, resample_offset
+from perception_proc.lidar.sensor import apply_noise_and_limits, frame_generator, point_basis, to_points
+from perception_proc.protocol import (
+    ALGORITHM_POINT,
+    PerceptionContext,
+    PerceptionInput,
+    SensorFrame,
+    StageSet,
+    check_output,
+)
 
 __all__ = ["Perception", "FrameResult", "own_vehicle_box", "OWN_BOX_MARGIN_M"]
 
@@ -101,13 +107,13 @@ class Perception:
     def __init__(self, scenario: Scenario, rig: Rig | None, cameras: Sequence[CameraPipeline] = ()):
         self.scenario = scenario
         self.rig = rig
-        #: the camera sensors (perception_proc.camera_pipeline), in declaration order
+        #: the camera sensors (perception_proc.cameras.pipeline), in declaration order
         self.cameras = list(cameras)
         sensor = scenario.lidar
         if sensor is not None:
             self.elevation, self.azimuth = beam_table(sensor.pattern)
             self.shape = pattern_shape(sensor.pattern)
-            #: ``sensor.method: beam_native``: ranges decoded per beam (perception_proc.beam_decode), no rig
+            #: ``sensor.method: beam_native``: ranges decoded per beam (perception_proc.lidar.beam_decode), no rig
             self.beams = (BeamDecoder(beam_layout(sensor.pattern), sensor.codec) if sensor.method == "beam_native"
                           else None)
             self.level_from_sensor = mount_transform(sensor.mount) @ body_from_camera_axes()

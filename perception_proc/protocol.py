@@ -4,10 +4,10 @@
 Signatures (all plain callables; built-ins in :mod:`perception_proc.staged`):
 
 * algorithm: ``algorithm(ctx: PerceptionContext, inp: PerceptionInput) -> PerceptionOutput``
-* rim stage: ``rim(ctx, inp) -> CartEstimate`` (perception_proc.rim): the cart's rim corners and pose;
-* height map stage: ``heightmap(ctx, inp, cart) -> HeightMap`` (perception_proc.heightmap): grain heights on
+* rim stage: ``rim(ctx, inp) -> CartEstimate`` (perception_proc.estimates.rim): the cart's rim corners and pose;
+* height map stage: ``heightmap(ctx, inp, cart) -> HeightMap`` (perception_proc.estimates.heightmap): grain heights on
   the controller grid, in the frame of the cart found;
-* impact stage: ``impact(ctx, inp, cart, heightmap) -> Impact`` (perception_proc.impact): where the stream
+* impact stage: ``impact(ctx, inp, cart, heightmap) -> Impact`` (perception_proc.estimates.impact): where the stream
   lands, grid frame.
 
 Frames: ``inp.points`` are in the **level frame** (the sensor's parent body frame: x forward, y left, z up from
@@ -35,10 +35,9 @@ import numpy as np
 
 from cosim.errors import PluginFault
 from cosim.scenario.config import Scenario
-
-from .heightmap import HeightMap
-from .impact import Impact
-from .rim import CartEstimate
+from perception_proc.estimates.heightmap import HeightMap
+from perception_proc.estimates.impact import Impact
+from perception_proc.estimates.rim import CartEstimate
 
 __all__ = ["PerceptionContext", "PerceptionInput", "PerceptionOutput", "SensorFrame", "StageSet", "ALGORITHM_POINT",
            "STAGE_POINTS", "check_cart", "check_heightmap", "check_impact", "check_output"]
@@ -117,7 +116,7 @@ class SensorFrame:
 class PerceptionInput:
     """One frame: ``frame``; ``ranges`` (N,) float32 m per beam, NaN no return; ``points`` (N, 3) float64 m, the
     returns in the level frame, NaN rows invalid (and where the return is on the sensor's own vehicle), stored
-    column-major (``points[:, k]`` contiguous); ``border`` (N,) uint8 beam flags (perception_proc.rim
+    column-major (``points[:, k]`` contiguous); ``border`` (N,) uint8 beam flags (perception_proc.estimates.rim
     ``FOV_EDGE`` / ``OCCLUDED``); the pose hint ``heading_xy``: the towing direction in the level frame (unit
     (x, y)); ``heights_out``: an optional (nx, ny) float32 destination a height map stage may fill;
     ``sensors``: every sensor's :class:`SensorFrame` by name. With several depth-giving sensors, ``ranges``,

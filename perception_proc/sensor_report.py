@@ -4,7 +4,7 @@
 Every frame: the share of valid data, the valid points, the model's time. On frames compared with truth:
 the depth error against the exact ray cast (a camera's planar depth, the LiDAR's range: its figures in the
 2-15 m working range of ``perc_state``), and the height map the sensor alone gives in the frame's perceived
-cart against the true heights (perception_proc.camera_accuracy.fill_error).
+cart against the true heights (perception_proc.accuracy.sensors.fill_error).
 """
 from __future__ import annotations
 
@@ -13,12 +13,12 @@ from typing import Mapping
 
 import numpy as np
 
-from . import accuracy as acc
-from . import camera_accuracy as cacc
-from .blocks import SENSOR_FIELDS
-from .cameras import PerceptionCameras
-from .heightmap import height_map
-from .pipeline import FrameResult, Perception
+import perception_proc.accuracy.sensors as cacc
+import perception_proc.accuracy.stage as acc
+from perception_proc.blocks import SENSOR_FIELDS
+from perception_proc.cameras.sensors import PerceptionCameras
+from perception_proc.estimates.heightmap import height_map
+from perception_proc.pipeline import FrameResult, Perception
 
 __all__ = ["sensor_values", "record_of"]
 

@@ -2,7 +2,7 @@
 first implementations of :mod:`perception_proc.protocol`, loaded like a user's (cosim.scenario.plugins).
 
 ``staged`` runs ``ctx.stages``: rim (cart boundary) -> height map -> impact, then blanks the cells the stream
-hides around the impact (:func:`perception_proc.impact.blank_under_stream`). Without a cart there is no map
+hides around the impact (:func:`perception_proc.estimates.impact.blank_under_stream`). Without a cart there is no map
 and no impact. Each stage's answer is checked and a stage that raises or returns a bad value ends the run
 naming that stage's plug-in.
 """
@@ -14,10 +14,10 @@ from dataclasses import replace
 import numpy as np
 
 from cosim.errors import PluginFault
-
-from .heightmap import HeightMap, height_map
-from .impact import Impact, blank_under_stream, find_impact
-from .protocol import (
+from perception_proc.estimates.heightmap import HeightMap, height_map
+from perception_proc.estimates.impact import Impact, blank_under_stream, find_impact
+from perception_proc.estimates.rim import CartEstimate, find_cart
+from perception_proc.protocol import (
     STAGE_POINTS,
     PerceptionContext,
     PerceptionInput,
@@ -26,7 +26,6 @@ from .protocol import (
     check_heightmap,
     check_impact,
 )
-from .rim import CartEstimate, find_cart
 
 __all__ = ["staged", "rim_stage", "heightmap_stage", "impact_stage", "NO_IMPACT_REASON"]
 
@@ -36,12 +35,12 @@ _MS_PER_S = 1e3
 
 
 def rim_stage(ctx: PerceptionContext, inp: PerceptionInput) -> CartEstimate:
-    """The cart rim from the level-frame points (perception_proc.rim.find_cart)."""
+    """The cart rim from the level-frame points (perception_proc.estimates.rim.find_cart)."""
     return find_cart(inp.points, inp.border, ctx.scenario.cart, inp.heading_xy, ctx.noise_sigma_m)
 
 
 def heightmap_stage(ctx: PerceptionContext, inp: PerceptionInput, cart: CartEstimate) -> HeightMap:
-    """Lower-cluster medians per cell in the perceived cart grid (perception_proc.heightmap.height_map), written
+    """Lower-cluster medians per cell in the perceived cart grid (perception_proc.estimates.heightmap.height_map), written
     into ``inp.heights_out`` when given."""
     sc = ctx.scenario
     return height_map(inp.points, cart.level_from_grid, sc.cart, sc.controller.grid_cell_m,
@@ -49,7 +48,7 @@ def heightmap_stage(ctx: PerceptionContext, inp: PerceptionInput, cart: CartEsti
 
 
 def impact_stage(ctx: PerceptionContext, inp: PerceptionInput, cart: CartEstimate, hm: HeightMap) -> Impact:
-    """The stream's landing point from its returns and the height map (perception_proc.impact.find_impact),
+    """The stream's landing point from its returns and the height map (perception_proc.estimates.impact.find_impact),
     with the fitted axis moved away from the sensor."""
     lfg = cart.level_from_grid
     sensor_grid = (ctx.level_from_sensor[:3, 3] - lfg[:3, 3]) @ lfg[:3, :3]

@@ -13,11 +13,10 @@ from typing import Mapping
 
 import numpy as np
 
+import perception_proc.accuracy.sensors as cacc
+import perception_proc.accuracy.stage as acc
 from cosim.scenario.config import Scenario
-
-from . import accuracy as acc
-from . import camera_accuracy as cacc
-from .blocks import RANGE_BANDS_M, SENSOR_FIELDS, band_name, sensor_state_block
+from perception_proc.blocks import RANGE_BANDS_M, SENSOR_FIELDS, band_name, sensor_state_block
 
 __all__ = ["summarize", "clean_json", "evaluation_caster", "evaluation_note", "sensor_blocks"]
 
@@ -55,7 +54,7 @@ def _median(values: np.ndarray) -> float:
 
 
 def evaluation_caster(scenario: Scenario) -> str | None:
-    """The exact ray cast the accuracy evaluation ran (``perception_proc.accuracy.exact_ranges``: Embree where
+    """The exact ray cast the accuracy evaluation ran (``perception_proc.accuracy.stage.exact_ranges``: Embree where
     embreex imports, else the numpy ray cast; one of ``cosim.world.fastcast.CASTERS``), None when it is off."""
     from cosim.world.fastcast import embree_available
 

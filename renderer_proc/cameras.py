@@ -44,11 +44,11 @@ def camera_backend(scenario: Scenario, views: list[View], context: Any = None):
     labelled = [bool({"labels", "rgb", "right"} & set(v.parts)) for v in views]
     pins = [v.pin for v in views]
     if scenario.renderer == "gl":
-        from .camera_gl import GLCameraRenderer
+        from renderer_proc.gl.camera import GLCameraRenderer
 
         return GLCameraRenderer(pins, scenario.render.lighting, context=context)
     if scenario.renderer == "mock":
-        from .camera_mock import MockCameraRenderer
+        from renderer_proc.mock.camera import MockCameraRenderer
 
         return MockCameraRenderer(pins, scenario.render.lighting, labelled)
     raise ValueError(f"scenario.renderer is {scenario.renderer!r}: this scenario runs no renderer")

@@ -24,10 +24,9 @@ from cosim.world.fastcast import CASTERS
 from cosim.world.parts import entity_parts
 from cosim.world.rig import plan_rig
 from cosim.world.scene import scene_from_state
-
-from .blocks import STATE_BLOCK, WRITER, ray_casts, wants_rgb
-from .cameras import CameraSet
-from .projection import camera_poses, world_from_sensor
+from renderer_proc.blocks import STATE_BLOCK, WRITER, ray_casts, wants_rgb
+from renderer_proc.cameras import CameraSet
+from renderer_proc.projection import camera_poses, world_from_sensor
 
 if TYPE_CHECKING:
     from shm_schema.segment import Segment
@@ -65,11 +64,11 @@ def make_backend(scenario: Scenario, rig, context: Any = None):
         return _beam_backend(scenario, context)
     opts = dict(rgb=wants_rgb(scenario), float_depth=scenario.render.float_depth)
     if scenario.renderer == "gl":
-        from .gl_backend import GLRenderer
+        from renderer_proc.gl.backend import GLRenderer
 
         return GLRenderer(rig, scenario.lidar.codec, context=context, **opts)
     if scenario.renderer == "mock":
-        from .mock_backend import MockRenderer
+        from renderer_proc.mock.backend import MockRenderer
 
         return MockRenderer(rig, scenario.lidar.codec, parts=entity_parts(scenario), **opts)
     raise ValueError(f"scenario.renderer is {scenario.renderer!r}: this scenario runs no renderer")
@@ -80,11 +79,11 @@ def _beam_backend(scenario: Scenario, context: Any = None):
     patterns) or ``MockBeamRenderer`` (mock; gl with a CSV pattern)."""
     layout, codec, rgb = beam_layout(scenario.lidar.pattern), scenario.lidar.codec, wants_rgb(scenario)
     if scenario.renderer == "gl" and layout.gridded:
-        from .beam_gl import GLBeamRenderer
+        from renderer_proc.gl.beam import GLBeamRenderer
 
         return GLBeamRenderer(layout, codec, rgb=rgb, context=context)
     if scenario.renderer in ("gl", "mock"):       # a CSV table has no angle grid: its exact ray cast under gl too
-        from .beam_mock import MockBeamRenderer
+        from renderer_proc.mock.beam import MockBeamRenderer
 
         return MockBeamRenderer(layout, codec, rgb=rgb, parts=entity_parts(scenario))
     raise ValueError(f"scenario.renderer is {scenario.renderer!r}: this scenario runs no renderer")

@@ -13,8 +13,7 @@ import numpy as np
 
 from cosim.scenario.config.scenario import Scenario
 from cosim.world.fastcast import CASTERS
-
-from .blocks import STATE_BLOCK
+from renderer_proc.blocks import STATE_BLOCK
 
 __all__ = ["summarize"]
 

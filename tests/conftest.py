@@ -56,7 +56,7 @@ def built_fmus(tmp_path_factory):
 def ctx():
     """A headless GL context (EGL) for a test module; the module is skipped with the reason where none can be made."""
     from cosim.errors import RendererUnavailable
-    from renderer_proc.gl_backend import create_gl_context
+    from renderer_proc.gl.backend import create_gl_context
 
     try:
         c = create_gl_context()

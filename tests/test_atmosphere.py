@@ -1,4 +1,4 @@
-"""Dust and the grain stream for the LiDAR (perception_proc.atmosphere, stream_particles, lidar_atmosphere): the
+"""Dust and the grain stream for the LiDAR (perception_proc.atmosphere.dust, stream_particles, lidar_atmosphere): the
 clear-air limit is today's ranges, the uniform medium against its closed forms, the reported return, the stream's
 kernels as partial occluders."""
 from __future__ import annotations
@@ -10,9 +10,9 @@ import pytest
 from scipy.integrate import quad
 
 from cosim.scenario.config import Scenario
-from perception_proc.atmosphere import C_MPS, dust_model, hard_power, overlap, soft_power
-from perception_proc.lidar_atmosphere import lidar_atmosphere, stream_row_time
-from perception_proc.stream_particles import beam_crossings, disk_overlap, kernel_density, occlude
+from perception_proc.atmosphere.dust import C_MPS, dust_model, hard_power, overlap, soft_power
+from perception_proc.atmosphere.lidar import lidar_atmosphere, stream_row_time
+from perception_proc.atmosphere.stream import beam_crossings, disk_overlap, kernel_density, occlude
 
 TAU = 20e-9
 R1, R2 = 0.9, 1.0

@@ -14,10 +14,10 @@ from cosim.world.beamtarget import BEAMS_DEPTH_BLOCK, TABLE_WIDTH, beam_layout
 from cosim.world.geometry import make_transform
 from cosim.world.meshes import unit_cube
 from cosim.world.scene import Boxes, Cylinders, HeightField, MeshInstance, Scene, scene_from_state
-from perception_proc.beam_decode import BeamDecoder
-from renderer_proc.beam_mock import MockBeamRenderer
+from perception_proc.lidar.beam_decode import BeamDecoder
 from renderer_proc.blocks import declare_blocks
 from renderer_proc.codec import decode_depth
+from renderer_proc.mock.beam import MockBeamRenderer
 from renderer_proc.projection import world_from_sensor
 from renderer_proc.sample import sample_frame
 
@@ -45,7 +45,7 @@ def boxes_scene(poses, halves, as_mesh: bool = False) -> Scene:
 
 def both_ranges(ctx, pattern: Pattern, scene: Scene) -> dict[str, np.ndarray]:
     """Decoded ranges (N,) m of the mock and (with a context) the GL beam-native renderer, sensor at the origin."""
-    from renderer_proc.beam_gl import GLBeamRenderer
+    from renderer_proc.gl.beam import GLBeamRenderer
 
     lay = beam_layout(pattern)
     out = {}
@@ -173,7 +173,7 @@ def test_full_turn_ring_of_walls_and_a_ceiling(ctx, as_mesh):
 def test_gl_matches_the_exact_cast_beam_for_beam_on_default_frames(ctx):
     # two frames 4 s apart drawn by the same renderers: the vehicles have moved, the GL renderer's cached ground
     # image (same pose to the ground plane) is reused, the grain and stream are redrawn
-    from renderer_proc.beam_gl import GLBeamRenderer
+    from renderer_proc.gl.beam import GLBeamRenderer
 
     sc = Scenario(format_version=1, sensor={"method": "beam_native"})
     lay = beam_layout(sc.sensor.pattern)
@@ -252,7 +252,7 @@ def test_short_run_is_exact_in_the_working_range():
 
 @pytest.mark.parametrize("preset", ["grid", "honeycomb"])
 def test_row_table_is_conservative(preset):
-    from renderer_proc.beam_gl import row_bounds
+    from renderer_proc.gl.beam import row_bounds
 
     row_el = beam_layout(Pattern(preset=preset, elevation_count=37))
     row_el = row_el.elevation[::row_el.shape[1]]
@@ -296,7 +296,7 @@ def test_csv_patterns_get_the_exact_cast_under_gl_too(tmp_path):
 @pytest.mark.gl
 def test_gl_shaded_image_marks_hits_and_sky(ctx):
     from cosim.world.scene import SKY_RGBA
-    from renderer_proc.beam_gl import GLBeamRenderer
+    from renderer_proc.gl.beam import GLBeamRenderer
 
     pattern = grid((-10.0, 10.0, 21), (-1.0, 1.0, 1))
     edge_x = -5.0 * math.tan(math.radians(0.5))

@@ -13,8 +13,8 @@ from cosim.scenario.config.sensing import Codec, Pattern
 from cosim.world.beamtarget import beam_layout
 from cosim.world.geometry import make_transform
 from cosim.world.scene import Boxes, Cylinders, HeightField, Scene
-from renderer_proc.beam_mock import beam_ranges
 from renderer_proc.codec import decode_depth
+from renderer_proc.mock.beam import beam_ranges
 
 pytestmark = pytest.mark.gl
 
@@ -97,7 +97,7 @@ def render(ctx, pattern: Pattern, scene: Scene, *, rgb: bool = False, cover: boo
     """The GL beam-native target of ``scene`` from the origin: decoded ranges (N,) m, or with ``cover`` the
     pixels (N,) bool the solids' rectangles cover; and the fragments shaded (an occlusion query over the solids,
     depth test off with ``cover``). ``rects``: solid.geom's rectangle budget instead of max_rects."""
-    import renderer_proc.beam_gl as beam_gl
+    import renderer_proc.gl.beam as beam_gl
 
     if rects is not None:
         monkeypatch.setattr(beam_gl, "max_rects", lambda rgb: rects)
@@ -221,7 +221,7 @@ def test_empty_cart_floor_stays_exact(ctx):
     # 0, which must still be drawn (the floor is bounded by its side faces only); GL against the exact cast
     from cosim.scenario.config import Scenario
     from cosim.world.scene import scene_from_state
-    from renderer_proc.beam_gl import GLBeamRenderer
+    from renderer_proc.gl.beam import GLBeamRenderer
     from renderer_proc.projection import world_from_sensor
     from renderer_proc.sample import sample_frame
 
@@ -245,7 +245,7 @@ def test_empty_cart_floor_stays_exact(ctx):
 
 
 def test_boxes_are_sliced_on_cpu_rasterisers_only(ctx):
-    from renderer_proc.beam_gl import slicing_pays
+    from renderer_proc.gl.beam import slicing_pays
     # llvmpipe shades every fragment on the CPU: slicing pays there; a GPU draws the boxes unsliced (the same
     # bytes, test above), and NVIDIA's compiler is never given the slicing loop it crashes on
     assert slicing_pays(ctx.info["GL_RENDERER"]) == ("llvmpipe" in ctx.info["GL_RENDERER"])

@@ -1,4 +1,4 @@
-"""The grain surface's quad path in the GL beam-native renderer (renderer_proc/surface_gl.py,
+"""The grain surface's quad path in the GL beam-native renderer (renderer_proc/gl/surface.py,
 shaders/beam_quad.*): SurfaceMesh.quads is SurfaceMesh.triangles in pairs, and rough height fields (steep steps,
 grazing beams, beams straight down across the back seam) are drawn beam for beam as the exact ray cast, with no
 beam the surface is hit by left unwritten (docs/lidar.md)."""
@@ -13,9 +13,9 @@ from cosim.world.beamtarget import beam_layout
 from cosim.world.geometry import make_transform
 from cosim.world.heightfield import padded_heights
 from cosim.world.scene import Boxes, Cylinders, HeightField, Scene, scene_from_state
-from renderer_proc.beam_mock import beam_ranges
 from renderer_proc.codec import decode_depth
-from renderer_proc.hfmesh import MERGE_BLOCK, SurfaceMesh
+from renderer_proc.gl.hfmesh import MERGE_BLOCK, SurfaceMesh
+from renderer_proc.mock.beam import beam_ranges
 from renderer_proc.projection import world_from_sensor
 from renderer_proc.sample import sample_frame
 
@@ -54,7 +54,7 @@ def surface_scene(heights: np.ndarray, corner_sensor: tuple[float, float, float]
 
 def render(ctx, pattern: Pattern, scene: Scene, pose: np.ndarray) -> dict[str, np.ndarray]:
     """Encoded and shaded images of the GL renderer's quad and triangle paths, the exact ranges (N,) m."""
-    from renderer_proc.beam_gl import GLBeamRenderer
+    from renderer_proc.gl.beam import GLBeamRenderer
 
     lay = beam_layout(pattern)
     out = {"exact": beam_ranges(scene, pose, lay.directions), "layout": lay}
@@ -157,7 +157,7 @@ def test_surface_benchmark_counts_fewer_fragments_for_quads(ctx):
 def test_unchanged_heights_are_not_uploaded_again_and_changed_ones_are(ctx):
     # Surface.upload writes the heights only when their bytes change: frames alternating between two height fields
     # (and repeating one) give each field's own image, and a repeat writes nothing
-    from renderer_proc.beam_gl import GLBeamRenderer
+    from renderer_proc.gl.beam import GLBeamRenderer
 
     pattern = Pattern(preset="grid", azimuth_min_deg=-60, azimuth_max_deg=60, azimuth_count=120,
                       elevation_min_deg=-60, elevation_max_deg=5, elevation_count=80)

@@ -1,4 +1,4 @@
-"""Dust in the cameras (perception_proc/camera_dust.py through the post-process seam; docs/cameras.md,
+"""Dust in the cameras (perception_proc/atmosphere/camera.py through the post-process seam; docs/cameras.md,
 docs/field.md): clear air changes nothing, the haze is Koschmieder's law, the speckle share is its closed form and
 seeded, the depth camera's pixels go through the LiDAR's dust model, and the stereo matcher loses valid pixels as
 the visibility drops."""
@@ -11,8 +11,7 @@ import pytest
 
 from cosim.scenario.loader import load_scenario_text
 from cosim.testing.stereo_plane import textured_plane_pair
-from perception_proc.atmosphere import hard_power, soft_power
-from perception_proc.camera_dust import (
+from perception_proc.atmosphere.camera import (
     AIRLIGHT_RGB,
     CameraDust,
     hazed,
@@ -20,9 +19,10 @@ from perception_proc.camera_dust import (
     speckle_share,
     speckled,
 )
-from perception_proc.camera_effects import NoEffects, camera_effects
-from perception_proc.camera_pipeline import CameraImages, CameraPipeline
-from perception_proc.stereo import make_matcher, stereo_depth
+from perception_proc.atmosphere.dust import hard_power, soft_power
+from perception_proc.cameras.effects import NoEffects, camera_effects
+from perception_proc.cameras.pipeline import CameraImages, CameraPipeline
+from perception_proc.cameras.stereo import make_matcher, stereo_depth
 
 TOF = """format_version: 1
 name: tof_dust

@@ -1,4 +1,4 @@
-"""The GL camera renderer (renderer_proc.camera_gl): labels and depth against the exact ray cast, the LiDAR and a
+"""The GL camera renderer (renderer_proc.gl.camera): labels and depth against the exact ray cast, the LiDAR and a
 camera at the same pose agreeing on what both see, and the light (docs/cameras.md)."""
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from cosim.world.labelcast import cast_labels
 from cosim.world.labels import CART_RIM, CART_WALL, GRAIN, GROUND
 from cosim.world.scene import scene_from_state
 from cosim.world.sensors import camera_pinhole, world_from_sensor
-from renderer_proc.camera_gl import GLCameraRenderer
+from renderer_proc.gl.camera import GLCameraRenderer
 
 pytestmark = pytest.mark.gl
 

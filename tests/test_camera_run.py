@@ -59,7 +59,7 @@ def test_a_plugin_reads_camera_images_in_simulation_and_launched(tmp_path, shm_c
     colour) and .depth_m: within a few cm of the truth in cosim.Simulation; without the colour image
     (``rgb: false``) it has nothing to map; and the same in a launched run."""
     from cosim import Simulation
-    from perception_proc.accuracy import heightmap_error, truth_on_grid
+    from perception_proc.accuracy.stage import heightmap_error, truth_on_grid
 
     with Simulation(EXAMPLE / "scenario.yaml", duration=0.5) as sim:
         state = sim.step(4)

@@ -11,8 +11,8 @@ from scipy.stats import norm
 from cosim.scenario.config.cameras import DepthCamera, StereoCamera
 from cosim.testing.stereo_plane import textured_plane_pair
 from cosim.world.camera import Pinhole
-from perception_proc.stereo import disparity, grey, make_matcher
-from perception_proc.tof import axial_sigma, frame_generator, tof_depth
+from perception_proc.cameras.stereo import disparity, grey, make_matcher
+from perception_proc.cameras.tof import axial_sigma, frame_generator, tof_depth
 
 PIN = Pinhole(256, 212, math.radians(70.6))
 TOF = DepthCamera(kind="depth_camera", mount={"parent": "world"}, range_max_m=10.0)

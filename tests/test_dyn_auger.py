@@ -11,7 +11,7 @@ from scipy.integrate import quad
 
 from cosim.scenario.config import Scenario
 from cosim.world.geometry import cart_grid_from_body, invert, vehicle_pose
-from dynamics_proc import auger as ag
+from dynamics_proc.grain import auger as ag
 
 
 def params(**auger) -> ag.AugerParams:

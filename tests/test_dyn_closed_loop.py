@@ -8,7 +8,7 @@ import pytest
 
 from cosim.scenario.config import Scenario
 from dynamics_proc.closed_loop import noisy_measurement, simulate
-from dynamics_proc.grainfill import GrainGrid, max_slope
+from dynamics_proc.grain.fill import GrainGrid, max_slope
 from dynamics_proc.summary import summarize
 
 PEAK_TOL_M = 0.05
@@ -148,7 +148,7 @@ def test_forced_auger_spill_is_accounted(monkeypatch, where, surface):
     slides over a wall top, is spill, and delivered = in cart + spilled still holds."""
     from dataclasses import replace
 
-    from dynamics_proc.controller import SectionFillController
+    from dynamics_proc.control.controller import SectionFillController
 
     real = SectionFillController.step
 
@@ -159,7 +159,7 @@ def test_forced_auger_spill_is_accounted(monkeypatch, where, surface):
     lat = {"ground": 3.0, "rim": None, "near_wall": 6.75}[where]
     if where == "rim":
         # put the left rim band under the stream's landing point at rim height (closed-form parabola)
-        from dynamics_proc import auger as ag
+        from dynamics_proc.grain import auger as ag
         s0 = scen()
         a = ag.AugerParams.from_scenario(s0)
         lp = ag.landing_point(ag.spout_world(0, 0, 0, a), ag.exit_velocity_world(0, a),

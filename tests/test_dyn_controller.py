@@ -7,8 +7,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cosim.scenario.config import Scenario
-from dynamics_proc.controller import ControllerParams, controller_step, initial_controller, min2x2, section_heights
-from dynamics_proc.strategies import back_to_front, front_to_back, get_strategy, lowest_first
+from dynamics_proc.control.controller import (
+    ControllerParams,
+    controller_step,
+    initial_controller,
+    min2x2,
+    section_heights,
+)
+from dynamics_proc.control.strategies import back_to_front, front_to_back, get_strategy, lowest_first
 
 
 def cparams(**controller) -> ControllerParams:

@@ -1,4 +1,4 @@
-"""The built-in controller copes (controller.coping; dynamics_proc.coping, dynamics_proc.feedforward): a lead on
+"""The built-in controller copes (controller.coping; dynamics_proc.control.coping, dynamics_proc.control.feedforward): a lead on
 the full level at high flow, dead reckoning and a safe hold when perception drops out, feed-forward through turns."""
 from __future__ import annotations
 
@@ -12,15 +12,15 @@ from cosim.cli import main
 from cosim.runtime.outcome import HOLD_LOST, HOLD_NO_MEASUREMENT, judge
 from cosim.scenario.config import Scenario
 from cosim.scenario.loader import load_scenario, packaged_scenarios
-from dynamics_proc import auger as ag
 from dynamics_proc.closed_loop import simulate
-from dynamics_proc.coping import MODE_DEAD_RECKONING, MODE_HOLD, MODE_MEASURED, mode, rise_rate, slowed_section
-from dynamics_proc.feedforward import _spout_grid, steady_cart_offset, turn_compensation
-from dynamics_proc.integrators import step_exponential_values
-from dynamics_proc.machine_sync import SyncGains, cart_offset, sync_command
+from dynamics_proc.control.coping import MODE_DEAD_RECKONING, MODE_HOLD, MODE_MEASURED, mode, rise_rate, slowed_section
+from dynamics_proc.control.feedforward import _spout_grid, steady_cart_offset, turn_compensation
+from dynamics_proc.grain import auger as ag
 from dynamics_proc.model import ModelParams
 from dynamics_proc.summary import summarize
-from dynamics_proc.vehicles import CYAW, VehicleParams, cart_pose, initial_state
+from dynamics_proc.vehicles.integrators import step_exponential_values
+from dynamics_proc.vehicles.machine_sync import SyncGains, cart_offset, sync_command
+from dynamics_proc.vehicles.motion import CYAW, VehicleParams, cart_pose, initial_state
 
 
 def scen(**kw) -> Scenario:

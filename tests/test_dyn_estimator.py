@@ -12,10 +12,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cosim.scenario.config import Scenario
-from dynamics_proc.auger import landing_point
 from dynamics_proc.closed_loop import occluded_measurement, simulate
-from dynamics_proc.estimator import FusionParams, consistent, initial_estimate, landing_on, predict, update
-from dynamics_proc.grainfill import GrainGrid, max_slope
+from dynamics_proc.control.estimator import FusionParams, consistent, initial_estimate, landing_on, predict, update
+from dynamics_proc.grain.auger import landing_point
+from dynamics_proc.grain.fill import GrainGrid, max_slope
 from dynamics_proc.summary import summarize
 
 GRID = GrainGrid(40, 20, 0.1, 2.0, math.tan(math.radians(23.0)), 0.25)

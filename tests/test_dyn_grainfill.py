@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cosim.scenario.config import Scenario
-from dynamics_proc.grainfill import (
+from dynamics_proc.grain.fill import (
     GrainGrid,
     deposit,
     initial_heights,

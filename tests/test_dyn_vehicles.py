@@ -12,9 +12,9 @@ from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
 from cosim.scenario.config import Scenario
-from dynamics_proc.integrators import integrate, step_exponential, step_exponential_values, step_ivp
-from dynamics_proc.machine_sync import cart_offset, sync_command, tractor_offset
-from dynamics_proc.vehicles import (
+from dynamics_proc.vehicles.integrators import integrate, step_exponential, step_exponential_values, step_ivp
+from dynamics_proc.vehicles.machine_sync import cart_offset, sync_command, tractor_offset
+from dynamics_proc.vehicles.motion import (
     CX,
     CY,
     DELTA,
@@ -42,7 +42,7 @@ def scen(**kw) -> Scenario:
 def run_sync(s: Scenario, seconds: float, dt: float, method: str = "exponential", setpoint=None):
     """Vehicles under Machine Sync alone (no grain), held input per step: states (n + 1, 9)."""
     p = VehicleParams.from_scenario(s)
-    from dynamics_proc.machine_sync import SyncGains
+    from dynamics_proc.vehicles.machine_sync import SyncGains
     g = SyncGains.from_scenario(s)
     sp = setpoint or (s.machine_sync.longitudinal_offset_m, s.machine_sync.lateral_offset_m)
     x = initial_state(s, p)
@@ -110,7 +110,7 @@ def test_exponential_keeps_the_stiff_distance_exact():
 def _exponential_step_reference(x, u, p, dt):
     """The exponential step written plainly from kinematic_derivative (the frame loop's inlined arithmetic must
     give these bits)."""
-    from dynamics_proc.integrators import _stage_lag
+    from dynamics_proc.vehicles.integrators import _stage_lag
     v0, vm, v1, v_end = _stage_lag(x[V], u[0], p.drivetrain_tau_s, p.accel_max_mps2, p.brake_max_mps2, dt)
     r = p.steer_rate_max_radps
     d0, dm, d1, d_end = _stage_lag(x[DELTA], u[1], p.steer_tau_s, r, r, dt)

@@ -1,4 +1,4 @@
-"""Machine Sync and the flow in a field (dynamics_proc.fieldnoise, dynamics_proc.fieldsync): the GNSS error's
+"""Machine Sync and the flow in a field (dynamics_proc.vehicles.fieldnoise, dynamics_proc.vehicles.fieldsync): the GNSS error's
 variance and correlation time, latency, actuation delay, slip, the speed and turn profile, the flow's variation,
 the controller's guards through a stop and a start, determinism."""
 from __future__ import annotations
@@ -12,10 +12,10 @@ import pytest
 from cosim.runtime.outcome import judge
 from cosim.scenario.config import Scenario
 from dynamics_proc.closed_loop import simulate
-from dynamics_proc.fieldnoise import gm_coefficients, gm_series
-from dynamics_proc.fieldsync import FieldParams, combine_motion, speed_change
 from dynamics_proc.summary import summarize
-from dynamics_proc.vehicles import VehicleParams
+from dynamics_proc.vehicles.fieldnoise import gm_coefficients, gm_series
+from dynamics_proc.vehicles.fieldsync import FieldParams, combine_motion, speed_change
+from dynamics_proc.vehicles.motion import VehicleParams
 
 STOP_GO = [{"t_s": 0, "speed_mps": 2}, {"t_s": 20, "speed_mps": 2}, {"t_s": 22, "speed_mps": 0},
            {"t_s": 30, "speed_mps": 0}, {"t_s": 32, "speed_mps": 2}]
@@ -63,7 +63,7 @@ def test_slip_slows_the_tractor_over_the_ground_by_its_fraction():
     # the tractor on its own at a held wheel speed: distance over the ground = wheel speed x (1 - slip) x time
     from dataclasses import replace
 
-    from dynamics_proc.integrators import step_exponential_values
+    from dynamics_proc.vehicles.integrators import step_exponential_values
     vp = replace(VehicleParams.from_scenario(scen()), ground_keep=0.9)
     xs = [0.0] * 9
     xs[6] = 2.0

@@ -15,7 +15,7 @@ import yaml
 from cosim.cli import main
 from cosim.scenario.loader import load_scenario
 from cosim.scenario.options import load_with_options
-from dynamics_proc.external import WorldInputs, grain_params, initial_grain, initial_inputs, step_grain
+from dynamics_proc.fmu.external import WorldInputs, grain_params, initial_grain, initial_inputs, step_grain
 from dynamics_proc.model import ModelParams, initial_world, signals, step_frame, truth_measurement
 
 fmpy = pytest.importorskip("fmpy", reason="FMU tests need fmpy (pip install -e \".[test]\")")

@@ -157,7 +157,7 @@ def test_zero_based_fmu_without_index_base_is_refused(tmp_path, built_fmus):
 def test_section_answers_follow_index_base():
     """The adapter's reading of an FMU's section answer: base 1 (1..N, 0 none) and base 0 (0..N-1, -1 none) give
     the same 0-based index; out of range is a fault naming the range."""
-    from dynamics_proc.fmus import _section
+    from dynamics_proc.fmu.models import _section
 
     slave = type("S", (), {"desc": type("D", (), {"path": "X.fmu"}), "label": "controller.fmu"})()
     assert [_section(slave, v, 9, "section", 1, 1) for v in (1.0, 9.0, 0.0)] == [0, 8, -1]
@@ -230,7 +230,7 @@ def test_example_builds_and_runs_launched(tmp_path, built_fmus, shm_clean, examp
 def test_adapters_follow_the_roles_signal_order():
     """The adapters read the FMU's values by position in the role's signal order (cosim.fmi.roles)."""
     from cosim.fmi.roles import CONTROLLER, VEHICLE
-    from dynamics_proc import fmus
+    from dynamics_proc.fmu import models as fmus
 
     assert list(fmus._STATE_INDEX) == [s.name for s in VEHICLE.outputs]
     assert list(fmus._CONTROLLER_INPUTS) == [s.name for s in CONTROLLER.inputs[1:]]

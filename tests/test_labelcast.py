@@ -14,7 +14,7 @@ from cosim.world.labels import CART_RIM, CART_WALL, GRAIN, GROUND, LABELS, NONE
 from cosim.world.raycast import ray_boxes, raycast
 from cosim.world.scene import Boxes, Cylinders, HeightField, Scene, scene_from_state
 from cosim.world.sensors import world_from_sensor
-from renderer_proc.camera_mock import MockCameraRenderer
+from renderer_proc.mock.camera import MockCameraRenderer
 
 
 @pytest.fixture(scope="module")

@@ -11,10 +11,10 @@ from cosim.testing.synthetic import Box, cart_shapes, raycast
 from cosim.world.camera import beam_directions
 from cosim.world.geometry import apply, body_from_camera_axes, cart_body_from_grid, mount_transform, vehicle_pose
 from cosim.world.patterns import beam_table, pattern_shape
-from perception_proc.heightmap import _cell_index, grid_shape, height_map
-from perception_proc.impact import blank_under_stream, find_impact, line_fits
-from perception_proc.lidar import apply_noise_and_limits, frame_generator
-from perception_proc.rim import border_beams, find_cart
+from perception_proc.estimates.heightmap import _cell_index, grid_shape, height_map
+from perception_proc.estimates.impact import blank_under_stream, find_impact, line_fits
+from perception_proc.estimates.rim import border_beams, find_cart
+from perception_proc.lidar.sensor import apply_noise_and_limits, frame_generator
 
 CART = Cart()
 CELL = 0.1
@@ -233,7 +233,7 @@ def test_own_box_axis_order_follows_the_view():
 def test_border_flags_match_their_definition():
     """FOV_EDGE on the pattern's outer rows and columns; OCCLUDED where a 3 x 3 neighbour (edge-replicated) is
     nearer by more than OCCLUDER_REL of the range, invalid neighbours never nearer."""
-    from perception_proc.rim import FOV_EDGE, OCCLUDED, OCCLUDER_REL
+    from perception_proc.estimates.rim import FOV_EDGE, OCCLUDED, OCCLUDER_REL
 
     rng = np.random.default_rng(3)
     r = rng.uniform(2.0, 20.0, (30, 40)).astype(np.float32)
@@ -252,7 +252,7 @@ def test_border_flags_match_their_definition():
 def test_upright_grid_transform_gives_the_full_products():
     """For a yaw-only cart pose the height map's grid coordinates skip the terms that are exact zeros: the
     same numbers as the full R^T (p - t), the same selection."""
-    from perception_proc.heightmap import _interior_points
+    from perception_proc.estimates.heightmap import _interior_points
 
     rng = np.random.default_rng(4)
     lfg = vehicle_pose(1.3, 6.2, 0.37) @ cart_body_from_grid(CART)
@@ -282,7 +282,7 @@ def test_edge_line_fit_memo_returns_the_fit():
     for repeated input, and a changed point is a new fit."""
     import cv2
 
-    from perception_proc.rim import _fit_line
+    from perception_proc.estimates.rim import _fit_line
 
     rng = np.random.default_rng(5)
     pts = np.stack([np.linspace(0, 6, 300), 0.1 * np.linspace(0, 6, 300) + rng.normal(0, 0.01, 300)], 1)
@@ -329,7 +329,7 @@ def test_neighbour_grid_matches_a_kd_tree(seed):
     clouds, including points on the cell lines and pairs exactly one radius apart (strictly closer counts)."""
     from scipy.spatial import cKDTree
 
-    from perception_proc.rim import _has_neighbour
+    from perception_proc.estimates.rim import _has_neighbour
 
     rng = np.random.default_rng(seed)
     for trial in range(200):
@@ -347,7 +347,7 @@ def test_neighbour_grid_matches_a_kd_tree(seed):
 def test_neighbour_pairs_and_grid_agree(seed):
     """The two kernels of the "anything right above" test: every pair (few pairs) and the grid (many) give the
     same flags, on cell lines and at exactly one radius too."""
-    from perception_proc.neighbours import near_in_grid, near_pairs
+    from perception_proc.estimates.neighbours import near_in_grid, near_pairs
 
     rng = np.random.default_rng(seed)
     flags = []
@@ -370,7 +370,7 @@ def test_roof_cell_bound_holds_and_changes_no_answer(seed):
     """The bound on the roof cells that points above the rim can cover (their bounding box grown by a cell
     diagonal) is never below the cells they do cover, in any rectangle, so using it changes no answer; dense
     patches, thin strips and scattered points, roofs and open carts both."""
-    from perception_proc.roof import roof_cells, roof_cells_bound, roofed
+    from perception_proc.estimates.roof import roof_cells, roof_cells_bound, roofed
 
     rng = np.random.default_rng(seed)
     answers = []

@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 from cosim.scenario.config import Codec
 from cosim.testing.synthetic import encode_linear
-from perception_proc.codec import decode_bytes, decode_depth, decode_lut, decode_words, lut_key
+from perception_proc.lidar.codec import decode_bytes, decode_depth, decode_lut, decode_words, lut_key
 
 
 def encode_reference(d_m: np.ndarray, alpha_cm: float, beta_cm: float, gamma: float = 2.2,

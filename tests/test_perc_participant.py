@@ -17,7 +17,7 @@ from cosim.world.geometry import vehicle_pose
 from cosim.world.raycast import raycast
 from cosim.world.scene import scene_from_state
 from dynamics_proc.blocks import declare_blocks as dynamics_blocks
-from perception_proc.accuracy_report import render_markdown, write_report
+from perception_proc.accuracy.report import render_markdown, write_report
 from perception_proc.blocks import declare_blocks
 from perception_proc.orderstats import median_sorted, percentile_sorted, percentiles
 from perception_proc.participant import PerceptionParticipant, create
@@ -222,7 +222,7 @@ def test_accuracy_off_never_casts_and_the_summary_says_so(monkeypatch):
     """perception.accuracy_every_frames: 0 keeps the exact ray cast off the frame (never called), the frame's
     accuracy fields NaN, and the summary's range_error says evaluation was off, with null statistics; with
     evaluation on it says how often."""
-    import perception_proc.accuracy as acc_mod
+    import perception_proc.accuracy.stage as acc_mod
 
     off = SCENARIO.model_copy(update={"perception": SCENARIO.perception.model_copy(
         update={"accuracy_every_frames": 0})})

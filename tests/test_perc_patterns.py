@@ -19,7 +19,13 @@ from cosim.world.patterns import (
     pattern_shape,
     validate_table,
 )
-from perception_proc.lidar import apply_noise_and_limits, frame_generator, point_basis, to_points, to_points_reference
+from perception_proc.lidar.sensor import (
+    apply_noise_and_limits,
+    frame_generator,
+    point_basis,
+    to_points,
+    to_points_reference,
+)
 
 
 def test_grid_is_uniform_with_both_ends_in_image_order():

@@ -10,8 +10,8 @@ from cosim.scenario.config import Codec, Pattern
 from cosim.testing.synthetic import Box, Plane, encode_linear, raycast, render_depth, stitched_rig
 from cosim.world.camera import Pinhole, Rig, RigCamera, beam_directions, paper_angles
 from cosim.world.patterns import beam_table, pattern_shape
-from perception_proc.resample import beam_pixels, build_table, paper_pixel, resample
-from perception_proc.resample_offset import build_offset_table, is_offset, resample_offset
+from perception_proc.lidar.resample import beam_pixels, build_table, paper_pixel, resample
+from perception_proc.lidar.resample_offset import build_offset_table, is_offset, resample_offset
 
 CODEC = Codec()
 BOUND = CODEC.bound_m

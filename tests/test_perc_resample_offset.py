@@ -1,4 +1,4 @@
-"""Offset-LiDAR resampling (perception_proc.resample_offset) against exact ray casts of analytic scenes.
+"""Offset-LiDAR resampling (perception_proc.lidar.resample_offset) against exact ray casts of analytic scenes.
 
 Truth is always ``cosim.testing.synthetic.raycast`` from the LiDAR origin along the same beams; the camera
 images are rendered from the offset camera centres and encoded with the linear codec (Eqs 1-2).
@@ -14,8 +14,8 @@ from cosim.scenario.config import Codec, Pattern
 from cosim.testing.synthetic import Box, Plane, encode_linear, raycast, render_depth, stitched_rig
 from cosim.world.camera import beam_directions
 from cosim.world.patterns import beam_table, pattern_shape
-from perception_proc import resample_offset as ro
-from perception_proc.resample import beam_pixels, build_table, resample
+from perception_proc.lidar import resample_offset as ro
+from perception_proc.lidar.resample import beam_pixels, build_table, resample
 
 CODEC = Codec()
 BOUND = CODEC.bound_m

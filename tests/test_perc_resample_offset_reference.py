@@ -1,5 +1,5 @@
-"""The offset-LiDAR kernel (perception_proc.resample_offset) against its readable per-pixel reference
-(perception_proc.resample_offset_reference) on analytic scenes beyond the kernel's NEAR_RANGE_M: the same
+"""The offset-LiDAR kernel (perception_proc.lidar.resample_offset) against its readable per-pixel reference
+(perception_proc.lidar.resample_offset_reference) on analytic scenes beyond the kernel's NEAR_RANGE_M: the same
 beams return, and their ranges agree to float32 rounding."""
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import pytest
 from cosim.scenario.config import Codec, Pattern
 from cosim.testing.synthetic import Box, Plane, encode_linear, render_depth, stitched_rig
 from cosim.world.patterns import beam_table, pattern_shape
-from perception_proc import resample_offset as ro
-from perception_proc.resample_offset_reference import resample_offset_reference
+from perception_proc.lidar import resample_offset as ro
+from perception_proc.lidar.resample_offset_reference import resample_offset_reference
 
 CODEC = Codec()
 

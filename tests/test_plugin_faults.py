@@ -18,7 +18,7 @@ FAULTY = '''
 import math
 import numpy as np
 from dataclasses import replace
-from dynamics_proc.control_protocol import ControllerCommand
+from dynamics_proc.control.protocol import ControllerCommand
 from perception_proc.staged import heightmap_stage, impact_stage
 
 calls = 0

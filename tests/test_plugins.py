@@ -26,7 +26,7 @@ from cosim.scenario.plugins import (
     resolve_plugin,
 )
 from dynamics_proc import closed_loop
-from dynamics_proc.strategies import front_to_back
+from dynamics_proc.control.strategies import front_to_back
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -141,7 +141,7 @@ def test_no_plugins_refuses_external_and_validate_lists_what_loads(tmp_path, cap
     out = capsys.readouterr().out
     assert (f"plug-in controller.strategy = {mod}:middle_out: EXTERNAL (runs its code); file "
             f"{tmp_path / (mod + '.py')}; version unknown") in out
-    assert f"plug-in controller.model = section_fill: built in; file {ROOT / 'dynamics_proc' / 'controller.py'}" in out
+    assert f"plug-in controller.model = section_fill: built in; file {ROOT / 'dynamics_proc' / 'control' / 'controller.py'}" in out
     with pytest.raises(ScenarioError, match="plug-ins are disabled"):
         load_scenario(scenario, allow_plugins=False)
     for verb in ("run", "compare"):
@@ -181,7 +181,7 @@ def test_strategy_on_pythonpath_picks_the_sections_launched_and_in_process(tmp_p
 # --------------------------------------------------------------------------- a user's controller at work
 STAY_PUT = '''
 import math
-from dynamics_proc.control_protocol import ControllerCommand
+from dynamics_proc.control.protocol import ControllerCommand
 
 class StayPut:
     """Never nudges; runs the auger once a measurement has arrived, on the section under the spout."""
@@ -239,7 +239,7 @@ def test_documented_controller_and_algorithm_run(tmp_path, monkeypatch, shm_clea
 def test_own_perception_example_stage_maps_the_grain(shm_clean):
     """examples/own_perception: the user's height map stage produces the map the controller acts on, within a
     few cm of the truth over most of the cart."""
-    from perception_proc.accuracy import heightmap_error, truth_on_grid
+    from perception_proc.accuracy.stage import heightmap_error, truth_on_grid
 
     s = load_scenario(ROOT / "examples" / "own_perception" / "scenario.yaml")
     assert s.perception.stages.heightmap == "cell_median:cell_median"

@@ -13,7 +13,7 @@ from cosim.world.camera import Pinhole, Rig, RigCamera
 from cosim.world.geometry import make_transform, rot_x, rot_y
 from cosim.world.scene import Boxes, Cylinders, HeightField, Scene, scene_from_state
 from renderer_proc.codec import decode_depth, encode_depth
-from renderer_proc.mock_backend import MockRenderer
+from renderer_proc.mock.backend import MockRenderer
 from renderer_proc.projection import camera_poses
 from renderer_proc.sample import sample_frame
 
@@ -27,7 +27,7 @@ Z_TOL_REL = 2e-5
 
 
 def renderer(ctx, rig, codec=CODEC, **kw):
-    from renderer_proc.gl_backend import GLRenderer
+    from renderer_proc.gl.backend import GLRenderer
     return GLRenderer(rig, codec, context=ctx, **kw)
 
 
@@ -177,7 +177,7 @@ def test_gl_and_mock_agree_on_cart_scene(ctx, t_s):
 def test_no_context_error_suggests_mock(monkeypatch):
     import moderngl
 
-    from renderer_proc.gl_backend import create_gl_context
+    from renderer_proc.gl.backend import create_gl_context
 
     def fail(**kw):
         raise Exception("eglGetDisplay failed")
@@ -297,8 +297,8 @@ def test_merged_flat_blocks_render_like_the_full_grid(ctx, monkeypatch):
     pixel falls through a seam to the floor below (both agree with the exact cast)."""
     import functools
 
-    from renderer_proc import surface_gl
-    from renderer_proc.hfmesh import SurfaceMesh
+    from renderer_proc.gl import surface as surface_gl
+    from renderer_proc.gl.hfmesh import SurfaceMesh
 
     s = Scenario(format_version=1)
     _, h, _ = sample_frame(s)

@@ -130,7 +130,7 @@ def test_gl_unavailable_names_cause_and_mock(monkeypatch):
 
 def test_import_never_touches_gl():
     code = ("import sys, renderer_proc, renderer_proc.participant, renderer_proc.blocks, cosim.world.rig, "
-            "cosim.world.scene, cosim.world.raycast, renderer_proc.mock_backend, renderer_proc.gl_backend\n"
+            "cosim.world.scene, cosim.world.raycast, renderer_proc.mock.backend, renderer_proc.gl.backend\n"
             "assert 'moderngl' not in sys.modules, 'moderngl imported'\n"
             "assert not any(m.startswith('glcontext') for m in sys.modules)\n")
     subprocess.run([sys.executable, "-c", code], check=True, cwd=str(__import__("pathlib").Path(__file__).parents[1]))
@@ -143,7 +143,7 @@ def test_two_gl_renderers_in_one_thread_each_draw_into_their_own_context():
     starts)."""
     from cosim.world.beamtarget import beam_layout
     from cosim.world.scene import scene_from_state
-    from renderer_proc.beam_gl import GLBeamRenderer
+    from renderer_proc.gl.beam import GLBeamRenderer
     from renderer_proc.projection import world_from_sensor
 
     s = Scenario(format_version=1)

@@ -140,7 +140,7 @@ def _surface_checks(h: np.ndarray, cell: float, block: int) -> int:
     shared by exactly two triangles in opposite directions (no T-junction, no crack), the same surface as
     ``surface_height``. Returns the triangle count."""
     from cosim.world.heightfield import padded_heights, surface_height
-    from renderer_proc.hfmesh import SurfaceMesh
+    from renderer_proc.gl.hfmesh import SurfaceMesh
 
     nx, ny = h.shape
     length, width = nx * cell, ny * cell

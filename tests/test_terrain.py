@@ -1,5 +1,5 @@
-"""The field surface (cosim.world.terrain) and the machines and the grain on it (dynamics_proc.ground,
-dynamics_proc.tilt): closed forms on a known slope, the roughness's statistics, the repose surface and the
+"""The field surface (cosim.world.terrain) and the machines and the grain on it (dynamics_proc.vehicles.ground,
+dynamics_proc.grain.tilt): closed forms on a known slope, the roughness's statistics, the repose surface and the
 spill edge in a tilted cart, mass balance and determinism on rough ground."""
 from __future__ import annotations
 
@@ -15,11 +15,11 @@ from cosim.world.raycast import raycast
 from cosim.world.scene import scene_from_state
 from cosim.world.terrain import rough_field, terrain_of
 from dynamics_proc.closed_loop import simulate
-from dynamics_proc.grainfill import GrainGrid, volume
-from dynamics_proc.ground import machine_poses, planar_poses
+from dynamics_proc.grain.fill import GrainGrid, volume
+from dynamics_proc.grain.tilt import Tilt, deposit_tilted, l1_envelope, settle, tilt_of, tilted_cap
 from dynamics_proc.model import ModelParams, initial_world, signals
 from dynamics_proc.summary import summarize
-from dynamics_proc.tilt import Tilt, deposit_tilted, l1_envelope, settle, tilt_of, tilted_cap
+from dynamics_proc.vehicles.ground import machine_poses, planar_poses
 
 
 def scen(terrain=None, **kw) -> Scenario:

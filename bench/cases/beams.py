@@ -5,7 +5,7 @@ spread over ``span`` simulated seconds, the vehicles driving), every arm interle
 every camera read, then perception's resample: decode, back-project, planar sampler) and ``beam_native`` (one
 pixel per beam, read, the per-beam decode); process CPU time (every thread: llvmpipe's included) and wall time
 per frame, and each method's range error against the exact ray cast of the same beams
-(``renderer_proc.beam_mock.beam_ranges``) over every beam of every frame.
+(``renderer_proc.mock.beam.beam_ranges``) over every beam of every frame.
 
 ``mock_cast``: the beam-native mock renderer's frame (``set_scene`` + ``draw`` + ``read_depth``) with each ray caster
 (``numpy``; ``embree``, the scene's triangles built every frame; ``embree-static``, the rigid bodies built once per
@@ -42,7 +42,7 @@ CAST_ARMS = ("numpy", "embree", "embree-static", "gl")
 @functools.lru_cache(maxsize=1)
 def _context():
     """One GL context for every renderer of the process (moderngl draws into the current context)."""
-    from renderer_proc.gl_backend import create_gl_context
+    from renderer_proc.gl.backend import create_gl_context
 
     return create_gl_context()
 
@@ -59,10 +59,10 @@ class CameraRig:
         sc = sc.model_copy(update={"renderer": renderer})
         self.sc, self.rig = sc, plan_rig(sc)
         if renderer == "gl":
-            from renderer_proc.gl_backend import GLRenderer
+            from renderer_proc.gl.backend import GLRenderer
             self.r = GLRenderer(self.rig, sc.sensor.codec, context=_context())
         else:
-            from renderer_proc.mock_backend import MockRenderer
+            from renderer_proc.mock.backend import MockRenderer
             self.r = MockRenderer(self.rig, sc.sensor.codec)
         self.pipe = Perception(sc, self.rig)
         self.imgs = [np.zeros((c.intrinsics.height, c.intrinsics.width, 4), np.uint8) for c in self.rig.cameras]
@@ -85,13 +85,13 @@ class BeamNative:
 
         from cosim.world.beamtarget import beam_layout
         from perception_proc.pipeline import Perception
-        from renderer_proc.beam_mock import MockBeamRenderer
+        from renderer_proc.mock.beam import MockBeamRenderer
 
         sc = sc.model_copy(update={"renderer": renderer,
                                    "sensor": sc.sensor.model_copy(update={"method": "beam_native"})})
         self.sc, self.lay = sc, beam_layout(sc.sensor.pattern)
         if renderer == "gl":
-            from renderer_proc.beam_gl import GLBeamRenderer
+            from renderer_proc.gl.beam import GLBeamRenderer
             self.r = GLBeamRenderer(self.lay, sc.sensor.codec, context=_context())
         else:
             self.r = MockBeamRenderer(self.lay, sc.sensor.codec)
@@ -138,7 +138,7 @@ def step_methods(frames: int, span: float, renderers: list[str], errors: bool = 
     from cosim.scenario.config import Scenario
     from cosim.world.beamtarget import beam_layout
     from cosim.world.scene import scene_from_state
-    from renderer_proc.beam_mock import beam_ranges
+    from renderer_proc.mock.beam import beam_ranges
     from renderer_proc.projection import world_from_sensor
     from renderer_proc.sample import sample_frame
 
@@ -186,13 +186,13 @@ def cast_renderers(sc, arms: list[str]) -> dict:
     from cosim.errors import RendererUnavailable
     from cosim.world.beamtarget import beam_layout
     from cosim.world.parts import entity_parts
-    from renderer_proc.beam_mock import MockBeamRenderer
+    from renderer_proc.mock.beam import MockBeamRenderer
 
     lay, codec = beam_layout(sc.sensor.pattern), sc.sensor.codec
     out = {}
     for arm in arms:
         if arm == "gl":
-            from renderer_proc.beam_gl import GLBeamRenderer
+            from renderer_proc.gl.beam import GLBeamRenderer
 
             try:
                 out[arm] = GLBeamRenderer(lay, codec)

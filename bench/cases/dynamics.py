@@ -39,12 +39,12 @@ def frame_costs(s, frames: int) -> dict:
     """ms per frame (arrays over frames) of the whole frame step and of its parts, on the states of a run."""
     import numpy as np
 
-    from dynamics_proc import auger as ag
-    from dynamics_proc.controller import Delivery, controller_step
-    from dynamics_proc.grainfill import deposit
-    from dynamics_proc.integrators import integrate
-    from dynamics_proc.machine_sync import sync_command
+    from dynamics_proc.control.controller import Delivery, controller_step
+    from dynamics_proc.grain import auger as ag
+    from dynamics_proc.grain.fill import deposit
     from dynamics_proc.model import ModelParams, initial_world, signals, spout_grid, step_frame, truth_measurement
+    from dynamics_proc.vehicles.integrators import integrate
+    from dynamics_proc.vehicles.machine_sync import sync_command
 
     p = ModelParams.from_scenario(s)
     w = initial_world(s, p)
@@ -106,9 +106,9 @@ def _integrate_run(s, method: str, sim_s: float, substeps: int = 1, rtol: float 
     """Cart positions (frames + 1, 2) m and wall s of the Machine Sync closed loop with ``method``."""
     import numpy as np
 
-    from dynamics_proc.integrators import integrate
-    from dynamics_proc.machine_sync import SyncGains, sync_command
-    from dynamics_proc.vehicles import VehicleParams, cart_pose, initial_state
+    from dynamics_proc.vehicles.integrators import integrate
+    from dynamics_proc.vehicles.machine_sync import SyncGains, sync_command
+    from dynamics_proc.vehicles.motion import VehicleParams, cart_pose, initial_state
 
     p, g = VehicleParams.from_scenario(s), SyncGains.from_scenario(s)
     x = initial_state(s, p)

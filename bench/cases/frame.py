@@ -51,7 +51,7 @@ def _timed(obj, name: str, into: list, clock=time.thread_time) -> None:
 
 def _split_draws(be, series) -> None:
     """Time each of the beam renderer's draw calls apart from its raster work (a finish after each)."""
-    import renderer_proc.beam_gl as bg
+    import renderer_proc.gl.beam as bg
 
     ctx, render = be.ctx, be._render
 

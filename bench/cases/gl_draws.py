@@ -7,7 +7,7 @@ replaced by a constant write, no discard, and the depth test off, an occlusion q
 geometry shader's rectangles), CPU of the draw and ``ctx.finish()`` (process CPU time, llvmpipe's threads included,
 median of ``reps``), and of the same draw with ``GL_RASTERIZER_DISCARD`` on (the vertex and geometry shaders alone).
 
-``beam_surface``: the grain surface's draw, grid quads (``SurfaceMesh.quads``, ``renderer_proc/surface_gl.py``)
+``beam_surface``: the grain surface's draw, grid quads (``SurfaceMesh.quads``, ``renderer_proc/gl/surface.py``)
 against single triangles, interleaved per frame: surface CPU per draw (``reps`` draws after the frame's ``draw``),
 fragments shaded (occlusion query over a twin renderer whose fragment shaders write a constant) and primitives; the
 two paths' images are compared byte for byte and against the exact ray cast. Frames: ``sample`` and ``rough`` (the
@@ -32,11 +32,11 @@ def solid_draws(frames: int, span: float, reps: int) -> dict[str, list[float]]:
     """Per frame: ``{draw}_frags``, ``{draw}_ms`` and ``{draw}_geom_ms`` of each solid draw (boxes, cylinders)."""
     import numpy as np
 
-    import renderer_proc.beam_gl as beam_gl
+    import renderer_proc.gl.beam as beam_gl
     from cosim.scenario.config import Scenario
     from cosim.world.beamtarget import beam_layout
     from cosim.world.scene import scene_from_state
-    from renderer_proc.gl_backend import create_gl_context
+    from renderer_proc.gl.backend import create_gl_context
     from renderer_proc.projection import world_from_sensor
     from renderer_proc.sample import sample_frame
 
@@ -113,7 +113,7 @@ def _surface_renderers(lay, codec, ctx, quads: bool):
     """(renderer, counting twin) for one surface path."""
     from unittest import mock
 
-    from renderer_proc import beam_gl
+    from renderer_proc.gl import beam as beam_gl
 
     real = beam_gl.GLBeamRenderer(lay, codec, context=ctx, surface_quads=quads)
     src = beam_gl._src
@@ -153,9 +153,9 @@ def surface_paths(frames: int, span: float, reps: int, context=None) -> dict:
     from cosim.scenario.config import Scenario
     from cosim.world.beamtarget import beam_layout
     from cosim.world.scene import scene_from_state
-    from renderer_proc.beam_mock import beam_ranges
     from renderer_proc.codec import decode_depth
-    from renderer_proc.gl_backend import create_gl_context
+    from renderer_proc.gl.backend import create_gl_context
+    from renderer_proc.mock.beam import beam_ranges
     from renderer_proc.projection import world_from_sensor
     from renderer_proc.sample import sample_frame
 

@@ -12,9 +12,9 @@ renderer writes the same bytes), accuracy on every beam of every frame, both sam
 the auger tube (:data:`ALT_MOUNT`): range error by distance band and the offloading measures; the standalone reports
 go to ``bench/out/perception_accuracy_<label>_<sampler>.{md,json}``.
 
-``offset_accuracy``: the offset-LiDAR resampling (``perception_proc.resample_offset``) against an exact ray cast:
+``offset_accuracy``: the offset-LiDAR resampling (``perception_proc.lidar.resample_offset``) against an exact ray cast:
 the default scene's frame at t = 10 s drawn by the mock renderer at full resolution with every rig camera moved
-:data:`OFFSET_M` from the LiDAR origin (truth: ``perception_proc.accuracy.exact_ranges`` from the LiDAR origin), and
+:data:`OFFSET_M` from the LiDAR origin (truth: ``perception_proc.accuracy.stage.exact_ranges`` from the LiDAR origin), and
 the synthetic scene of ``perception_synthetic`` (floor and two boxes; truth ``cosim.testing.synthetic.raycast``).
 """
 from __future__ import annotations
@@ -67,7 +67,7 @@ def _remap_nearest(imgs, tab, codec):
     import cv2
     import numpy as np
 
-    from perception_proc.codec import decode_bytes
+    from perception_proc.lidar.codec import decode_bytes
 
     out = np.full(tab.n_beams, np.nan, np.float32)
     for img, cam in zip(imgs, tab.cameras):
@@ -86,9 +86,9 @@ def lidar_rows(repeats: int) -> dict:
     from cosim.testing.synthetic import encode_linear, render_depth, stitched_rig
     from cosim.world.camera import beam_directions
     from cosim.world.patterns import beam_table, pattern_shape
-    from perception_proc.codec import decode_depth
-    from perception_proc.resample import build_table, resample
-    from perception_proc.resample_offset import build_offset_table, resample_offset
+    from perception_proc.lidar.codec import decode_depth
+    from perception_proc.lidar.resample import build_table, resample
+    from perception_proc.lidar.resample_offset import build_offset_table, resample_offset
 
     codec, pattern, shapes = Codec(), Pattern(**GRID), _synthetic_shapes()
     e, a = beam_table(pattern)
@@ -174,7 +174,7 @@ def accuracy_cost_rows(repeats: int) -> dict:
     """One accuracy evaluation's exact ray cast on the default scene: every beam, and the default sample."""
     from cosim.scenario.config import Scenario
     from cosim.world.rig import plan_rig
-    from perception_proc.accuracy import exact_ranges, sample_beams, world_from_parent
+    from perception_proc.accuracy.stage import exact_ranges, sample_beams, world_from_parent
     from perception_proc.pipeline import Perception
     from renderer_proc.sample import sample_frame
 
@@ -235,7 +235,7 @@ def _accuracy_run(sampler: str, frames: int, mount: dict | None = None) -> dict:
       "band, offloading measures", options={"frames": 4, "reports": True}, quick={"frames": 1, "reports": False})
 def perception_accuracy(ctx: Context) -> dict:
     """Three runs of ``frames`` frames (module docstring); ``reports``: write the standalone reports."""
-    from perception_proc.accuracy_report import write_report
+    from perception_proc.accuracy.report import write_report
 
     out: dict = {"range error (mm)": {}, "offloading measures": {}}
     bands: dict = {}
@@ -281,9 +281,9 @@ def _default_offset_case():
     from cosim.world.patterns import beam_table, pattern_shape
     from cosim.world.rig import plan_rig
     from cosim.world.scene import scene_from_state
-    from perception_proc.accuracy import exact_ranges
+    from perception_proc.accuracy.stage import exact_ranges
     from perception_proc.pipeline import Perception
-    from renderer_proc.mock_backend import MockRenderer
+    from renderer_proc.mock.backend import MockRenderer
     from renderer_proc.projection import camera_poses, world_from_sensor
     from renderer_proc.sample import sample_frame
 
@@ -327,8 +327,8 @@ def offset_accuracy(ctx: Context) -> dict:
     """Range errors of ``resample_offset`` on each scene (module docstring), ``range_error_stats``' beams."""
     import numpy as np
 
-    from perception_proc import resample_offset as mod
-    from perception_proc.accuracy import range_error_stats
+    from perception_proc.accuracy.stage import range_error_stats
+    from perception_proc.lidar import resample_offset as mod
 
     cases = {"default scene": _default_offset_case, **{f"synthetic {w}x{h}": (lambda w=w, h=h: _synthetic_offset_case(w, h))
                                                         for w, h in SIZES}}

@@ -6,7 +6,7 @@ frame moving at the harvest speed, for 640 x 480 and 1024 x 768, one and two cam
 auto-planned rig and the mock renderer; and the auto-planned rig on the frames of a run (the states, height maps
 and streams the dynamics participant writes from frame :data:`RUN_FIRST_FRAME` on, ground-truth feedback), once
 more without the grain surface (wrong images: the surface's share). The sample frame's pile is a cone on a flat
-fill, so most of its surface merges into large triangles (``renderer_proc.hfmesh``); a run's fill leaves few blocks
+fill, so most of its surface merges into large triangles (``renderer_proc.gl.hfmesh``); a run's fill leaves few blocks
 flat and costs more. llvmpipe reads ``LP_NUM_THREADS`` and ``LP_NATIVE_VECTOR_WIDTH``; the renderer sets neither.
 
 ``rig_plan``: the cameras and pixels the rig planner picks for a LiDAR pattern and angular error bound (fewest
@@ -112,7 +112,7 @@ def triangles(s) -> dict:
     from cosim.world.heightfield import padded_heights
     from cosim.world.meshes import unit_cube, unit_cylinder
     from cosim.world.scene import scene_from_state
-    from renderer_proc.hfmesh import SurfaceMesh
+    from renderer_proc.gl.hfmesh import SurfaceMesh
     from renderer_proc.sample import sample_frame
 
     state, h, stream = sample_frame(s)

@@ -13,8 +13,8 @@ single-threaded, as in a run's processes (``cosim.runtime.threadpools``).
 ``meter=callgrind`` runs the stages under ``valgrind --tool=callgrind`` and counts each stage's instructions
 (``harness.callgrind``); ``focus`` (``STAGE:MODULE:FUNCTION`` or ``STAGE:MODULE:Class.method``, ``;``-separated) adds
 the inclusive count of one function within a stage. ``save`` writes the replay's outputs; ``check`` compares them
-bit for bit with saved ones. The stages look their functions up in their modules (``perception_proc.rim``,
-``.heightmap``, ``.impact``) at each call, so a focus names e.g. ``cart:perception_proc.rim:find_cart``.
+bit for bit with saved ones. The stages look their functions up in their modules (``perception_proc.estimates.rim``,
+``.heightmap``, ``.impact``) at each call, so a focus names e.g. ``cart:perception_proc.estimates.rim:find_cart``.
 """
 from __future__ import annotations
 
@@ -117,10 +117,12 @@ def run_stages(rec, meter, repeat: int = 1, upto: str | None = None) -> dict[str
     the inputs of later stages are computed outside the meter as well. Stages after ``upto`` are left out. Returns
     the number of metered calls per stage."""
     from cases._replay import load_inputs, local_segment
-    from perception_proc import accuracy as acc
-    from perception_proc import heightmap as heightmap_module  # functions looked up per call: a focus wraps them
-    from perception_proc import impact as impact_module
-    from perception_proc import rim as rim_module
+    from perception_proc.accuracy import stage as acc
+    from perception_proc.estimates import (
+        heightmap as heightmap_module,  # functions looked up per call: a focus wraps them
+    )
+    from perception_proc.estimates import impact as impact_module
+    from perception_proc.estimates import rim as rim_module
     from perception_proc.participant import PerceptionParticipant
 
     seg = local_segment(rec.scenario)

@@ -120,7 +120,7 @@ def fmu(ctx: Context) -> dict:
 
     from cosim.runtime.inprocess import simulate
     from cosim.scenario.loader import load_scenario
-    from dynamics_proc.fmus import open_fmus
+    from dynamics_proc.fmu.models import open_fmus
     from dynamics_proc.model import ModelParams, _advance_vehicles, initial_world, step_frame
 
     short = [f"duration_s={ctx['duration']}"] if ctx["duration"] else []

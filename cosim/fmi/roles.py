@@ -77,7 +77,7 @@ _VEHICLE_STATE = (
     Signal("cart_yaw_rad", ("Real",), doc="cart heading, world, rad"),
 )
 
-#: the tractor and its cart, driven by Machine Sync (dynamics_proc.vehicles, dynamics_proc.machine_sync)
+#: the tractor and its cart, driven by Machine Sync (dynamics_proc.vehicles.motion, dynamics_proc.vehicles.machine_sync)
 VEHICLE = Role(
     "tractor_cart", "vehicles.tractor_cart",
     inputs=(Signal("speed_cmd_mps", ("Real",), doc="Machine Sync's speed command, m/s (>= 0)"),
@@ -87,7 +87,7 @@ VEHICLE = Role(
     steps=("dynamics_step", "frame"),
 )
 
-#: the fill strategy (dynamics_proc.strategies): which section to fill next, sections numbered 1..N
+#: the fill strategy (dynamics_proc.control.strategies): which section to fill next, sections numbered 1..N
 STRATEGY = Role(
     "strategy", "controller (strategy)",
     inputs=(Signal("full", ("Boolean", "Integer", "Real"), per_section=True,
@@ -103,7 +103,7 @@ STRATEGY = Role(
     clocks=("triggered",),
 )
 
-#: the whole offloading controller (dynamics_proc.control_protocol), positions along the cart grid x axis (m from
+#: the whole offloading controller (dynamics_proc.control.protocol), positions along the cart grid x axis (m from
 #: the front inner wall), sections numbered 1..N
 CONTROLLER = Role(
     "controller", "controller (model)",

@@ -14,8 +14,8 @@ summary's fill, spill and perception parts, the recorded series and the run's er
 with a ``reason`` in words and numbers ("perception never found the cart: 0 of 1201 frames", "spill 120 kg",
 "overfill 15 cm in section 9"). Pure: no I/O.
 
-The controller's hold reasons (:data:`HOLD_REASONS`) are the contract between the controller (which writes the
-code into ``dyn_state.hold_reason``, dynamics_proc.coping) and this judge.
+The controller's hold reasons (:data:`HOLD_REASONS`, cosim.scenario.config.holds) are the contract between the
+controller (which writes the code into ``dyn_state.hold_reason``, dynamics_proc.control.coping) and this judge.
 """
 from __future__ import annotations
 
@@ -25,6 +25,7 @@ from typing import Mapping
 import numpy as np
 
 from cosim.scenario.config import Scenario
+from cosim.scenario.config.holds import HOLD_LOST, HOLD_NO_MEASUREMENT, HOLD_NONE, HOLD_REASONS
 
 __all__ = ["FILLED", "STOPPED_SAFE", "JOB_FAILED", "STATUSES", "HOLD_NONE", "HOLD_NO_MEASUREMENT", "HOLD_LOST",
            "HOLD_REASONS", "judge", "outcome_line"]
@@ -32,17 +33,6 @@ __all__ = ["FILLED", "STOPPED_SAFE", "JOB_FAILED", "STATUSES", "HOLD_NONE", "HOL
 FILLED, STOPPED_SAFE, JOB_FAILED = "filled", "stopped_safe", "job_failed"
 STATUSES = (FILLED, STOPPED_SAFE, JOB_FAILED)
 
-#: hold reason codes (``dyn_state.hold_reason``): 0 the controller is not holding
-HOLD_NONE = 0
-#: no usable height map has arrived yet, so the auger has not been started
-HOLD_NO_MEASUREMENT = 1
-#: perception lost the cart or the fill and the dead-reckoned estimate is no longer confident enough
-HOLD_LOST = 2
-#: code -> what the controller is doing, in words
-HOLD_REASONS: dict[int, str] = {
-    HOLD_NO_MEASUREMENT: "no usable height map yet: the auger is not started",
-    HOLD_LOST: "perception lost the cart or the fill and dead reckoning is not confident enough: auger off, holding",
-}
 #: a flow level below this counts as stopped (the auger's run-out ends exactly at 0)
 FLOW_STOPPED = 1e-9
 _CM_PER_M = 100.0

@@ -29,6 +29,9 @@ class ParticipantSpec:
     #: (the pipelined schedule, cosim.runtime.pipeline); None: the member cannot be pipelined
     reads: str | None = None
     kwargs: Mapping[str, Any] = field(default_factory=dict)
+    #: ``initial_state(scenario) -> (dyn_state fields, truth height map float32)``: the frame-0 world the scenario
+    #: checks look at (cosim.scenario.plausibility); the dynamics role only
+    initial_state: str | None = None
 
     def create(self, scenario: Scenario):
         return load_callable(self.factory)(scenario, **dict(self.kwargs))
@@ -47,7 +50,8 @@ class ParticipantSpec:
 
 DEFAULT_SPECS: dict[str, ParticipantSpec] = {
     "dynamics": ParticipantSpec("dynamics", "dynamics_proc.participant:create", "dynamics_proc.blocks:declare_blocks",
-                                "dynamics_proc.summary:summarize", reads="cosim.runtime.participant:dynamics_reads"),
+                                "dynamics_proc.summary:summarize", reads="cosim.runtime.participant:dynamics_reads",
+                                initial_state="dynamics_proc.model:frame0_state"),
     "renderer": ParticipantSpec("renderer", "renderer_proc.participant:create", "renderer_proc.blocks:declare_blocks",
                                 "renderer_proc.summary:summarize", reads="cosim.runtime.participant:renderer_reads"),
     "perception": ParticipantSpec("perception", "perception_proc.participant:create",

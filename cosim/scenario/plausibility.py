@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cosim.runtime.specs import DEFAULT_SPECS, load_callable
 from cosim.scenario.config import Scenario
 from cosim.world.camera import Pinhole, beam_directions
 from cosim.world.geometry import apply, body_from_camera_axes, entity_pose, invert, mount_transform
@@ -56,20 +57,8 @@ _TOL_M = 1e-9
 
 
 def _initial_state(s: Scenario) -> tuple[dict, np.ndarray]:
-    """dyn_state fields and the truth height map (float32) of frame 0."""
-    from dynamics_proc.model import ModelParams, initial_world, signals
-
-    # the frame-0 poses come from the scenario alone: the built-in controller and vehicle model stand in for any
-    # plug-in or FMU (nothing of the user's is opened or stepped to check the geometry)
-    geometry = s.model_copy(update={
-        "controller": s.controller.model_copy(update={"model": "section_fill", "model_options": {},
-                                                      "strategy": "front_to_back", "strategy_options": {}, "fmu": None}),
-        "vehicles": type(s.vehicles)()})
-    p = ModelParams.from_scenario(geometry)
-    w = initial_world(geometry, p)
-    state = signals(w, p)
-    state["stream_points"] = 0
-    return state, np.asarray(w.heights, dtype=np.float32)
+    """dyn_state fields and the truth height map (float32) of frame 0, as the dynamics role's spec gives them."""
+    return load_callable(DEFAULT_SPECS["dynamics"].initial_state)(s)
 
 
 def _pose(s: Scenario, state: dict, entity: str) -> np.ndarray:

@@ -15,8 +15,8 @@ Groups (plug-in points; the scenario key each one is named by):
 ========================  =========================  ==========================================
 group                     scenario key               protocol
 ========================  =========================  ==========================================
-``strategies``            controller.strategy        dynamics_proc.strategies (a function)
-``controllers``           controller.model           dynamics_proc.control_protocol (a factory)
+``strategies``            controller.strategy        dynamics_proc.control.strategies (a function)
+``controllers``           controller.model           dynamics_proc.control.protocol (a factory)
 ``perception``            perception.algorithm       perception_proc.protocol (a function)
 ``perception.rim``        perception.stages.rim      perception_proc.protocol
 ``perception.heightmap``  perception.stages.heightmap  perception_proc.protocol
@@ -46,11 +46,11 @@ __all__ = ["BUILTINS", "ENTRY_POINT_GROUPS", "ARITY", "PluginError", "PluginOpti
 #: plug-in group -> built-in short name -> import path (the same as the package's entry points)
 BUILTINS: dict[str, dict[str, str]] = {
     "strategies": {
-        "front_to_back": "dynamics_proc.strategies:front_to_back",
-        "back_to_front": "dynamics_proc.strategies:back_to_front",
-        "lowest_first": "dynamics_proc.strategies:lowest_first",
+        "front_to_back": "dynamics_proc.control.strategies:front_to_back",
+        "back_to_front": "dynamics_proc.control.strategies:back_to_front",
+        "lowest_first": "dynamics_proc.control.strategies:lowest_first",
     },
-    "controllers": {"section_fill": "dynamics_proc.controller:SectionFillController"},
+    "controllers": {"section_fill": "dynamics_proc.control.controller:SectionFillController"},
     "perception": {"staged": "perception_proc.staged:staged"},
     "perception.rim": {"builtin": "perception_proc.staged:rim_stage"},
     "perception.heightmap": {"builtin": "perception_proc.staged:heightmap_stage"},

@@ -35,7 +35,7 @@ def textured_plane_pair(ctx: Any, pin: Pinhole, baseline_m: float, pitch_deg: fl
                         height_m: float = 3.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(left, right, depth): the pair's RGBA8 images (H, W, 4) uint8 and the left camera's exact planar depth
     (H, W) float32 m (NaN: sky), drawn in the moderngl context ``ctx`` (lent: nothing of it is released)."""
-    from renderer_proc.camera_gl import GLCameraRenderer
+    from renderer_proc.gl.camera import GLCameraRenderer
 
     left = make_transform(rpy_matrix(0.0, math.radians(pitch_deg), 0.0), (0.0, 0.0, height_m)) @ body_from_camera_axes()
     right = left @ make_transform(np.eye(3), (baseline_m, 0.0, 0.0))

@@ -128,7 +128,7 @@ class MeshInstance:
 class Scene:
     """Everything the renderers draw for one frame (world frame). ``ground_box``: index in ``boxes`` of the
     ground slab (its top face is the ground plane), or None; the GL renderer keeps a per-camera image of it
-    while the camera's pose relative to the slab's plane does not change (``renderer_proc.gl_backend``).
+    while the camera's pose relative to the slab's plane does not change (``renderer_proc.gl.backend``).
     ``poses``: world_from_body (4, 4) float64 of each entity the scene was built from (:func:`scene_from_state`),
     or None; with it the exact ray cast keeps each entity's parts in its body frame across frames
     (``cosim.world.rigidcast``)."""

@@ -1,6 +1,6 @@
 """An offloading controller as an FMU (FMI 2.0 co-simulation), written with pythonfmu: the paper's section-fill
 logic (front-to-back), the same decisions as graincosim's built-in controller with ``estimator: paper``
-(dynamics_proc/controller.py), written out here so the FMU is self-contained.
+(dynamics_proc/control/controller.py), written out here so the FMU is self-contained.
 
 Once per sensor frame it gets each section's measured peak height (NaN: no valid cells or no measurement),
 the spout position, the predicted drift and impact points (cart grid frame, m) and the nudge signal; it keeps

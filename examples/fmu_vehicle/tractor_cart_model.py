@@ -1,5 +1,5 @@
 """The equations of the example tractor-cart FMUs (TractorCart.py: FMI 2.0, TractorCart3.py: FMI 3.0), shared so
-that both wrap one model. The same equations as graincosim's built-in model (dynamics_proc/vehicles.py), written
+that both wrap one model. The same equations as graincosim's built-in model (dynamics_proc/vehicles/motion.py), written
 out here so the FMUs are self-contained: a kinematic bicycle about the rear axle with a first-order drivetrain lag
 (acceleration and braking limits) and a first-order steering lag (rate limit), towing a single-axle cart from a
 hitch behind the rear axle. Integrated with classic RK4 (Simulink's ode4), inputs held over a step.

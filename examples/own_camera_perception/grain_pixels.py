@@ -20,7 +20,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from perception_proc.heightmap import HeightMap
+from perception_proc.estimates.heightmap import HeightMap
 from perception_proc.protocol import PerceptionContext, PerceptionInput, PerceptionOutput
 
 __all__ = ["grain_pixels", "grain_mask", "BLUE_OVER_GREEN_MAX", "RED_OVER_GREEN_MIN", "MIN_GREEN"]
@@ -63,7 +63,7 @@ def _grain_points(inp: PerceptionInput) -> np.ndarray:
 def grain_pixels(ctx: PerceptionContext, inp: PerceptionInput) -> PerceptionOutput:
     """Cart from the built-in rim stage; heights from grain-coloured pixels; impact from the built-in stage."""
     cart = ctx.stages.rim(ctx, inp)
-    from perception_proc.impact import Impact
+    from perception_proc.estimates.impact import Impact
 
     if not cart.valid:
         return PerceptionOutput(cart, None, Impact(False, np.full(3, np.nan), 0, "no cart"))

@@ -1,6 +1,6 @@
 """A height map stage of our own: the median of every return in a cell.
 
-graincosim's built-in stage (perception_proc.heightmap) takes the median of each cell's *lower cluster* of
+graincosim's built-in stage (perception_proc.estimates.heightmap) takes the median of each cell's *lower cluster* of
 returns, so that stream returns inside a cell do not lift it; this one is simpler: every return below
 ``STREAM_ABOVE_RIM_M`` over the rim top counts, and returns standing more than ``STREAM_ABOVE_CELL_M`` above
 their cell's median are flagged as the stream (the impact stage fits the stream to those).
@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from perception_proc.heightmap import HeightMap
+from perception_proc.estimates.heightmap import HeightMap
+from perception_proc.estimates.rim import CartEstimate
 from perception_proc.protocol import PerceptionContext, PerceptionInput
-from perception_proc.rim import CartEstimate
 
 __all__ = ["cell_median", "WALL_CLEAR_M", "STREAM_ABOVE_RIM_M", "STREAM_ABOVE_CELL_M"]
 

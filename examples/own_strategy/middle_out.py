@@ -4,7 +4,7 @@ The middle section first, then the not-full section nearest the middle (ties to 
 current section until it is full. Loading the middle first puts the weight over the cart's axle early, so a
 load stopped half way leaves the cart balanced instead of nose- or tail-heavy.
 
-Protocol (graincosim ``controller.strategy``, dynamics_proc.strategies): ``(full (N,) bool, height (N,) float64 m
+Protocol (graincosim ``controller.strategy``, dynamics_proc.control.strategies): ``(full (N,) bool, height (N,) float64 m
 with NaN unknown, current int) -> int``, the 0-based section to fill next (front = 0), or -1 when every
 section is full. It is called once per sensor frame once a measurement has arrived.
 """

@@ -1,4 +1,4 @@
-"""Test FMU: the front_to_back fill strategy (dynamics_proc.strategies) as an FMI 2.0 co-simulation FMU.
+"""Test FMU: the front_to_back fill strategy (dynamics_proc.control.strategies) as an FMI 2.0 co-simulation FMU.
 
 Inputs full_1..full_9 (Boolean), current (Integer, 1..N, 0 none); output section (Integer, 1..N, 0 all full).
 Parameter ``sections`` (<= 9); ``bad_section`` > 0 makes it answer that section instead (a fault to report).

@@ -1,4 +1,4 @@
-"""Test FMU: the front_to_back fill strategy (dynamics_proc.strategies) as an FMI 2.0 co-simulation FMU that numbers
+"""Test FMU: the front_to_back fill strategy (dynamics_proc.control.strategies) as an FMI 2.0 co-simulation FMU that numbers
 sections from 0, as a Python strategy does: inputs full_0..full_8 (Boolean), current (Integer, 0..N-1, -1 none);
 output section (Integer, 0..N-1, -1 when every section is full). Parameter ``sections`` (<= 9). Mapped with
 ``index_base: 0``.

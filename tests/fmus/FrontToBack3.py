@@ -1,4 +1,4 @@
-"""Test FMU: the front_to_back fill strategy (dynamics_proc.strategies) as an FMI 3.0 co-simulation FMU whose
+"""Test FMU: the front_to_back fill strategy (dynamics_proc.control.strategies) as an FMI 3.0 co-simulation FMU whose
 section vectors are arrays: ``full`` (Boolean[9]) and ``height`` (Float64[9], m) in, ``current`` (Int64, 1..N,
 0 none) in, ``section`` (Int32, 1..N, 0 all full) out; ``highest_height`` (Float64) out reports the largest
 finite height it was given (so a test can see the array arrive). Parameter ``sections`` (<= 9).

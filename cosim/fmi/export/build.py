@@ -29,8 +29,8 @@ from cosim.scenario.plugins import is_import_path
 from cosim.scenario.trust import plugin_points
 from cosim.scenario.yamlmarks import Dumper
 from cosim.world.terrain import terrain_of
-from dynamics_proc.external import TERRAIN_REFUSED
 
+from .contract import TERRAIN_REFUSED
 from .world import SCENARIO_FILE
 
 

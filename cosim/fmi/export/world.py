@@ -3,11 +3,11 @@ foreign master (docs/fmu.md, "Export").
 
 :class:`WorldHost` runs in the master's process (the FMU's Python, see docs/fmu.md): it loads the scenario the FMU
 carries, sets up the ring over the in-process transport (a segment in ordinary memory, nothing spawned) with the
-dynamics role played by :class:`dynamics_proc.external.ExternalDynamicsParticipant` and the scenario's renderer and
+dynamics role played by :class:`dynamics_proc.fmu.external.ExternalDynamicsParticipant` and the scenario's renderer and
 perception as in a launched run, and steps it one sensor frame per ``doStep``.
 
 Variables (:func:`inputs` and :func:`outputs`, our names; units in them): the inputs are what a vehicle-and-
-controller model produces (:class:`dynamics_proc.external.WorldInputs`), the outputs what a controller consumes:
+controller model produces (:class:`dynamics_proc.fmu.external.WorldInputs`), the outputs what a controller consumes:
 perceived per-section peak heights and fullness (the built-in controller's robust section peak of the perceived
 height map, NaN where a section has too few valid cells or the cart was not found), the perceived cart pose,
 impact point and coverage, and the ground-truth values beside them. Per-section outputs are N values
@@ -21,19 +21,16 @@ describe t + h.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from cosim.fmi.export.contract import BLOCKS, CREATE, INPUT_STARTS, READOUT
 from cosim.runtime.lockstep import InProcessRing
-from cosim.runtime.specs import DEFAULT_SPECS, ParticipantSpec, build_schema
+from cosim.runtime.specs import DEFAULT_SPECS, ParticipantSpec, build_schema, load_callable
 from cosim.scenario.config import Scenario
 from cosim.scenario.loader import load_scenario
-from dynamics_proc.controller import ControllerParams, section_heights
-from dynamics_proc.external import WorldInputs, initial_inputs
-from dynamics_proc.grainfill import resample
-from dynamics_proc.summary import section_stats
 from shm_schema import Segment
 
 __all__ = ["SCENARIO_FILE", "STEP_RTOL", "Var", "inputs", "outputs", "WorldHost", "StepRefused"]
@@ -45,7 +42,7 @@ STEP_RTOL = 1e-6
 #: frames the in-process ring is sized for: the world runs as long as the master steps it
 MAX_FRAMES = 2**40
 #: the dynamics role when the vehicles and the controller are outside
-EXTERNAL_DYNAMICS = ParticipantSpec("dynamics", "dynamics_proc.external:create", "dynamics_proc.blocks:declare_blocks")
+EXTERNAL_DYNAMICS = ParticipantSpec("dynamics", CREATE, BLOCKS)
 
 
 class StepRefused(ValueError):
@@ -72,16 +69,14 @@ _INPUT_DOCS = {
 
 def inputs(s: Scenario) -> list[Var]:
     """The FMU's inputs, start values at the scenario's initial state (auger off, no flow)."""
-    u = initial_inputs(s)
     out = []
-    for f in fields(WorldInputs):
-        value = getattr(u, f.name)
-        if f.name == "auger_on":
-            out.append(Var(f.name, "Boolean", 1, "the auger runs", bool(value)))
-        elif f.name == "flow_m3ps":
-            out.append(Var(f.name, "Real", 1, "grain flow leaving the spout, m^3/s (>= 0)", float(value)))
+    for name, value in load_callable(INPUT_STARTS)(s).items():
+        if name == "auger_on":
+            out.append(Var(name, "Boolean", 1, "the auger runs", bool(value)))
+        elif name == "flow_m3ps":
+            out.append(Var(name, "Real", 1, "grain flow leaving the spout, m^3/s (>= 0)", float(value)))
         else:
-            out.append(Var(f.name, "Real", 1, _INPUT_DOCS[f.name.split("_")[0]], float(value)))
+            out.append(Var(name, "Real", 1, _INPUT_DOCS[name.split("_")[0]], float(value)))
     return out
 
 
@@ -145,7 +140,7 @@ class WorldHost:
         except BaseException:
             self.close()
             raise
-        self._control = ControllerParams.from_scenario(s, strategy=_no_strategy)
+        self._sections = load_callable(READOUT)(s)
         self._ring = InProcessRing(self._seg, self._participants, MAX_FRAMES)
         self._run_frame()
 
@@ -170,24 +165,22 @@ class WorldHost:
         self._read_outputs()
 
     def _read_outputs(self) -> None:
-        seg, c, o = self._seg, self._control, self.outputs
+        seg, r, o = self._seg, self._sections, self.outputs
         dyn = self._participants[0]
-        g = dyn.params.grid
-        truth = section_heights(resample(dyn.world.heights, g.cell_m, c.grid_cell_m, g.length_m, g.width_m), c)
+        truth = r.truth_peaks(dyn)
         ps = seg.view("perc_state")
         valid = bool(ps.cart_valid) and seg.frame_of("perc_state") == self.frame
-        perceived = (section_heights(np.array(seg.view("heightmap_perceived"), dtype=np.float64), c) if valid
-                     else np.full(c.sections, np.nan))
+        perceived = r.perceived_peaks(seg.view("heightmap_perceived")) if valid else np.full(r.sections, np.nan)
         st = seg.view("dyn_state")
         o.update({
             "frame": self.frame,
-            "perceived_height_m": perceived.tolist(), "perceived_fullness": (perceived / c.target_m).tolist(),
+            "perceived_height_m": perceived.tolist(), "perceived_fullness": (perceived / r.target_m).tolist(),
             "perceived_cart_valid": valid, "perceived_cart_x_m": float(ps.cart_x_m),
             "perceived_cart_y_m": float(ps.cart_y_m), "perceived_cart_yaw_rad": float(ps.cart_yaw_rad),
             "perceived_impact_valid": bool(ps.impact_valid), "perceived_impact_gx_m": float(ps.impact_gx_m),
             "perceived_impact_gy_m": float(ps.impact_gy_m), "coverage": float(ps.coverage),
-            "true_height_m": truth.tolist(), "true_fullness": (truth / c.target_m).tolist(),
-            "true_mean_height_m": section_stats(dyn.world.heights, self.scenario)[1].tolist(),
+            "true_height_m": truth.tolist(), "true_fullness": (truth / r.target_m).tolist(),
+            "true_mean_height_m": r.true_means(dyn).tolist(),
             "true_impact_valid": bool(st.impact_valid), "true_impact_gx_m": float(st.impact_gx_m),
             "true_impact_gy_m": float(st.impact_gy_m), "delivered_m3": float(st.delivered_m3),
             "in_cart_m3": float(st.in_cart_m3), "spilled_m3": float(st.spilled_m3),
@@ -200,8 +193,3 @@ class WorldHost:
         for p in participants:
             p.close()
         self._ring = None
-
-
-def _no_strategy(*_args) -> int:
-    """The controller parameters' strategy slot: the exported world has no controller."""
-    return -1

@@ -1,4 +1,4 @@
-"""The air between the sensors and what they see (``atmosphere:``; perception_proc.atmosphere, docs/field.md).
+"""The air between the sensors and what they see (``atmosphere:``; perception_proc.atmosphere.dust, docs/field.md).
 Owned by perception_proc. Clear air (the default) changes nothing, to the bit."""
 from __future__ import annotations
 

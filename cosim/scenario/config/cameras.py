@@ -118,7 +118,7 @@ class Camera(Model):
 
 class DepthCamera(Camera):
     """A time-of-flight style depth camera: the exact rendered depth with the noise model of Nguyen, Izadi and
-    Lovell (2012) for Kinect-class sensors (perception_proc.tof; defaults are the paper's coefficients).
+    Lovell (2012) for Kinect-class sensors (perception_proc.cameras.tof; defaults are the paper's coefficients).
 
     Axial 1-sigma ``axial_a_m + axial_b_per_m (z - axial_z0_m)^2`` m at planar depth z (m), plus
     ``axial_grazing_m / sqrt(z) theta^2 / (pi/2 - theta)^2`` beyond ``grazing_from_deg`` of incidence theta;

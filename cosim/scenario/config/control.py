@@ -32,7 +32,7 @@ class Grain(Model):
 
 
 class Fusion(Model):
-    """The fused estimator (``controller.estimator: fused``, dynamics_proc.estimator): a per-cell Kalman filter
+    """The fused estimator (``controller.estimator: fused``, dynamics_proc.control.estimator): a per-cell Kalman filter
     that deposits the delivered volume at the predicted impact with the heap law and corrects it with the
     perceived heights.
 
@@ -66,7 +66,7 @@ class Fusion(Model):
 
 
 class Coping(Model):
-    """How the built-in controller (``section_fill``) copes with field conditions (dynamics_proc.coping;
+    """How the built-in controller (``section_fill``) copes with field conditions (dynamics_proc.control.coping;
     docs/field.md).
 
     * ``full_lead_s``: lead on the full level. A section counts as full once its estimated peak plus its measured
@@ -134,9 +134,9 @@ class Controller(Model):
     as the paper does.
 
     Plug-ins (docs/plugins.md; a scenario that names one runs its code): ``strategy`` picks the next section,
-    ``front_to_back`` / ``back_to_front`` / ``lowest_first`` (dynamics_proc.strategies), an entry point name or
+    ``front_to_back`` / ``back_to_front`` / ``lowest_first`` (dynamics_proc.control.strategies), an entry point name or
     an import path ``package.module:name``; ``model`` is the whole controller, ``section_fill`` (this one,
-    dynamics_proc.controller) or a plug-in implementing dynamics_proc.control_protocol. ``fmu`` (for either)
+    dynamics_proc.control.controller) or a plug-in implementing dynamics_proc.control.protocol. ``fmu`` (for either)
     names the FMU ``fmu`` (docs/fmu.md). ``strategy_options`` / ``model_options``: keyword arguments the
     plug-in is called with (a strategy) or made with (a controller factory), checked against its signature.
     ``coping``: how the built-in controller copes with field conditions (:class:`Coping`).
@@ -151,7 +151,7 @@ class Controller(Model):
     """Keyword arguments the strategy plug-in is called with (checked against its signature)."""
     model: PluginRef = "section_fill"
     """The whole controller: section_fill (built in), fmu, or a plug-in implementing
-    dynamics_proc.control_protocol."""
+    dynamics_proc.control.protocol."""
     model_options: Options = {}
     """Keyword arguments the controller factory is called with (checked against its signature)."""
     sections: int = Field(default=9, ge=1, le=64)

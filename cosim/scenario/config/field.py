@@ -14,7 +14,7 @@ __all__ = ["GaussMarkov", "Slip", "ProfilePoint", "increasing_times"]
 
 
 class GaussMarkov(Model):
-    """A stationary first-order Gauss-Markov process (dynamics_proc.fieldnoise): zero mean, standard deviation
+    """A stationary first-order Gauss-Markov process (dynamics_proc.vehicles.fieldnoise): zero mean, standard deviation
     ``sigma``, autocorrelation ``sigma^2 exp(-|dt| / correlation_time_s)``; seeded from the scenario's seed, one
     stream per process. ``sigma`` 0: off."""
 

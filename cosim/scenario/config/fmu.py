@@ -77,7 +77,7 @@ class Fmu(Model):
 
 
 class TractorCart(Model):
-    """The tractor towing the cart: the built-in model (``dynamics_proc.vehicles``) unless ``fmu`` is given."""
+    """The tractor towing the cart: the built-in model (``dynamics_proc.vehicles.motion``) unless ``fmu`` is given."""
 
     fmu: Fmu | None = None
     """An FMU that replaces the built-in tractor-and-cart dynamics (docs/fmu.md)."""

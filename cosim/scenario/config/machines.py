@@ -213,7 +213,7 @@ class MachineSync(Model):
     origin's distance ahead (+) or behind (-) the combine body origin at the start. The default puts the spout
     of the default auger over the middle of the cart's first section (grid x = 0.35 m).
 
-    Feedback law (``dynamics_proc.machine_sync``): the tractor's wanted velocity is the velocity of its setpoint
+    Feedback law (``dynamics_proc.vehicles.machine_sync``): the tractor's wanted velocity is the velocity of its setpoint
     plus ``kp_long`` / ``kp_lat`` (1/s) times the position error in combine axes; the heading follows that
     velocity's direction with gain ``heading_gain_ps`` (1/s). ``initial_*_error_m`` displace the tractor from
     its setpoint at t = 0 (combine axes, m).

@@ -172,7 +172,7 @@ class Perception(Model):
     beams seldom: 16384 every 120 frames is ~0.1 ms per frame amortised (under 2 % of a default frame) and
     ~180,000 beams over a 120 s run; truth never feeds the estimates.
     ``accuracy_beams``: how many beams each evaluation casts, one drawn per stratum of equal runs of the beam
-    table, seeded by (seed, frame) (0: every beam; see perception_proc.accuracy.sample_beams).
+    table, seeded by (seed, frame) (0: every beam; see perception_proc.accuracy.stage.sample_beams).
     ``algorithm``: the per-frame algorithm (points -> cart, height map, impact): ``staged`` runs ``stages``;
     an entry point name or an import path ``package.module:name`` replaces it whole (docs/plugins.md);
     ``algorithm_options``: keyword arguments it is called with.

@@ -1,0 +1,1 @@
+"""The grain: the unloading auger and its stream, the fill of the cart, and the fill in a tilted cart."""

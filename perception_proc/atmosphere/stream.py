@@ -1,0 +1,147 @@
+"""The grain stream as particles for the LiDAR: its kernels partly occlude the beams that cross it.
+
+After Hahner et al. 2022 (snowfall on LiDAR point clouds): a beam of footprint diameter ``w(r) = divergence * r``
+crossing a cloud of particles is split among the particles it meets and what lies behind them, by occlusion ratios
+that sum to 1: the particles in range order each take the share of the still unoccluded beam that their disk
+covers of the footprint (the exact circle-circle overlap area), the hard target behind gets the rest. Each
+share returns like a Lambertian target at its range (perception_proc.atmosphere.dust.hard_power, times its share and the
+transmission before it); the sensor reports the strongest or the last return above its detection limit.
+
+The stream (the ``stream`` block: rows [x, y, z, radius] from the spout to the impact, equal times apart) holds
+kernels of diameter d at the number density ``n = phi / (pi d^3 / 6)``, phi the solid fraction
+``packing * flow / (speed * pi radius^2)`` (the flow's bulk volume through the drawn cross-section at the local
+speed, from the rows' spacing). Along a beam's chord of length L through a segment of the stream, the kernels whose
+disks overlap its footprint are a Poisson number of mean ``n pi ((w + d) / 2)^2 L``, uniform along the chord and
+over that disk. Seeded per frame: ``SeedSequence(seed, spawn_key=(STREAM_PARTICLES, frame))``.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["STREAM_PARTICLES", "disk_overlap", "beam_crossings", "kernel_density", "occlude"]
+
+#: the random stream of the kernels' draws (apart from the other seeded streams)
+STREAM_PARTICLES = 3
+#: segments per bounding sphere of the beam cull
+GROUP = 8
+#: at most this many kernels are drawn per crossing: a kernel takes about (d / w)^2 of a beam, so after 200 the
+#: transmission through even the coarsest footprint (w = 3 mrad x 15 m) is below 1e-3
+MAX_KERNELS = 200
+
+
+def disk_overlap(d: np.ndarray, r1: np.ndarray, r2: float | np.ndarray) -> np.ndarray:
+    """Area (m^2) common to disks of radii ``r1`` and ``r2`` whose centres are ``d`` apart (arrays broadcast)."""
+    d, r1, r2 = np.broadcast_arrays(np.asarray(d, np.float64), np.asarray(r1, np.float64), np.asarray(r2, np.float64))
+    out = np.zeros(d.shape)
+    inside = d <= np.abs(r1 - r2)
+    out[inside] = math.pi * np.minimum(r1, r2)[inside] ** 2
+    part = ~inside & (d < r1 + r2)
+    if part.any():
+        dd, a, b = d[part], r1[part], r2[part]
+        c1 = np.clip((dd * dd + a * a - b * b) / (2 * dd * a), -1.0, 1.0)
+        c2 = np.clip((dd * dd + b * b - a * a) / (2 * dd * b), -1.0, 1.0)
+        k = (-dd + a + b) * (dd + a - b) * (dd - a + b) * (dd + a + b)
+        out[part] = a * a * np.arccos(c1) + b * b * np.arccos(c2) - 0.5 * np.sqrt(np.maximum(k, 0.0))
+    return out
+
+
+def beam_crossings(origin: np.ndarray, directions: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Where beams from ``origin`` (3,) along unit ``directions`` (N, 3) (world) cross the stream's segments
+    between consecutive ``rows`` (M, 4) [x, y, z, radius] (world, m): (beam index (K,), segment index (K,),
+    range of the crossing's middle (K,) m, chord length (K,) m), from the closest approach of the beam to each
+    segment's axis (the segment taken as a cylinder of its rows' mean radius, the crossing kept when the
+    closest point lies on the segment)."""
+    p0, p1 = rows[:-1, :3].astype(np.float64), rows[1:, :3].astype(np.float64)
+    radius = 0.5 * (rows[:-1, 3] + rows[1:, 3]).astype(np.float64)
+    axis = p1 - p0
+    length = np.linalg.norm(axis, axis=1)
+    keep = length > 0.0
+    p0, axis, length, radius = p0[keep], axis[keep], length[keep], radius[keep]
+    seg_ids = np.flatnonzero(keep)
+    u = axis / length[:, None]
+    # cull: a beam must pass within the bounding sphere of a group of segments, then within the segment's
+    mid = p0 + 0.5 * axis
+    seg_r = 0.5 * length + radius
+    to_m = mid - origin                                              # (S, 3)
+    empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0))
+    pairs_b, pairs_s = [], []
+    for g0 in range(0, len(p0), GROUP):
+        g = slice(g0, g0 + GROUP)
+        lo, hi = (mid[g] - seg_r[g, None]).min(0), (mid[g] + seg_r[g, None]).max(0)
+        to_c = 0.5 * (lo + hi) - origin
+        rad = 0.5 * float(np.linalg.norm(hi - lo))
+        along = directions @ to_c
+        cand = np.flatnonzero((along > -rad) & (float(to_c @ to_c) - along * along <= rad * rad))
+        if cand.size == 0:
+            continue
+        a_m = directions[cand] @ to_m[g].T                           # (C, G)
+        near = (a_m > -seg_r[None, g]) & (np.einsum("sk,sk->s", to_m[g], to_m[g])[None, :] - a_m * a_m
+                                          <= seg_r[None, g] ** 2)
+        ci, si = np.nonzero(near)
+        pairs_b.append(cand[ci])
+        pairs_s.append(si + g0)
+    if not pairs_b:
+        return empty
+    beam_of, si = np.concatenate(pairs_b), np.concatenate(pairs_s)
+    if beam_of.size == 0:
+        return empty
+    d, w0, us = directions[beam_of], origin[None, :] - p0[si], u[si]
+    b = np.einsum("kj,kj->k", d, us)                                 # cos of the angle between them
+    dd = np.einsum("kj,kj->k", d, w0)
+    e = np.einsum("kj,kj->k", us, w0)
+    den = 1.0 - b * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_beam = (b * e - dd) / den                                  # closest point: along the beam
+        t_seg = (e - b * dd) / den                                   # along the segment's axis
+    dist = np.linalg.norm(w0 + t_beam[:, None] * d - t_seg[:, None] * us, axis=1)
+    hit = (den > 1e-12) & (t_beam > 0.0) & (t_seg >= 0.0) & (t_seg <= length[si]) & (dist < radius[si])
+    beam_of, si, t_beam, dist, den = beam_of[hit], si[hit], t_beam[hit], dist[hit], den[hit]
+    sin_a = np.sqrt(den)
+    chord = 2.0 * np.sqrt(radius[si] ** 2 - dist ** 2) / sin_a
+    return beam_of, seg_ids[si], t_beam, np.minimum(chord, length[si] / sin_a + 2.0 * radius[si])
+
+
+def kernel_density(rows: np.ndarray, flow_m3ps: float, packing: float, kernel_d_m: float,
+                   dt_row_s: float) -> np.ndarray:
+    """Kernels per m^3 (M - 1,) in each segment between ``rows`` (M, 4) (equal times ``dt_row_s`` apart): the
+    bulk ``flow_m3ps`` times ``packing`` through each segment's cross-section at its speed (the rows' spacing
+    over ``dt_row_s``), over one kernel's volume."""
+    spacing = np.linalg.norm(np.diff(rows[:, :3].astype(np.float64), axis=0), axis=1)
+    speed = np.maximum(spacing / dt_row_s, 1e-6)
+    radius = 0.5 * (rows[:-1, 3] + rows[1:, 3]).astype(np.float64)
+    area = math.pi * np.maximum(radius, 1e-9) ** 2
+    phi = np.minimum(packing * flow_m3ps / (speed * area), packing)
+    return phi / (math.pi * kernel_d_m ** 3 / 6.0)
+
+
+def occlude(ranges: np.ndarray, beams: np.ndarray, mids: np.ndarray, chords: np.ndarray, density: np.ndarray,
+            kernel_d_m: float, divergence_rad: float, rng: np.random.Generator):
+    """The kernels the beams meet: crossing k (beam ``beams[k]``, chord of length ``chords[k]`` centred at range
+    ``mids[k]`` m, ``density[k]`` kernels/m^3), with ``ranges`` (N,) the hard targets (NaN none). Returns
+    (beams with kernels (B,) int64, per kernel: its beam's row in that list (M,), range (M,) m, share of the beam
+    (M,); the share left for each beam's target (B,)), kernels in range order within a beam, the shares and what is
+    left summing to 1 per beam."""
+    w = divergence_rad * np.maximum(mids, 1e-3)
+    reach = 0.5 * (w + kernel_d_m)
+    counts = np.minimum(rng.poisson(density * math.pi * reach * reach * chords), MAX_KERNELS)
+    k = np.repeat(np.arange(len(beams)), counts)
+    r = (mids - 0.5 * chords)[k] + chords[k] * rng.random(k.size)
+    off = reach[k] * np.sqrt(rng.random(k.size))                     # uniform over the disk of reach
+    share = np.minimum(disk_overlap(off, 0.5 * kernel_d_m, 0.5 * w[k]) / (math.pi * 0.25 * w[k] ** 2), 1.0)
+    beam = beams[k]
+    target = ranges[beam]
+    front = ~(np.isfinite(target) & (r >= target))                  # kernels behind the target are never met
+    beam, r, share = beam[front], r[front], share[front]
+    order = np.lexsort((r, beam))
+    beam, r, share = beam[order], r[order], share[order]
+    ids, row = np.unique(beam, return_inverse=True)
+    logs = np.log1p(-np.minimum(share, 1.0 - 1e-12))
+    cum = np.cumsum(logs)
+    first = np.searchsorted(beam, ids)
+    start = np.concatenate([[0.0], cum])[first][row]                 # sum of the logs before each beam's first
+    before = np.exp(np.concatenate([[0.0], cum[:-1]]) - start)       # transmission before each kernel
+    took = before * share
+    left = np.exp(np.add.reduceat(logs, first)) if len(ids) else np.zeros(0)
+    return ids, row, r, took, left
