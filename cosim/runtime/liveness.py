@@ -41,7 +41,7 @@ from shm_schema.layout import SLOT_WORD
 
 __all__ = ["BEAT_S", "STALL_S", "CONFIRM_S", "IDLE_S", "LOOK_AFTER_S", "STARTUP_REPORT_S", "Heartbeat", "Watch",
            "Progress", "Evidence", "process_state", "cpu_ticks", "is_stopped", "threads_progress", "end_process",
-           "stop_processes", "child_failure", "ring_holder"]
+           "stop_processes", "child_failure"]
 
 #: period of a child's liveness beat, s
 BEAT_S = 0.1
@@ -353,16 +353,6 @@ def child_failure(name: str, proc, seg: Segment) -> RunError:
     phase = Phase.NAMES[int(slot["phase"])] if 0 <= int(slot["phase"]) < len(Phase.NAMES) else "?"
     return ParticipantDied(f"{name} (pid {proc.pid}) died with {how} during frame {frame} (phase {phase})",
                            process=name, frame=frame)
-
-
-def ring_holder(seg: Segment, members: Sequence[str]) -> str | None:
-    """The member that holds up the run (the one a hand-off timeout is about): of the members starting or stepping
-    (a member blocked on a reader, under the pipelined schedule, says waiting), the one busy the longest (its slot's
-    ``heartbeat_ns`` is stamped when it starts a step; 0 before its first); None when every member waits (then no
-    member is at fault)."""
-    busy = [(int(seg.slot(n)["heartbeat_ns"]), n) for n in members
-            if int(seg.slot(n)["phase"]) in (Phase.STARTING, Phase.STEPPING)]
-    return min(busy)[1] if busy else None
 
 
 def stop_processes(procs: Mapping[str, object], *, graceful: bool, join_timeout_s: float, grace_s: float,

@@ -17,11 +17,11 @@ import time
 from pathlib import Path
 from typing import Mapping
 
-from cosim.errors import HandoffTimeout, OutputError, ParticipantHung, RunError, RunInterrupted
+from cosim.errors import OutputError, ParticipantHung, RunError, RunInterrupted
 
 from .figures import PENDING, draw_figures, figures_plan
 from .files import atomic_write
-from .liveness import ring_holder, stop_processes
+from .liveness import stop_processes
 from .outcome import outcome_line
 from .outputs import finish_outputs
 from .runstate import RunState
@@ -46,16 +46,8 @@ OBSERVER_GRACE_S = 1.5
 
 
 def at_fault(run: RunState, error: RunError) -> RunError:
-    """``error`` naming the process at fault: a hand-off timeout met by the supervisor names the member that holds
-    up the ring (its message already describes it); an error that names no process (a write error) names the
-    supervisor, which writes the outputs."""
-    if isinstance(error, HandoffTimeout) and error.process == SUPERVISOR and run.seg is not None:
-        holder = ring_holder(run.seg, run.plan.members)
-        if holder is not None:
-            frame = int(run.seg.slot(holder)["frame"])
-            return HandoffTimeout(f"{holder} did not finish frame {frame} within the hand-off timeout "
-                                  f"(timing.handoff_timeout_s = {run.scenario.timing.handoff_timeout_s:g} s): "
-                                  f"{error}", process=holder, frame=frame, detail=error.detail)
+    """``error`` naming the process at fault: an error that names no process (a write error) names the supervisor,
+    which writes the outputs. (A hang or a runaway is named on its member by the liveness watch already.)"""
     if not error.process:
         error.process = SUPERVISOR
     return error
