@@ -180,13 +180,12 @@ class Progress:
     reported_ns: int = 0
 
     def sample(self, now: int, cpu: int, busy: bool) -> None:
-        """Take one sample: progress when the working threads gained CPU time or one wants a core."""
+        """Take one sample: progress when the working threads gained CPU time (more than _EPS_NS since the last
+        progress) or one of them wants a core or waits for the disk; the first sample starts the count."""
         if self.cpu0_ns < 0:
-            self.cpu0_ns, self.moved_ns = cpu, now
-        elif busy or cpu - self.cpu_ns > _EPS_NS:
-            self.moved_ns = now
-        if busy or cpu - self.cpu_ns > _EPS_NS or self.cpu_ns < 0:
-            self.cpu_ns = cpu
+            self.cpu0_ns = cpu
+        if self.cpu_ns < 0 or busy or cpu - self.cpu_ns > _EPS_NS:
+            self.cpu_ns, self.moved_ns = cpu, now
         self.sampled_ns = now
 
     @property
