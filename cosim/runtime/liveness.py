@@ -279,9 +279,9 @@ class Watch:
                                  f"{p.cpu_s:.1f} s of its own CPU time ({key} = {limit:g} s); a loop that never "
                                  "ends?", process=name, frame=frame)
         if starting and self._report is not None:
-            self._report_startup(name, w, p, now)
+            self._report_startup(name, p, now)
 
-    def _report_startup(self, name: str, w, p: Progress, now: int) -> None:
+    def _report_startup(self, name: str, p: Progress, now: int) -> None:
         since = (now - p.since_ns) / _NS
         if since < STARTUP_REPORT_S or (now - p.reported_ns) / _NS < STARTUP_REPORT_S:
             return
