@@ -43,10 +43,10 @@ def check_port(host: str, port: int) -> None:
             raise PortBusy(f"viewer cannot listen on {host}:{port}: {exc.strerror or exc}") from None
 
 
-def wait_until_answers(url: str, timeout_s: float = ANNOUNCE_TIMEOUT_S) -> bool:
-    """Poll ``url`` + ``healthz`` until it answers 200 (True) or ``timeout_s`` passes (False)."""
+def wait_until_answers(url: str, timeout_s: float = ANNOUNCE_TIMEOUT_S, stop: threading.Event | None = None) -> bool:
+    """Poll ``url`` + ``healthz`` until it answers 200 (True) or ``timeout_s`` passes or ``stop`` is set (False)."""
     deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
+    while time.monotonic() < deadline and not (stop is not None and stop.is_set()):
         try:
             with urllib.request.urlopen(url.rstrip("/") + "/healthz", timeout=1.0) as r:
                 if r.status == 200:
@@ -60,9 +60,10 @@ def wait_until_answers(url: str, timeout_s: float = ANNOUNCE_TIMEOUT_S) -> bool:
 class ViewerAnnouncer:
     """Prints ``viewer: URL (while the run lasts)`` to ``stream`` once the viewer at the URL its announce file
     names answers. ``path`` is the announce file to hand the observer; :meth:`close` stops waiting and removes
-    it. ``url`` holds the address once printed."""
+    it. ``url`` holds the address once printed. ``timeout_s`` None (the default) waits as long as the run lasts:
+    on a busy machine the viewer's start may take minutes, and its address is still worth printing."""
 
-    def __init__(self, stream: TextIO, timeout_s: float = ANNOUNCE_TIMEOUT_S):
+    def __init__(self, stream: TextIO, timeout_s: float | None = None):
         self._dir = tempfile.TemporaryDirectory(prefix="cosim-viewer-")
         self.path = Path(self._dir.name) / "viewer.json"
         self.url: str | None = None
@@ -72,12 +73,12 @@ class ViewerAnnouncer:
         self._thread.start()
 
     def _wait(self) -> None:
-        deadline = time.monotonic() + self._timeout
+        deadline = time.monotonic() + (self._timeout if self._timeout is not None else float("inf"))
         while not self.path.exists():
             if self._stop.wait(POLL_S) or time.monotonic() > deadline:
                 return
         url = json.loads(self.path.read_text())["url"]
-        if wait_until_answers(url, max(0.0, deadline - time.monotonic())) and not self._stop.is_set():
+        if wait_until_answers(url, max(0.0, deadline - time.monotonic()), self._stop) and not self._stop.is_set():
             self.url = url
             self._stream.write(f"viewer: {url} (while the run lasts)\n")
             self._stream.flush()
