@@ -17,14 +17,15 @@ import signal
 import sys
 import threading
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 from cosim.runtime.threadpools import default_to_single_threaded_pools
 
 from .errors import OutputError, RunRefused, ScenarioError
 from .studies.commands import add_sweep_parser, out_options, study_command, sweep_command
 
-__all__ = ["main", "build_parser", "run_extras", "required_exit", "VERBS", "EXIT_NOT_FILLED"]
+__all__ = ["main", "build_parser", "run_extras", "required_exit", "VERBS", "PLAIN_VERBS", "SCENARIO_VERBS",
+           "EXIT_NOT_FILLED"]
 
 VERBS = ("run", "validate", "schema", "compare", "study", "view", "replay", "report", "list", "sweep",
          "export-fmu", "export")
@@ -254,79 +255,77 @@ def _interruptible(fn):
     return wrapper
 
 
-@_interruptible
-def main(argv: Sequence[str] | None = None) -> int:
-    default_to_single_threaded_pools()  # before numpy loads: in-process runs (study, compare) and children
-    argv = list(sys.argv[1:] if argv is None else argv)
-    if not argv or (argv[0] not in VERBS and argv[0] not in ("-h", "--help")):
-        argv.insert(0, "run")
-    args = build_parser().parse_args(argv)
-    if args.verb in ("view", "replay"):
-        from .viewer.__main__ import main as viewer_main
+def _view(args: argparse.Namespace) -> int:
+    """``view`` and ``replay``: the dashboard attached to a live run or replaying a recording."""
+    from .viewer.__main__ import main as viewer_main
 
-        where = ["--port", str(args.port), "--host", args.host]
-        if args.verb == "view":
-            return viewer_main(["--attach", args.run, *where])
-        return viewer_main(["--replay", str(args.file), *where, "--speed", str(args.speed)]
-                           + (["--loop"] if args.loop else []))
-    if args.verb == "sweep":
-        return sweep_command(args)
-    if args.verb == "report":
-        return _report(args.run_dir)
-    if args.verb == "list":
-        from cosim.scenario.loader import describe_packaged
+    where = ["--port", str(args.port), "--host", args.host]
+    if args.verb == "view":
+        return viewer_main(["--attach", args.run, *where])
+    return viewer_main(["--replay", str(args.file), *where, "--speed", str(args.speed)]
+                       + (["--loop"] if args.loop else []))
 
-        rows = describe_packaged()
-        width = max(len(n) for n in rows)
-        sys.stdout.write("".join(f"{n:<{width}}  {d}\n" for n, d in rows.items()))
-        return 0
-    if args.verb == "schema":
-        from cosim.scenario.jsonschema import schema_text
 
-        text = schema_text()
-        if args.out:
-            args.out.write_text(text)
-        else:
-            sys.stdout.write(text)
-        return 0
-    try:
-        scenario = _load(args)
-    except ScenarioError as exc:
-        sys.stderr.write(f"{exc}\n{len(exc.problems)} problem(s); nothing was started.\n")
-        return EXIT_SCENARIO
-    except FileNotFoundError as exc:
-        sys.stderr.write(f"{exc}\n")
-        return EXIT_SCENARIO
-    if args.verb == "validate":
-        if args.print:
-            from cosim.scenario.loader import dump_resolved
+def _list(args: argparse.Namespace) -> int:
+    """``list``: the packaged scenarios, one line each."""
+    from cosim.scenario.loader import describe_packaged
 
-            sys.stdout.write(dump_resolved(scenario))
-        else:
-            from cosim.scenario.trust import format_inventory, inspect_scenario
+    rows = describe_packaged()
+    width = max(len(n) for n in rows)
+    sys.stdout.write("".join(f"{n:<{width}}  {d}\n" for n, d in rows.items()))
+    return 0
 
-            sys.stdout.write(f"{args.scenario}: valid ({scenario.frames + 1} frames, ring "
-                             f"{' -> '.join(scenario.participants)})\nloads (a plug-in runs its code):\n"
-                             f"{format_inventory(inspect_scenario(scenario, versions=True)[0])}\n")
-        return 0
-    from cosim.runtime.progress import run_progress
 
-    if args.verb == "study":
-        return study_command(args, scenario)
-    if args.verb in ("export-fmu", "export"):
-        from cosim.fmi.export.build import export_command
+def _schema(args: argparse.Namespace) -> int:
+    """``schema``: the scenario's JSON Schema, to ``--out`` or stdout."""
+    from cosim.scenario.jsonschema import schema_text
 
-        return export_command(args, scenario)
-    if args.verb == "compare":
-        from cosim.runtime.outputs import default_run_dir
-        from cosim.studies.compare import compare
+    text = schema_text()
+    if args.out:
+        args.out.write_text(text)
+    else:
+        sys.stdout.write(text)
+    return 0
 
-        out = args.out or default_run_dir(scenario.model_copy(update={"name": f"compare-{scenario.name}"}))
-        report = compare(scenario, out, quiet=args.quiet, overwrite=args.overwrite,
-                         parents=args.parents or args.out is None)
-        sys.stdout.write(f"report: {report}\n")
-        return 0
+
+def _validate(args: argparse.Namespace, scenario) -> int:
+    """``validate``: the resolved scenario (``--print``) or what it loads."""
+    if args.print:
+        from cosim.scenario.loader import dump_resolved
+
+        sys.stdout.write(dump_resolved(scenario))
+    else:
+        from cosim.scenario.trust import format_inventory, inspect_scenario
+
+        sys.stdout.write(f"{args.scenario}: valid ({scenario.frames + 1} frames, ring "
+                         f"{' -> '.join(scenario.participants)})\nloads (a plug-in runs its code):\n"
+                         f"{format_inventory(inspect_scenario(scenario, versions=True)[0])}\n")
+    return 0
+
+
+def _export(args: argparse.Namespace, scenario) -> int:
+    """``export-fmu`` (``export``): the scenario's world as an FMU."""
+    from cosim.fmi.export.build import export_command
+
+    return export_command(args, scenario)
+
+
+def _compare(args: argparse.Namespace, scenario) -> int:
+    """``compare``: the scenario with ground-truth and with perception feedback, and the report."""
+    from cosim.runtime.outputs import default_run_dir
+    from cosim.studies.compare import compare
+
+    out = args.out or default_run_dir(scenario.model_copy(update={"name": f"compare-{scenario.name}"}))
+    report = compare(scenario, out, quiet=args.quiet, overwrite=args.overwrite,
+                     parents=args.parents or args.out is None)
+    sys.stdout.write(f"report: {report}\n")
+    return 0
+
+
+def _run(args: argparse.Namespace, scenario) -> int:
+    """``run``: one run over OS processes, its summary, and its exit status."""
     from cosim.runtime.launcher import launch
+    from cosim.runtime.progress import run_progress
 
     progress = run_progress(scenario.name, args.quiet)
     announcer = None
@@ -355,6 +354,40 @@ def main(argv: Sequence[str] | None = None) -> int:
             progress.close()
     _print_summary(result, sys.stdout)
     return required_exit(result.exit_code, result.summary, args.require_filled)
+
+
+#: verbs that need no scenario: verb -> handler(args) -> exit status
+PLAIN_VERBS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "view": _view, "replay": _view, "sweep": lambda args: sweep_command(args),
+    "report": lambda args: _report(args.run_dir), "list": _list, "schema": _schema,
+}
+#: verbs on a loaded scenario: verb -> handler(args, scenario) -> exit status
+SCENARIO_VERBS: dict[str, Callable[[argparse.Namespace, object], int]] = {
+    "validate": _validate, "study": lambda args, scenario: study_command(args, scenario), "export-fmu": _export,
+    "export": _export, "compare": _compare, "run": _run,
+}
+
+
+@_interruptible
+def main(argv: Sequence[str] | None = None) -> int:
+    """The command line (``launch.py VERB ...``): a verb of :data:`PLAIN_VERBS` or :data:`SCENARIO_VERBS` (``run``
+    when the first argument is none), its exit status."""
+    default_to_single_threaded_pools()  # before numpy loads: in-process runs (study, compare) and children
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or (argv[0] not in VERBS and argv[0] not in ("-h", "--help")):
+        argv.insert(0, "run")
+    args = build_parser().parse_args(argv)
+    if args.verb in PLAIN_VERBS:
+        return PLAIN_VERBS[args.verb](args)
+    try:
+        scenario = _load(args)
+    except ScenarioError as exc:
+        sys.stderr.write(f"{exc}\n{len(exc.problems)} problem(s); nothing was started.\n")
+        return EXIT_SCENARIO
+    except FileNotFoundError as exc:
+        sys.stderr.write(f"{exc}\n")
+        return EXIT_SCENARIO
+    return SCENARIO_VERBS[args.verb](args, scenario)
 
 
 def required_exit(code: int, summary: dict, require_filled: bool) -> int:

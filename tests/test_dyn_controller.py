@@ -14,6 +14,7 @@ from dynamics_proc.control.controller import (
     min2x2,
     section_heights,
 )
+from dynamics_proc.control.protocol import ControllerInput
 from dynamics_proc.control.strategies import back_to_front, front_to_back, get_strategy, lowest_first
 
 
@@ -90,7 +91,9 @@ def test_min2x2_never_exceeds_a_valid_neighbour_block(m):
 
 
 def _step(st_, p, t, meas, actual=0.35, impacts=((0.35, 1.5), (0.35, 1.5)), signal=0.35):
-    return controller_step(st_, p, t, meas, actual, impacts, 0.0, signal)
+    inp = ControllerInput(t_s=t, frame=0, heights=meas, spout_x_m=actual, impacts=impacts, drift_x_m=0.0,
+                          nudge_signal_m=signal, delivery=None, target_fill_m=p.target_m)
+    return controller_step(st_, p, inp)
 
 
 def test_no_measurement_keeps_auger_off_and_holds():

@@ -13,7 +13,15 @@ from cosim.runtime.outcome import HOLD_LOST, HOLD_NO_MEASUREMENT, judge
 from cosim.scenario.config import Scenario
 from cosim.scenario.loader import load_scenario, packaged_scenarios
 from dynamics_proc.closed_loop import simulate
-from dynamics_proc.control.coping import MODE_DEAD_RECKONING, MODE_HOLD, MODE_MEASURED, mode, rise_rate, slowed_section
+from dynamics_proc.control.coping import (
+    MODE_DEAD_RECKONING,
+    MODE_HOLD,
+    MODE_MEASURED,
+    SlowLimits,
+    mode,
+    rise_rate,
+    slowed_section,
+)
 from dynamics_proc.control.feedforward import _spout_grid, steady_cart_offset, turn_compensation
 from dynamics_proc.grain import auger as ag
 from dynamics_proc.model import ModelParams
@@ -46,14 +54,14 @@ def test_the_rise_rate_filter_is_a_first_order_lag_of_the_true_rate():
 def test_slowing_starts_near_full_at_a_high_rise_only_and_lasts_until_the_impact_leaves():
     full, heights, centres = np.array([False, False, False]), np.array([1.80, 1.0, 1.0]), (1.0, 3.0, 5.0)
     args = dict(lead_s=1.0, allowance_m=0.06, full_level_m=1.89, centres_m=centres, section_m=2.0)
-    assert slowed_section(0, -1, full, heights, np.array([0.10, 0, 0]), 1.0, **args) == 0     # 1.80 + 0.10
-    assert slowed_section(0, -1, full, heights, np.array([0.05, 0, 0]), 1.0, **args) == -1    # rise <= allowance
-    assert slowed_section(0, -1, full, np.array([1.7, 1, 1]), np.array([0.1, 0, 0]), 1.0, **args) == -1  # far
+    assert slowed_section(0, -1, full, heights, np.array([0.10, 0, 0]), 1.0, SlowLimits(**args)) == 0     # 1.80 + 0.10
+    assert slowed_section(0, -1, full, heights, np.array([0.05, 0, 0]), 1.0, SlowLimits(**args)) == -1    # rise <= allowance
+    assert slowed_section(0, -1, full, np.array([1.7, 1, 1]), np.array([0.1, 0, 0]), 1.0, SlowLimits(**args)) == -1  # far
     done = np.array([True, False, False])
-    assert slowed_section(1, 0, done, heights, np.zeros(3), 1.9, **args) == 0                 # still over 0
-    assert slowed_section(1, 0, done, heights, np.zeros(3), 2.1, **args) == -1                # arrived
-    assert slowed_section(1, 0, full, heights, np.zeros(3), 1.9, **args) == -1                # 0 left unfilled
-    assert slowed_section(0, -1, full, heights, np.array([1.0, 0, 0]), 1.0, **{**args, "lead_s": 0.0}) == -1
+    assert slowed_section(1, 0, done, heights, np.zeros(3), 1.9, SlowLimits(**args)) == 0                 # still over 0
+    assert slowed_section(1, 0, done, heights, np.zeros(3), 2.1, SlowLimits(**args)) == -1                # arrived
+    assert slowed_section(1, 0, full, heights, np.zeros(3), 1.9, SlowLimits(**args)) == -1                # 0 left unfilled
+    assert slowed_section(0, -1, full, heights, np.array([1.0, 0, 0]), 1.0, SlowLimits(**{**args, "lead_s": 0.0})) == -1
 
 
 def test_modes_and_hold_reasons():

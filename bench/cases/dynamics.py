@@ -40,6 +40,7 @@ def frame_costs(s, frames: int) -> dict:
     import numpy as np
 
     from dynamics_proc.control.controller import Delivery, controller_step
+    from dynamics_proc.control.protocol import ControllerInput
     from dynamics_proc.grain import auger as ag
     from dynamics_proc.grain.fill import deposit
     from dynamics_proc.model import ModelParams, initial_world, signals, spout_grid, step_frame, truth_measurement
@@ -66,7 +67,9 @@ def frame_costs(s, frames: int) -> dict:
             deposit(w.heights, float(imp.grid[0]), float(imp.grid[1]), 0.0125, p.grid, p.cap)
         t3 = time.perf_counter()
         delivery = Delivery(w.delivered_m3, spg, g[:3, :3] @ vel) if p.control.fusion is not None else None
-        controller_step(w.ctrl, p.control, w.t_s, meas, float(spg[0]), ((1.0, 1.0), (1.0, 1.0)), 0.0, 0.35, delivery)
+        controller_step(w.ctrl, p.control, ControllerInput(
+            t_s=w.t_s, frame=m, heights=meas, spout_x_m=float(spg[0]), impacts=((1.0, 1.0), (1.0, 1.0)), drift_x_m=0.0,
+            nudge_signal_m=0.35, delivery=delivery, target_fill_m=p.control.target_m))
         t4 = time.perf_counter()
         w = step_frame(w, meas, p)
         t5 = time.perf_counter()

@@ -44,7 +44,14 @@ import numpy as np
 from cosim.errors import PluginFault
 from cosim.scenario.config import Scenario
 from cosim.scenario.plugins import load_plugin
-from dynamics_proc.control.coping import mode, peak_sigma, rise_rate, slowed_section, unexplained_shift
+from dynamics_proc.control.coping import (
+    SlowLimits,
+    mode,
+    peak_sigma,
+    rise_rate,
+    slowed_section,
+    unexplained_shift,
+)
 from dynamics_proc.control.estimator import (
     FillEstimate,
     FusionParams,
@@ -60,7 +67,8 @@ from dynamics_proc.control.strategies import Strategy
 from dynamics_proc.grain.fill import GrainGrid, section_rows
 
 __all__ = ["BIAS_TAU_S", "SETTLE_S", "STRATEGY_POINT", "ControllerParams", "ControllerState", "Delivery",
-           "min2x2", "section_heights", "section_valid", "initial_controller", "controller_step",
+           "min2x2", "section_heights", "section_valid", "initial_controller", "Ingested", "Fullness", "Aim", "ingest",
+           "fullness", "aim", "safety", "controller_step",
            "SectionFillController", "plugin_dir"]
 
 #: the scenario key of the fill strategy plug-in (named in faults)
@@ -192,33 +200,70 @@ def initial_controller(p: ControllerParams) -> ControllerState:
     """State before the first measurement: nothing known, auger off."""
     n = p.sections
     est = initial_estimate(p.fusion) if p.fusion is not None else None
-    return ControllerState(np.full(n, np.nan), np.full(n, -np.inf), np.zeros(n, bool), np.zeros(n, bool), est,
-                           0.0, -1, -np.inf, 0.0, False, False, False, 0, np.zeros(n), HOLD_NO_MEASUREMENT)
+    return ControllerState(heights=np.full(n, np.nan), last_valid_t=np.full(n, -np.inf), forced_full=np.zeros(n, bool),
+                           full=np.zeros(n, bool), estimate=est, delivered_m3=0.0, target=-1, last_nudge_t=-np.inf,
+                           bias_m=0.0, auger_cmd=False, seen=False, all_full=False, nudges=0, rate=np.zeros(n),
+                           hold=HOLD_NO_MEASUREMENT)
 
 
 def _inside(x: float, y: float, margin: float, p: ControllerParams) -> bool:
     return margin <= x <= p.length_m - margin and margin <= y <= p.width_m - margin
 
 
-def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np.ndarray | None,
-                    actual_x: float, impacts: tuple[tuple[float, float], ...], drift_x: float,
-                    nudge_signal: float, delivery: Delivery | None = None,
-                    turn_shift_m: tuple[float, float] = (0.0, 0.0), lateral_correction_m: float = 0.0,
-                    speed_change_mps2: float = 0.0) -> tuple[ControllerState, ControllerCommand]:
-    """One controller decision at time ``t`` s.
+@dataclass(frozen=True)
+class Ingested:
+    """What a decision knows after taking in the frame's inputs (:func:`ingest`): per-section ``heights`` (N,) m
+    (NaN unknown), ``last_valid_t`` (N,) s, ``seen``, the fused ``estimate`` and ``delivered_m3`` it has taken in,
+    ``ok`` (N,) bool the sections the measurement covered (None: no measurement used), and ``blocks`` the started
+    estimate's 2 x 2 block minima (:func:`section_blocks`, else None)."""
 
-    ``meas`` (nx, ny) m or None; ``actual_x`` spout grid x m; ``impacts`` predicted impact points (grid
-    x, y m, from the known geometry; the auger runs only while all are safely inside); ``drift_x`` predicted
-    impact x minus spout x m; ``nudge_signal`` the spout grid x m
-    the current setpoint implies; ``delivery`` what the fused estimator needs (required with it);
-    ``turn_shift_m`` (now, ahead): the steady-state shift of the spout along grid x that the combine's yaw rate
-    now and ``controller.coping.feedforward_lead_s`` ahead would cause (dynamics_proc.control.feedforward), m, and
-    ``lateral_correction_m`` the lateral setpoint correction for the turn ahead, m: both used with
-    ``controller.coping.feedforward``; ``speed_change_mps2`` the combine's largest rate of speed change ahead
-    (``controller.coping.pause_accel_mps2``).
-    """
+    heights: np.ndarray
+    last_valid_t: np.ndarray
+    seen: bool
+    estimate: FillEstimate | None
+    delivered_m3: float
+    ok: np.ndarray | None
+    blocks: tuple[np.ndarray, np.ndarray] | None
+
+
+@dataclass(frozen=True)
+class Fullness:
+    """The sections' state after :func:`fullness`: the filtered ``rate`` (N,) m/s, ``forced`` and ``full`` (N,) bool,
+    the ``target`` (-1 none), ``all_full``, the ``slowed`` section (-1 none), the ``mode``, the ``hold`` reason and
+    the target's 1-sigma ``sigma_m``."""
+
+    rate: np.ndarray
+    forced: np.ndarray
+    full: np.ndarray
+    target: int
+    all_full: bool
+    slowed: int
+    mode: int
+    hold: int
+    sigma_m: float
+
+
+@dataclass(frozen=True)
+class Aim:
+    """Where the spout should be (:func:`aim`): ``desired_m`` (grid x), the learnt ``bias_m``, the bias with the
+    turn ahead ``total_bias_m``, the ``effort_m`` (desired + total bias), the ``nudge`` (-1, 0, 1), the time of the
+    last nudge ``last_nudge_t`` (s) and the ``nudges`` so far."""
+
+    desired_m: float
+    bias_m: float
+    total_bias_m: float
+    effort_m: float
+    nudge: int
+    last_nudge_t: float
+    nudges: int
+
+
+def ingest(st: ControllerState, p: ControllerParams, inp: ControllerInput) -> Ingested:
+    """Stage 1: the fused estimate predicted with the grain delivered since the last decision, and the measurement
+    (``inp.heights``, rejected whole when the fused estimate finds it inconsistent) taken in."""
     heights, last_valid, seen = st.heights, st.last_valid_t, st.seen
     est, delivered = st.estimate, st.delivered_m3
+    meas, delivery = inp.heights, inp.delivery
     if est is not None:
         if delivery is None:
             raise ValueError("the fused estimator needs the delivery signal")
@@ -241,68 +286,109 @@ def controller_step(st: ControllerState, p: ControllerParams, t: float, meas: np
         else:
             ok = section_valid(m, p)
             est = update(est, m, p.fusion)
-        last_valid = np.where(ok, t, last_valid)
+        last_valid = np.where(ok, inp.t_s, last_valid)
         seen = seen or bool(ok.any())                          # an all-NaN map is no measurement
     # the estimate's 2 x 2 block minima: its section peaks and the target's sigma read them
     blocks = section_blocks(est.height, p) if est is not None and est.started else None
     if blocks is not None:
         heights = section_heights(est.height, p, blocks)
+    return Ingested(heights=heights, last_valid_t=last_valid, seen=seen, estimate=est, delivered_m3=delivered, ok=ok,
+                    blocks=blocks)
+
+
+def fullness(st: ControllerState, p: ControllerParams, inp: ControllerInput, ing: Ingested) -> Fullness:
+    """Stage 2: the sections' rise rates, which are full (latched; a stale target given up as full with the paper's
+    estimator), the strategy's target, whether the auger is slowed, and the mode and hold reason."""
+    heights, seen = ing.heights, ing.seen
     rate = st.rate if st.rate is not None else np.zeros(p.sections)
     if p.full_lead_s > 0.0:
         rate = rise_rate(rate, st.heights, heights, p.frame_dt_s, p.rise_tau_s)
     forced = st.forced_full
     # the paper's estimator has nothing to go on without a view: a target stale for long is given up as full.
     # The fused one carries on by dead reckoning while its confidence lasts (below)
-    if (est is None and seen and st.target >= 0 and st.auger_cmd and t - last_valid[st.target] > p.stale_timeout_s
-            and not forced[st.target]):
+    if (ing.estimate is None and seen and st.target >= 0 and st.auger_cmd
+            and inp.t_s - ing.last_valid_t[st.target] > p.stale_timeout_s and not forced[st.target]):
         forced = forced.copy()
         forced[st.target] = True
     with np.errstate(invalid="ignore"):
         full = (heights >= p.full_level_m) | forced      # NaN (unknown) is not full
     full |= st.full                                       # latched: grain does not leave the cart
     target = _pick(p, full, heights, st.target) if seen else -1
-    all_full = seen and target < 0
-    slowed = slowed_section(target, st.slowed, full, heights, rate, actual_x + drift_x, p.full_lead_s,
-                            p.lead_allowance_m, p.full_level_m, p.centres_m, p.length_m / p.sections)
-    mode, hold, sigma = _mode(p, seen, target, ok, est, blocks)
+    slowed = slowed_section(target, st.slowed, full, heights, rate, inp.spout_x_m + inp.drift_x_m,
+                            SlowLimits(p.full_lead_s, p.lead_allowance_m, p.full_level_m, p.centres_m,
+                                       p.length_m / p.sections))
+    mode_, hold, sigma = _mode(p, seen, target, ing.ok, ing.estimate, ing.blocks)
+    return Fullness(rate=rate, forced=forced, full=full, target=target, all_full=seen and target < 0, slowed=slowed,
+                    mode=mode_, hold=hold, sigma_m=sigma)
+
+
+def aim(st: ControllerState, p: ControllerParams, inp: ControllerInput, target: int) -> Aim:
+    """Stage 3: the desired spout position over ``target`` (inside the safe margins), the steady-state bias learnt
+    while settled (with the turn's feed-forward), and a nudge of the Machine Sync setpoint when the effort is half a
+    nudge away and the predicted impact after it stays inside."""
+    t, actual_x, drift_x, signal = inp.t_s, inp.spout_x_m, inp.drift_x_m, inp.nudge_signal_m
     lo, hi = p.safe_margin_m, p.length_m - p.safe_margin_m
     if target >= 0:
         desired = min(max(p.centres_m[target] - drift_x, lo - drift_x), hi - drift_x)
     else:
         desired = actual_x
-    now_shift, ahead_shift = turn_shift_m if p.feedforward else (0.0, 0.0)
+    now_shift, ahead_shift = inp.turn_shift_m if p.feedforward else (0.0, 0.0)
     bias = st.bias_m
     if t - st.last_nudge_t >= SETTLE_S:
-        bias += (p.frame_dt_s / BIAS_TAU_S) * ((nudge_signal - actual_x + now_shift) - bias)
+        bias += (p.frame_dt_s / BIAS_TAU_S) * ((signal - actual_x + now_shift) - bias)
     total_bias = bias - ahead_shift
     effort = desired + total_bias
     nudge, last_nudge, count = 0, st.last_nudge_t, st.nudges
-    err = effort - nudge_signal
+    err = effort - signal
     if (target >= 0 and t - st.last_nudge_t >= p.nudge_interval_s
             and abs(err) >= 0.5 * p.nudge_m - NUDGE_SLACK_M):
         step = 1 if err > 0 else -1
-        landing = nudge_signal + step * p.nudge_m - total_bias + drift_x  # predicted impact x after the nudge
+        landing = signal + step * p.nudge_m - total_bias + drift_x  # predicted impact x after the nudge
         if lo <= landing <= hi:
             nudge, last_nudge, count = step, t, count + 1
+    return Aim(desired_m=desired, bias_m=bias, total_bias_m=total_bias, effort_m=effort, nudge=nudge,
+               last_nudge_t=last_nudge, nudges=count)
+
+
+def safety(st: ControllerState, p: ControllerParams, inp: ControllerInput, ing: Ingested, fill: Fullness) -> bool:
+    """Stage 4: whether the auger runs: a target seen and near (travel with the auger off: grain dropped far from
+    the target lands on sections that may be full), every predicted impact inside the margin (the hysteresis margin
+    while running) now and at the spout's unexplained velocity ahead, the combine's speed steady enough, no
+    section other than the target overfull under the impact, and no hold."""
+    actual_x, target = inp.spout_x_m, fill.target
     margin = p.off_margin_m if st.auger_cmd else p.safe_margin_m
     ahead = unexplained_shift(actual_x, st.spout_x, p.frame_dt_s, p.nudge_speed_mps, p.safety_lead_s)
-    safe = all(_inside(ix, iy, margin, p) and _inside(ix + ahead, iy, margin, p) for ix, iy in impacts)
-    safe = safe and speed_change_mps2 <= p.pause_accel_mps2 and not _over_overfull(p, heights, target,
-                                                                                   actual_x + drift_x)
-    # travel with the auger off: grain dropped far from the target lands on sections that may be full
+    safe = all(_inside(ix, iy, margin, p) and _inside(ix + ahead, iy, margin, p) for ix, iy in inp.impacts)
+    safe = safe and inp.speed_change_mps2 <= p.pause_accel_mps2 and not _over_overfull(
+        p, ing.heights, target, actual_x + inp.drift_x_m)
     reach = TRAVEL_ON_SECTIONS * p.length_m / p.sections
-    near = target >= 0 and abs(actual_x + drift_x - p.centres_m[target]) <= reach
-    auger = bool(seen and target >= 0 and safe and near and not hold)
+    near = target >= 0 and abs(actual_x + inp.drift_x_m - p.centres_m[target]) <= reach
+    return bool(ing.seen and target >= 0 and safe and near and not fill.hold)
+
+
+def controller_step(st: ControllerState, p: ControllerParams,
+                    inp: ControllerInput) -> tuple[ControllerState, ControllerCommand]:
+    """One controller decision at time ``inp.t_s`` (the protocol's :class:`ControllerInput`; its ``target_fill_m``
+    is applied by :class:`SectionFillController`): :func:`ingest` -> :func:`fullness` -> :func:`aim` ->
+    :func:`safety`. The fused estimator needs ``inp.delivery``."""
+    ing = ingest(st, p, inp)
+    fill = fullness(st, p, inp, ing)
+    target, heights = fill.target, ing.heights
+    where = aim(st, p, inp, target)
+    auger = safety(st, p, inp, ing, fill)
     with np.errstate(invalid="ignore"):
-        fullness = heights / p.target_m
-    lead = max(float(rate[target]), 0.0) * p.full_lead_s if target >= 0 else 0.0
-    new_state = ControllerState(heights=heights, last_valid_t=last_valid, forced_full=forced, full=full, estimate=est,
-                                delivered_m3=delivered, target=target, last_nudge_t=last_nudge, bias_m=bias,
-                                auger_cmd=auger, seen=seen, all_full=all_full, nudges=count, rate=rate, hold=hold,
-                                slowed=slowed, spout_x=actual_x)
-    return new_state, ControllerCommand(nudge, auger, desired, effort, target, fullness, all_full, seen, total_bias,
-                                        mode, hold, sigma, lead, p.slow_flow if slowed >= 0 else 1.0,
-                                        lateral_correction_m if p.feedforward else 0.0)
+        fullness_ = heights / p.target_m
+    lead = max(float(fill.rate[target]), 0.0) * p.full_lead_s if target >= 0 else 0.0
+    new_state = ControllerState(heights=heights, last_valid_t=ing.last_valid_t, forced_full=fill.forced, full=fill.full,
+                                estimate=ing.estimate, delivered_m3=ing.delivered_m3, target=target,
+                                last_nudge_t=where.last_nudge_t, bias_m=where.bias_m, auger_cmd=auger, seen=ing.seen,
+                                all_full=fill.all_full, nudges=where.nudges, rate=fill.rate, hold=fill.hold,
+                                slowed=fill.slowed, spout_x=inp.spout_x_m)
+    return new_state, ControllerCommand(
+        nudge=where.nudge, auger_on=auger, desired_m=where.desired_m, effort_m=where.effort_m, target=target,
+        fullness=fullness_, all_full=fill.all_full, seen=ing.seen, bias_m=where.total_bias_m, mode=fill.mode,
+        hold_reason=fill.hold, sigma_m=fill.sigma_m, lead_m=lead, flow=p.slow_flow if fill.slowed >= 0 else 1.0,
+        lateral_m=inp.lateral_correction_m if p.feedforward else 0.0)
 
 
 def _over_overfull(p: ControllerParams, heights: np.ndarray, target: int, impact_x: float) -> bool:
@@ -357,6 +443,4 @@ class SectionFillController:
         if inp.target_fill_m != self.params.target_m:
             self.params = replace(self.params, target_m=inp.target_fill_m,
                                   full_level_m=self.full_fraction * inp.target_fill_m)
-        return controller_step(state, self.params, inp.t_s, inp.heights, inp.spout_x_m, inp.impacts, inp.drift_x_m,
-                               inp.nudge_signal_m, inp.delivery, inp.turn_shift_m, inp.lateral_correction_m,
-                               inp.speed_change_mps2)
+        return controller_step(state, self.params, inp)

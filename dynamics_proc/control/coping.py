@@ -26,12 +26,13 @@ geometry, so the frame step computes it and hands it to the controller in ``Cont
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from dynamics_proc.control.protocol import HOLD_LOST, HOLD_NO_MEASUREMENT, HOLD_NONE
 
-__all__ = ["MODE_MEASURED", "MODE_DEAD_RECKONING", "MODE_HOLD", "rise_rate", "peak_sigma", "slowed_section", "mode",
+__all__ = ["MODE_MEASURED", "MODE_DEAD_RECKONING", "MODE_HOLD", "rise_rate", "peak_sigma", "SlowLimits", "slowed_section", "mode",
            "unexplained_shift"]
 
 MODE_MEASURED, MODE_DEAD_RECKONING, MODE_HOLD = 0, 1, 2
@@ -59,15 +60,29 @@ def peak_sigma(blocks: np.ndarray, var: np.ndarray, rows: slice) -> float:
     return float(np.sqrt(var[(rows.start or 0) + i, j]))
 
 
+@dataclass(frozen=True)
+class SlowLimits:
+    """When the auger is slowed near full (:func:`slowed_section`): the lead ``lead_s`` (s; 0 switches slowing
+    off), the rise over it that needs no slowing ``allowance_m`` (m), the "full" level ``full_level_m`` (m), the
+    sections' centres along grid x ``centres_m`` (N,) m and a section's length ``section_m`` (m)."""
+
+    lead_s: float
+    allowance_m: float
+    full_level_m: float
+    centres_m: tuple[float, ...]
+    section_m: float
+
+
 def slowed_section(target: int, slowed: int, full: np.ndarray, heights: np.ndarray, rate: np.ndarray,
-                   impact_x: float, lead_s: float, allowance_m: float, full_level_m: float,
-                   centres_m: tuple[float, ...], section_m: float) -> int:
+                   impact_x: float, limits: SlowLimits) -> int:
     """The section (0-based) the auger is slowed for, -1 none: the ``target`` once its level ``heights[target]``
     plus its rise over the lead, ``max(rate, 0) * lead_s``, reaches ``full_level_m`` while that rise exceeds
     ``allowance_m`` (a high flow; latched while it stays the target, ``slowed`` the last answer), and that
     section, once ``full``, until the predicted ``impact_x`` (grid x, m) is within half a section (``section_m``)
     of the next target's centre (at a high flow the grain dropped on the way lands on the full section).
-    ``heights``, ``rate`` (N,) m, m/s; ``full`` (N,) bool; ``lead_s`` 0 switches it off."""
+    ``heights``, ``rate`` (N,) m, m/s; ``full`` (N,) bool; the other figures from ``limits``."""
+    lead_s, allowance_m, full_level_m = limits.lead_s, limits.allowance_m, limits.full_level_m
+    centres_m, section_m = limits.centres_m, limits.section_m
     if target < 0 or lead_s <= 0.0:
         return -1
     if slowed == target:
