@@ -41,7 +41,7 @@ from dynamics_proc.vehicles.fieldsync import (
     speed_change,
 )
 from dynamics_proc.vehicles.ground import spout_on_terrain
-from dynamics_proc.vehicles.integrators import integrate, step_exponential_values
+from dynamics_proc.vehicles.integrators import Stepping, integrate, step_exponential_values
 from dynamics_proc.vehicles.machine_sync import sync_command
 from dynamics_proc.vehicles.motion import CX, CY, CYAW, cart_pose, initial_state
 
@@ -156,7 +156,7 @@ def step_frame(w: World, meas: np.ndarray | None, p: ModelParams) -> World:
     setpoint = (w.setpoint[0] + out.nudge * p.control.nudge_m, w.setpoint[1])
     if fs is not None and p.field.moves_vehicles and (p.fmus is None or p.fmus.vehicle is None):
         x, fs = advance_vehicles(x, (setpoint[0], setpoint[1] + out.lateral_m), fs, p.field, p.vehicles, p.gains,
-                                 p.method, p.dt_s, p.steps, w.t_s, p.rtol, p.atol)
+                                 Stepping(p.method, p.dt_s, p.steps, p.rtol, p.atol), w.t_s)
     else:
         x = _advance_vehicles(x, (setpoint[0], setpoint[1] + out.lateral_m), p, w.frame + 1)
     level, vol = _flow(w.flow_level, out, p, fs)

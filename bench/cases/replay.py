@@ -175,20 +175,32 @@ def run_stages(rec, meter, repeat: int = 1, upto: str | None = None) -> dict[str
 
     everything = list(range(len(frames)))
     stages = {"lidar": (lidar, everything), "points": (lambda i: pipe.points(out["lidar"][i]), everything),
-              "level": (level, everything), "cart": (cart, everything)}
+              "level": (level, everything), "cart": (cart, everything), "step": (step, everything)}
+
+    def cart_stages():
+        with_cart = [i for i in everything if out["cart"][i].valid]
+        stages["heightmap"] = (heightmap, with_cart)
+        stages["impact"] = (impact, with_cart)
+
+    def accuracy_stage():
+        evaluated = [i for i in everything if part._accuracy_beams(frames[i]) is not None]
+        out["perceived"] = {i: pipe.perceive(out["lidar"][i], headings[i], with_points=False) for i in evaluated}
+        clean.update({i: pipe.resample_gathered(gathered[i]) for i in evaluated})
+        stages["accuracy"] = (accuracy, evaluated)
+
+    calls = _meter_stages(meter, stages, {"heightmap": cart_stages, "accuracy": accuracy_stage}, out, repeat, upto)
+    part.close()
+    return calls
+
+
+def _meter_stages(meter, stages: dict, late: dict, out: dict, repeat: int, upto: str | None) -> dict[str, int]:
+    """Meter the :data:`STAGES` in order (``stages``: name -> (function of a frame index, the indices)), each once
+    outside the meter first; ``late``: name -> what adds that stage (and its inputs) once the stages before it have
+    run. Stages after ``upto`` are left out; each stage's results go to ``out[name]``. The metered calls per stage."""
     calls: dict[str, int] = {}
     for name in STAGES:
-        if name == "heightmap":
-            with_cart = [i for i in everything if out["cart"][i].valid]
-            stages["heightmap"] = (heightmap, with_cart)
-            stages["impact"] = (impact, with_cart)
-        elif name == "accuracy":
-            evaluated = [i for i in everything if part._accuracy_beams(frames[i]) is not None]
-            out["perceived"] = {i: pipe.perceive(out["lidar"][i], headings[i], with_points=False) for i in evaluated}
-            clean.update({i: pipe.resample_gathered(gathered[i]) for i in evaluated})
-            stages["accuracy"] = (accuracy, evaluated)
-        elif name == "step":
-            stages["step"] = (step, everything)
+        if name in late:
+            late[name]()
         fn, which = stages[name]
         if which:
             fn(which[0])                                    # warm-up, outside the meter
@@ -199,7 +211,6 @@ def run_stages(rec, meter, repeat: int = 1, upto: str | None = None) -> dict[str
         calls[name] = repeat * len(which)
         if name == upto:
             break
-    part.close()
     return calls
 
 

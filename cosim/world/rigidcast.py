@@ -277,6 +277,23 @@ class RigidCaster:
                 proto.hide()
         return used
 
+    def _place_bodies(self, scene: Scene, tilted: list[str], o: np.ndarray, lin: np.ndarray,
+                      trans: np.ndarray) -> list[int]:
+        """Each machine body's placement (origin-relative) into ``lin`` (K, 3, 3) and ``trans`` (K, 3), a tilted one
+        by its boxes-only prototype (the other one hidden); the prototypes' indices."""
+        idx = []
+        for name, proto in self._bodies.items():
+            boxes_only = self._tilted[name][0]
+            if name in tilted:
+                proto.hide()
+                proto = boxes_only
+            elif boxes_only is not None:
+                boxes_only.hide()
+            k = proto.k
+            lin[k], trans[k] = scene.poses[name][:3, :3], scene.poses[name][:3, 3] - o
+            idx.append(k)
+        return idx
+
     def cast(self, scene: Scene, origin: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Exact ranges (N,) float64 m (inf on a miss) of rays from ``origin`` (3,) along unit ``directions``
         (N, 3), world frame, through ``scene`` (built by ``scene_from_state`` for this caster's scenario)."""
@@ -304,16 +321,7 @@ class RigidCaster:
         hf = scene.heightfield
         idx = [self._hf.k]
         lin[idx[0]], trans[idx[0]] = hf.world_from_grid[:3, :3], hf.world_from_grid[:3, 3] - o
-        for name, proto in self._bodies.items():
-            boxes_only = self._tilted[name][0]
-            if name in tilted:
-                proto.hide()
-                proto = boxes_only
-            elif boxes_only is not None:
-                boxes_only.hide()
-            k = proto.k
-            lin[k], trans[k] = scene.poses[name][:3, :3], scene.poses[name][:3, 3] - o
-            idx.append(k)
+        idx += self._place_bodies(scene, tilted, o, lin, trans)
         ks = [p.k for p in cubes]
         m = b.world_from_box[self._n_boxes:]
         lin[ks], trans[ks] = m[:, :3, :3] * b.half_extents[self._n_boxes:, None, :], m[:, :3, 3] - o

@@ -174,6 +174,34 @@ def _stream_cylinders(stream: np.ndarray, n_points: int) -> tuple[np.ndarray, np
     return pts[:-1, :3][keep], pts[1:, :3][keep], radius[keep]
 
 
+def _auger_and_stream(scenario: Scenario, state: Mapping[str, float], poses: Mapping[str, np.ndarray],
+                      parts: Mapping[str, EntityParts], stream: np.ndarray,
+                      stream_solid: bool | None) -> tuple[list, ...]:
+    """The cylinders of the auger tube (pivot on the combine body -> spout, world) and of the stream: six lists of
+    row arrays, one per cylinder column (p0, p1, radius, colour, label, material), for :func:`scene_from_state`."""
+    c0, c1, rad, ccol, clabel, cmat = [], [], [], [], [], []
+    # auger tube: pivot (combine body) -> spout (world)
+    pivot = apply(poses["combine"], np.asarray(scenario.auger.pivot_xyz_m, dtype=np.float64))
+    spout = np.array([state["spout_x_m"], state["spout_y_m"], state["spout_z_m"]], dtype=np.float64)
+    c0.append(pivot[None])
+    c1.append(spout[None])
+    rad.append(np.array([scenario.auger.tube_radius_m]))
+    ccol.append(np.array([parts["combine"].box_colour[0]], dtype=np.float32))
+    clabel.append(np.array([AUGER], np.uint8))
+    cmat.append(np.array([STEEL], np.uint8))
+    # the stream is drawn from its valid rows alone (grain still falls for a while after the auger stops); with
+    # atmosphere.stream_particles it is no solid: the LiDAR's atmosphere meets its kernels (docs/field.md)
+    solid = not scenario.atmosphere.stream_particles if stream_solid is None else stream_solid
+    s0, s1, sr = _stream_cylinders(stream, int(state["stream_points"]) if solid else 0)
+    c0.append(s0)
+    c1.append(s1)
+    rad.append(sr)
+    ccol.append(np.tile(np.array(STREAM_COLOUR, dtype=np.float32), (len(sr), 1)))
+    clabel.append(np.full(len(sr), STREAM, np.uint8))
+    cmat.append(np.full(len(sr), GRAIN_MAT, np.uint8))
+    return c0, c1, rad, ccol, clabel, cmat
+
+
 def scene_from_state(scenario: Scenario, state: Mapping[str, float], heightmap: np.ndarray,
                      stream: np.ndarray, stream_solid: bool | None = None) -> Scene:
     """Build the frame's scene.
@@ -227,25 +255,9 @@ def scene_from_state(scenario: Scenario, state: Mapping[str, float], heightmap: 
         # the terrain's patch around the cart (cosim.world.terrain): the surface the wheels stand on
         name, verts, faces, origin = terrain.mesh((float(state["cart_x_m"]), float(state["cart_y_m"])))
         meshes.append(MeshInstance(name, verts, faces, make_transform(np.eye(3), origin), GROUND_COLOUR))
-    # auger tube: pivot (combine body) -> spout (world)
-    pivot = apply(poses["combine"], np.asarray(scenario.auger.pivot_xyz_m, dtype=np.float64))
-    spout = np.array([state["spout_x_m"], state["spout_y_m"], state["spout_z_m"]], dtype=np.float64)
-    c0.append(pivot[None])
-    c1.append(spout[None])
-    rad.append(np.array([scenario.auger.tube_radius_m]))
-    ccol.append(np.array([parts["combine"].box_colour[0]], dtype=np.float32))
-    clabel.append(np.array([AUGER], np.uint8))
-    cmat.append(np.array([STEEL], np.uint8))
-    # the stream is drawn from its valid rows alone (grain still falls for a while after the auger stops); with
-    # atmosphere.stream_particles it is no solid: the LiDAR's atmosphere meets its kernels (docs/field.md)
-    solid = not scenario.atmosphere.stream_particles if stream_solid is None else stream_solid
-    s0, s1, sr = _stream_cylinders(stream, int(state["stream_points"]) if solid else 0)
-    c0.append(s0)
-    c1.append(s1)
-    rad.append(sr)
-    ccol.append(np.tile(np.array(STREAM_COLOUR, dtype=np.float32), (len(sr), 1)))
-    clabel.append(np.full(len(sr), STREAM, np.uint8))
-    cmat.append(np.full(len(sr), GRAIN_MAT, np.uint8))
+    tube_and_stream = _auger_and_stream(scenario, state, poses, parts, stream, stream_solid)
+    for column, rows in zip((c0, c1, rad, ccol, clabel, cmat), tube_and_stream):
+        column.extend(rows)
     hf = HeightField(poses["cart"] @ cart_body_from_grid(cart), h.astype(np.float32, copy=False),
                      scenario.grain.cell_m, cart.interior_length_m, cart.interior_width_m)
     box_labels = np.concatenate(blabel)

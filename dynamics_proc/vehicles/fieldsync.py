@@ -33,7 +33,7 @@ from dynamics_proc.vehicles.fieldnoise import (
     gm_start,
     gm_step,
 )
-from dynamics_proc.vehicles.integrators import integrate, step_exponential_values
+from dynamics_proc.vehicles.integrators import Stepping, integrate, step_exponential_values
 from dynamics_proc.vehicles.machine_sync import SyncGains, sync_command
 from dynamics_proc.vehicles.motion import CX, CY, CYAW, DELTA, TX, TY, V, VehicleParams, combine_advance
 
@@ -188,10 +188,10 @@ def _received(fp: FieldParams, s_hist: tuple, vp: VehicleParams, dt: float) -> t
 
 
 def advance_vehicles(x: np.ndarray, setpoint: tuple[float, float], s: FieldState, fp: FieldParams, vp: VehicleParams,
-                     gains: SyncGains, method: str, dt: float, steps: int, t0: float, rtol: float,
-                     atol: float) -> tuple[np.ndarray, FieldState]:
-    """The vehicle state (9,) ``steps`` steps of ``dt`` on from time ``t0`` in the field (the module docstring),
-    and the field state with its history and command pipe moved on."""
+                     gains: SyncGains, stepping: Stepping, t0: float) -> tuple[np.ndarray, FieldState]:
+    """The vehicle state (9,) ``stepping.steps`` steps of ``stepping.dt_s`` on from time ``t0`` in the field (the
+    module docstring), and the field state with its history and command pipe moved on."""
+    method, dt, steps, rtol, atol = stepping.method, stepping.dt_s, stepping.steps, stepping.rtol, stepping.atol
     xs = x.tolist()
     hist, cmds = s.history, s.commands
     keep = 1.0 - _slip(fp, s.slip)

@@ -13,6 +13,7 @@ Every function maps state (9,) float64 -> new state (9,) float64 over ``dt`` sec
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
@@ -28,9 +29,21 @@ from dynamics_proc.vehicles.motion import (
     towing_rates,
 )
 
-__all__ = ["METHODS", "step_rk4", "step_exponential", "step_exponential_values", "step_ivp", "integrate"]
+__all__ = ["METHODS", "Stepping", "step_rk4", "step_exponential", "step_exponential_values", "step_ivp", "integrate"]
 
 METHODS = ("rk4", "exponential", "radau", "bdf")
+
+
+@dataclass(frozen=True)
+class Stepping:
+    """How the vehicle state is integrated over a frame: ``steps`` held-input steps of ``dt_s`` s by ``method``
+    (:data:`METHODS`), with the tolerances ``rtol`` / ``atol`` of the scipy methods."""
+
+    method: str
+    dt_s: float
+    steps: int
+    rtol: float
+    atol: float
 
 
 def step_rk4(x: np.ndarray, u: tuple[float, float], p: VehicleParams, dt: float) -> np.ndarray:
