@@ -1,9 +1,10 @@
-"""Perception process (the paper's MATLAB side): depth decode, LiDAR resampling, noise, cart boundary, grain
-height map, impact location, accuracy against truth.
+"""Perception process (the paper's MATLAB side): the LiDAR sensor model built on the camera images, the camera
+sensors, and the offloading estimates with their accuracy against truth.
 
-Modules: ``patterns`` (beam tables), ``codec`` (Eq 3), ``resample`` / ``resample_offset`` (Eqs 5-7, co-located
-and general), ``lidar`` (limits, noise, point records), ``rim`` / ``heightmap`` / ``impact`` (the offloading
-algorithms), ``pipeline`` (one frame, pure), ``participant`` (the ring member), ``blocks``, ``accuracy``,
-``summary``, ``accuracy_report``. Importing the
-package imports nothing else.
+Subpackages by the paper's blocks: ``lidar`` (Eq 3 decoder, the Eqs 6-7 resampling, beam-native ranges, range
+limits and noise), ``cameras`` (images, depth models, effects, points), ``atmosphere`` (dust and the stream as
+particles), ``estimates`` (cart boundary, grain height map, impact location), ``accuracy`` (against truth). At
+the top: ``pipeline`` (one frame, pure), ``participant`` (the ring member), ``protocol`` and ``staged`` (the
+plug-in point and the built-in algorithm), ``blocks``, ``summary``. docs/paper.md maps each block and equation of
+the paper to its function and its test. Importing the package imports nothing else.
 """
