@@ -23,6 +23,7 @@ def record(scenario, path: Path, every: int, offsets: tuple[int, ...], frames: i
     frames were kept."""
     import numpy as np
 
+    from cosim.runtime.files import atomic_replace
     from cosim.runtime.inprocess import simulate
     from perception_proc import participant as perc_mod
 
@@ -55,12 +56,11 @@ def record(scenario, path: Path, every: int, offsets: tuple[int, ...], frames: i
         perc_mod.create = base_create
     names = list(kept["state"][0])
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".partial.npz")
-    np.savez_compressed(
-        tmp, scenario=np.array(scenario.model_dump_json()), frames=np.array(kept["frame"], np.int64),
-        state_names=np.array(names), state=np.array([[s[n] for n in names] for s in kept["state"]], np.float64),
-        **{b: np.stack(kept[b]) for b in TRUTH_BLOCKS}, **{f"img_{k}": np.stack(v) for k, v in images.items()})
-    tmp.replace(path)
+    with atomic_replace(path) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(
+            f, scenario=np.array(scenario.model_dump_json()), frames=np.array(kept["frame"], np.int64),
+            state_names=np.array(names), state=np.array([[s[n] for n in names] for s in kept["state"]], np.float64),
+            **{b: np.stack(kept[b]) for b in TRUTH_BLOCKS}, **{f"img_{k}": np.stack(v) for k, v in images.items()})
     return len(kept["frame"])
 
 

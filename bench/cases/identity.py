@@ -27,6 +27,7 @@ import sys
 from pathlib import Path
 
 from harness import Context, case
+from harness.arms import shown_path
 
 __all__ = ["differences", "digest", "identity", "record"]
 
@@ -140,9 +141,9 @@ def identity(ctx: Context) -> dict:
     shutil.rmtree(out, ignore_errors=True)
     out.mkdir(parents=True)
     record(ctx.tree, out, runs, ctx["renderer"], ctx["duration"])
-    res = {"recorded runs": {name: {**digest(out, name), "recorded in": str(out)} for name in runs}}
+    res = {"recorded runs": {name: {**digest(out, name), "recorded in": shown_path(out)} for name in runs}}
     if ctx["ref"]:
         ref = ctx.path(ctx["ref"])
-        res["against the reference"] = {name: {"reference": str(ref), "differences": len(d := differences(ref, out, name)),
+        res["against the reference"] = {name: {"reference": shown_path(ref), "differences": len(d := differences(ref, out, name)),
                                         "first": "; ".join(d[:5]) or "bit-identical"} for name in runs}
     return res

@@ -18,7 +18,7 @@ from typing import Sequence
 
 from .registry import Case, Context, OptionError, get
 
-__all__ = ["ROOT", "Arm", "SampleFailed", "parse_arms", "sample", "worker_main"]
+__all__ = ["ROOT", "Arm", "SampleFailed", "parse_arms", "sample", "shown_path", "worker_main"]
 
 #: the checkout whose bench/ is running
 ROOT = Path(__file__).resolve().parents[2]
@@ -28,6 +28,16 @@ _MARK = "BENCH-SAMPLE "
 
 class SampleFailed(RuntimeError):
     """A worker that ended without a sample (its traceback went to standard error)."""
+
+
+def shown_path(path: Path | str) -> str:
+    """``path`` as results show it, without the machine's absolute paths: relative to this checkout (``.`` for the
+    checkout itself) or to the working directory where it lies in either, else its last folder's name."""
+    path = Path(path).resolve()
+    for base in (ROOT, Path.cwd().resolve()):
+        if path == base or base in path.parents:
+            return str(path.relative_to(base)) or "."
+    return path.name
 
 
 @dataclass(frozen=True)

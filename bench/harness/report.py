@@ -5,6 +5,7 @@ import json
 import math
 from pathlib import Path
 
+from .arms import shown_path
 from .machine import describe
 from .rounds import Stat
 from .session import Result, Session
@@ -68,7 +69,7 @@ def _titles(per_arm: dict[str, dict]) -> list[str]:
 
 def case_markdown(res: Result, commits: dict[str, str | None]) -> list[str]:
     c = res.case
-    arms = "; ".join(f"`{a.label}`: {a.tree}" + (f" at {commits.get(a.label)}" if commits.get(a.label) else "")
+    arms = "; ".join(f"`{a.label}`: {shown_path(a.tree)}" + (f" at {commits.get(a.label)}" if commits.get(a.label) else "")
                      + (f", `--set {' --set '.join(a.settings)}`" if a.settings else "") for a in res.arms)
     opts = ", ".join(f"{k}={v}" for k, v in res.opts.items()) or "none"
     lines = [f"## {c.name}: {c.summary}", "",
@@ -116,7 +117,7 @@ def to_json(s: Session) -> dict:
     for res in s.results:
         cases[res.case.name] = {
             "summary": res.case.summary, "options": res.opts, "rounds": res.rounds,
-            "arms": [{"label": a.label, "tree": str(a.tree), "settings": list(a.settings),
+            "arms": [{"label": a.label, "tree": shown_path(a.tree), "settings": list(a.settings),
                       "commit": s.commits.get(a.label)} for a in res.arms],
             "failures": res.failures, "samples": _plain(res.samples), "median": _plain(res.median()), "paired": _plain(res.paired())}
     return {"command": s.command, "written_utc": s.written_utc, "machine": s.machine, "quick": s.quick,

@@ -25,6 +25,7 @@ from pathlib import Path
 import foxglove
 from foxglove.channels import SceneUpdateChannel
 
+from cosim.runtime.files import atomic_write
 from shm_schema import Segment, SnapshotTimeout, StructBlock
 
 from .publish import FramePublisher, Recorded, RunInfo
@@ -189,9 +190,7 @@ def observe(segment_name: str, scenario_json: str, port: int = DEFAULT_PORT, hos
         sys.stderr.write(f"foxglove: {live.url} (Foxglove or Lichtblick: open a Foxglove WebSocket connection)\n")
         log.info("foxglove: serving %s on %s", segment_name, live.url)
         if announce:
-            tmp = Path(announce).with_suffix(".tmp")
-            tmp.write_text(json.dumps({"url": live.url, "port": live.port, "pid": os.getpid()}))
-            os.replace(tmp, announce)
+            atomic_write(Path(announce), json.dumps({"url": live.url, "port": live.port, "pid": os.getpid()}))
         live.serve()
     finally:
         live.close()

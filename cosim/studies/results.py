@@ -13,8 +13,9 @@ import csv
 import json
 import logging
 import math
-import os
 from pathlib import Path
+
+from cosim.runtime.files import atomic_replace
 
 __all__ = ["METRICS", "OUTCOME_COLUMNS", "metrics_of", "outcome_of", "read_summary", "read_table", "ResultsTable"]
 
@@ -106,13 +107,11 @@ class ResultsTable:
         """Write results.csv (and results.parquet where pyarrow is present); returns the CSV's path."""
         self.out.mkdir(parents=True, exist_ok=True)
         path = self.out / "results.csv"
-        tmp = path.with_name(path.name + ".tmp")
-        with open(tmp, "w", newline="") as f:
+        with atomic_replace(path) as tmp, open(tmp, "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=self.columns, extrasaction="ignore")
             w.writeheader()
             for row in self.rows.values():
                 w.writerow({k: _cell(row.get(k)) for k in self.columns})
-        os.replace(tmp, path)
         self._write_parquet()
         return path
 
@@ -123,11 +122,11 @@ class ResultsTable:
         except ImportError:
             return
         path = self.out / "results.parquet"
-        tmp = path.with_name(path.name + ".tmp")
         try:
             rows = [{k: (json.dumps(v) if isinstance(v, (list, dict)) else v) for k, v in r.items()}
                     for r in self.rows.values()]
-            pq.write_table(pa.Table.from_pylist(rows), tmp)
-            os.replace(tmp, path)
+            table = pa.Table.from_pylist(rows)
+            with atomic_replace(path) as tmp:
+                pq.write_table(table, tmp)
         except (pa.ArrowException, ValueError, TypeError) as exc:  # mixed types in a column: the CSV has it all
             log.warning("results.parquet not written: %s", exc)

@@ -36,6 +36,8 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 from urllib.parse import parse_qs, urlsplit
 
+from cosim.runtime.files import atomic_write
+
 from .address import wait_until_answers
 from .fill import bar_labels
 from .page import page_html
@@ -335,9 +337,7 @@ def serve(source, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, announce: 
     if threading.current_thread() is threading.main_thread():
         previous = signal.signal(signal.SIGTERM, _raise_stop)
     if announce:
-        tmp = Path(announce).with_suffix(".tmp")
-        tmp.write_text(json.dumps({"url": srv.url, "pid": os.getpid()}))
-        os.replace(tmp, announce)
+        atomic_write(Path(announce), json.dumps({"url": srv.url, "pid": os.getpid()}))
     try:
         srv.serve_forever(poll_interval=0.5)
     except (ServerStop, KeyboardInterrupt) as exc:

@@ -1,0 +1,31 @@
+"""Results name source trees and run folders without the machine's absolute paths (bench/harness/arms.py)."""
+from __future__ import annotations
+
+import json
+import re
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+BENCH = ROOT / "bench"
+if str(BENCH) not in sys.path:
+    sys.path.insert(0, str(BENCH))
+
+from harness.arms import shown_path  # noqa: E402
+
+#: a string that starts like an absolute path of a POSIX or Windows machine
+ABSOLUTE = re.compile(r'"(/[A-Za-z]|[A-Za-z]:\\)')
+
+
+def test_paths_show_relative_to_the_checkout_or_by_name(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert shown_path(ROOT) == "."
+    assert shown_path(ROOT / "bench" / "out" / "identity" / "this") == "bench/out/identity/this"
+    assert shown_path(tmp_path / "runs" / "a") == "runs/a"
+    assert shown_path(tmp_path.parent) == tmp_path.parent.name
+
+
+def test_the_committed_results_hold_no_absolute_path():
+    text = (BENCH / "results.json").read_text(encoding="utf-8")
+    json.loads(text)
+    assert not ABSOLUTE.findall(text)
