@@ -78,7 +78,7 @@ def test_perception_feedback_applies_latency(latency, overlap):
     measurement is the same float32 truth, under the same latency rule; overlapping, the stand-in publishes
     P(m) one turn late, after dynamics' frame m + 1 (cosim.runtime.participant), with the same result."""
     s = scen(feedback="perception", renderer="mock",
-             timing={"latency_frames": latency, "overlap_perception": overlap})
+             timing={"latency_frames": latency, "schedule": "overlapped" if overlap else "sequential"})
     perc = [ArrayBlock("heightmap_perceived", "perception", "f4", (60, 30), unit="m"),
             StructBlock("perc_state", "perception", (Field("t_s", "s"), Field("cart_valid", "", "i8")))]
     seg = _local(s, perc)

@@ -88,8 +88,8 @@ def test_exported_fmu_passes_fmpy_validation_and_declares_the_contract(world_fmu
     assert {"perceived_cart_x_m", "perceived_impact_gx_m", "coverage", "true_impact_gx_m", "spilled_m3"} <= outs
     with zipfile.ZipFile(world_fmu) as zf:
         carried = yaml.safe_load(zf.read("resources/scenario.yaml"))
-    assert (carried["feedback"], carried["renderer"], carried["timing"]["overlap_perception"]) == (
-        "perception", "mock", False)
+    assert (carried["feedback"], carried["renderer"], carried["timing"]["schedule"]) == (
+        "perception", "mock", "sequential")
     assert carried["vehicles"]["tractor_cart"]["fmu"] is None and carried["grain"]["initial_fill_m"] == 1.5
 
 

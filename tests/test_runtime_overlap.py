@@ -29,7 +29,8 @@ def test_overlap_only_where_the_latency_leaves_a_frame():
     assert perception_overlaps(sc)                                          # perception feedback, L = 1
     assert not perception_overlaps(with_timing(sc, latency_frames=0))
     assert perception_overlaps(with_timing(sc, latency_frames=0).model_copy(update={"feedback": "ground_truth"}))
-    assert not perception_overlaps(with_timing(sc, overlap_perception=False))
+    assert not perception_overlaps(with_timing(sc, schedule="sequential"))
+    assert perception_overlaps(with_timing(sc, schedule="overlapped"))
 
 
 def test_plan_orders_the_flush_turn():
@@ -93,7 +94,7 @@ def test_real_perception_overlapped_gives_the_serial_numbers():
                                     "perception": {"accuracy_every_frames": 5}})
     runs = {}
     for overlap in (True, False):
-        sc = with_timing(base, overlap_perception=overlap)
+        sc = with_timing(base, schedule="overlapped" if overlap else "sequential")
         assert perception_overlaps(sc) is overlap
         runs[overlap] = simulate(sc).recorder.series()
     a, b = runs[True], runs[False]
@@ -102,3 +103,15 @@ def test_real_perception_overlapped_gives_the_serial_numbers():
     assert differ == []
     assert np.array_equal(a["perc_state.frame"], a["frame"])
     assert np.count_nonzero(a["perc_state.acc_evaluated"]) == 4
+
+
+def test_the_overlap_is_part_of_the_one_schedule_key(tmp_path):
+    """``timing.overlap_perception`` is refused at its line with the ``timing.schedule`` values that say it."""
+    from cosim.errors import ScenarioError
+    from cosim.scenario.loader import load_scenario
+
+    f = tmp_path / "s.yaml"
+    f.write_text("format_version: 1\ntiming:\n  overlap_perception: false\n")
+    with pytest.raises(ScenarioError, match=r"s\.yaml:3:\d+: timing\.overlap_perception: not a key: .*timing\.schedule: "
+                                            r"sequential \(no overlap\), overlapped or pipelined"):
+        load_scenario(f)

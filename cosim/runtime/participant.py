@@ -10,7 +10,7 @@ integrates t_{m-1} -> t_m and writes S(m), the renderer renders S(m) into I(m) a
 P(m). Feedback latency L (``timing.latency_frames``): at frame m dynamics acts on P(m - 1 - L), i.e. L frames
 older than the freshest perception output (P(m-1)). Outputs for frames < 0 do not exist: "no measurement".
 
-Overlap (``timing.overlap_perception``, :func:`perception_overlaps`): when dynamics does not need P(m) before
+Overlap (``timing.schedule`` other than ``sequential``, :func:`perception_overlaps`): when dynamics does not need P(m) before
 frame m + 2, perception splits its frame. ``step(m)`` first publishes P(m - 1), kept from its previous turn,
 then gathers what it needs from I(m) and returns the rest of its work as a callable; the ring passes the token
 on and then runs that callable, which computes P(m) into private memory while dynamics and the renderer do
@@ -65,7 +65,7 @@ def perception_overlaps(scenario) -> bool:
     Only when nothing needs P(m) at frame m + 1: dynamics acts on P(m - 1 - L), so any latency L >= 1 leaves
     a frame of slack, and ground-truth feedback reads no perception output at all."""
     t = scenario.timing
-    return bool(t.overlap_perception) and (scenario.feedback != "perception" or t.latency_frames >= 1)
+    return t.schedule != "sequential" and (scenario.feedback != "perception" or t.latency_frames >= 1)
 
 
 #: the most frames back dynamics takes perception's outputs under the pipelined schedule: it acts on

@@ -119,11 +119,12 @@ def _check_acyclic(members: tuple[str, ...], edges: list[Edge]) -> None:
 
 
 def effective_schedule(scenario, reads: Mapping[str, Mapping[str, int] | None]) -> tuple[str, str]:
-    """(schedule, why) a launched run uses: ``timing.schedule``, except ``sequential`` where pipelining cannot pay
+    """(schedule, why) a launched run uses: ``pipelined`` for ``timing.schedule: pipelined``, else ``sequential`` (the
+    token ring; ``overlapped`` is the token ring with perception overlapping), and ``sequential`` where pipelining cannot pay
     or cannot be planned: one ring member, one core, or a member without a ``reads`` declaration."""
     want = scenario.timing.schedule
     if want != "pipelined":
-        return "sequential", "timing.schedule: sequential"
+        return "sequential", f"timing.schedule: {want}"
     if len(reads) < 2:
         return "sequential", "one ring member: nothing to pipeline"
     missing = [m for m, r in reads.items() if r is None]

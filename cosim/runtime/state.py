@@ -18,7 +18,7 @@ __all__ = ["FrameState", "StateReader"]
 
 class FrameState(Mapping):
     """The values after frame ``frame``. ``stamps`` maps each block to the frame its content belongs to: a
-    deferred member (perception with ``timing.overlap_perception``) publishes frame m's outputs one turn late,
+    deferred member (perception unless ``timing.schedule: sequential``) publishes frame m's outputs one turn late,
     so its blocks hold frame m - 1 until the run's last turn flushes them."""
 
     __slots__ = ("frame", "stamps", "_recs", "_index", "_arrays", "_keys")

@@ -77,7 +77,7 @@ def export_scenario(s: Scenario, folder: Path, renderer: str = "mock") -> Path:
                          "modules; install the plug-in as a package (an entry point) or use a built-in")
     d = s.model_dump(mode="json")
     d.update(feedback="perception", renderer=renderer)
-    d["timing"]["overlap_perception"] = False
+    d["timing"]["schedule"] = "sequential"
     d["vehicles"]["tractor_cart"]["fmu"] = None
     d["controller"].update(fmu=None, model="section_fill", model_options={}, strategy="front_to_back",
                            strategy_options={})

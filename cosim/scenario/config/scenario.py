@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-from pydantic import Field, ValidationInfo, field_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from .atmosphere import Atmosphere
 from .base import Model, PosFloat
@@ -59,16 +59,14 @@ class Timing(Model):
     """Dynamics integration step, s; must divide sensor_period_s (an integer number of steps per frame)."""
     latency_frames: int = Field(default=1, ge=0, le=100)
     """Frames between a perception output and the controller seeing it (0-100)."""
-    overlap_perception: bool = True
-    """With latency_frames >= 1 (or ground-truth feedback) perception of frame m runs while dynamics and the
-    renderer do frame m + 1 and publishes at its next turn; results are the same either way
-    (cosim.runtime.participant.perception_overlaps)."""
-    schedule: Literal["sequential", "pipelined"] = "pipelined"
-    """How the processes of a launched run take turns (docs/architecture.md): sequential, one token ring
-    (dynamics, renderer, perception, supervisor; perception overlapping the next frame as above), or pipelined,
-    each process waiting only for the frames it reads, so that dynamics, the renderer and perception work on
-    neighbouring frames at once. Both give the same results; a run with one process (no renderer or perception)
-    or on one core runs sequential."""
+    schedule: Literal["sequential", "overlapped", "pipelined"] = "pipelined"
+    """How the processes take turns (docs/architecture.md); every schedule gives the same results, to the bit.
+    sequential: one token ring (dynamics, renderer, perception, supervisor), each member's frame after the one
+    before it. overlapped: the token ring, with perception of frame m running while dynamics and the renderer do
+    frame m + 1 (it publishes at its next turn; with latency_frames >= 1 or ground-truth feedback,
+    cosim.runtime.participant.perception_overlaps). pipelined: each process waits only for the frames it reads,
+    so that dynamics, the renderer and perception work on neighbouring frames at once (perception overlapping as
+    in overlapped); a run with one process (no renderer or perception) or on one core runs as the token ring."""
     handoff_timeout_s: PosFloat = 30.0
     """CPU time one process may spend on one frame before the run stops with HandoffTimeout naming it (a loop
     that never ends), s of the process's own CPU time, not of the clock: a process slowed by a busy machine is
@@ -77,6 +75,16 @@ class Timing(Model):
     startup_timeout_s: PosFloat = 120.0
     """CPU time one process may spend starting (imports, models, GL context, shaders) before the run stops with
     HandoffTimeout naming it, s of its own CPU time; a start-up that makes no progress is named hung."""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _one_schedule_key(cls, data):
+        """``overlap_perception`` is part of ``schedule``: a scenario that names it is told which value to use."""
+        if isinstance(data, dict) and "overlap_perception" in data:
+            raise key_error("Timing", ("overlap_perception",), "not a key: whether perception overlaps the next frame "
+                            "is part of timing.schedule: sequential (no overlap), overlapped or pipelined (the "
+                            "default; both overlap)", data["overlap_perception"])
+        return data
 
     @field_validator("dynamics_dt_s")
     @classmethod
