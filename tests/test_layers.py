@@ -4,6 +4,7 @@ packages (at any depth: module level, inside functions, under ``TYPE_CHECKING``)
 * ``cosim`` imports no participant package outside ``cosim/testing/``;
 * a participant imports of ``cosim.runtime`` only ``cosim.runtime.participant``;
 * participants never import each other;
+* the configuration layer (``cosim.scenario.config``) is a leaf: it imports no other first-party module;
 * no import cycle among the modules;
 * at most :data:`TOP_MODULES_MAX` modules at the top of each participant package;
 * every import of a first-party name (in the packages, tests, bench and examples) names a module that exists, or a
@@ -23,6 +24,8 @@ PARTICIPANTS = ("dynamics_proc", "renderer_proc", "perception_proc")
 COSIM_TESTING = "cosim.testing"
 #: the one module of the runtime a participant imports
 RUNTIME, RUNTIME_CONTRACT = "cosim.runtime", "cosim.runtime.participant"
+#: the configuration layer, a leaf
+CONFIG = "cosim.scenario.config"
 #: modules (``*.py``) at the top of a participant package, at most
 TOP_MODULES_MAX = 12
 
@@ -90,6 +93,8 @@ def layer_violations(graph: dict[str, list[tuple[str, int]]]) -> list[str]:
                 bad.append(f"{mod}:{line} -> {dep} (a participant imports only {RUNTIME_CONTRACT} of the runtime)")
             if src in PARTICIPANTS and dst in PARTICIPANTS and src != dst:
                 bad.append(f"{mod}:{line} -> {dep} (participants never import each other)")
+            if (mod + ".").startswith(CONFIG + ".") and not (dep + ".").startswith(CONFIG + "."):
+                bad.append(f"{mod}:{line} -> {dep} (the configuration layer {CONFIG} imports nothing outside it)")
     return bad
 
 
@@ -226,13 +231,17 @@ def test_the_scan_finds_late_relative_and_type_checking_imports(tmp_path):
                                   "from cosim.runtime import participant\nfrom cosim.runtime.outcome import X\n",
         "dynamics_proc/record.py": "def g():\n    from . import model\n",
         "renderer_proc/draw.py": "import perception_proc\n",
+        "cosim/scenario/__init__.py": "", "cosim/scenario/profiles.py": "",
+        "cosim/scenario/config/__init__.py": "from . import base\nfrom ..profiles import load\n",
+        "cosim/scenario/config/base.py": "",
     })
     bad = layer_violations(g)
     assert any(b.startswith("cosim.api:2 -> dynamics_proc.model") for b in bad)
     assert any(b.startswith("dynamics_proc.model:5 -> cosim.runtime.outcome") for b in bad)
     assert any(b.startswith("renderer_proc.draw:1 -> perception_proc") for b in bad)
+    assert any(b.startswith("cosim.scenario.config:2 -> cosim.scenario.profiles") for b in bad)
     assert not any(b.startswith(("cosim.testing", "dynamics_proc.model:4")) for b in bad)
-    assert len(bad) == 3
+    assert len(bad) == 4
     assert import_cycles(g) == [["dynamics_proc.model", "dynamics_proc.record"]]
 
 

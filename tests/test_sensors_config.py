@@ -8,8 +8,8 @@ from cosim.errors import ScenarioError
 from cosim.runtime.specs import build_schema, ring_specs
 from cosim.scenario.config import Scenario
 from cosim.scenario.config.cameras import DepthCamera, LidarSensor, StereoCamera
+from cosim.scenario.config.profiles import SOURCES, load_profile, profile_names
 from cosim.scenario.loader import dump_resolved, load_scenario, load_scenario_text, resolve_scenario_arg
-from cosim.scenario.profiles import SOURCES, load_profile, profile_names
 
 MOUNT = "{parent: combine, xyz_m: [-2.0, 7.6, 5.6], rpy_deg: [0.0, 90.0, 90.0]}"
 

@@ -15,7 +15,7 @@ Cameras follow the camera frame of docs/architecture.md (X right, Y up, Z forwar
 ``mount`` places a body-axes frame (x forward, y left, z up) on its parent and the optical axis is its x axis;
 ``rpy_deg`` turns it (positive pitch looks down). The pinhole has ``width_px`` x ``height_px`` square pixels,
 ``hfov_deg`` horizontally and its principal point at the image centre. ``profile`` fills every value the
-camera does not set from a packaged device profile (cosim.scenario.profiles).
+camera does not set from a packaged device profile (cosim.scenario.config.profiles).
 """
 from __future__ import annotations
 
@@ -24,8 +24,8 @@ from typing import Annotated, Literal, Union
 
 from pydantic import AfterValidator, Field, model_validator
 
-from ..profiles import load_profile
 from .base import Model, Mount, NonNegFloat, PosFloat
+from .profiles import load_profile
 from .sensing import Sensor
 
 __all__ = ["SENSOR_NAME", "KINDS", "DEPTH_KINDS", "Camera", "LidarSensor", "DepthCamera", "StereoCamera",

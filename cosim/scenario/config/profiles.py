@@ -17,7 +17,7 @@ import yaml
 __all__ = ["PROFILE_DIR", "SOURCES", "ProfileValue", "Profile", "load_profile", "profile_names"]
 
 #: where the packaged profiles live
-PROFILE_DIR = Path(__file__).resolve().parent / "profiles"
+PROFILE_DIR = Path(__file__).resolve().parents[1] / "profiles"
 #: what a value's ``source`` may be
 SOURCES = ("datasheet", "paper", "tuned")
 
