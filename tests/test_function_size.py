@@ -35,3 +35,23 @@ def test_the_count_spans_def_to_last_line():
     assert long_functions(f"def f():\n{body}\n") == []                      # 80 lines
     assert long_functions(f"class C:\n    def g(self):\n    {body.replace(chr(10), chr(10) + '    ')}\n"
                           f"        return 1\n") == [("g", 2, 81)]
+
+
+def test_the_controller_step_is_four_short_stages():
+    """controller_step runs ingest -> fullness -> aim -> safety, each under 60 lines (docs/paper.md)."""
+    import inspect
+
+    from dynamics_proc.control import controller
+
+    for name in ("ingest", "fullness", "aim", "safety", "controller_step"):
+        lines = inspect.getsource(getattr(controller, name)).count("\n")
+        assert lines < 60, f"{name} has {lines} lines"
+    body = inspect.getsource(controller.controller_step)
+    assert [s for s in ("ingest(", "fullness(", "aim(", "safety(") if s not in body] == []
+
+
+def test_the_command_line_is_a_table_of_verbs():
+    from cosim import cli
+
+    assert set(cli.PLAIN_VERBS) | set(cli.SCENARIO_VERBS) == set(cli.VERBS)
+    assert not set(cli.PLAIN_VERBS) & set(cli.SCENARIO_VERBS)
