@@ -3,9 +3,9 @@
     python bench/run.py --list                              # the cases, one line each
     python bench/run.py --describe e2e                      # what a case measures and its options
     python bench/run.py ring_latency render_fps --rounds 3  # both cases, rounds interleaved
-    python bench/run.py e2e --tree main=/work/main --tree new=. --rounds 6 --opt duration=30   # A/B of trees
+    python bench/run.py e2e --tree main=../main --tree new=. --rounds 6 --opt duration=30   # A/B of trees
     python bench/run.py e2e --variant rig=sensor.method=camera_rig --variant beams=sensor.method=beam_native
-    python bench/run.py mock_cast --quick --json /tmp/mock.json                                  # a check, seconds
+    python bench/run.py mock_cast --quick --json mock.json                                       # a check, seconds
 
 Each sample (one case, one arm, one round) is taken in a fresh process that imports the arm's source tree
 (``--tree NAME=PATH``; default this checkout); ``--variant NAME=PATH=VALUE`` adds an arm of this tree with one more

@@ -23,7 +23,7 @@ What it measures (each figure names its source in the Markdown):
 figures. Usage::
 
     python bench/run_all.py                      # the headline figures (an hour on 2 cores)
-    python bench/run_all.py --quick --out /tmp/r # a few minutes: structure only
+    python bench/run_all.py --quick --out bench/out/quick # a few minutes: structure only
 """
 from __future__ import annotations
 

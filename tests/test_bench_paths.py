@@ -29,3 +29,17 @@ def test_the_committed_results_hold_no_absolute_path():
     text = (BENCH / "results.json").read_text(encoding="utf-8")
     json.loads(text)
     assert not ABSOLUTE.findall(text)
+
+
+#: an absolute path of a machine in a command line shown to a user
+MACHINE_PATH = re.compile(r"(?<![\w.~$}])/(tmp|work|home|root|Users|var)/")
+
+
+def test_usage_lines_hold_no_absolute_path():
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), BENCH / "README.md",
+             BENCH / "run.py", BENCH / "run_all.py", ROOT / "cosim" / "cli.py"]
+    lines = [f"{p.relative_to(ROOT)}:{i}: {line.strip()}" for p in pages
+             for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1)
+             if "python " in line and MACHINE_PATH.search(line)]
+    assert not lines, "usage lines with a machine's absolute path:\n" + "\n".join(lines)
+    assert MACHINE_PATH.search("python bench/run.py e2e --tree main=/work/main")
