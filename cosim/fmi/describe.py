@@ -19,6 +19,8 @@ from types import MappingProxyType, ModuleType
 from typing import Mapping
 from xml.etree import ElementTree
 
+from .archive import archive_problem
+
 __all__ = ["FMI_VERSIONS", "KINDS", "KIND_NAMES", "FmiUnavailable", "FmuInvalid", "Clock", "Variable",
            "FmuDescription", "require_fmpy", "describe"]
 
@@ -133,6 +135,12 @@ def _read_root(path: str) -> ElementTree.Element:
     """The root element of the FMU's model description, read without fmpy's full parse."""
     if not zipfile.is_zipfile(path):
         raise FmuInvalid("is not an FMU (not a zip archive); export the model as an FMU (FMI 2.0 or 3.0 co-simulation)")
+    try:
+        unsafe = archive_problem(path)
+    except zipfile.BadZipFile as e:
+        raise FmuInvalid(f"is not a readable zip archive: {e}") from None
+    if unsafe is not None:
+        raise FmuInvalid(unsafe)
     with zipfile.ZipFile(path) as zf:
         if "modelDescription.xml" not in zf.namelist():
             raise FmuInvalid("is not an FMU: the archive has no modelDescription.xml")

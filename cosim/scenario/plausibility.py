@@ -16,7 +16,9 @@ what they refuse is what the run would have got wrong:
 * a CSV beam table that cannot be read, holds a non-finite or out-of-range angle, or is larger than
   ``MAX_CSV_BYTES``;
 * a beam pattern whose memory exceeds what /dev/shm, the machine and the address space allow
-  (cosim.scenario.memory).
+  (cosim.scenario.memory);
+* cameras beyond the pixel budget or the memory, and a height-map file that cannot be read safely or is out of
+  bounds (cosim.scenario.sizes, checked first: nothing else is built when one fails).
 
 A frame-0 world that cannot be built at all is a problem too (named, never a traceback).
 """
@@ -36,6 +38,7 @@ from cosim.world.parts import cart_boxes
 from cosim.world.patterns import PatternError, beam_table
 
 from .memory import memory_problems, size_text
+from .sizes import size_problems
 
 __all__ = ["implausible", "FOV_BEAMS", "MAX_CSV_BYTES", "NEIGHBOURHOOD_M"]
 
@@ -143,6 +146,9 @@ def _pattern_problems(s: Scenario) -> tuple[list[tuple[Loc, str]], tuple | None]
 
 def implausible(s: Scenario) -> list[tuple[Loc, str]]:
     """Every plausibility problem of ``s`` as (loc, message); [] when the world at frame 0 makes sense."""
+    problems = size_problems(s)
+    if problems:
+        return problems  # nothing below may allocate what these refuse
     problems, table = _pattern_problems(s)
     problems += _mesh_problems(s)
     if problems:

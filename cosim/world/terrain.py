@@ -19,11 +19,12 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from cosim.scenario.config import Scenario
+
+from .height_map import read_height_map
 
 __all__ = ["TERRAIN_STREAM", "PCT", "Terrain", "rough_field", "terrain_of"]
 
@@ -133,9 +134,7 @@ class Terrain:
 def _terrain(grade: float, cross: float, rms: float, corr: float, cell: float, tile: float, seed: int,
              path: str | None, origin: tuple[float, float], extent: float) -> Terrain:
     if path is not None:
-        samples = np.load(Path(path)).astype(np.float64)
-        if samples.ndim != 2 or min(samples.shape) < 2 or not np.all(np.isfinite(samples)):
-            raise ValueError(f"{path}: a height map must be a finite 2-D array of at least 2 x 2 heights")
+        samples = read_height_map(path)
         if rms > 0.0:
             n = samples.shape
             grid = rough_field(rms, corr, max(n), cell, seed)[: n[0], : n[1]]

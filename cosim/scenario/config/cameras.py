@@ -28,7 +28,7 @@ from .base import Model, Mount, NonNegFloat, PosFloat
 from .profiles import load_profile
 from .sensing import Sensor
 
-__all__ = ["SENSOR_NAME", "KINDS", "DEPTH_KINDS", "Camera", "LidarSensor", "DepthCamera", "StereoCamera",
+__all__ = ["SENSOR_NAME", "KINDS", "STEREO_BASELINE_M", "MAX_SENSORS", "DEPTH_KINDS", "Camera", "LidarSensor", "DepthCamera", "StereoCamera",
            "RgbCamera", "SensorSpec", "SensorMap", "Sensors"]
 
 #: what a sensor name may look like (it names the sensor's shared-memory blocks, ``cam_<name>_...``)
@@ -41,6 +41,12 @@ DEPTH_KINDS = ("lidar", "depth_camera", "stereo_camera")
 DISPARITY_STEP_PX = 16
 #: StereoBM's smallest block, px
 BM_MIN_BLOCK_PX = 5
+#: (shortest, longest) stereo baseline, m: from a compact module's (Intel RealSense D405: 18 mm) with room below,
+#: to a vehicle-wide rig (about 1.5 m); the packaged profiles are 75 mm (OAK-D) and 0.21 m (MultiSense S21)
+STEREO_BASELINE_M = (0.005, 2.0)
+#: most sensors of a scenario: each is a render pass, a perception pipeline and its shared blocks a frame; a
+#: harvester carries one to four
+MAX_SENSORS = 16
 
 
 def _tuples(value):
@@ -168,8 +174,9 @@ class StereoCamera(Camera):
 
     kind: Literal["stereo_camera"]
     """stereo_camera: left and right textured images, disparity from OpenCV's matcher, depth = f B / d."""
-    baseline_m: PosFloat = 0.12
-    """Distance from the left camera (the mount) to the right one along the image's X (right), m."""
+    baseline_m: float = Field(default=0.12, ge=STEREO_BASELINE_M[0], le=STEREO_BASELINE_M[1], allow_inf_nan=False)
+    """Distance from the left camera (the mount) to the right one along the image's X (right), m (5 mm to 2 m:
+    compact modules to vehicle-wide rigs)."""
     matcher: Literal["sgbm", "bm"] = "sgbm"
     """OpenCV's StereoSGBM (sgbm) or StereoBM (bm)."""
     sgbm_mode: Literal["sgbm", "3way", "hh"] = "sgbm"
@@ -229,4 +236,5 @@ class SensorMap(dict):
 
 
 #: the ``sensors:`` field's type
-Sensors = Annotated[dict[Annotated[str, Field(pattern=SENSOR_NAME)], SensorSpec], AfterValidator(SensorMap)]
+Sensors = Annotated[dict[Annotated[str, Field(pattern=SENSOR_NAME)], SensorSpec], Field(max_length=MAX_SENSORS),
+                    AfterValidator(SensorMap)]

@@ -7,11 +7,20 @@ from pathlib import Path
 from pydantic import Field, model_validator
 
 from .base import Model, NonNegFloat, PosFloat
+from .limits import key_error
 
-__all__ = ["Terrain"]
+__all__ = ["Terrain", "MAX_SLOPE_PCT", "MAX_TERRAIN_CELLS", "MAX_RENDER_CELLS_PER_SIDE"]
 
 #: grades and cross slopes beyond this (percent) are not a harvested field (and leave the small-angle models)
 MAX_SLOPE_PCT = 30.0
+#: most samples of a terrain grid (the roughness tile ``(tile_m / cell_m)^2``, a height map's nx ny, or the
+#: square a height map's roughness is drawn on): 2048 x 2048. Drawing the roughness takes about 40 B a cell at its
+#: peak (noise, kernel and their FFTs), so about 170 MB and 0.4 s on a 2-core laptop, in validate and in each of
+#: the three processes that build the ground (measured with tracemalloc on cosim.world.terrain.rough_field)
+MAX_TERRAIN_CELLS = 1 << 22
+#: most cells along a side of the patch the renderer draws (``render_extent_m / cell_m``): 1024 x 1024 cells are
+#: two million triangles, rebuilt each time the patch moves
+MAX_RENDER_CELLS_PER_SIDE = 1024
 
 
 class Terrain(Model):
@@ -46,6 +55,24 @@ class Terrain(Model):
     """World position of the height map's first sample, m."""
     render_extent_m: float = Field(default=40.0, ge=10.0, le=400.0, allow_inf_nan=False)
     """Side of the square patch of the surface the renderer draws around the cart, m."""
+
+    @model_validator(mode="after")
+    def _bounded(self) -> "Terrain":
+        """The grids this ground needs fit (:data:`MAX_TERRAIN_CELLS`, :data:`MAX_RENDER_CELLS_PER_SIDE`),
+        checked from the numbers alone, before any is allocated."""
+        side = self.tile_m / self.cell_m
+        if self.roughness_rms_m > 0.0 and self.height_map_file is None and side * side > MAX_TERRAIN_CELLS:
+            smallest = self.tile_m / MAX_TERRAIN_CELLS ** 0.5
+            raise key_error("Terrain", ("tile_m",), f"a {self.tile_m:g} m tile of {self.cell_m:g} m cells is "
+                            f"{side:,.0f} x {side:,.0f} samples of roughness; at most {MAX_TERRAIN_CELLS:,} (2048 x "
+                            f"2048) fit: use a smaller tile_m or a cell_m of at least {smallest:.3g} m", self.tile_m)
+        patch = self.render_extent_m / self.cell_m
+        if not self.flat and patch > MAX_RENDER_CELLS_PER_SIDE:
+            raise key_error("Terrain", ("render_extent_m",), f"a {self.render_extent_m:g} m patch of {self.cell_m:g} "
+                            f"m cells is {patch:,.0f} cells a side for the renderer; at most "
+                            f"{MAX_RENDER_CELLS_PER_SIDE} fit: use a smaller render_extent_m or a larger cell_m",
+                            self.render_extent_m)
+        return self
 
     @model_validator(mode="after")
     def _resolvable(self) -> "Terrain":
