@@ -90,3 +90,33 @@ def test_a_chain_longer_than_the_limit_is_refused(tmp_path):
 def test_overrides_apply_after_the_bases():
     s = load_scenario_text("format_version: 1\nextends: default\n", overrides=["duration_s=5"], check_world=False)
     assert s.duration_s == 5.0 and s.sensor.method == "beam_native"
+
+
+TOF = ("sensors:\n  tof:\n    kind: depth_camera\n    profile: tof_kinect_class\n    range_max_m: 8.0\n"
+       "    mount: {parent: combine, xyz_m: [-3.5, 5.0, 6.0], rpy_deg: [0.0, 52.0, 116.0]}\n")
+
+
+def test_sensors_replaces_the_bases_sensor_and_back(tmp_path):
+    """A base's one-LiDAR ``sensor:`` is not inherited by a file that gives ``sensors:`` (and a base's
+    ``sensors:`` not by one that gives ``sensor:``): no "remove sensor:" for a key the user's file does not have."""
+    (tmp_path / "cams.yaml").write_text("format_version: 1\nextends: default\n" + TOF)
+    s = load_scenario(tmp_path / "cams.yaml", check_world=False)
+    assert list(s.sensor_set) == ["tof"] and s.lidar is None
+    (tmp_path / "lidar.yaml").write_text("format_version: 1\nextends: tof_mast\nsensor:\n  method: beam_native\n")
+    s = load_scenario(tmp_path / "lidar.yaml", check_world=False)
+    assert s.sensors == {} and s.lidar.method == "beam_native" and list(s.sensor_set) == ["lidar"]
+    # a file that gives both is still refused, at its own sensors key
+    (tmp_path / "both.yaml").write_text("format_version: 1\nextends: default\nsensor:\n  method: beam_native\n"
+                                        + TOF)
+    with pytest.raises(ScenarioError, match=r"both\.yaml:5:1: sensors: both sensor: and sensors: are given"):
+        load_scenario(tmp_path / "both.yaml", check_world=False)
+
+
+def test_a_cross_check_points_at_the_users_line_that_sets_the_value(tmp_path):
+    (tmp_path / "mine.yaml").write_text("format_version: 1\nextends: default\ncontroller:\n  strategy: lowest_first\n"
+                                        "  target_fill_m: 190\n")
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(tmp_path / "mine.yaml")
+    [p] = info.value.problems
+    assert (p.file, p.line, p.col, p.path) == (str(tmp_path / "mine.yaml"), 5, 18, "controller.target_fill_m")
+    assert "target_fill_m (190) is above the wall top" in p.message

@@ -117,10 +117,10 @@ def test_a_problem_only_the_override_causes_points_at_the_override():
     packaged file's line."""
     problems = _problems(["cart.interior_depth_m=0.5"])
     assert {(p.file, p.line, p.col) for p in problems} == {(SET_FILE, 1, 23)}
-    assert {p.path for p in problems} == {"grain", "controller"}
+    assert {p.path for p in problems} == {"grain.initial_fill_m", "controller.target_fill_m"}
     assert all(p.message.endswith("(after --set cart.interior_depth_m=0.5)") for p in problems)
     [problem] = _problems(["timing.latency_frames=2", "controller.target_fill_m=2.5"])
-    assert (problem.file, problem.line, problem.path) == (SET_FILE, 2, "controller")
+    assert (problem.file, problem.line, problem.path) == (SET_FILE, 2, "controller.target_fill_m")
     # a problem the file has on its own stays at the file's line
     with pytest.raises(ScenarioError) as info:
         load_scenario_text("format_version: 1\nduration_s: -1\n", "f.yaml", ["seed=3"])

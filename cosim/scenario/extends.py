@@ -4,7 +4,10 @@ The base is a packaged scenario by name (``extends: default``) or a file: a valu
 suffix or a ``/`` is a path, relative to the folder of the file that names it. The base is read (and may extend
 another in turn, up to :data:`MAX_CHAIN` files), then the file's own keys are merged over it as ``--set`` merges
 them: a mapping merges key by key, anything else (a value, a list) replaces. ``name`` and ``description`` are not
-inherited: they describe the file itself (left out, they take the record defaults).
+inherited: they describe the file itself (left out, they take the record defaults). ``sensors:`` and the
+one-LiDAR shorthand ``sensor:`` replace each other: a file that gives one of them and not the other does not
+inherit the other from its base (a base's ``sensors:`` merge with a file's ``sensors:`` by name, as any mapping).
+A mapping both give (``controller:``) is the file's: a problem of the section is reported at the file's key.
 
 Every value keeps the marks of the file it comes from, so a problem in an inherited value is reported at the
 base file's line, and a relative path is resolved against the folder of the file that gave it
@@ -23,7 +26,7 @@ from .files import _unknown, packaged_scenarios, read_scenario
 from .overrides import assign
 from .yamlmarks import Doc, parse, show
 
-__all__ = ["EXTENDS_KEY", "MAX_CHAIN", "NOT_INHERITED", "EXTENDS_DESCRIPTION", "apply_extends", "base_of"]
+__all__ = ["EXTENDS_KEY", "MAX_CHAIN", "NOT_INHERITED", "EXCLUSIVE", "EXTENDS_DESCRIPTION", "apply_extends", "base_of"]
 
 #: the key that names a scenario's base
 EXTENDS_KEY = "extends"
@@ -31,6 +34,9 @@ EXTENDS_KEY = "extends"
 MAX_CHAIN = 16
 #: keys a file does not inherit from its base
 NOT_INHERITED = ("name", "description")
+#: (key, the base's key it replaces): a file that gives the one and not the other does not inherit the other
+#: (``sensors:`` replaces the one-LiDAR shorthand ``sensor:`` of its base, and back)
+EXCLUSIVE = (("sensors", "sensor"), ("sensor", "sensors"))
 #: the key's description (the JSON Schema carries it)
 EXTENDS_DESCRIPTION = (
     "Start from another scenario and state only what differs: the name of a packaged scenario (`launch.py list`) "
@@ -104,8 +110,13 @@ def apply_extends(doc: Doc, filename: str, folder: Path,
     base, base_folders = apply_extends(base, str(path), path.parent, chain + ((own,) if own else ()))
     for key in NOT_INHERITED:
         _drop(base, key)
+    for own_key, other in EXCLUSIVE:
+        if own_key in doc.data and other not in doc.data:
+            _drop(base, other)
     for key, item in doc.data.items():
         assign(base, (key,), item, doc, (key,), doc.keys[(key,)])
+    base.keys.update(doc.keys)              # a mapping both give is the file's: its problems at the file's key
+    base.values.update(doc.values)
     base.values[()] = base.keys[()] = doc.values[()]
     base.problems = doc.problems + base.problems
     return base, {**base_folders, **folders}

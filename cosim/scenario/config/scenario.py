@@ -205,8 +205,9 @@ class Scenario(Model):
                 raise key_error("Grain", ("cell_m",), f"{grain.cell_m:g} m does not divide the cart interior {what} "
                                 f"{extent:g} m; choose a cell that divides it (e.g. {extent / n:g} m)", grain.cell_m)
         if grain.initial_fill_m > cart.interior_depth_m:
-            raise ValueError(f"initial_fill_m ({grain.initial_fill_m:g}) is above the wall top "
-                             f"(cart.interior_depth_m = {cart.interior_depth_m:g}): the cart would already overflow")
+            raise key_error("Grain", ("initial_fill_m",), f"initial_fill_m ({grain.initial_fill_m:g}) is above the "
+                            f"wall top (cart.interior_depth_m = {cart.interior_depth_m:g}): the cart would already "
+                            "overflow", grain.initial_fill_m)
         return grain
 
     @field_validator("controller")
@@ -219,13 +220,14 @@ class Scenario(Model):
         if too_large:
             raise key_error("Controller", ("grid_cell_m",), too_large, controller.grid_cell_m)
         if controller.target_fill_m > cart.interior_depth_m:
-            raise ValueError(f"target_fill_m ({controller.target_fill_m:g}) is above the wall top "
-                             f"(cart.interior_depth_m = {cart.interior_depth_m:g}): grain that high spills")
+            raise key_error("Controller", ("target_fill_m",), f"target_fill_m ({controller.target_fill_m:g}) is "
+                            f"above the wall top (cart.interior_depth_m = {cart.interior_depth_m:g}): grain that high "
+                            "spills", controller.target_fill_m)
         cells = cart.grid_shape(controller.grid_cell_m)[0]                 # as the controller grids the cart
         if cells < controller.sections:
-            raise ValueError(f"{controller.sections} sections need at least one grid cell each, but "
-                             f"cart.interior_length_m / grid_cell_m gives {cells}; use fewer sections or a finer "
-                             "grid_cell_m")
+            raise key_error("Controller", ("sections",), f"{controller.sections} sections need at least one grid "
+                            f"cell each, but cart.interior_length_m / grid_cell_m gives {cells}; use fewer sections "
+                            "or a finer grid_cell_m", controller.sections)
         return controller
 
     @field_validator("sensors")
