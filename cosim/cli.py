@@ -21,7 +21,7 @@ from typing import Callable, Sequence
 
 from cosim.runtime.threadpools import default_to_single_threaded_pools
 
-from .errors import OutputError, RunRefused, ScenarioError
+from .errors import OutputError, RunRefused, ScenarioError, shown_path
 from .studies.commands import add_sweep_parser, out_options, study_command, sweep_command
 
 __all__ = ["main", "build_parser", "run_extras", "required_exit", "VERBS", "PLAIN_VERBS", "SCENARIO_VERBS",
@@ -110,7 +110,10 @@ def build_parser() -> argparse.ArgumentParser:
     exp = sub.add_parser("export-fmu", aliases=["export"], help="write the scenario's world, sensors and perception as a co-simulation "
                          "FMU (docs/fmu.md)")
     _scenario_options(exp)
-    exp.add_argument("--out", type=Path, required=True, metavar="NAME.fmu", help="the FMU file to write")
+    exp.add_argument("--out", type=Path, required=True, metavar="NAME.fmu", help="the FMU file to write (an "
+                     "existing folder: <scenario name>.fmu in it)")
+    exp.add_argument("--overwrite", action="store_true", help="replace an FMU already at --out")
+    exp.add_argument("--parents", action="store_true", help="create --out's missing folders")
     exp.add_argument("--fmi", choices=("2", "3"), default="2", help="FMI version (default %(default)s; 3 needs "
                      "pythonfmu3)")
     return parser
@@ -185,7 +188,7 @@ def _load(args: argparse.Namespace):
 
 def _print_summary(result, stream) -> None:
     s = result.summary
-    lines = [f"run directory: {result.run_dir}",
+    lines = [f"run directory: {shown_path(result.run_dir)}",
              f"completed: {s.get('completed')}  frames: {s.get('frames')}  sim {s.get('sim_time_s', 0):.1f} s  "
              f"wall {s.get('wall_time_s', 0):.1f} s  real-time factor {s.get('real_time_factor') or 0:.1f}x"]
     fill = s.get("fill")

@@ -9,15 +9,23 @@
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 __all__ = [
-    "CosimError", "Problem", "ScenarioError", "RunError", "HandoffTimeout", "FrameMismatch",
+    "shown_path", "CosimError", "Problem", "ScenarioError", "RunError", "HandoffTimeout", "FrameMismatch",
     "ParticipantCrashed", "ParticipantDied", "ParticipantHung", "RunInterrupted", "OutputError", "RecordingFailed",
     "RunRefused",
     "RendererUnavailable", "PluginFault", "SimulationError", "SimulationClosed", "SimulationDone", "InputError",
     "UnknownInput", "InputNotSettable", "InputOutOfRange",
 ]
+
+
+def shown_path(path: str | os.PathLike) -> str:
+    """``path`` for a message or the console: as it is when printable, else Python's escaped repr, so that a
+    control byte in a user's path (an escape typed into ``--out``) never reaches the terminal raw."""
+    text = os.fsdecode(path)
+    return text if text.isprintable() else repr(text)
 
 
 class CosimError(Exception):

@@ -23,7 +23,7 @@ import json
 import os
 from pathlib import Path
 
-from cosim.errors import RunRefused
+from cosim.errors import RunRefused, shown_path
 
 from .files import TMP_PREFIX, TMP_SUFFIX
 
@@ -93,7 +93,7 @@ def clear_run_files(run_dir: Path) -> list[str]:
             except FileNotFoundError:
                 continue
             except OSError as exc:
-                raise RunDirError(f"--out {run_dir}: cannot remove the earlier run's {path.name}: "
+                raise RunDirError(f"--out {shown_path(run_dir)}: cannot remove the earlier run's {path.name}: "
                                   f"{exc.strerror or exc}") from None
             removed.append(path.name)
     return removed
@@ -104,16 +104,16 @@ def make_out_dir(run_dir: Path, parents: bool = False) -> None:
     :class:`RunDirError` when it is not a directory, cannot be made, or cannot be written."""
     run_dir = Path(run_dir)
     if run_dir.exists() and not run_dir.is_dir():
-        raise RunDirError(f"--out {run_dir}: exists and is not a directory")
+        raise RunDirError(f"--out {shown_path(run_dir)}: exists and is not a directory")
     try:
         run_dir.mkdir(parents=parents, exist_ok=True)
     except FileNotFoundError:
-        raise RunDirError(f"--out {run_dir}: its parent folder {run_dir.parent} does not exist; create it, or add "
+        raise RunDirError(f"--out {shown_path(run_dir)}: its parent folder {shown_path(run_dir.parent)} does not exist; create it, or add "
                           "--parents to create every missing folder") from None
     except OSError as exc:
-        raise RunDirError(f"--out {run_dir}: cannot create the directory: {exc.strerror or exc}") from None
+        raise RunDirError(f"--out {shown_path(run_dir)}: cannot create the directory: {exc.strerror or exc}") from None
     if not os.access(run_dir, os.W_OK | os.X_OK):
-        raise RunDirError(f"--out {run_dir}: permission denied (the directory is not writable)")
+        raise RunDirError(f"--out {shown_path(run_dir)}: permission denied (the directory is not writable)")
 
 
 def _lock(run_dir: Path) -> RunDirLock:
@@ -121,7 +121,7 @@ def _lock(run_dir: Path) -> RunDirLock:
     try:
         fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
     except OSError as exc:
-        raise RunDirError(f"--out {run_dir}: cannot create {LOCK_NAME}: {exc.strerror or exc}") from None
+        raise RunDirError(f"--out {shown_path(run_dir)}: cannot create {LOCK_NAME}: {exc.strerror or exc}") from None
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError:
@@ -131,7 +131,7 @@ def _lock(run_dir: Path) -> RunDirLock:
         except OSError:
             pass
         os.close(fd)
-        raise RunDirError(f"--out {run_dir}: another run is writing there"
+        raise RunDirError(f"--out {shown_path(run_dir)}: another run is writing there"
                           + (f" (launcher pid {holder})" if holder else "") + "; choose another --out") from None
     try:
         os.ftruncate(fd, 0)
@@ -146,13 +146,13 @@ def _claim(run_dir: Path, overwrite: bool) -> None:
     earlier = earlier_run(run_dir)
     if earlier is not None:
         if not overwrite:
-            raise RunDirError(f"--out {run_dir}: holds {earlier}; choose another --out, or add --overwrite to "
+            raise RunDirError(f"--out {shown_path(run_dir)}: holds {earlier}; choose another --out, or add --overwrite to "
                               "replace that run's files")
         clear_run_files(run_dir)
         return
     clash = [n for n in RUN_FILES if (run_dir / n).exists()]
     if clash:
-        raise RunDirError(f"--out {run_dir}: holds {', '.join(clash)}, which a run would replace, but no earlier "
+        raise RunDirError(f"--out {shown_path(run_dir)}: holds {', '.join(clash)}, which a run would replace, but no earlier "
                           "run (no summary.json or run.json); choose another --out (files that are not a run's "
                           "are never replaced, --overwrite or not)")
 

@@ -15,7 +15,7 @@ def build(dest: Path = HERE) -> Path:
     from cosim.cli import main
 
     out = dest / "GrainWorld.fmu"
-    code = main(["export-fmu", str(HERE / "scenario.yaml"), "--out", str(out)])
+    code = main(["export-fmu", str(HERE / "scenario.yaml"), "--out", str(out), "--overwrite"])
     if code:
         sys.exit(code)
     return out

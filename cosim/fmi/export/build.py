@@ -12,6 +12,7 @@ load it.
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import keyword
 import re
 import shutil
@@ -31,13 +32,14 @@ from cosim.scenario.yamlmarks import Dumper
 from cosim.world.terrain import terrain_of
 
 from .contract import TERRAIN_REFUSED
+from .destination import DestinationError, fmu_destination, shown, write_atomically
 from .world import SCENARIO_FILE
 
 
 class BuilderMissing(ImportError):
     """The FMU builder for the FMI version asked for is not installed; the message says what to install."""
 
-__all__ = ["FMI_BUILDERS", "FILES_DIR", "BuilderMissing", "model_identifier", "export_scenario", "export_fmu",
+__all__ = ["FMI_BUILDERS", "FILES_DIR", "BuilderMissing", "DestinationError", "model_identifier", "export_scenario", "export_fmu",
            "export_command"]
 
 HERE = Path(__file__).resolve().parent
@@ -51,11 +53,26 @@ TEMPLATE_CLASS = "GrainWorld"
 RENDERERS = ("mock", "gl")
 
 
+def _taken(ident: str) -> bool:
+    """Whether ``ident`` names a module Python could import instead of the FMU's own (pythonfmu imports the model
+    class from a module of that name: ``gc`` or ``json`` would be the standard library's)."""
+    if ident in sys.stdlib_module_names or ident in sys.builtin_module_names or ident in sys.modules:
+        return True
+    try:
+        return importlib.util.find_spec(ident) is not None
+    except (ImportError, ValueError):
+        return True
+
+
 def model_identifier(out: Path) -> str:
-    """The FMU's model identifier (a C identifier, also its binary's name) from the output file's stem."""
+    """The FMU's model identifier (a C identifier, also its binary's and its Python module's name) from the output
+    file's stem; ``_fmu`` is appended while it names a module Python would import instead (``gc.fmu`` ->
+    ``gc_fmu``)."""
     ident = re.sub(r"\W", "_", out.stem)
     if not ident or ident[0].isdigit() or keyword.iskeyword(ident):
         ident = "M" + ident
+    while _taken(ident):
+        ident += "_fmu"
     return ident
 
 
@@ -100,10 +117,16 @@ def export_scenario(s: Scenario, folder: Path, renderer: str = "mock") -> Path:
     return path
 
 
-def export_fmu(s: Scenario, out: str | Path, fmi: str = "2", renderer: str = "mock") -> Path:
+def export_fmu(s: Scenario, out: str | Path, fmi: str = "2", renderer: str = "mock", *, overwrite: bool = False,
+               parents: bool = False) -> Path:
     """Build the FMU of scenario ``s`` at ``out`` (FMI ``fmi`` "2" or "3", rendering with ``renderer``); return
-    its path. :class:`cosim.errors.ScenarioError` when the exported scenario does not load, ValueError for what an
-    export cannot carry, :class:`BuilderMissing` when the builder for that FMI version is not installed."""
+    the path of the file written. ``out`` is checked first and written atomically (cosim.fmi.export.destination:
+    an existing folder takes ``<scenario name>.fmu``; ``overwrite`` replaces an earlier FMU, ``parents`` makes
+    missing folders). :class:`cosim.errors.ScenarioError` when the exported scenario does not load, ValueError for
+    what an export cannot carry or a destination it cannot use (:class:`DestinationError`),
+    :class:`BuilderMissing` when the builder for that FMI version is not installed, OSError when the file cannot
+    be written."""
+    out = fmu_destination(out, s.name, overwrite=overwrite, parents=parents)
     if fmi not in FMI_BUILDERS:
         raise ValueError(f"FMI {fmi!r}: export writes FMI {' or '.join(FMI_BUILDERS)}")
     module, template = FMI_BUILDERS[fmi]
@@ -111,7 +134,6 @@ def export_fmu(s: Scenario, out: str | Path, fmi: str = "2", renderer: str = "mo
         builder = importlib.import_module(module).FmuBuilder
     except ImportError as e:
         raise BuilderMissing(f"exporting FMI {fmi}.0 needs {module}: pip install {module} [{e}]") from None
-    out = Path(out)
     ident = model_identifier(out)
     with tempfile.TemporaryDirectory(prefix="graincosim-export-") as tmp:
         folder = Path(tmp) / "resources"
@@ -122,8 +144,7 @@ def export_fmu(s: Scenario, out: str | Path, fmi: str = "2", renderer: str = "mo
         built = Path(builder.build_FMU(script, dest=Path(tmp) / "built", project_files=list(folder.iterdir()),
                                        canHandleVariableCommunicationStepSize=False))
         _model_structure(built, fmi)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        shutil.move(built, out)
+        write_atomically(built, out)
     return out
 
 
@@ -160,13 +181,19 @@ def _edit_structure(xml: bytes, fmi: str) -> bytes:
 
 
 def export_command(args, s: Scenario) -> int:
-    """``launch.py export-fmu``: build the FMU (``--out``, ``--fmi``; the renderer ``--renderer``, mock unless
-    given), print its path; exit 2 with the reason for what cannot be exported."""
+    """``launch.py export-fmu``: build the FMU (``--out``, ``--fmi``, ``--overwrite``, ``--parents``; the renderer
+    ``--renderer``, mock unless given), print the file written; exit 2 with the reason for what cannot be exported
+    or a destination that cannot take it, 1 when writing it fails (nothing truncated is left)."""
     try:
-        path = export_fmu(s, args.out, args.fmi, args.renderer or "mock")
+        path = export_fmu(s, args.out, args.fmi, args.renderer or "mock", overwrite=args.overwrite,
+                          parents=args.parents)
     except (ValueError, BuilderMissing) as e:
         sys.stderr.write(f"export-fmu: {e}\n")
         return 2
-    sys.stdout.write(f"{path}: FMI {args.fmi}.0 co-simulation, one doStep per {s.timing.sensor_period_s:g} s sensor "
-                     f"frame, {s.controller.sections} sections (docs/fmu.md)\n")
+    except OSError as e:
+        sys.stderr.write(f"export-fmu: --out {shown(args.out)}: cannot write the FMU: {e.strerror or e}; nothing was "
+                         "written\n")
+        return 1
+    sys.stdout.write(f"wrote {shown(path)}: FMI {args.fmi}.0 co-simulation, one doStep per "
+                     f"{s.timing.sensor_period_s:g} s sensor frame, {s.controller.sections} sections (docs/fmu.md)\n")
     return 0
