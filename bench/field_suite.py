@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SWEEP = ROOT / "bench" / "field_suite.yaml"
 #: the acceptance: at least this share of seeds filled, the rest stopped safe, none failed
 FILLED_SHARE = 0.95
-STATUSES = ("filled", "stopped_safe", "job_failed")
+STATUSES = ("filled", "stopped_safe", "unfinished", "job_failed")
 
 __all__ = ["SECTION", "summarize_results", "render_markdown", "put_section", "main"]
 

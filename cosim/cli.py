@@ -71,8 +71,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="port of the --foxglove server (default %(default)s)")
     run.add_argument("--quiet", action="store_true", help="no progress output")
     run.add_argument("--require-filled", action="store_true",
-                     help="exit 3 when the run completed but did not fill the cart (outcome stopped_safe or "
-                     "job_failed in summary.json)")
+                     help="exit 3 when the run completed but did not fill the cart (outcome stopped_safe, "
+                     "unfinished or job_failed in summary.json)")
     val = sub.add_parser("validate", help="validate a scenario and print the resolved result")
     _scenario_options(val)
     val.add_argument("--print", action="store_true", help="print the fully resolved scenario as YAML")

@@ -100,7 +100,7 @@ def test_gnss_error_moves_the_tractor_and_the_controllers_view_with_its_statisti
     assert 0.005 < np.std(e) < 0.06 and np.abs(np.diff(e)).max() < 0.01      # relative error: slow, cm-sized
     again = simulate(s)
     assert all(np.array_equal(r.series[k], again.series[k], equal_nan=True) for k in r.series)
-    assert _outcome(s, r)["status"] in ("filled", "job_failed")               # runs to the end either way
+    assert _outcome(s, r)["status"] in ("filled", "unfinished", "job_failed")  # runs to the end either way
 
 
 def test_the_controller_pauses_through_a_stop_and_a_start_instead_of_spilling():

@@ -62,15 +62,30 @@ def test_a_controller_that_holds_says_why_and_with_what_confidence():
     assert "5 of 9 sections at target (section 6 peaks 1.20 m of 1.90 m)" in out["reason"]
 
 
-def test_a_false_done_an_unfinished_run_and_a_silent_idle_controller_fail():
+def test_a_false_done_and_a_silent_idle_controller_fail():
     short = [TARGET] * 8 + [1.5]
     assert "declared the cart full but only 8 of 9" in judge(SC, _summary(short), _series(all_full=True))["reason"]
-    out = judge(SC, _summary(short), _series(flow_end=1.0))
-    assert out["status"] == "job_failed" and out["reason"].startswith("not filled when the run ended at 60.0 s")
     out = judge(SC, _summary([1.0] * 9), _series(auger=False))
     assert out["status"] == "job_failed" and "never started and the controller gave no reason" in out["reason"]
     # still running when the grain was not stopped: a hold only counts once the flow is off
-    assert judge(SC, _summary(short), _series(hold=HOLD_LOST, flow_end=0.5))["status"] == "job_failed"
+    out = judge(SC, _summary(short), _series(hold=HOLD_LOST, flow_end=0.5))
+    assert out["status"] == "job_failed" and "with the grain still flowing" in out["reason"]
+
+
+@pytest.mark.parametrize("fraction, shown", [(0.873, "87.3 % filled"), (0.0415, "4.2 % filled"), (None, "")])
+def test_a_run_its_duration_ended_at_work_is_unfinished_with_its_progress(fraction, shown):
+    """Still filling when the duration ran out, nothing spilled or overfilled: unfinished, not failed, with the
+    fill fraction and the sections at target."""
+    short = [TARGET] * 6 + [1.5, 1.2, 1.1]
+    fill = {"fill_fraction": fraction} if fraction is not None else {}
+    summary = _summary(short)
+    summary["fill"].update(fill)
+    out = judge(SC, summary, _series(n=101, flow_end=1.0))
+    assert out["status"] == "unfinished" and out["fill_fraction"] == fraction
+    assert out["reason"] == (f"the run ended at its duration, 10.0 s, before the job was done: {shown}"
+                             + (", " if shown else "") + "6 of 9 sections at target (section 9 peaks 1.10 m of 1.90 m)")
+    # spill or overfill at the end of a short run is still a failed job
+    assert judge(SC, _summary(short, spill_kg=3.0), _series(n=101, flow_end=1.0))["status"] == "job_failed"
 
 
 def test_a_run_that_did_not_complete_fails_the_job_naming_why():
@@ -83,8 +98,9 @@ def test_console_log_and_require_filled(tmp_path, capsys, shm_clean):
     args = ["run", "default", "--renderer", "none", "--feedback", "ground_truth", "--duration", "3", "--quiet"]
     assert main(args + ["--out", str(tmp_path / "a")]) == 0
     out = capsys.readouterr().out
-    assert "outcome: job_failed: not filled when the run ended at 3.0 s: 0 of 9 sections at target" in out
+    assert "outcome: unfinished: the run ended at its duration, 3.0 s, before the job was done: " in out
     summary = json.loads((tmp_path / "a" / "summary.json").read_text())
-    assert summary["outcome"]["status"] == "job_failed" and summary["completed"] is True
-    assert "outcome: job_failed: not filled" in (tmp_path / "a" / "log.txt").read_text()
+    assert summary["outcome"]["status"] == "unfinished" and summary["completed"] is True
+    assert f"{summary['fill']['fill_fraction'] * 100:.1f} % filled, 0 of 9 sections at target" in out
+    assert "outcome: unfinished: the run ended at its duration" in (tmp_path / "a" / "log.txt").read_text()
     assert main(args + ["--out", str(tmp_path / "b"), "--require-filled"]) == EXIT_NOT_FILLED

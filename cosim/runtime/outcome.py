@@ -8,11 +8,17 @@ summary's fill, spill and perception parts, the recorded series and the run's er
 * ``stopped_safe``: not filled, but nothing spilled or overfilled and the auger is off at the end because the
   controller stopped on purpose and said why (``dyn_state.hold_reason``), or perception never found the cart
   so the auger never started;
+* ``unfinished``: not filled, nothing spilled or overfilled, the auger started and the controller still at work
+  (no hold, the cart not declared full) when the run reached its duration (``duration_s``, ``--duration``): the
+  run ended before the job could be done, which is no failure of the job; the reason gives the progress made
+  (``fill.fill_fraction``, the sections at target);
 * ``job_failed``: everything else: spill, overfill, a run that did not complete, a controller that declared
-  the cart full while a section is short of the target, or a run that ended unfilled without a reason,
+  the cart full while a section is short of the target, a run that ended unfilled with the auger never started
+  and no reason given, or with the controller holding but the grain still flowing,
 
 with a ``reason`` in words and numbers ("perception never found the cart: 0 of 1201 frames", "spill 120 kg",
-"overfill 15 cm in section 9"). Pure: no I/O.
+"overfill 15 cm in section 9", "the run ended at its duration, 10.0 s, before the job was done: 12.3 % filled").
+Pure: no I/O.
 
 The controller's hold reasons (:data:`HOLD_REASONS`, cosim.scenario.config.holds) are the contract between the
 controller (which writes the code into ``dyn_state.hold_reason``, dynamics_proc.control.coping) and this judge.
@@ -27,11 +33,12 @@ import numpy as np
 from cosim.scenario.config import Scenario
 from cosim.scenario.config.holds import HOLD_LOST, HOLD_NO_MEASUREMENT, HOLD_NONE, HOLD_REASONS
 
-__all__ = ["FILLED", "STOPPED_SAFE", "JOB_FAILED", "STATUSES", "HOLD_NONE", "HOLD_NO_MEASUREMENT", "HOLD_LOST",
+__all__ = ["FILLED", "STOPPED_SAFE", "UNFINISHED", "JOB_FAILED", "STATUSES", "HOLD_NONE", "HOLD_NO_MEASUREMENT", "HOLD_LOST",
            "HOLD_REASONS", "judge", "outcome_line"]
 
-FILLED, STOPPED_SAFE, JOB_FAILED = "filled", "stopped_safe", "job_failed"
-STATUSES = (FILLED, STOPPED_SAFE, JOB_FAILED)
+FILLED, STOPPED_SAFE, UNFINISHED, JOB_FAILED = "filled", "stopped_safe", "unfinished", "job_failed"
+#: every status, from the job done to the job failed
+STATUSES = (FILLED, STOPPED_SAFE, UNFINISHED, JOB_FAILED)
 
 #: a flow level below this counts as stopped (the auger's run-out ends exactly at 0)
 FLOW_STOPPED = 1e-9
@@ -86,7 +93,8 @@ def _hold_text(series: Mapping[str, np.ndarray], code: int) -> str:
 def judge(scenario: Scenario, summary: Mapping, series: Mapping[str, np.ndarray]) -> dict:
     """``{"status", "reason", ...}`` of a run from its summary (``fill``, ``spill``, ``completed``, ``error``) and
     its series (``"<block>.<field>"`` -> (frames,) float64). The extra keys give the numbers the reason rests
-    on: ``sections_at_target`` of ``sections``, ``auger_on_s``, ``cart_found_frames`` / ``perception_frames``
+    on: ``sections_at_target`` of ``sections``, ``fill_fraction`` (the summary's, None without it), ``auger_on_s``,
+    ``cart_found_frames`` / ``perception_frames``
     (None without perception), ``hold_reason`` (the controller's last code)."""
     tol = scenario.outcome
     target = scenario.controller.target_fill_m
@@ -104,7 +112,9 @@ def judge(scenario: Scenario, summary: Mapping, series: Mapping[str, np.ndarray]
     code = int(hold[-1]) if hold.size else HOLD_NONE
     short = _sections_short(peaks, target, tol.underfill_tolerance_m) if peaks else [(k + 1, math.nan)
                                                                                        for k in range(n)]
+    progress = fill.get("fill_fraction")
     facts = {"sections_at_target": n - len(short), "sections": n, "auger_on_s": auger_on_s,
+             "fill_fraction": float(progress) if isinstance(progress, (int, float)) else None,
              "cart_found_frames": cart[0] if cart else None, "perception_frames": cart[1] if cart else None,
              "hold_reason": code}
     failed: list[str] = []
@@ -142,7 +152,12 @@ def judge(scenario: Scenario, summary: Mapping, series: Mapping[str, np.ndarray]
     if auger_on_s == 0.0:
         return {"status": JOB_FAILED, "reason": f"the auger never started and the controller gave no reason; "
                 f"{shortfall}", **facts}
-    return {"status": JOB_FAILED, "reason": f"not filled when the run ended at {end:.1f} s: {shortfall}", **facts}
+    if code != HOLD_NONE:           # holding, the grain not yet stopped when the run ended
+        return {"status": JOB_FAILED, "reason": f"not filled when the run ended at {end:.1f} s, the controller "
+                f"holding ({HOLD_REASONS.get(code, code)}) with the grain still flowing: {shortfall}", **facts}
+    done = f"{facts['fill_fraction'] * 100.0:.1f} % filled, " if facts["fill_fraction"] is not None else ""
+    return {"status": UNFINISHED, "reason": f"the run ended at its duration, {end:.1f} s, before the job was done: "
+            f"{done}{shortfall}", **facts}
 
 
 def outcome_line(outcome: Mapping | None) -> str:

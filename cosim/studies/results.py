@@ -2,7 +2,7 @@
 
 Columns, in order: ``id``; the labels (a study's ``knob``, ``setting``); the varied parameters (dotted scenario
 paths); ``seed``, ``completed``, ``error``, ``attempts``; ``outcome`` and ``outcome_reason`` (whether the job was
-done: summary.json's ``outcome``, ``filled`` / ``stopped_safe`` / ``job_failed``, and why); the metrics of :data:`METRICS` (from the run's
+done: summary.json's ``outcome``, ``filled`` / ``stopped_safe`` / ``unfinished`` / ``job_failed``, and why); the metrics of :data:`METRICS` (from the run's
 summary.json, empty where the run has none, e.g. perception metrics of a ground-truth run); ``worker`` (the
 Dask worker's address, or ``local``) and ``run_dir`` (relative to the sweep's directory). ``results.csv``
 always, ``results.parquet`` too where pyarrow is importable.

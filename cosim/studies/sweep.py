@@ -56,7 +56,7 @@ class SweepOutcome:
     skipped: int
     interrupted: bool
     results: Path
-    #: runs per job outcome (``filled``, ``stopped_safe``, ``job_failed``; summary.json ``outcome``)
+    #: runs per job outcome (``filled``, ``stopped_safe``, ``unfinished``, ``job_failed``; summary.json ``outcome``)
     outcomes: dict = field(default_factory=dict)
 
 
