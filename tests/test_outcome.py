@@ -104,3 +104,17 @@ def test_console_log_and_require_filled(tmp_path, capsys, shm_clean):
     assert f"{summary['fill']['fill_fraction'] * 100:.1f} % filled, 0 of 9 sections at target" in out
     assert "outcome: unfinished: the run ended at its duration" in (tmp_path / "a" / "log.txt").read_text()
     assert main(args + ["--out", str(tmp_path / "b"), "--require-filled"]) == EXIT_NOT_FILLED
+
+
+def test_a_case_built_to_stop_safe_stops_safe_even_when_its_duration_ends_it(tmp_path, capsys, shm_clean):
+    """grazing_sensor never sees into the cart: a run cut short by its duration is still stopped_safe with the
+    reason, not unfinished (the auger never started), and the packaged description says so."""
+    from cosim.scenario.loader import load_scenario, resolve_scenario_arg
+
+    assert "built to stop safe" in load_scenario(resolve_scenario_arg("grazing_sensor")).description
+    args = ["run", "grazing_sensor", "--renderer", "mock", "--duration", "1.5", "--quiet", "--set",
+            "outputs.figures=false", "--out", str(tmp_path / "g")]
+    assert main(args) == 0
+    summary = json.loads((tmp_path / "g" / "summary.json").read_text())
+    assert summary["outcome"]["status"] == "stopped_safe"
+    assert summary["outcome"]["reason"].startswith("perception never found the cart: 0 of 16 frames; the auger never")
