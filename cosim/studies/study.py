@@ -1,4 +1,4 @@
-"""``launch.py study``: error against run time over the fidelity knobs (issues 6 and 17).
+"""``launch.py study``: error against run time over the fidelity knobs.
 
 Each knob is a list of settings (dotted-path overrides of the scenario). The study is a sweep (same engine and
 results table as ``launch.py sweep``, cosim/studies/sweep.py): every setting is one launched run of a short
