@@ -4,8 +4,8 @@
     python -m cosim.viewer --attach RUN --once        # print one snapshot's summary as JSON and detach
     python -m cosim.viewer --replay FILE.mcap [--speed 1] [--loop]
 
-Exit codes: 0 served until Ctrl-C (or ``--once`` done), 1 the run does not exist or has ended (a clear message,
-no traceback), 2 bad usage.
+Exit codes: 130 served until Ctrl-C or SIGTERM (as every verb of ``launch.py``), 0 ``--once`` done, 1 the run
+does not exist or has ended (a clear message, no traceback), 2 bad usage or a port it cannot listen on.
 """
 from __future__ import annotations
 
@@ -16,9 +16,11 @@ import os
 import sys
 from typing import Sequence
 
-__all__ = ["main", "build_parser", "EXIT_NO_RUN"]
+__all__ = ["main", "build_parser", "EXIT_NO_RUN", "EXIT_INTERRUPTED"]
 
 EXIT_NO_RUN = 1
+#: served until Ctrl-C or SIGTERM (the exit code of every interrupted verb)
+EXIT_INTERRUPTED = 130
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -77,13 +79,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         except OSError:
             pass
     try:
-        serve(source, args.host, args.port, args.announce)
+        signalled = serve(source, args.host, args.port, args.announce)
     except KeyboardInterrupt:
-        pass
+        signalled = True
     except OSError as exc:
         source.close()
         sys.stderr.write(f"viewer cannot listen on {args.host}:{args.port}: {exc}\n")
         return 2
+    if signalled:
+        sys.stderr.write("interrupted\n")
+        return EXIT_INTERRUPTED
     return 0
 
 

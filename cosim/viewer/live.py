@@ -23,7 +23,7 @@ from shm_schema import Phase, Segment, SegmentNotFound, SnapshotTimeout, StructB
 from .snapshot import History, Snapshot, wanted_block
 from .viewinfo import ViewInfo
 
-__all__ = ["RunNotFound", "RunEnded", "resolve_run", "LiveSource", "SHM_DIR", "MIN_INTERVAL_S"]
+__all__ = ["RunNotFound", "RunEnded", "resolve_run", "LiveSource", "SHM_DIR", "MIN_INTERVAL_S", "RECORDING_NAME"]
 
 log = logging.getLogger("cosim.viewer")
 
@@ -45,6 +45,21 @@ class RunEnded(LookupError):
     """The run exists on disk but has ended: its segment is gone."""
 
 
+#: the file ``launch.py run --record`` writes in the run directory (cosim.recording.writer.DEFAULT_NAME, which
+#: imports the Foxglove SDK: not loaded to print a message)
+RECORDING_NAME = "recording.mcap"
+
+
+def _ended_message(run_dir: Path, segment: str) -> str:
+    """What to say of a run that has ended: where its outputs are, and how to replay its recording only when one
+    was written there (``launch.py run --record``)."""
+    text = f"run {run_dir.name} has ended (its segment {segment} is gone); its outputs are in {run_dir}"
+    recording = run_dir / RECORDING_NAME
+    if recording.is_file() and recording.stat().st_size > 0:
+        return f"{text}; replay its recording with `python launch.py replay {recording}`"
+    return f"{text} (no recording was written: `launch.py run --record` writes one to replay)"
+
+
 def resolve_run(run: str | os.PathLike) -> tuple[str, Path | None]:
     """(segment name, run directory or None) of ``run``: a run directory, its run.json, or a segment name.
 
@@ -64,8 +79,7 @@ def resolve_run(run: str | os.PathLike) -> tuple[str, Path | None]:
         except (ValueError, KeyError, TypeError) as exc:
             raise RunNotFound(f"{info_path} does not name a segment ({type(exc).__name__}: {exc})") from None
         if info.get("ended"):
-            raise RunEnded(f"run {p.name} has ended (its segment {segment} is gone); its outputs are in "
-                           f"{p}; replay a recording with `python -m cosim.viewer --replay {p}/recording.mcap`")
+            raise RunEnded(_ended_message(p, segment))
         return segment, p
     name = str(run)
     if name.startswith(str(SHM_DIR) + "/"):

@@ -321,10 +321,11 @@ def _raise_stop(signum, frame) -> None:
 
 
 def serve(source, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, announce: str | None = None,
-          show_end: bool = False) -> None:
+          show_end: bool = False) -> bool:
     """Serve ``source`` until SIGTERM or Ctrl-C, then stop gracefully (module docstring). ``announce``: a file to
     write ``{"url": ...}`` to once listening; ``show_end``: SIGTERM means the run has ended: show its end to a
-    watching page first (:meth:`DashboardServer.show_the_end`)."""
+    watching page first (:meth:`DashboardServer.show_the_end`). Returns whether a signal (Ctrl-C, SIGTERM) ended
+    it (the command line's exit 130), False when it was shut down from within."""
     try:
         srv = DashboardServer(source, host, port)
     except BaseException:
@@ -338,9 +339,11 @@ def serve(source, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, announce: 
         previous = signal.signal(signal.SIGTERM, _raise_stop)
     if announce:
         atomic_write(Path(announce), json.dumps({"url": srv.url, "pid": os.getpid()}))
+    signalled = False
     try:
         srv.serve_forever(poll_interval=0.5)
     except (ServerStop, KeyboardInterrupt) as exc:
+        signalled = True
         log.info("viewer of %s stopping (%s)", source.name, type(exc).__name__)
         if previous is not None:
             signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second SIGTERM must not cut the end short
@@ -351,6 +354,7 @@ def serve(source, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, announce: 
             signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second SIGTERM must not cut the drain short
         srv.drain()
         srv.server_close()
+    return signalled
 
 
 def observe(segment_name: str, port: int = DEFAULT_PORT, host: str = DEFAULT_HOST, announce: str | None = None,
