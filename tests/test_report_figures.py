@@ -3,6 +3,7 @@ colour bar with units on every map, cells without a value drawn apart from 0 m a
 errors shown as zero, labels that do not overlap, and the renderer actually used in the titles."""
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import matplotlib
@@ -149,3 +150,41 @@ def test_study_plot_shows_zero_errors_as_zero_and_labels_do_not_overlap():
     outside = [t.get_text() for t in labels if not frame.contains(*t.get_window_extent(renderer).min)
                or not frame.contains(*t.get_window_extent(renderer).max)]
     assert outside == [], "labels drawn outside their axes"
+
+
+def _texts(fig) -> list:
+    """(axes index, text, window extent) of every visible axis label, title and tick label inside its view."""
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    out = []
+    for i, ax in enumerate(fig.axes):
+        found = [ax.xaxis.label, ax.yaxis.label, ax.title]
+        for axis in (ax.xaxis, ax.yaxis):
+            lo, hi = sorted(axis.get_view_interval())
+            found += [t.label1 for t in axis.get_major_ticks() + axis.get_minor_ticks()
+                      if lo <= t.get_loc() <= hi and t.label1.get_visible() and t.label1.get_text()]
+        out += [(i, t.get_text(), t.get_window_extent(renderer)) for t in found if t.get_text()]
+    return out
+
+
+def test_study_figure_axis_labels_never_overlap():
+    """Narrow and wide cost ranges on log axes, long error labels, three knobs side by side: no two axis labels,
+    titles or tick labels overlap, and all lie inside the figure."""
+    panels = [
+        ("dynamics", "cart track error vs radau dt=0.001 (m)",
+         [("exponential dt=0.01", 0.02, 1e-4), ("radau dt=0.01", 0.05, 2e-5), ("radau dt=0.001", 0.4, 0.0)],
+         "exponential dt=0.01"),
+        ("grain_cell", "section mean height error vs 0.025 m (m)",
+         [("0.1", 0.01, 0.02), ("0.05", 0.03, 0.004), ("0.025", 0.2, 0.0)], "0.05"),
+        ("resample", "heightmap RMSE vs the exact ray cast (m)", [("nearest", 0.1, 0.003), ("bilinear", 0.12, 0.002)],
+         "bilinear"),
+    ]
+    for n in (1, 3):
+        fig = fig_study(panels[:n])
+        texts = _texts(fig)
+        clash = [(a[:2], b[:2]) for a, b in itertools.combinations(texts, 2) if a[2].overlaps(b[2])]
+        assert clash == []
+        w, h = fig.bbox.width, fig.bbox.height
+        assert [t[:2] for t in texts if t[2].x0 < 0 or t[2].y0 < 0 or t[2].x1 > w or t[2].y1 > h] == []
+        assert sum(1 for t in texts if t[0] == n - 1 and "10^" in t[1]) >= 2      # labelled ticks on each axis

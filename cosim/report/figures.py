@@ -16,6 +16,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch, Rectangle
+from matplotlib.ticker import NullFormatter
 
 from cosim.runtime.files import atomic_write
 
@@ -219,6 +220,7 @@ def fig_study(panels: Sequence[tuple[str, str, Sequence[tuple[str, float, float]
             ax.annotate(label + (" (0)" if zero else ""), (x, yy), fontsize=7, textcoords="offset points",
                         xytext=LABEL_OFFSETS_PT[0])
         ax.set_ylim(floor / 2, (max(nonzero) if nonzero else 1.0) * 3)
+        _decade_at_least(ax, [p[1] for p in pts])
         ax.set_xlabel("wall time per simulated second (s)")
         ax.set_ylabel(error_label)
         ax.set_title(name)
@@ -227,6 +229,21 @@ def fig_study(panels: Sequence[tuple[str, str, Sequence[tuple[str, float, float]
     fig.subplots_adjust(left=0.12 / max(len(panels), 1) + 0.05, right=0.98, bottom=0.14, top=0.92, wspace=0.35)
     _place_labels(fig)
     return fig
+
+
+def _decade_at_least(ax, xs: Sequence[float]) -> None:
+    """A log x axis over at least one decade around ``xs`` (so that a power of ten is on it), labelled at its
+    powers of ten only: the minor ticks' labels (2 x 10^-2, 3 x 10^-2, ...) crowd into one another on a narrow
+    range."""
+    xs = [x for x in xs if x > 0 and np.isfinite(x)]
+    if xs:
+        lo, hi = min(xs) / 1.5, max(xs) * 1.5
+        if hi / lo < 10.0:
+            mid = np.sqrt(lo * hi)
+            lo, hi = mid / np.sqrt(10.0), mid * np.sqrt(10.0)
+        ax.set_xlim(lo, hi)
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    ax.yaxis.set_minor_formatter(NullFormatter())
 
 
 def _place_labels(fig: Figure) -> None:
