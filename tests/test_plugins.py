@@ -347,3 +347,22 @@ def test_own_strategy_examples_option_moves_the_start(tmp_path):
     assert seqs[4][:2] == [5, 4] and seqs[6][:2] == [7, 6]
     with pytest.raises(ScenarioError, match="takes no option 'centre'"):
         load_scenario(path, ["controller.strategy_options.centre=3"])
+
+
+def test_which_distribution_provides_a_plugin_scans_the_installed_packages_at_most_once(monkeypatch):
+    """This project's built-ins are named without a scan of every installed package's metadata (seconds on a busy
+    machine, once per plug-in, was most of validate's time); another's scans once per sys.path."""
+    from importlib import metadata
+
+    import cosim.scenario.plugins as plugins
+
+    calls = []
+    real = metadata.packages_distributions
+    monkeypatch.setattr(plugins.metadata, "packages_distributions", lambda: calls.append(1) or real())
+    plugins._packages_distributions.cache_clear()
+    assert distribution_of(resolve_plugin("strategies", "front_to_back"))[0] == "graincosim"
+    assert calls == []
+    numpy_like = plugins.PluginInfo("strategies", "x", "numpy:ones", False, "", np.ones)
+    assert distribution_of(numpy_like)[0] == "numpy" and distribution_of(numpy_like)[0] == "numpy"
+    assert calls == [1]
+    plugins._packages_distributions.cache_clear()
