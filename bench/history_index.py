@@ -18,13 +18,13 @@ INDEX = "Index"
 TOPICS: dict[str, str] = {
     "Headline figures and end to end": r"run_all|quiet re-measure|wall-time target|ratio again|20x|default run end to "
                                        r"end|End to end, default|GPU machine|[Uu]nder load",
-    "Perception": r"perception step|cart search|perception frame's CPU|Perception \(issue 5\)|19 cm beam|degenerate "
+    "Perception": r"perception step|cart search|perception frame's CPU|^Perception$|19 cm beam|degenerate "
                   r"frames",
     "Renderer, LiDAR and the mock": r"renderer's and the dynamics'|beam-native|mock renderer|mock as the fast|Renderer "
                                     r"\(renderer_proc",
-    "Dynamics, control and FMUs": r"Dynamics \(issue 3\)|fused estimator|FMUs in the loop|controller",
+    "Dynamics, control and FMUs": r"^Dynamics: measured|fused estimator|FMUs in the loop|controller",
     "Field conditions and sensors": r"field-conditions|field suite|cameras and several sensors|dust",
-    "Runtime, harness and interfaces": r"harness with named|fork server|input checks|pipelined schedule|launcher "
+    "Runtime, harness and interfaces": r"harness with named|fork server|input checks|pipelined schedule|validate and a 5 s run|launcher "
                                        r"back|Lockstep ring|reliability|liveness|cost grows|Python API|plug-in seams",
     "Observers: viewer, recording, Foxglove": r"dashboard|Foxglove|Viewer and recording",
     "Studies and sweeps": r"sweeps? on Dask|study",
