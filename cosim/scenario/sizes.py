@@ -27,7 +27,7 @@ __all__ = ["CAMERA_PIXEL_BUDGET", "CAMERA_PROCESS_BYTES_PER_PIXEL", "camera_pixe
 #: most camera pixels rendered in one frame, over every view of every camera (see the module docstring)
 CAMERA_PIXEL_BUDGET = 1 << 23
 #: working memory a camera pixel costs in the processes, bytes: the depth camera's noise model's peak (176 B,
-#: measured with tracemalloc on perception_proc.tof.tof_depth for a 1280 x 960 image)
+#: measured with tracemalloc on perception_proc.cameras.tof.tof_depth for a 1280 x 960 image)
 CAMERA_PROCESS_BYTES_PER_PIXEL = 176
 #: shared bytes a pixel of each camera part costs (renderer's blocks, cosim.world.sensors.camera_parts)
 _PART_BYTES = {"rgb": 4, "right": 4, "depth": 4, "labels": 1}
@@ -119,7 +119,7 @@ def _measure() -> None:
 
     from cosim.scenario.config.cameras import DepthCamera
     from cosim.world.camera import Pinhole
-    from perception_proc.tof import frame_generator, tof_depth
+    from perception_proc.cameras.tof import frame_generator, tof_depth
 
     cam = DepthCamera(kind="depth_camera", mount={"parent": "combine"}, width_px=1280, height_px=960)
     pin = Pinhole(1280, 960, float(np.radians(60.0)))
