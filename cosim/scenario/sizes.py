@@ -9,7 +9,7 @@ runs these first).
   roughness is drawn on within ``MAX_TERRAIN_CELLS``.
 
 The pixel budget is a start-up and frame budget, derived from measurements on a 2-core laptop (reproduced by
-``python -m cosim.scenario.sizes``): the depth camera's noise model, the costliest per-pixel stage, takes about
+``python bench/camera_pixel_cost.py``): the depth camera's noise model, the costliest per-pixel stage, takes about
 300 ns and 176 B of working memory a pixel; 2^23 pixels (27 VGA views, two 2048 x 2048 ones) are then about 2.5 s
 and 1.5 GB a frame in perception, which a start-up of ``timing.startup_timeout_s`` (120 s) and a short run still
 absorb. More is refused with the figures, not found out 40 s into the run.
@@ -108,33 +108,3 @@ def terrain_problems(s: Scenario) -> list[Problem]:
 def size_problems(s: Scenario, free: tuple | None = None) -> list[Problem]:
     """Every problem of this module (cameras, then the ground)."""
     return camera_problems(s, free) + terrain_problems(s)
-
-
-def _measure() -> None:
-    """Print the per-pixel cost of the depth camera's noise model (the figures behind the budget)."""
-    import time
-    import tracemalloc
-
-    import numpy as np
-
-    from cosim.scenario.config.cameras import DepthCamera
-    from cosim.world.camera import Pinhole
-    from perception_proc.cameras.tof import frame_generator, tof_depth
-
-    cam = DepthCamera(kind="depth_camera", mount={"parent": "combine"}, width_px=1280, height_px=960)
-    pin = Pinhole(1280, 960, float(np.radians(60.0)))
-    z = np.random.default_rng(0).uniform(2.0, 8.0, (960, 1280)).astype(np.float32)
-    tof_depth(z, pin, cam, frame_generator(0, 0, 0))
-    t = time.perf_counter()
-    for i in range(3):
-        tof_depth(z, pin, cam, frame_generator(0, i, 0))
-    ns = (time.perf_counter() - t) / 3 / z.size * 1e9
-    tracemalloc.start()
-    tof_depth(z, pin, cam, frame_generator(0, 9, 0))
-    peak = tracemalloc.get_traced_memory()[1] / z.size
-    print(f"depth camera noise model: {ns:.0f} ns and {peak:.0f} B a pixel; the budget of {CAMERA_PIXEL_BUDGET:,} "
-          f"pixels: {CAMERA_PIXEL_BUDGET * ns * 1e-9:.1f} s and {size_text(CAMERA_PIXEL_BUDGET * peak)} a frame")
-
-
-if __name__ == "__main__":
-    _measure()
