@@ -176,7 +176,10 @@ def test_kill9_of_the_launcher_leaves_the_rows_and_a_running_summary(tmp_path):
     assert summary["status"] == "running" and summary["completed"] is False
     frames = _frames_on_disk(out / "timeseries.csv")
     assert len(frames) > 1 and frames == list(range(len(frames)))
-    time.sleep(1.0)  # the children follow their launcher (PR_SET_PDEATHSIG) and its resource tracker unlinks
+    # the children follow their launcher (PR_SET_PDEATHSIG) and its resource tracker unlinks (slower when busy)
+    deadline = time.monotonic() + promised(1.0, 10.0)
+    while list(Path("/dev/shm").glob(f"cosim-{proc.pid}-*")) and time.monotonic() < deadline:
+        time.sleep(0.1)
     assert not list(Path("/dev/shm").glob(f"cosim-{proc.pid}-*"))
 
 
