@@ -10,6 +10,7 @@ from .atmosphere import Atmosphere
 from .base import Model, PosFloat
 from .cameras import DEPTH_KINDS, Camera, LidarSensor, SensorMap, Sensors, StereoCamera
 from .control import Controller, Grain, Integrator
+from .draws import FieldDraws
 from .fmu import Vehicles
 from .limits import key_error
 from .machines import Auger, Cart, Combine, Crop, MachineSync, Tractor
@@ -170,6 +171,9 @@ class Scenario(Model):
     """Offloading perception: resampling, height map, impact, accuracy evaluation, plug-ins."""
     atmosphere: Atmosphere = Atmosphere()
     """The air between the sensors and what they see: dust, the grain stream as particles (clear by default)."""
+    field: FieldDraws = FieldDraws()
+    """What the seed draws of the field (flow, GNSS, profile, roughness, dust, offsets) and within which ranges;
+    nothing by default (docs/field.md)."""
     outputs: Outputs = Outputs()
     """Optional outputs of a run: figures, report."""
     outcome: Outcome = Outcome()
@@ -229,6 +233,25 @@ class Scenario(Model):
                             f"cell each, but cart.interior_length_m / grid_cell_m gives {cells}; use fewer sections "
                             "or a finer grid_cell_m", controller.sections)
         return controller
+
+    @field_validator("field")
+    @classmethod
+    def _profile_keeps_its_order(cls, field: FieldDraws, info: ValidationInfo) -> FieldDraws:
+        combine = info.data.get("combine")
+        if "profile" not in field.draw or combine is None:
+            return field
+        from ..fielddraw import profile_problem
+        points = field.base.get("combine.profile", combine.profile) or ()
+        problem = profile_problem(points, field.profile)
+        if problem:
+            raise key_error("FieldDraws", ("profile",), problem, field.profile.model_dump())
+        return field
+
+    @model_validator(mode="after")
+    def _draw_the_field(self) -> "Scenario":
+        from ..fielddraw import realise
+        realise(self)
+        return self
 
     @field_validator("sensors")
     @classmethod
