@@ -83,7 +83,7 @@ def test_a_commanded_flow_fraction_is_approached_on_the_auger_ramps_with_the_exa
 
 
 def _high_flow(*sets):
-    s = load_scenario(packaged_scenarios()["high_flow"], list(sets), extra={"feedback": "ground_truth",
+    s = load_scenario(packaged_scenarios()["high_flow"], ["field.draw=[]", *sets], extra={"feedback": "ground_truth",
                                                                             "renderer": "none"})
     return s, simulate(s)
 
@@ -190,3 +190,51 @@ def test_a_map_that_disagrees_with_the_estimate_everywhere_is_rejected_whole():
     open_gate = scen(controller={"fusion": {"gate_sigma": 1e6}})
     out = _outcome(open_gate, simulate(open_gate, measure=_dusty(20)))
     assert out["status"] != "filled", out
+
+
+def test_a_rise_measured_at_the_slowed_flow_is_judged_at_the_nominal_flow_while_a_release_is_pending():
+    from dynamics_proc.control.flowlead import commanded_level, level_filter, rise_at_nominal
+    dt, tau, k = 0.1, 2.0, 0.2                     # a section that rises k m/s per unit of flow level
+    rate, level_f, h = np.zeros(1), 0.0, np.zeros(1)
+    for n in range(80):                            # the flow level steps 1 -> 0.3: rise and level, one filter
+        level = 1.0 if n < 30 else 0.3
+        rate = rise_rate(rate, h, h + k * level * dt, dt, tau)
+        h = h + k * level * dt
+        level_f = level_filter(level_f, level, dt, tau)
+        assert rate[0] == pytest.approx(k * level_f, rel=1e-12)      # the same lag: their ratio is k throughout
+    assert rise_at_nominal(rate, level_f, 0, 1, 0.3)[0] == pytest.approx(k, rel=1e-9)  # pending: at nominal
+    assert rise_at_nominal(rate, level_f, -1, 1, 0.3) is rate                 # nothing slowed: as measured
+    assert rise_at_nominal(rate, level_f, 1, 1, 0.3) is rate                  # slowed for the target itself
+    assert rise_at_nominal(rate, 0.0, 0, 1, 0.3)[0] == pytest.approx(rate[0] / 0.3)   # auger off: floored
+    assert (commanded_level(False, 0, 0.3), commanded_level(True, 2, 0.3), commanded_level(True, -1, 0.3)) == (
+        0.0, 0.3, 1.0)
+    # the mechanism: section 0 slowed and full, the impact travelling into target 1 at 1.85 m, which rises 5 cm/s
+    # at the slowed flow. As measured (5 cm over the lead, within the 6 cm allowance) the full flow would come
+    # back on it on arrival; judged at the nominal flow (17 cm) the slowing carries on to it
+    full, heights = np.array([True, False, False]), np.array([1.9, 1.85, 1.0])
+    args = dict(lead_s=1.0, allowance_m=0.06, full_level_m=1.89, centres_m=(1.0, 3.0, 5.0), section_m=2.0)
+    measured = np.array([0.0, 0.05, 0.0])
+    assert slowed_section(1, 0, full, heights, measured, 2.5, SlowLimits(**args)) == -1
+    assert slowed_section(1, 0, full, heights, rise_at_nominal(measured, 0.3, 0, 1, 0.3), 2.5, SlowLimits(**args)) == 1
+
+
+def test_the_default_scenario_never_has_a_release_pending(monkeypatch):
+    """The lead acts on the default scenario's last section only, so the nominal-flow judgement never applies
+    there: its ground-truth run is unchanged (bench identity against the tree before it, docs/field.md); at five
+    times the flow it applies."""
+    import dynamics_proc.control.controller as ctl
+    from dynamics_proc.control.flowlead import rise_at_nominal
+    pending = []
+
+    def spy(rate, level_f, slowed, target, slow_flow):
+        out = rise_at_nominal(rate, level_f, slowed, target, slow_flow)
+        pending.append(out is not rate)
+        return out
+
+    monkeypatch.setattr(ctl, "rise_at_nominal", spy)
+    s = load_scenario(packaged_scenarios()["default"], extra={"feedback": "ground_truth", "renderer": "none"})
+    r = simulate(s)
+    assert len(pending) == len(r.series["dyn_state.t_s"]) - 1 and not any(pending)
+    pending.clear()
+    simulate(_high_flow()[0])
+    assert sum(pending) > 10

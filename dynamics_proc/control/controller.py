@@ -61,6 +61,7 @@ from dynamics_proc.control.estimator import (
     predict,
     update,
 )
+from dynamics_proc.control.flowlead import commanded_level, level_filter, rise_at_nominal
 from dynamics_proc.control.protocol import HOLD_NO_MEASUREMENT, ControllerCommand, ControllerInput, Delivery
 from dynamics_proc.control.sections import min2x2, section_blocks, section_heights, section_pairing, section_valid
 from dynamics_proc.control.strategies import Strategy
@@ -194,6 +195,7 @@ class ControllerState:
     hold: int = 0                # hold reason code (dynamics_proc.control.protocol.HOLD_*), 0 not holding
     slowed: int = -1             # 0-based section the auger is slowed for (near full), -1 none
     spout_x: float = math.nan    # the spout's grid x at the last decision, m
+    level_f: float = 0.0         # commanded flow level, filtered as the rise rate is (control.flowlead)
 
 
 def initial_controller(p: ControllerParams) -> ControllerState:
@@ -314,7 +316,8 @@ def fullness(st: ControllerState, p: ControllerParams, inp: ControllerInput, ing
         full = (heights >= p.full_level_m) | forced      # NaN (unknown) is not full
     full |= st.full                                       # latched: grain does not leave the cart
     target = _pick(p, full, heights, st.target) if seen else -1
-    slowed = slowed_section(target, st.slowed, full, heights, rate, inp.spout_x_m + inp.drift_x_m,
+    lead_rate = rise_at_nominal(rate, st.level_f, st.slowed, target, p.slow_flow)
+    slowed = slowed_section(target, st.slowed, full, heights, lead_rate, inp.spout_x_m + inp.drift_x_m,
                             SlowLimits(p.full_lead_s, p.lead_allowance_m, p.full_level_m, p.centres_m,
                                        p.length_m / p.sections))
     mode_, hold, sigma = _mode(p, seen, target, ing.ok, ing.estimate, ing.blocks)
@@ -383,7 +386,9 @@ def controller_step(st: ControllerState, p: ControllerParams,
                                 estimate=ing.estimate, delivered_m3=ing.delivered_m3, target=target,
                                 last_nudge_t=where.last_nudge_t, bias_m=where.bias_m, auger_cmd=auger, seen=ing.seen,
                                 all_full=fill.all_full, nudges=where.nudges, rate=fill.rate, hold=fill.hold,
-                                slowed=fill.slowed, spout_x=inp.spout_x_m)
+                                slowed=fill.slowed, spout_x=inp.spout_x_m,
+                                level_f=level_filter(st.level_f, commanded_level(auger, fill.slowed, p.slow_flow),
+                                                     p.frame_dt_s, p.rise_tau_s))
     return new_state, ControllerCommand(
         nudge=where.nudge, auger_on=auger, desired_m=where.desired_m, effort_m=where.effort_m, target=target,
         fullness=fullness_, all_full=fill.all_full, seen=ing.seen, bias_m=where.total_bias_m, mode=fill.mode,
