@@ -115,8 +115,8 @@ def _judge(case: str, n: int, counts: Counter) -> tuple[str, bool]:
 def summarize_results(rows: list[dict]) -> dict:
     """Per case (the ``base`` column, in order of first appearance), over its runs with an outcome: runs, outcome
     counts, shares and Wilson 95 % intervals; overfill (m: median, p95, max); spill (kg: max, runs with any); time
-    to target (s: median of the filled); the seeds; the runs that broke the case's rule grouped by reason with
-    their seeds (``failures``) and every reason a seed was not filled (``reasons``); the rule and whether it is
+    to target (s: median of the filled); the seeds; the runs that break the case's rule whatever their count (a fill
+    case's ``job_failed``, a stop-safe case's other outcomes) grouped by reason with their seeds (``failures``) and every reason a seed was not filled (``reasons``); the rule and whether it is
     met."""
     cases: dict[str, list[dict]] = {}
     for r in rows:
@@ -130,7 +130,9 @@ def summarize_results(rows: list[dict]) -> dict:
         spill = [v for v in (_num(r, "spill_kg") for r in rs) if v is not None]
         ttt = [v for r in rs if r["outcome"] == "filled" for v in [_num(r, "time_to_target_s")] if v is not None]
         rule, meets = _judge(case, n, counts)
-        wanted = "stopped_safe" if rule == "stop-safe" else "filled"
+        # what breaks the rule whatever the count: a fill case's job_failed, a stop-safe case's anything else
+        broke = (lambda r: r["outcome"] != "stopped_safe") if rule == "stop-safe" else (
+            lambda r: r["outcome"] == "job_failed")
         out[case] = {
             "rule": rule, "runs": n, "seeds": sorted(int(r["seed"]) for r in rs),
             **{s: counts.get(s, 0) for s in STATUSES},
@@ -140,7 +142,8 @@ def summarize_results(rows: list[dict]) -> dict:
             "overfill_max_m": max(over) if over else None,
             "spill_max_kg": max(spill) if spill else None, "spill_runs": sum(1 for v in spill if v > 0.0),
             "time_to_target_median_s": statistics.median(ttt) if ttt else None,
-            "failures": _grouped(rs, lambda r, w=wanted: r["outcome"] != w),
+            "wall_median_s": _quantile([v for v in (_num(r, "wall_time_s") for r in rs) if v is not None], 0.5),
+            "failures": _grouped(rs, broke),
             "reasons": _grouped(rs, lambda r: r["outcome"] != "filled"),
             "meets": meets,
         }
@@ -166,18 +169,19 @@ def render_markdown(table: dict, meta: dict) -> str:
         f"filled with the interval's lower end at least {FILLED_LOWER:.0%} (over 100 seeds: at most 2 not filled) "
         "and none job_failed; a *stop-safe* case (built so that no sensor sees into the cart) needs every seed "
         "stopped_safe with its reason. Overfill quantiles over all runs of a case (linear between order "
-        "statistics).", "",
+        "statistics); wall time per run as the runs ran (two at a time on the suite's machine, see docs/field.md).", "",
         "| case | rule | runs | filled (95 % CI) | stopped_safe (95 % CI) | unfinished (95 % CI) | job_failed (95 % CI) | "
         "overfill median / "
-        "p95 / max (cm) | spill max (kg) | target median (s) | meets |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+        "p95 / max (cm) | spill max (kg) | target median (s) | wall median (s) | meets |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
     for case, t in table.items():
         over = f"{_cm(t['overfill_median_m'])} / {_cm(t['overfill_p95_m'])} / {_cm(t['overfill_max_m'])}"
         ttt = "-" if t["time_to_target_median_s"] is None else f"{t['time_to_target_median_s']:.0f}"
         spill = "-" if t["spill_max_kg"] is None else f"{t['spill_max_kg']:.0f}"
+        wall = "-" if t.get("wall_median_s") is None else f"{t['wall_median_s']:.0f}"
         lines.append(f"| `{case}` | {t['rule']} | {t['runs']} | {_pct_ci(t, 'filled')} | "
                      f"{_pct_ci(t, 'stopped_safe')} | {_pct_ci(t, 'unfinished')} | {_pct_ci(t, 'job_failed')} | {over} | {spill} | {ttt} | "
-                     f"{'yes' if t['meets'] else 'no'} |")
+                     f"{wall} | {'yes' if t['meets'] else 'no'} |")
     notes = []
     for case, t in table.items():
         for reason, g in t["reasons"].items():
