@@ -52,7 +52,7 @@ STOP_SAFE = {
 }
 
 __all__ = ["SECTION", "STOP_SAFE", "wilson", "summarize_results", "render_markdown", "put_section", "read_rows",
-           "write_figures", "compare_outcomes", "main"]
+           "write_figures", "compare_outcomes", "seed_major", "main"]
 
 #: the heading of the suite's section in bench/results.md (run_all.py keeps it when it rewrites the file)
 SECTION = "## Field-conditions suite"
@@ -277,6 +277,16 @@ def compare_outcomes(mock: list[dict], gl: list[dict]) -> dict:
     return out
 
 
+def seed_major(runs, seeds: int | None = None) -> list:
+    """``runs`` (RunSpec) ordered by seed, the cases in their order within a seed (so that a suite cut short has
+    every case at about the same number of seeds); only the first ``seeds`` seeds when given."""
+    ordered = sorted(runs, key=lambda r: r.seed)                 # stable
+    if seeds is None:
+        return ordered
+    keep = set(sorted({r.seed for r in ordered})[:seeds])
+    return [r for r in ordered if r.seed in keep]
+
+
 def _run(results: Path, sweep_file: Path, jobs: int | None, scheduler: str | None, seeds: int | None = None,
          renderer: str | None = None) -> None:
     """The suite's sweep (seed-major; the first ``seeds`` seeds only when given; on ``renderer`` when given)
@@ -285,10 +295,7 @@ def _run(results: Path, sweep_file: Path, jobs: int | None, scheduler: str | Non
     from cosim.studies.sweepfile import load_sweep
 
     sweep = load_sweep(sweep_file)
-    runs = sorted(sweep.runs, key=lambda r: r.seed)           # stable: cases in their order within a seed
-    if seeds is not None:
-        keep = sorted({r.seed for r in runs})[:seeds]
-        runs = [r for r in runs if r.seed in keep]
+    runs = seed_major(sweep.runs, seeds)
     if renderer is not None:
         runs = [replace(r, scenario=r.scenario.model_copy(update={"renderer": renderer})) for r in runs]
     outcome = run_sweep(replace(sweep, runs=tuple(runs)), results, scheduler=scheduler, jobs=jobs, figures=False)

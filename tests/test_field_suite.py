@@ -34,7 +34,10 @@ def test_the_suite_sweeps_every_case_over_a_hundred_new_seeds_with_perception():
         assert case.field.draw                                             # every case draws its field
     seeds = sorted({r.seed for r in sweep.runs})
     assert seeds == list(range(1000, 1100)) and len({r.id for r in sweep.runs}) == len(CASES) * 100
-    assert set(_bench("field_suite").STOP_SAFE) == {"grazing_sensor", "blinding_dust"}
+    fs = _bench("field_suite")
+    assert set(fs.STOP_SAFE) == {"grazing_sensor", "blinding_dust"}
+    order = fs.seed_major(sweep.runs, 2)                                   # what --run --seeds 2 submits
+    assert [(r.seed, r.labels["base"]) for r in order] == [(s, c) for s in (1000, 1001) for c in CASES]
 
 
 def test_the_wilson_interval_matches_its_closed_form():
