@@ -165,8 +165,9 @@ def render_markdown(table: dict, meta: dict) -> str:
         f"Field-conditions suite (`bench/field_suite.yaml`: perception feedback, mock renderer, each seed its own "
         f"field; seeds {meta.get('seeds', '1000-1099')}): {meta.get('runs', 0)} runs with an outcome read from "
         f"`{meta.get('results')}` at {meta.get('written')}, by `{meta.get('command', 'python bench/field_suite.py')}`"
-        f". Rates with Wilson 95 % intervals. Rules: a *fill* case needs at least {FILLED_SHARE:.0%} of its seeds "
-        f"filled with the interval's lower end at least {FILLED_LOWER:.0%} (over 100 seeds: at most 2 not filled) "
+        f". Rates with Wilson 95 % intervals. Rules: a *fill* case needs at least {100 * FILLED_SHARE:.0f} % of its seeds "
+        f"filled with the interval's lower end at least {100 * FILLED_LOWER:.0f} % (over 100 seeds: at most 2 not "
+        "filled; a case with fewer seeds cannot reach it) "
         "and none job_failed; a *stop-safe* case (built so that no sensor sees into the cart) needs every seed "
         "stopped_safe with its reason. Overfill quantiles over all runs of a case (linear between order "
         "statistics); wall time per run as the runs ran (two at a time on the suite's machine, see docs/field.md).", "",
