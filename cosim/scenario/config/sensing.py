@@ -176,6 +176,8 @@ class Perception(Model):
     ``algorithm``: the per-frame algorithm (points -> cart, height map, impact): ``staged`` runs ``stages``;
     an entry point name or an import path ``package.module:name`` replaces it whole (docs/plugins.md);
     ``algorithm_options``: keyword arguments it is called with.
+    ``pose_gate_m``, ``pose_gate_deg``: a found cart farther or more turned than these from where Machine Sync puts
+    it (perception_proc.posegate) is rejected: a phantom in dust, not the cart.
     """
 
     min_points_per_cell: int = Field(default=1, ge=1)
@@ -189,6 +191,10 @@ class Perception(Model):
     """Compare with an exact ray cast of the same scene every that many frames (0: never)."""
     accuracy_beams: int = Field(default=16384, ge=0, le=10_000_000)
     """Beams each accuracy evaluation casts, one per stratum of the beam table (0: every beam)."""
+    pose_gate_m: NonNegFloat = 0.5
+    """A cart found farther than this from where Machine Sync puts it is no cart (0: no gate), m."""
+    pose_gate_deg: float = Field(default=5.0, ge=0.0, le=180.0, allow_inf_nan=False)
+    """A cart found turned more than this from where Machine Sync puts it is no cart, deg."""
     algorithm: PluginRef = "staged"
     """The per-frame algorithm: staged (runs stages), an entry point name or an import path that replaces it
     whole."""
