@@ -44,22 +44,21 @@ def _plain(node: Any) -> Any:
     return node.model_dump() if isinstance(node, BaseModel) else node
 
 
-def _default(path: str) -> Any:
-    """The default value of a dotted scenario key (from the records' defaults)."""
-    from .config.scenario import Scenario
+def _default(model: type[BaseModel], path: str) -> Any:
+    """The default value of a dotted key of the record ``model`` (the scenario's), from the records' defaults."""
     head, *rest = path.split(".")
-    value: Any = Scenario.model_fields[head].get_default(call_default_factory=True)
+    value: Any = model.model_fields[head].get_default(call_default_factory=True)
     for key in rest:
         value = getattr(value, key)
     return value.model_dump() if isinstance(value, BaseModel) else value
 
 
-def _get(data: dict, path: str) -> Any:
+def _get(data: dict, path: str, model: type[BaseModel]) -> Any:
     node: Any = data
     for key in path.split("."):
         node = _plain(node)
         if not isinstance(node, dict) or key not in node:
-            return _default(path)
+            return _default(model, path)
         node = node[key]
     return _plain(node)
 
@@ -130,9 +129,10 @@ def _draw(condition: str, rng: np.random.Generator, spec: FieldDraws, base: dict
     return _draw_dust(rng, spec.dust, base)
 
 
-def draw_field(data: Any) -> Any:
-    """``data`` (a scenario's raw mapping) with its field drawn for its seed (module docstring). Data that is not
-    a mapping, or whose ``field`` or ``seed`` is invalid, is returned as it is (validation then reports it)."""
+def draw_field(data: Any, model: type[BaseModel]) -> Any:
+    """``data`` (a scenario's mapping, of the record ``model``) with its field drawn for its seed (module
+    docstring). Data that is not a mapping, or whose ``field`` or ``seed`` is invalid, is returned as it is
+    (validation then reports it)."""
     if not isinstance(data, dict) or "field" not in data:
         return data
     try:
@@ -146,7 +146,7 @@ def draw_field(data: Any) -> Any:
     for path, value in spec.base.items():                       # the scenario's own values back
         _set(out, path, value)
     paths = [p for c in CONDITIONS if c in spec.draw for p in OWNED[c]]
-    base = {p: _get(out, p) for p in paths}
+    base = {p: _get(out, p, model) for p in paths}
     for condition in (c for c in CONDITIONS if c in spec.draw):
         for path, value in _draw(condition, condition_rng(seed, condition), spec, base).items():
             _set(out, path, value)
@@ -175,7 +175,7 @@ def realise(scenario) -> None:
     validator may). Nothing happens when it draws nothing and records no earlier draw."""
     if _DRAWING.get() or (not scenario.field.draw and not scenario.field.base):
         return
-    data = draw_field(scenario.model_dump())
+    data = draw_field(scenario.model_dump(), type(scenario))
     token = _DRAWING.set(True)
     try:
         drawn = type(scenario).model_validate(data)
