@@ -52,7 +52,7 @@ STOP_SAFE = {
 }
 
 __all__ = ["SECTION", "STOP_SAFE", "wilson", "summarize_results", "render_markdown", "put_section", "read_rows",
-           "write_figures", "compare_outcomes", "seed_major", "main"]
+           "write_figures", "compare_outcomes", "seed_major", "interrupted", "main"]
 
 #: the heading of the suite's section in bench/results.md (run_all.py keeps it when it rewrites the file)
 SECTION = "## Field-conditions suite"
@@ -163,7 +163,9 @@ def render_markdown(table: dict, meta: dict) -> str:
     """The table as Markdown: the rules, one row per case, the failures with their seeds."""
     lines = [
         f"Field-conditions suite (`bench/field_suite.yaml`: perception feedback, mock renderer, each seed its own "
-        f"field; seeds {meta.get('seeds', '1000-1099')}): {meta.get('runs', 0)} runs with an outcome read from "
+        f"field; seeds {meta.get('seeds', '1000-1099')}): {meta.get('runs', 0)} runs with an outcome"
+        f"{' of the ' + str(meta['planned']) + ' planned (a partial suite: the rest not yet run)' if meta.get('planned', 0) > meta.get('runs', 0) else ''}"
+        f", read from "
         f"`{meta.get('results')}` at {meta.get('written')}, by `{meta.get('command', 'python bench/field_suite.py')}`"
         f". Rates with Wilson 95 % intervals. Rules: a *fill* case needs at least {100 * FILLED_SHARE:.0f} % of its seeds "
         f"filled with the interval's lower end at least {100 * FILLED_LOWER:.0f} % (over 100 seeds: at most 2 not "
@@ -209,16 +211,23 @@ def put_section(results_md: Path, table_md: str) -> None:
     results_md.write_text(f"{head.rstrip(chr(10))}\n\n{SECTION}\n\n{table_md}{tail}")
 
 
+def interrupted(summary: dict) -> bool:
+    """Whether a run was stopped from outside before its end (Ctrl-C or SIGTERM to the sweep): no outcome of the
+    suite (a resumed sweep runs it again), unlike a run that failed on its own."""
+    reason = str((summary.get("outcome") or {}).get("reason") or "") + " " + str(summary.get("error") or "")
+    return not summary.get("completed") and ("interrupted" in reason or "stopped by SIG" in reason)
+
+
 def read_rows(results: Path, sweep_file: Path = SWEEP) -> list[dict]:
-    """One row per run of the suite that has a summary in ``results/runs/<id>/`` (finished or not), with the
-    results table's columns (cosim.studies.results)."""
+    """One row per run of the suite that has a summary in ``results/runs/<id>/`` (finished, or failed on its
+    own; an :func:`interrupted` one is left out), with the results table's columns (cosim.studies.results)."""
     from cosim.studies.results import metrics_of, outcome_of, read_summary
     from cosim.studies.sweepfile import load_sweep
 
     rows = []
     for run in load_sweep(sweep_file).runs:
         summary = read_summary(results / "runs" / run.id)
-        if summary is None:
+        if summary is None or interrupted(summary):
             continue
         rows.append({"id": run.id, **run.labels, "seed": run.seed, "completed": summary.get("completed"),
                      **outcome_of(summary), **metrics_of(summary)})
@@ -325,7 +334,7 @@ def main(argv: list[str] | None = None) -> dict:
             "written": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             "command": "python bench/field_suite.py " + " ".join(argv if argv is not None else sys.argv[1:]),
             "figures": os.path.relpath(a.out / "field_suite", ROOT) if figures else "",
-            "seeds": "1000-1099"}
+            "seeds": "1000-1099", "planned": _planned(a.sweep)}
     doc = {"meta": meta, "cases": table}
     md = render_markdown(table, meta)
     if a.gl:
@@ -338,6 +347,11 @@ def main(argv: list[str] | None = None) -> dict:
     put_section(a.out / "results.md", md)
     sys.stdout.write(md)
     return table
+
+
+def _planned(sweep_file: Path) -> int:
+    from cosim.studies.sweepfile import load_sweep
+    return len(load_sweep(sweep_file).runs)
 
 
 def _gl_markdown(cmp: dict, n: int) -> str:

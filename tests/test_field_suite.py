@@ -92,6 +92,16 @@ def test_the_table_judges_each_case_by_its_rule_and_names_the_seeds_of_each_fail
     assert _bench("run_all").kept_suite_section(results).strip().startswith(fs.SECTION)
 
 
+def test_a_run_stopped_from_outside_is_no_outcome_but_a_run_that_failed_is():
+    fs = _bench("field_suite")
+    stopped = {"completed": False, "outcome": {"status": "job_failed", "reason": "the run did not complete "
+                                                "(interrupted after 40.1 s): stopped by SIGINT at frame 401"}}
+    crashed = {"completed": False, "outcome": {"status": "job_failed", "reason": "the run did not complete: "
+                                                "perception crashed at frame 12"}}
+    assert fs.interrupted(stopped) and not fs.interrupted(crashed)
+    assert not fs.interrupted({**stopped, "completed": True})
+
+
 def test_the_gl_comparison_counts_agreeing_outcomes_per_case():
     fs = _bench("field_suite")
     mock = [_row("a", 1000, "filled"), _row("a", 1001, "filled"), _row("b", 1000, "stopped_safe")]
