@@ -1,4 +1,4 @@
-"""The seed's draw of a field case (``field:``; cosim.scenario.fielddraw): different seeds are different fields,
+"""The seed's draw of a field case (``field:``; cosim.scenario.config.fielddraw): different seeds are different fields,
 every draw within its documented range, the same seed the same field however the scenario is built, a scenario
 that draws nothing unchanged, bad ranges refused at their keys."""
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from cosim.errors import ScenarioError
-from cosim.scenario.fielddraw import OWNED
+from cosim.scenario.config.fielddraw import OWNED
 from cosim.scenario.loader import dump_resolved, load_scenario, load_scenario_text, packaged_scenarios
 from dynamics_proc.closed_loop import simulate
 

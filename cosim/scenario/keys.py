@@ -28,7 +28,7 @@ TOPICS: dict[str, tuple[str, ...]] = {
     "Machines and crop": ("crop", "combine", "tractor", "cart", "auger", "machine_sync", "vehicles", "grain"),
     "The offloading controller": ("controller",),
     "Sensors, rendering and perception": ("sensor", "sensors", "render", "perception"),
-    "Field conditions": ("terrain", "atmosphere"),
+    "Field conditions": ("terrain", "atmosphere", "field"),
 }
 
 

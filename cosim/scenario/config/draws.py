@@ -1,4 +1,4 @@
-"""What a scenario's seed draws of its field (``field:``; cosim.scenario.fielddraw, docs/field.md).
+"""What a scenario's seed draws of its field (``field:``; cosim.scenario.config.fielddraw, docs/field.md).
 
 A field case names the conditions its seed draws (``draw``) and the range of each; the draw replaces the values
 of the keys it owns (listed per condition below) by values drawn uniformly from those ranges, from a generator

@@ -240,7 +240,7 @@ class Scenario(Model):
         combine = info.data.get("combine")
         if "profile" not in field.draw or combine is None:
             return field
-        from ..fielddraw import profile_problem
+        from .fielddraw import profile_problem
         points = field.base.get("combine.profile", combine.profile) or ()
         problem = profile_problem(points, field.profile)
         if problem:
@@ -249,7 +249,7 @@ class Scenario(Model):
 
     @model_validator(mode="after")
     def _draw_the_field(self) -> "Scenario":
-        from ..fielddraw import realise
+        from .fielddraw import realise
         realise(self)
         return self
 

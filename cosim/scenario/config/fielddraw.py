@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel
 
-from .config.draws import CONDITIONS, FieldDraws
+from .draws import CONDITIONS, FieldDraws
 
 __all__ = ["OWNED", "draw_field", "condition_rng", "realise", "profile_problem"]
 
