@@ -80,7 +80,7 @@ def test_the_table_judges_each_case_by_its_rule_and_names_the_seeds_of_each_fail
     assert not table["blinding_dust"]["meets"]
     assert list(table["blinding_dust"]["failures"]) == ["job_failed: not filled when the run ended"]
     md = fs.render_markdown(table, {"runs": len(rows), "results": "runs/x", "written": "now"})
-    assert "| `a` | fill | 100 | 98 % (93-99) | 2 % (1-7) | 0 % (0-4) | 5.8 / 10.2 / 10.7 | 0 | 90 | - | yes |" in md
+    assert "| `a` | fill | 100 | 98 % (93-99) | 2 % (1-7) | 0 % (0-4) | 0 % (0-4) | 5.8 / 10.2 / 10.7 | 0 | 90 | - | yes |" in md
     assert "* `b` (breaks its rule): 1x job_failed: overfill # cm in section #; seeds 1019" in md
     assert "* `a`: 2x stopped_safe: perception never found the cart: # of # frames; seeds 1098, 1099" in md
     results = tmp_path / "results.md"
