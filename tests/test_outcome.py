@@ -113,7 +113,7 @@ def test_a_case_built_to_stop_safe_stops_safe_even_when_its_duration_ends_it(tmp
 
     assert "built to stop safe" in load_scenario(resolve_scenario_arg("grazing_sensor")).description
     args = ["run", "grazing_sensor", "--renderer", "mock", "--duration", "1.5", "--quiet", "--set",
-            "outputs.figures=false", "--out", str(tmp_path / "g")]
+            "outputs.figures=false", "--set", "field.draw=[]", "--out", str(tmp_path / "g")]
     assert main(args) == 0
     summary = json.loads((tmp_path / "g" / "summary.json").read_text())
     assert summary["outcome"]["status"] == "stopped_safe"
