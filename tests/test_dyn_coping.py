@@ -219,9 +219,8 @@ def test_a_rise_measured_at_the_slowed_flow_is_judged_at_the_nominal_flow_while_
 
 
 def test_the_default_scenario_never_has_a_release_pending(monkeypatch):
-    """The lead acts on the default scenario's last section only, so the nominal-flow judgement never applies
-    there: its ground-truth run is unchanged (bench identity against the tree before it, docs/field.md); at five
-    times the flow it applies."""
+    """The lead acts on the default scenario's last section only, so the nominal-flow judgement, switched on, never
+    applies there (docs/field.md); at five times the flow (high_flow, where it is on) it applies."""
     import dynamics_proc.control.controller as ctl
     from dynamics_proc.control.flowlead import rise_at_nominal
     pending = []
@@ -232,7 +231,8 @@ def test_the_default_scenario_never_has_a_release_pending(monkeypatch):
         return out
 
     monkeypatch.setattr(ctl, "rise_at_nominal", spy)
-    s = load_scenario(packaged_scenarios()["default"], extra={"feedback": "ground_truth", "renderer": "none"})
+    s = load_scenario(packaged_scenarios()["default"], extra={"feedback": "ground_truth", "renderer": "none",
+                                                               "controller": {"coping": {"lead_at_nominal_flow": True}}})
     r = simulate(s)
     assert len(pending) == len(r.series["dyn_state.t_s"]) - 1 and not any(pending)
     pending.clear()

@@ -122,6 +122,7 @@ class ControllerParams:
     nudge_speed_mps: float = math.inf  # the spout's speed over the cart a nudge explains, m/s
     overfull_margin_m: float = math.inf  # no grain on a section other than the target this far over the target, m
     lead_allowance_m: float = 0.0    # a rise over the lead up to this needs no slowing, m
+    lead_at_nominal: bool = False    # judge a released-onto target's lead at the nominal flow (control.flowlead)
 
     @classmethod
     def from_scenario(cls, s: Scenario, strategy: Strategy | None = None) -> "ControllerParams":
@@ -148,6 +149,7 @@ class ControllerParams:
                    full_lead_s=c.coping.full_lead_s, rise_tau_s=c.coping.rise_tau_s,
                    fallback_sigma_m=c.coping.fallback_sigma_m, feedforward=c.coping.feedforward,
                    slow_flow=c.coping.slow_flow, lead_allowance_m=c.coping.lead_allowance_m,
+                   lead_at_nominal=c.coping.lead_at_nominal_flow,
                    safety_lead_s=c.coping.safety_lead_s,
                    pause_accel_mps2=c.coping.pause_accel_mps2 if c.coping.pause_accel_mps2 > 0.0 else math.inf,
                    nudge_speed_mps=s.machine_sync.kp_long * s.machine_sync.nudge_m,
@@ -316,7 +318,7 @@ def fullness(st: ControllerState, p: ControllerParams, inp: ControllerInput, ing
         full = (heights >= p.full_level_m) | forced      # NaN (unknown) is not full
     full |= st.full                                       # latched: grain does not leave the cart
     target = _pick(p, full, heights, st.target) if seen else -1
-    lead_rate = rise_at_nominal(rate, st.level_f, st.slowed, target, p.slow_flow)
+    lead_rate = rise_at_nominal(rate, st.level_f, st.slowed, target, p.slow_flow) if p.lead_at_nominal else rate
     slowed = slowed_section(target, st.slowed, full, heights, lead_rate, inp.spout_x_m + inp.drift_x_m,
                             SlowLimits(p.full_lead_s, p.lead_allowance_m, p.full_level_m, p.centres_m,
                                        p.length_m / p.sections))

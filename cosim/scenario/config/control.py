@@ -99,6 +99,12 @@ class Coping(Model):
     target (0-1]."""
     lead_allowance_m: NonNegFloat = 0.06
     """A rise over the lead up to this needs no slowing, m."""
+    lead_at_nominal_flow: bool = False
+    """While a slowed section is released onto the next target, judge that target's lead at the nominal flow (its
+    rise measured at the slowed flow scaled by nominal / slowed; dynamics_proc.control.flowlead) instead of the
+    rise measured: a target that arrives nearly full then is slowed too. Removes the overshoot of a section near
+    full when the flow comes back (high_flow), at the cost of slower fills wherever sections are slowed
+    (docs/field.md)."""
     rise_tau_s: PosFloat = 2.0
     """Time constant of the filter on each section's measured rise rate, s."""
     fallback_sigma_m: PosFloat = 0.05
