@@ -19,6 +19,9 @@ What it measures (each figure names its source in the Markdown):
   results.md it replaces, marked with the run that measured them): CPU per frame against beams and the
   grain grid, sweep runs per hour with 1 and 2 local workers.
 
+The sections other commands write into results.md (the field-conditions suite, "Under load" of case
+``underload``, the packaged scenarios of case ``scenarios``) are kept as they are.
+
 ``--quick`` is a check of the script (short runs, one round, few frames): its numbers are not the headline
 figures. Usage::
 
@@ -39,6 +42,8 @@ BENCH = Path(__file__).resolve().parent
 if str(BENCH) not in sys.path:
     sys.path.insert(0, str(BENCH))
 
+from cases.scenarios import SECTION as SCENARIOS_HEADING  # noqa: E402
+from cases.underload import SECTION as UNDERLOAD_HEADING  # noqa: E402
 from field_suite import SECTION as SUITE_HEADING  # noqa: E402
 from harness import ROOT, Arm, Result, get, run_cases  # noqa: E402
 from harness.report import table, to_json  # noqa: E402
@@ -207,12 +212,16 @@ def _section(text: str, heading: str) -> str:
     return heading + (body if nxt < 0 else body[:nxt + 1])
 
 
+#: the sections of results.md that other commands write, kept as they are
+KEPT_SECTIONS = (SCENARIOS_HEADING, UNDERLOAD_HEADING, SUITE_HEADING)
+
+
 def kept_suite_section(results_md: Path) -> str:
-    """The field-conditions suite's section of an existing ``results_md`` (written by bench/field_suite.py from
-    its hours-long sweep, which this script does not rerun), or ""."""
+    """The sections of an existing ``results_md`` that other commands write (:data:`KEPT_SECTIONS`: the packaged
+    scenarios of case ``scenarios``, case ``underload``'s, the field-conditions suite's from
+    bench/field_suite.py's hours-long sweep), which this script does not rerun, or ""."""
     text = results_md.read_text() if results_md.exists() else ""
-    section = _section(text, SUITE_HEADING)
-    return "\n" + section if section else ""
+    return "".join("\n" + s for s in (_section(text, h) for h in KEPT_SECTIONS) if s)
 
 
 def kept_curves_section(results_md: Path) -> str:

@@ -8,7 +8,10 @@ An arm records into ``bench/out/identity/<arm>/`` (kept for a later ``ref``):
   process ring); ``gt-<scenario>/``: the same for the other packaged scenarios and for the default scenario with the
   RK4 integrator, without figures;
 * ``perception.npz``: an in-process run (``cosim.runtime.inprocess.simulate``) of the default scenario with
-  perception feedback (``renderer``): every timeseries column and the final array blocks.
+  perception feedback (``renderer``): every timeseries column and the final array blocks;
+* ``perc-<scenario>/``: a launched run of a camera or field-conditions scenario as packaged (perception feedback,
+  its own renderer) for ``perception_duration`` s simulated, without figures: what the renderer's camera passes,
+  the depth camera's noise, the stereo matcher and the atmosphere give the loop.
 
 Compared bit for bit (NaN equal to NaN): every timeseries column except the wall-clock ``*_ms`` ones, and the final
 height maps.
@@ -29,7 +32,7 @@ from pathlib import Path
 from harness import Context, case
 from harness.arms import shown_path
 
-__all__ = ["differences", "digest", "identity", "record"]
+__all__ = ["GT_RUNS", "PERC_RUNS", "differences", "digest", "identity", "record"]
 
 #: final array blocks compared bit for bit
 MAPS = ("heightmap_truth", "heightmap_perceived")
@@ -41,6 +44,9 @@ GT_RUNS = {"gt": ["default"],
                "back_to_front", "curved_pass", "fast_harvest", "grazing_sensor", "heavy_noise", "high_flow",
                "lowest_first", "misaligned_start", "near_alpha", "soybeans", "stiff_drivetrain")},
            "gt-default-rk4": ["default", "--set", "integrator.method=rk4", "--set", "outputs.figures=false"]}
+#: the perception-feedback runs of the camera and field-conditions scenarios: directory name -> scenario
+PERC_RUNS = {f"perc-{n}": n for n in ("tof_mast", "stereo_spout", "lidar_and_stereo", "dusty", "dense_dust",
+                                      "rough_terrain")}
 OUT = Path(__file__).resolve().parents[1] / "out" / "identity"
 #: what the perception run saves (run in the arm's tree)
 _PERCEPTION = (
@@ -55,11 +61,18 @@ _PERCEPTION = (
     "np.savez(sys.argv[1], **d)\n")
 
 
-def record(tree: Path, out: Path, runs: list[str], renderer: str, duration: float | None) -> None:
-    """Record ``runs`` (names of :data:`GT_RUNS` and ``perception``) from ``tree`` into ``out``."""
+def record(tree: Path, out: Path, runs: list[str], renderer: str, duration: float | None,
+           perception_duration: float = 3.0) -> None:
+    """Record ``runs`` (names of :data:`GT_RUNS`, :data:`PERC_RUNS` and ``perception``) from ``tree`` into
+    ``out``."""
     env = dict(os.environ, PYTHONPATH=str(tree))
     dur = ["--duration", f"{duration:g}"] if duration else []
     for name in runs:
+        if name in PERC_RUNS:
+            subprocess.run([sys.executable, "launch.py", "run", PERC_RUNS[name], "--duration",
+                            f"{duration or perception_duration:g}", "--set", "outputs.figures=false", "--quiet",
+                            "--out", str(out / name)], cwd=tree, env=env, check=True, stdout=subprocess.DEVNULL)
+            continue
         if name == "perception":
             subprocess.run([sys.executable, "-c", _PERCEPTION, str(out / "perception.npz"), renderer, str(duration)],
                            cwd=tree, env=env, check=True)
@@ -127,20 +140,23 @@ def differences(a: Path, b: Path, name: str) -> list[str]:
 
 @case("identity", "bit-identity of each tree's results (every packaged scenario's ground-truth run, a perception "
       "run) across the arms or against a recorded reference",
-      options={"runs": ",".join([*GT_RUNS, "perception"]), "renderer": "gl", "duration": None, "ref": ""},
-      quick={"runs": "gt,perception", "renderer": "mock", "duration": 2.0},
+      options={"runs": ",".join([*GT_RUNS, "perception", *PERC_RUNS]), "renderer": "gl", "duration": None,
+               "perception_duration": 3.0, "ref": ""},
+      quick={"runs": "gt,perception,perc-tof_mast", "renderer": "mock", "duration": 2.0},
       compare=("columns and arrays", "digest", "differences"))
 def identity(ctx: Context) -> dict:
-    """Record ``runs`` (module docstring); ``duration``: cut every run short (a check); ``ref``: a directory recorded
-    by an earlier sample to compare with in detail."""
+    """Record ``runs`` (module docstring); ``duration``: cut every run short (a check); ``perception_duration``:
+    simulated s of each ``perc-*`` run; ``ref``: a directory recorded by an earlier sample to compare with in
+    detail."""
     runs = ctx["runs"].split(",")
-    unknown = set(runs) - {*GT_RUNS, "perception"}
+    known = [*GT_RUNS, "perception", *PERC_RUNS]
+    unknown = set(runs) - set(known)
     if unknown:
-        raise ValueError(f"unknown runs {sorted(unknown)}; choose from {', '.join([*GT_RUNS, 'perception'])}")
+        raise ValueError(f"unknown runs {sorted(unknown)}; choose from {', '.join(known)}")
     out = OUT / ctx.arm
     shutil.rmtree(out, ignore_errors=True)
     out.mkdir(parents=True)
-    record(ctx.tree, out, runs, ctx["renderer"], ctx["duration"])
+    record(ctx.tree, out, runs, ctx["renderer"], ctx["duration"], float(ctx["perception_duration"]))
     res = {"recorded runs": {name: {**digest(out, name), "recorded in": shown_path(out)} for name in runs}}
     if ctx["ref"]:
         ref = ctx.path(ctx["ref"])
