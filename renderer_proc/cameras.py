@@ -46,7 +46,8 @@ def camera_backend(scenario: Scenario, views: list[View], context: Any = None):
     if scenario.renderer == "gl":
         from renderer_proc.gl.camera import GLCameraRenderer
 
-        return GLCameraRenderer(pins, scenario.render.lighting, context=context)
+        return GLCameraRenderer(pins, scenario.render.lighting, context=context,
+                                parts=[{"rgb" if p == "right" else p for p in v.parts} for v in views])
     if scenario.renderer == "mock":
         from renderer_proc.mock.camera import MockCameraRenderer
 

@@ -5,7 +5,10 @@ Per view one framebuffer of renderbuffers (no textures: nothing is mipmapped or 
 attachment 0 RGBA8 colour (``shaders/camera.frag``: procedural textures from ``shaders/textures.glsl``, lit by
 the sun or, at night, a work light), attachment 1 R32F planar depth (``1 / gl_FragCoord.w``, the view-space
 depth itself; NaN where nothing is drawn), attachment 2 R8UI the label of the part drawn (integer: never
-blended), and a depth renderbuffer for visibility. Parts are drawn as the LiDAR's GL renderer draws them (the
+blended), and a depth renderbuffer for visibility. A renderer whose views read no colour (``parts``: depth
+cameras only) draws with ``shaders/camera_depth.frag`` instead: its depth at attachment 0 and, where read, labels
+at 1, no texture or light evaluated (the same vertex shaders: the same depth to the bit); where any view reads
+colour every view is drawn textured. Parts are drawn as the LiDAR's GL renderer draws them (the
 same unit meshes, instance records and grain surface, ``renderer_proc.gl.surface``), each instance carrying its
 label and material; the ground slab is drawn every frame (its texture is fixed to the ground, so no cached
 image). The projection flips the image vertically, so ``read_*`` fill top-down destinations directly.
@@ -56,31 +59,38 @@ def _records(base: np.ndarray, label: np.ndarray | None, material: np.ndarray | 
 
 @dataclass
 class _View:
-    """One view's framebuffers: ``draw`` (every attachment) and ``clears`` [(framebuffer, clear value)]."""
+    """One view's framebuffers: ``draw`` (every attachment), ``clears`` [(framebuffer, clear value)],
+    ``attachment`` part -> its colour attachment in ``draw``."""
 
     draw: Any
     clears: list
     size: tuple[int, int]
     proj: bytes
+    attachment: dict
 
 
 class GLCameraRenderer(GLResources):
     """Renders :class:`Scene` frames for camera views of pinholes ``pins``. ``set_scene`` uploads a frame,
     ``draw(k, world_from_camera)`` renders view k, ``read_rgb`` / ``read_depth`` / ``read_labels`` read it out.
-    ``context``: a GL context to share (the LiDAR renderer's), else one is made."""
+    ``context``: a GL context to share (the LiDAR renderer's), else one is made; ``parts``: per view the parts
+    read from it (of ``rgb``, ``depth``, ``labels``; None: all of them)."""
 
-    def __init__(self, pins: list[Pinhole], lighting: Lighting, *, context: Any = None):
+    def __init__(self, pins: list[Pinhole], lighting: Lighting, *, context: Any = None,
+                 parts: list | None = None):
         super().__init__(context)
         import moderngl  # after create_gl_context, which turns a missing moderngl into RendererUnavailable
 
         ctx = self.ctx
         self.pins, self.lighting = pins, lighting
-        frag = camera_fragment_source()
+        #: whether the views are drawn textured and lit (some view reads colour), else depth (and labels) only
+        self.colour = parts is None or any("rgb" in p for p in parts)
+        frag = camera_fragment_source() if self.colour else (SHADER_DIR / "camera_depth.frag").read_text()
         self.prog_inst = self._m(ctx.program(vertex_shader=(SHADER_DIR / "camera_inst.vert").read_text(),
                                              fragment_shader=frag))
         self.prog_hf = self._m(ctx.program(vertex_shader=(SHADER_DIR / "camera_hf.vert").read_text(),
                                            fragment_shader=frag))
-        self.prog_hf["u_colour"].value = GRAIN_COLOUR
+        if self.colour:
+            self.prog_hf["u_colour"].value = GRAIN_COLOUR
         self.prog_hf["u_tag"].value = (float(GRAIN), float(GRAIN_MAT))
         self._surface = Surface(ctx, self._m, self.prog_hf)
         self._unit: dict[str, list] = {}
@@ -91,7 +101,8 @@ class GLCameraRenderer(GLResources):
         self._mesh_names: list[str] = []
         self._origin = np.zeros(3)
         self._lamp: np.ndarray | None = None
-        self.views = [self._view(p) for p in pins]
+        self.views = [self._view(p, "labels" in q if parts is not None else True)
+                      for p, q in zip(pins, parts or pins)]
         self._sun = sun_direction(lighting)
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.BLEND)
@@ -105,22 +116,26 @@ class GLCameraRenderer(GLResources):
         inst = self._m(ctx.buffer(reserve=reserve * CAMERA_INSTANCE_FLOATS * 4, dynamic=True))
         vao = self._m(ctx.vertex_array(self.prog_inst, [(vbo, "3f", "in_pos"),
                                                         (inst, "16f 3f 2f/i", "in_model", "in_colour", "in_tag")],
-                                       index_buffer=ibo, index_element_size=4))
+                                       index_buffer=ibo, index_element_size=4, skip_errors=not self.colour))
         return [vao, inst, 0]
 
-    def _view(self, pin: Pinhole) -> _View:
+    def _view(self, pin: Pinhole, labels: bool) -> _View:
+        """One view's framebuffers: colour, depth and labels when drawn textured, else depth and, where read
+        (``labels``), labels; and the depth renderbuffer of the visibility test."""
         ctx = self.ctx
         size = (pin.width, pin.height)
         depth = self._m(ctx.depth_renderbuffer(size))
-        rgb = self._m(ctx.renderbuffer(size, 4, dtype="f1"))
-        z = self._m(ctx.renderbuffer(size, 1, dtype="f4"))
-        lab = self._m(ctx.renderbuffer(size, 1, dtype="u1"))
+        names = ["rgb", "depth", "labels"] if self.colour else ["depth"] + (["labels"] if labels else [])
         sky = tuple(SKY_RGBA) if not self.lighting.night else (*(c * self.lighting.night_ambient
                                                                  for c in SKY_RGBA[:3]), 1.0)
-        clears = [(self._m(ctx.framebuffer([rgb], depth)), sky), (self._m(ctx.framebuffer([z])), (_NAN,) * 4),
-                  (self._m(ctx.framebuffer([lab])), (0.0,) * 4)]
-        return _View(self._m(ctx.framebuffer([rgb, z, lab], depth)), clears, size,
-                     mat_bytes(gl_projection(pin, NEAR_M, FAR_M)))
+        make = {"rgb": lambda: ctx.renderbuffer(size, 4, dtype="f1"), "depth": lambda: ctx.renderbuffer(
+            size, 1, dtype="f4"), "labels": lambda: ctx.renderbuffer(size, 1, dtype="u1")}
+        clear = {"rgb": sky, "depth": (_NAN,) * 4, "labels": (0.0,) * 4}
+        bufs = [self._m(make[n]()) for n in names]
+        clears = [(self._m(ctx.framebuffer([b], depth if i == 0 else None)), clear[n])
+                  for i, (n, b) in enumerate(zip(names, bufs))]
+        return _View(self._m(ctx.framebuffer(bufs, depth)), clears, size,
+                     mat_bytes(gl_projection(pin, NEAR_M, FAR_M)), {n: i for i, n in enumerate(names)})
 
     def _upload(self, key: str, records: np.ndarray) -> None:
         upload_instances(self._unit[key], records)
@@ -160,6 +175,8 @@ class GLCameraRenderer(GLResources):
         for prog in (self.prog_inst, self.prog_hf):
             prog["u_view"].write(mat_bytes(view))
             prog["u_proj"].write(v.proj)
+            if not self.colour:                         # depth only: nothing lit
+                continue
             prog["u_origin"].value = tuple(self._origin)
             prog["u_sun"].value = tuple(view[:3, :3] @ self._sun)
             prog["u_sun_share"].value = sun_share
@@ -198,21 +215,28 @@ class GLCameraRenderer(GLResources):
             raise ValueError(f"view {k}: destination must be C-contiguous {shape} {np.dtype(dtype)}, got "
                              f"{out.shape} {out.dtype}")
 
+    def _attachment(self, k: int, part: str) -> int:
+        """The colour attachment of view ``k``'s ``part``; ValueError where the view does not draw it."""
+        try:
+            return self.views[k].attachment[part]
+        except KeyError:
+            raise ValueError(f"view {k} draws no {part} (it draws {', '.join(self.views[k].attachment)})") from None
+
     def read_rgb(self, k: int, out: np.ndarray) -> None:
         """View k's colour image into ``out`` (H, W, 4) uint8 in place."""
         v = self.views[k]
         self._check(k, out, (v.size[1], v.size[0], 4), np.uint8)
-        v.draw.read_into(out, components=4, attachment=0, alignment=1, dtype="f1")
+        v.draw.read_into(out, components=4, attachment=self._attachment(k, "rgb"), alignment=1, dtype="f1")
 
     def read_depth(self, k: int, out: np.ndarray) -> None:
         """View k's planar depth into ``out`` (H, W) float32 m (NaN where nothing is drawn) in place."""
         v = self.views[k]
         self._check(k, out, (v.size[1], v.size[0]), np.float32)
-        v.draw.read_into(out, components=1, attachment=1, alignment=1, dtype="f4")
+        v.draw.read_into(out, components=1, attachment=self._attachment(k, "depth"), alignment=1, dtype="f4")
 
     def read_labels(self, k: int, out: np.ndarray) -> None:
         """View k's labels into ``out`` (H, W) uint8 in place."""
         v = self.views[k]
         self._check(k, out, (v.size[1], v.size[0]), np.uint8)
-        v.draw.read_into(out, components=1, attachment=2, alignment=1, dtype="u1")
+        v.draw.read_into(out, components=1, attachment=self._attachment(k, "labels"), alignment=1, dtype="u1")
 
