@@ -22,7 +22,6 @@ only the range limits.
 from __future__ import annotations
 
 import math
-import warnings
 
 import numpy as np
 
@@ -41,33 +40,46 @@ def frame_generator(seed: int, frame: int, sensor_index: int) -> np.random.Gener
     return np.random.default_rng([int(seed), int(frame), TOF_STREAM, int(sensor_index)])
 
 
-def _smooth_side(p: np.ndarray, axis: int) -> np.ndarray:
-    """The difference of neighbouring points (H, W, 3) along ``axis`` taken on the side whose depth changes
-    least (forward or backward): at a depth edge each pixel keeps its own surface's tangent."""
-    fwd = np.diff(p, axis=axis, append=np.take(p, [-1], axis=axis))
-    bwd = np.diff(p, axis=axis, prepend=np.take(p, [0], axis=axis))
-    first = [slice(None)] * 3
-    first[axis] = 0
-    last = list(first)
-    last[axis] = -1
-    fwd[tuple(last)] = bwd[tuple(last)]                 # the border pixels have one side only
-    bwd[tuple(first)] = fwd[tuple(first)]
+def _smooth_side(p: tuple, axis: int) -> tuple:
+    """The difference of neighbouring points (x, y, z components, each (H, W)) along ``axis`` taken on the side
+    whose depth changes least (forward or backward): at a depth edge each pixel keeps its own surface's tangent.
+    The border pixels have one side only. Each difference ``d`` is taken once: pixel i's forward one is d[i],
+    its backward one d[i - 1]."""
+    def cut(a: np.ndarray, start: int, stop: int | None) -> np.ndarray:
+        idx = [slice(None)] * a.ndim
+        idx[axis] = slice(start, stop)
+        return a[tuple(idx)]
+
+    d = [cut(c, 1, None) - cut(c, 0, -1) for c in p]
     with np.errstate(invalid="ignore"):
-        use_fwd = np.abs(fwd[..., 2]) <= np.abs(bwd[..., 2])
-    return np.where(use_fwd[..., None], fwd, bwd)
+        use_fwd = np.abs(cut(d[2], 1, None)) <= np.abs(cut(d[2], 0, -1))
+    out = []
+    for dc in d:
+        t = np.empty_like(p[0])
+        cut(t, 1, -1)[...] = np.where(use_fwd, cut(dc, 1, None), cut(dc, 0, -1))
+        cut(t, 0, 1)[...] = cut(dc, 0, 1)
+        cut(t, -1, None)[...] = cut(dc, -1, None)
+        out.append(t)
+    return tuple(out)
 
 
 def incidence(pin: Pinhole, z: np.ndarray) -> np.ndarray:
     """Incidence angle (H, W) float64 rad between each pixel's ray and the surface normal, from planar depth
     ``z`` (H, W) m: the normal of the back-projected points' tangents, each taken towards the neighbour on the
     pixel's own side of a depth edge (:func:`_smooth_side`); NaN where ``z`` or both neighbours are not
-    finite."""
+    finite. Componentwise (x, y, z arrays): the arithmetic of ``Pinhole.backproject``, ``np.cross``,
+    ``np.linalg.norm`` and ``np.einsum`` to the bit (``tof_reference.incidence`` is the plain form, tested against this)."""
     uu, vv = pin.pixel_centres()
-    p = pin.backproject(uu, vv, z)
-    n = np.cross(_smooth_side(p, 1), _smooth_side(p, 0))
-    ray = p / np.linalg.norm(p, axis=2, keepdims=True)
+    z = np.asarray(z, dtype=np.float64)
+    s = z / pin.f
+    p = (s * (uu - pin.width / 2.0), s * (pin.height / 2.0 - vv), z)
+    (a0, a1, a2), (b0, b1, b2) = _smooth_side(p, 1), _smooth_side(p, 0)
+    n0, n1, n2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+    r = np.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
     with np.errstate(invalid="ignore", divide="ignore"):
-        cos = np.abs(np.einsum("hwi,hwi->hw", n, ray)) / np.linalg.norm(n, axis=2)
+        # the dot product is einsum's over a last axis, whose rounding a plain sum of products does not match
+        dot = np.einsum("hwi,hwi->hw", np.stack([n0, n1, n2], axis=-1), np.stack([c / r for c in p], axis=-1))
+        cos = np.abs(dot) / np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
     return np.arccos(np.clip(cos, 0.0, 1.0))
 
 
@@ -86,26 +98,33 @@ def lateral_sigma_px(theta: np.ndarray, cam: DepthCamera) -> np.ndarray:
         return cam.lateral_px + cam.lateral_grazing_px * theta / (np.pi / 2.0 - theta)
 
 
+def _shifted(pad: np.ndarray, shape: tuple[int, int]):
+    """The 9 views of the 3 x 3 neighbourhood of every pixel in ``pad`` (the image padded by 1)."""
+    h, w = shape
+    return (pad[i:i + h, j:j + w] for i in range(3) for j in range(3))
+
+
 def _neighbourhood(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(min, max) over each pixel's 3 x 3 neighbourhood of ``z`` (H, W), ignoring NaN (edge pixels use what
-    they have); a pixel with no finite neighbour gets NaN."""
-    h, w = z.shape
-    pad = np.pad(z, 1, constant_values=np.nan)
-    stack = np.stack([pad[i:i + h, j:j + w] for i in range(3) for j in range(3)])
-    with np.errstate(invalid="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)              # all-NaN neighbourhoods give NaN
-        return np.nanmin(stack, axis=0), np.nanmax(stack, axis=0)
+    they have); a pixel with no finite neighbour gets NaN. ``np.fmin`` / ``np.fmax`` over the 9 views (what
+    ``np.nanmin`` / ``np.nanmax`` of their stack compute, without the stack)."""
+    views = list(_shifted(np.pad(z, 1, constant_values=np.nan), z.shape))
+    lo, hi = views[0].copy(), views[0].copy()
+    for v in views[1:]:
+        np.fmin(lo, v, out=lo)
+        np.fmax(hi, v, out=hi)
+    return lo, hi
 
 
 def flying_mask(z: np.ndarray, edge_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pixels straddling a depth edge: (mask (H, W) bool, nearest (H, W), farthest (H, W) m of the 3 x 3
     neighbourhood). A pixel next to a miss (NaN) is on an edge too (its far side is the background)."""
     lo, hi = _neighbourhood(z)
-    h, w = z.shape
-    pad = np.pad(np.isfinite(z), 1, constant_values=True)
-    next_to_miss = ~np.all(np.stack([pad[i:i + h, j:j + w] for i in range(3) for j in range(3)]), axis=0)
+    seen = np.ones(z.shape, bool)
+    for v in _shifted(np.pad(np.isfinite(z), 1, constant_values=True), z.shape):
+        seen &= v
     with np.errstate(invalid="ignore"):
-        mask = np.isfinite(z) & ((hi - lo > edge_m) | next_to_miss)
+        mask = np.isfinite(z) & ((hi - lo > edge_m) | ~seen)
     return mask, lo, hi
 
 
@@ -123,8 +142,9 @@ def tof_depth(z: np.ndarray, pin: Pinhole, cam: DepthCamera, gen: np.random.Gene
         du = np.rint(gen.standard_normal((h, w)) * sl).astype(np.int64)
         rows = np.clip(np.arange(h)[:, None] + dv, 0, h - 1)
         cols = np.clip(np.arange(w)[None, :] + du, 0, w - 1)
-        out = z[rows, cols]                                         # the depth of the laterally displaced point
-        theta = theta[rows, cols]
+        at = rows * w + cols                                        # flat index of the laterally displaced point
+        out = np.take(z, at)                                        # its depth
+        theta = np.take(theta, at)
         fly, near, far = flying_mask(z, cam.flying_edge_m)
         mix = gen.random((h, w))
         out = np.where(fly, near + mix * (np.where(np.isfinite(far), far, near) - near), out)
