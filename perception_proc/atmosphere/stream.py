@@ -136,10 +136,11 @@ def occlude(ranges: np.ndarray, beams: np.ndarray, mids: np.ndarray, chords: np.
     beam, r, share = beam[front], r[front], share[front]
     order = np.lexsort((r, beam))
     beam, r, share = beam[order], r[order], share[order]
-    ids, row = np.unique(beam, return_inverse=True)
+    starts = np.concatenate([[True], beam[1:] != beam[:-1]]) if beam.size else np.zeros(0, bool)
+    first = np.flatnonzero(starts)                                  # each beam's first kernel (beam is sorted)
+    ids, row = beam[first], np.cumsum(starts) - 1                   # np.unique(beam, return_inverse=True)
     logs = np.log1p(-np.minimum(share, 1.0 - 1e-12))
     cum = np.cumsum(logs)
-    first = np.searchsorted(beam, ids)
     start = np.concatenate([[0.0], cum])[first][row]                 # sum of the logs before each beam's first
     before = np.exp(np.concatenate([[0.0], cum[:-1]]) - start)       # transmission before each kernel
     took = before * share
