@@ -20,7 +20,7 @@ What it measures (each figure names its source in the Markdown):
   grain grid, sweep runs per hour with 1 and 2 local workers.
 
 The sections other commands write into results.md (the field-conditions suite, "Under load" of case
-``underload``, the packaged scenarios of case ``scenarios``) are kept as they are.
+``underload``, the packaged scenarios of case ``scenarios``, the GPU's) are kept as they are.
 
 ``--quick`` is a check of the script (short runs, one round, few frames): its numbers are not the headline
 figures. Usage::
@@ -212,13 +212,15 @@ def _section(text: str, heading: str) -> str:
     return heading + (body if nxt < 0 else body[:nxt + 1])
 
 
+#: the heading of the GPU figures (measured on a lent device machine, by hand: the table says when none was lent)
+GPU_HEADING = "## GPU"
 #: the sections of results.md that other commands write, kept as they are
-KEPT_SECTIONS = (SCENARIOS_HEADING, UNDERLOAD_HEADING, SUITE_HEADING)
+KEPT_SECTIONS = (SCENARIOS_HEADING, GPU_HEADING, UNDERLOAD_HEADING, SUITE_HEADING)
 
 
 def kept_suite_section(results_md: Path) -> str:
     """The sections of an existing ``results_md`` that other commands write (:data:`KEPT_SECTIONS`: the packaged
-    scenarios of case ``scenarios``, case ``underload``'s, the field-conditions suite's from
+    scenarios of case ``scenarios``, the GPU's, case ``underload``'s, the field-conditions suite's from
     bench/field_suite.py's hours-long sweep), which this script does not rerun, or ""."""
     text = results_md.read_text() if results_md.exists() else ""
     return "".join("\n" + s for s in (_section(text, h) for h in KEPT_SECTIONS) if s)
