@@ -117,7 +117,7 @@ def load_cases() -> dict[str, Case]:
 
 
 def get(name: str) -> Case:
-    if not CASES:
+    if name not in CASES:                        # a script may have imported one case module before
         load_cases()
     if name not in CASES:
         raise OptionError(f"no case named {name!r}; `python bench/run.py --list` lists them")
