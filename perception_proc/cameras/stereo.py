@@ -25,6 +25,9 @@ __all__ = ["FIXED_POINT", "SGBM_MODES", "make_matcher", "grey", "disparity", "ca
 
 #: OpenCV's disparity fixed point: 16 steps per pixel
 FIXED_POINT = 16.0
+#: a disparity within this of either end of the search is invalid: a surface outside the searched depths has its
+#: cost minimum at the end of the search, px
+SEARCH_EDGE_PX = 1.0
 #: SGBM's smoothness penalties per unit of cn b^2 (OpenCV's documentation: 8 and 32)
 P1_PER_AREA, P2_PER_AREA = 8, 32
 #: ``sgbm_mode`` -> OpenCV's StereoSGBM mode
@@ -68,6 +71,9 @@ def camera_disparity(matcher, cam: StereoCamera, left: np.ndarray, right: np.nda
     """The stereo camera's disparity (H, W) float32 px, NaN invalid, of its grey pair ``left``, ``right`` (H, W)
     uint8: the matcher's, blocks without texture invalid, refined to sub-pixel with ``subpixel: refine``."""
     d = disparity(matcher, left, right, cam.min_disparity_px)
+    lo, hi = cam.disparity_range_px
+    with np.errstate(invalid="ignore"):
+        d[(d < lo + SEARCH_EDGE_PX) | (d > hi - SEARCH_EDGE_PX)] = np.nan
     if cam.texture_threshold > 0:
         d[texture_mask(left, cam.block_size, cam.texture_threshold)] = np.nan
     if cam.subpixel == "refine":
