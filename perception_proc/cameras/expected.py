@@ -25,9 +25,10 @@ __all__ = ["FIT_SIGMAS", "GATE_SIGMA_M", "point_sigma_m", "cell_sigma_m", "cart_
 
 #: the overfill tolerance must hold this many of a cell's expected 1-sigma
 FIT_SIGMAS = 2.0
-#: a point whose expected depth 1-sigma exceeds this is dropped: it says nothing of a fill level measured to
-#: centimetres and, in a rim band or a cell's lowest cluster, would be taken for what it is not, m
-GATE_SIGMA_M = 0.25
+#: a point whose expected depth 1-sigma exceeds this is dropped: the rim finder's band and a cell's clusters are
+#: a few decimetres deep, so such a point lands in the wrong one about as often as in its own, m (a quarter metre
+#: already drops the far rim of a small-baseline module on the mast and it loses the cart)
+GATE_SIGMA_M = 0.5
 
 
 def point_sigma_m(spec: Camera, focal_px: float, z_m):
