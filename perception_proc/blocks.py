@@ -57,6 +57,11 @@ _BASE: tuple[tuple[str, str, str, str], ...] = (
     ("impact_gy_m", "m", "f8", ""),
     ("impact_gz_m", "m", "f8", ""),
     ("coverage", "", "f8", "fraction of controller cells with a perceived height"),
+    ("height_sigma_m", "m", "f8", "the depth cameras' expected 1-sigma of a cell's height at the cart (largest; NaN: "
+     "no camera sees it)"),
+    ("height_sigma_depth_m", "m", "f8", "the planar depth at which that camera sees the cart"),
+    ("sensor_unfit", "", "i8", "1 when that sigma exceeds what outcome.overfill_tolerance_m allows: no height map "
+     "is published and the controller holds"),
     ("lidar_ms", "ms", "f8", "decode, resample, noise"),
     ("cart_ms", "ms", "f8", "cart boundary"),
     ("heightmap_ms", "ms", "f8", "height map"),

@@ -40,6 +40,7 @@ from cosim.world.geometry import invert
 from cosim.world.sensors import world_from_parent
 from perception_proc.atmosphere.lidar import lidar_atmosphere
 from perception_proc.blocks import ACCURACY_FIELDS, HEIGHTS_BLOCK, POINTS_BLOCK, STATE_BLOCK, WRITER, sensor_state_block
+from perception_proc.cameras.expected import FIT_SIGMAS
 from perception_proc.cameras.sensors import PerceptionCameras
 from perception_proc.estimates.posegate import pose_gate
 from perception_proc.leveling import level_from_parent
@@ -199,6 +200,10 @@ class PerceptionParticipant:
             out.heights[...] = res.heightmap.heights
         lfs = pipe.level_from_sensor if lfp is None else lfp @ pipe.level_from_sensor
         values = self._outputs(frame, state, ranges, res, wfp, lfs)
+        values.update(self._fitness(res))
+        if values["sensor_unfit"]:                       # the sensor cannot support the target: no height map
+            out.heights.fill(np.nan)
+            values["coverage"] = 0.0
         values["lidar_ms"] = _MS_PER_S * (t1 - t0)
         values["perception_ms"] = _MS_PER_S * (t2 - t0)
         values.update({n: (0 if d == "i8" else math.nan) for n, _, d, _ in ACCURACY_FIELDS})
@@ -271,6 +276,16 @@ class PerceptionParticipant:
         for key in ("cart", "heightmap", "impact"):
             v[f"{key}_ms"] = res.timing_ms.get(key, math.nan)
         return v
+
+    def _fitness(self, res: FrameResult) -> dict:
+        """``height_sigma_m``, ``height_sigma_depth_m``, ``sensor_unfit`` of the frame: the cameras' expected
+        error of a cell's height at the found cart; unfit when :data:`FIT_SIGMAS` of it exceed the overfill
+        tolerance (perception_proc.cameras.expected)."""
+        if not len(self.cameras) or not res.cart.valid:
+            return {"height_sigma_m": math.nan, "height_sigma_depth_m": math.nan, "sensor_unfit": 0}
+        sigma, _, z = self.cameras.height_sigma_at_cart(np.asarray(res.cart.corners))
+        unfit = math.isfinite(sigma) and sigma * FIT_SIGMAS > self.scenario.outcome.overfill_tolerance_m
+        return {"height_sigma_m": sigma, "height_sigma_depth_m": z, "sensor_unfit": int(unfit)}
 
     def _accuracy(self, state: dict, beams: np.ndarray, clean: np.ndarray, res: FrameResult, wfp: np.ndarray,
                   lfs: np.ndarray, truth_h: np.ndarray, stream: np.ndarray) -> dict:

@@ -135,7 +135,31 @@ def summarize(scenario: Scenario, series: Mapping[str, np.ndarray], heightmap_tr
                       for k in ("lidar", "cart", "heightmap", "impact", "perception", "accuracy")},
     }
     out["sensors"] = sensor_blocks(scenario, series, range_error, heightmap_truth, heightmap_perceived)
+    out["fitness"] = fitness(scenario, series)
     return {"perception": clean_json(out)}
+
+
+def fitness(scenario: Scenario, series: Mapping[str, np.ndarray]) -> dict:
+    """Whether the cameras' expected error at the cart supports the fill target (perception_proc.cameras.expected):
+    ``unfit_frames`` of ``frames_at_cart`` (frames with a camera seeing the found cart), the median expected
+    1-sigma of a cell's height ``height_sigma_m`` at the median depth ``depth_m``, what the target allows
+    (``allowed_sigma_m``: the overfill tolerance over FIT_SIGMAS) and ``reason``, a sentence naming the figure
+    when every frame at the cart was unfit (perception withheld its height map, so the controller never started
+    the auger), else None."""
+    from perception_proc.cameras.expected import FIT_SIGMAS
+
+    sigma, depth, unfit = (_col(series, k) for k in ("height_sigma_m", "height_sigma_depth_m", "sensor_unfit"))
+    seen = np.isfinite(sigma) if sigma.size else np.zeros(0, bool)
+    allowed = scenario.outcome.overfill_tolerance_m / FIT_SIGMAS
+    out = {"frames_at_cart": int(np.count_nonzero(seen)), "unfit_frames": int(np.nansum(unfit)) if unfit.size else 0,
+           "height_sigma_m": _median(sigma[seen]) if seen.any() else math.nan,
+           "depth_m": _median(depth[seen]) if seen.any() else math.nan, "allowed_sigma_m": allowed, "reason": None}
+    if out["frames_at_cart"] and out["unfit_frames"] == out["frames_at_cart"]:
+        out["reason"] = (f"the cameras' expected error of a cell's height at the cart, {100 * out['height_sigma_m']:.1f}"
+                         f" cm at {out['depth_m']:.1f} m, exceeds the {100 * allowed:.1f} cm the "
+                         f"{100 * scenario.outcome.overfill_tolerance_m:.0f} cm overfill tolerance allows: no height "
+                         "map was published and the auger was not started")
+    return out
 
 
 def _fill_final(scenario: Scenario, truth: np.ndarray | None, perceived: np.ndarray | None) -> dict:

@@ -32,12 +32,15 @@ def _plane_scene() -> Scene:
 
 
 def textured_plane_pair(ctx: Any, pin: Pinhole, baseline_m: float, pitch_deg: float = 40.0,
-                        height_m: float = 3.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                        height_m: float = 3.0, roll_deg: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(left, right, depth): the pair's RGBA8 images (H, W, 4) uint8 and the left camera's exact planar depth
-    (H, W) float32 m (NaN: sky), drawn in the moderngl context ``ctx`` (lent: nothing of it is released)."""
+    (H, W) float32 m (NaN: sky), drawn in the moderngl context ``ctx`` (lent: nothing of it is released).
+    ``pitch_deg`` 90 looks straight down (a plane facing the camera, one depth); less slants the plane along the
+    image's vertical, and ``roll_deg`` 90 (the pair turned about its optical axis) slants it along the image's
+    rows, the direction the matcher searches (a wall seen obliquely)."""
     from renderer_proc.gl.camera import GLCameraRenderer
 
-    left = make_transform(rpy_matrix(0.0, math.radians(pitch_deg), 0.0), (0.0, 0.0, height_m)) @ body_from_camera_axes()
+    left = make_transform(rpy_matrix(math.radians(roll_deg), math.radians(pitch_deg), 0.0), (0.0, 0.0, height_m)) @ body_from_camera_axes()
     right = left @ make_transform(np.eye(3), (baseline_m, 0.0, 0.0))
     r = GLCameraRenderer([pin, pin], Lighting(), context=ctx)
     try:

@@ -31,6 +31,7 @@ from cosim.world.sensors import (
     points_stride,
 )
 from perception_proc.cameras.effects import camera_effects
+from perception_proc.cameras.expected import GATE_SIGMA_M, point_sigma_m
 from perception_proc.cameras.images import SIGMA_DISTANCE_M, CameraImages
 from perception_proc.cameras.stereo import make_matcher, stereo_depth
 from perception_proc.cameras.tof import frame_generator, tof_depth
@@ -61,6 +62,8 @@ class CameraPipeline:
         self.blocks = {part: camera_block(name, part) for _, part in camera_parts(spec)}
         self.depth_giving = self.kind in ("depth_camera", "stereo_camera")
         s = points_stride(spec, scenario)
+        #: every ``stride``-th pixel along each axis is back-projected
+        self.stride = s
         h, w = self.pin.height, self.pin.width
         self.rows = np.arange(s // 2, h, s)
         self.cols = np.arange(s // 2, w, s)
@@ -128,12 +131,15 @@ class CameraPipeline:
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The strided pixels of ``depth_m`` (H, W) m back-projected: (level points (M, 3) float64, ranges (M,)
         float32 m from the camera, border flags (M,) uint8, camera-frame record (M, 4) float32 x y z range);
-        NaN rows where the depth is invalid. ``level_from_parent`` (4, 4) maps the camera's parent body frame
+        NaN rows where the depth is invalid or its expected 1-sigma exceeds
+        :data:`~perception_proc.cameras.expected.GATE_SIGMA_M`. ``level_from_parent`` (4, 4) maps the camera's parent body frame
         into the level frame (identity when they are the same body)."""
         if depth_m is None:
             empty = np.zeros((0, 3))
             return empty, np.zeros(0, np.float32), np.zeros(0, np.uint8), np.zeros((0, 4), np.float32)
         z = np.asarray(depth_m, np.float64)[np.ix_(self.rows, self.cols)].reshape(-1)
+        with np.errstate(invalid="ignore"):
+            z[point_sigma_m(self.spec, self.pin.f, z) > GATE_SIGMA_M] = np.nan    # gated by its own error
         cam = self.unit_points * z[:, None]                                    # camera frame, m
         rng = np.linalg.norm(cam, axis=1)
         level_from_camera = level_from_parent @ self.parent_from_camera

@@ -10,6 +10,7 @@ the cameras due (the only read of their shared images: with overlap the rest run
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Mapping
@@ -22,6 +23,7 @@ from cosim.scenario.config.scenario import Scenario
 from cosim.world.geometry import invert
 from cosim.world.sensors import world_from_parent
 from perception_proc.blocks import WRITER, camera_output_blocks
+from perception_proc.cameras.expected import cart_depth_m, cell_sigma_m
 from perception_proc.cameras.pipeline import CameraImages, CameraPipeline
 from perception_proc.protocol import SensorFrame
 
@@ -121,6 +123,25 @@ class PerceptionCameras:
                                                _MS_PER_S * (time.perf_counter() - t0),
                                                float(state.get("t_s", np.nan)) if state else np.nan)
         return [(self.latest[p.name].frame, self.latest[p.name].border) for p in self.pipes if p.name in self.latest]
+
+    def height_sigma_at_cart(self, corners: np.ndarray) -> tuple[float, str, float]:
+        """(sigma m, camera name, depth m): the largest expected 1-sigma of a controller cell's height among the
+        depth-giving cameras that see the cart (``corners`` (4, 3), its rim corners in the level frame), at the
+        median planar depth of each camera's points inside the rim (perception_proc.cameras.expected); NaN, "",
+        NaN when none sees it."""
+        cell_m = self.scenario.controller.grid_cell_m
+        worst = (math.nan, "", math.nan)
+        for p in self.pipes:
+            r = self.latest.get(p.name)
+            if not p.depth_giving or r is None or r.record is None:
+                continue
+            z = cart_depth_m(r.record, r.frame.points, corners)
+            if not math.isfinite(z):
+                continue
+            sigma = cell_sigma_m(p.spec, p.pin.f, p.stride, cell_m, z)
+            if not sigma <= worst[0]:
+                worst = (sigma, p.name, z)
+        return worst
 
     def sensor_values(self, name: str) -> dict:
         """The non-accuracy fields of ``sensor_<name>`` for camera ``name``'s latest data."""

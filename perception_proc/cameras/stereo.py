@@ -7,8 +7,10 @@ matchers run on the grey images (ITU-R BT.601 luma of the stored bytes): ``sgbm`
 (P1 = 8 cn b^2, P2 = 32 cn b^2 with cn = 1 and b the block size, OpenCV's recommended smoothness penalties),
 ``bm`` is ``cv2.StereoBM``. OpenCV returns fixed-point disparities (1/16 px); a pixel whose disparity is not
 above ``min_disparity_px - 1`` (no match, or filtered as a speckle or by the uniqueness or left-right check)
-is invalid, and so is a disparity of 0 (a point at infinity). Nothing is added to the images or to the
-disparities: the depth error is the matcher's, on the renderer's textured images.
+is invalid, and so is a disparity of 0 (a point at infinity). Then (``perception_proc.cameras.subpixel``) blocks
+without texture are invalid (``texture_threshold``) and, with ``subpixel: refine``, each disparity is refined by
+Gauss-Newton on the intensity difference instead of OpenCV's parabola, which locks to whole pixels. Nothing is
+added to the images: the depth error is the matcher's, on the renderer's textured images.
 """
 from __future__ import annotations
 
@@ -16,11 +18,16 @@ import cv2
 import numpy as np
 
 from cosim.scenario.config.cameras import StereoCamera
+from perception_proc.cameras.subpixel import refine_disparity, texture_mask
 
-__all__ = ["FIXED_POINT", "SGBM_MODES", "make_matcher", "grey", "disparity", "depth_from_disparity", "stereo_depth"]
+__all__ = ["FIXED_POINT", "SGBM_MODES", "make_matcher", "grey", "disparity", "camera_disparity", "depth_from_disparity",
+           "stereo_depth"]
 
 #: OpenCV's disparity fixed point: 16 steps per pixel
 FIXED_POINT = 16.0
+#: a disparity within this of either end of the search is invalid: a surface outside the searched depths has its
+#: cost minimum at the end of the search, px
+SEARCH_EDGE_PX = 1.0
 #: SGBM's smoothness penalties per unit of cn b^2 (OpenCV's documentation: 8 and 32)
 P1_PER_AREA, P2_PER_AREA = 8, 32
 #: ``sgbm_mode`` -> OpenCV's StereoSGBM mode
@@ -60,6 +67,22 @@ def disparity(matcher, left: np.ndarray, right: np.ndarray, min_disparity_px: in
     return d
 
 
+def camera_disparity(matcher, cam: StereoCamera, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """The stereo camera's disparity (H, W) float32 px, NaN invalid, of its grey pair ``left``, ``right`` (H, W)
+    uint8: the matcher's, blocks without texture invalid, refined to sub-pixel with ``subpixel: refine``."""
+    d = disparity(matcher, left, right, cam.min_disparity_px)
+    lo, hi = cam.disparity_range_px
+    with np.errstate(invalid="ignore"):
+        d[(d < lo + SEARCH_EDGE_PX) | (d > hi - SEARCH_EDGE_PX)] = np.nan
+    if cam.texture_threshold > 0:
+        d[texture_mask(left, cam.block_size, cam.texture_threshold)] = np.nan
+    if cam.subpixel == "refine":
+        d = refine_disparity(left, right, d, window_px=cam.block_size)
+        with np.errstate(invalid="ignore"):
+            d[d <= 0] = np.nan
+    return d
+
+
 def depth_from_disparity(d: np.ndarray, focal_px: float, baseline_m: float) -> np.ndarray:
     """Planar depth Z = f B / d (H, W) float32 m of disparities ``d`` (px, NaN invalid)."""
     return (np.float32(focal_px * baseline_m) / d).astype(np.float32)
@@ -69,8 +92,8 @@ def stereo_depth(matcher, cam: StereoCamera, focal_px: float, left_rgba: np.ndar
                  ) -> np.ndarray:
     """The stereo camera's planar depth (H, W) float32 m, NaN invalid or outside ``range_min_m`` ..
     ``range_max_m``, from its left and right (H, W, 4) uint8 images."""
-    z = depth_from_disparity(disparity(matcher, grey(left_rgba), grey(right_rgba), cam.min_disparity_px),
-                             focal_px, cam.baseline_m)
+    z = depth_from_disparity(camera_disparity(matcher, cam, grey(left_rgba), grey(right_rgba)), focal_px,
+                             cam.baseline_m)
     with np.errstate(invalid="ignore"):
         z[(z < cam.range_min_m) | (z > cam.range_max_m)] = np.nan
     return z

@@ -169,8 +169,10 @@ class StereoCamera(Camera):
     Hirschmuller method, about three times the time); the one-pass modes prefer the disparity of the rows above
     on surfaces that slant in the image's vertical (docs/cameras.md gives the measured bias). ``num_disparities`` (a multiple of 16) and ``min_disparity_px`` bound the search; ``block_size``
     (odd; BM needs >= 5), ``uniqueness_ratio``, ``speckle_window_px``, ``speckle_range_px`` and
-    ``disp12_max_diff_px`` are OpenCV's parameters of the same names. It needs the GL renderer's textured
-    images: the mock renderer's plain shading has nothing to match."""
+    ``disp12_max_diff_px`` are OpenCV's parameters of the same names; ``texture_threshold`` invalidates blocks without
+    texture (StereoBM's check, which SGBM lacks), ``subpixel`` picks the sub-pixel step and ``disparity_sigma_px``
+    states the disparity error the camera is expected to hold (perception weighs and gates its points by it). It
+    needs the GL renderer's textured images: the mock renderer's plain shading has nothing to match."""
 
     kind: Literal["stereo_camera"]
     """stereo_camera: left and right textured images, disparity from OpenCV's matcher, depth = f B / d."""
@@ -195,6 +197,13 @@ class StereoCamera(Camera):
     """OpenCV's speckle filter range, px of disparity."""
     disp12_max_diff_px: int = Field(default=1, ge=-1, le=64)
     """OpenCV's left-right check tolerance, px (-1: off)."""
+    texture_threshold: NonNegFloat = 0.5
+    """Pixels whose block has less mean absolute horizontal gradient are invalid, grey levels per px (0: off)."""
+    subpixel: Literal["refine", "matcher"] = "refine"
+    """Sub-pixel disparity: refine (Gauss-Newton on the intensity difference, no pixel locking) or matcher
+    (OpenCV's parabola over whole-pixel costs, which locks towards whole disparities)."""
+    disparity_sigma_px: PosFloat = 0.25
+    """The disparity 1-sigma the camera is expected to hold, px: its depth 1-sigma is Z^2 sigma / (f B)."""
 
     @model_validator(mode="after")
     def _matcher(self) -> "StereoCamera":
@@ -207,6 +216,10 @@ class StereoCamera(Camera):
         if self.num_disparities + self.min_disparity_px >= self.width_px:
             raise ValueError("num_disparities + min_disparity_px must be smaller than width_px")
         return self
+
+    def depth_sigma_m(self, z_m):
+        """The expected depth 1-sigma at planar depth ``z_m`` (m, scalar or array), m: Z^2 sigma_d / (f B)."""
+        return z_m * z_m * self.disparity_sigma_px / (self.focal_px * self.baseline_m)
 
     @property
     def disparity_range_px(self) -> tuple[int, int]:

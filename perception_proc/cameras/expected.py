@@ -1,0 +1,72 @@
+"""A depth camera's own expected error (docs/cameras.md): per point, and of one controller cell's height at the
+cart, so that perception gates points by it and withholds a height map the sensor cannot support.
+
+* per point (perception drops a point whose 1-sigma exceeds :data:`GATE_SIGMA_M`): the stereo law
+  sigma_Z = Z^2 sigma_d / (f B) (``disparity_sigma_px``, the profile's stated figure), the depth camera's axial
+  model at normal incidence;
+* per cell: a cell of ``cell_m`` seen at planar depth Z spans ``cell_m f / Z`` pixels each way; its height rests
+  on n independent measurements, the cell's pixels divided into squares of the points' stride or, for stereo,
+  of the matcher's block when larger (neighbouring windows share their pixels, so their errors are not
+  independent): sigma_cell = sigma_Z / sqrt(n), n >= 1.
+
+A sensor is fit for the target when sigma_cell at the cart is within :data:`FIT_SIGMAS` sigmas of the overfill
+tolerance (``outcome.overfill_tolerance_m``): a cell's height then errs by more than the tolerance in about 2.5 %
+of cells one way.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from cosim.scenario.config.cameras import Camera, DepthCamera, StereoCamera
+
+__all__ = ["FIT_SIGMAS", "GATE_SIGMA_M", "point_sigma_m", "cell_sigma_m", "cart_depth_m"]
+
+#: the overfill tolerance must hold this many of a cell's expected 1-sigma
+FIT_SIGMAS = 2.0
+#: a point whose expected depth 1-sigma exceeds this is dropped: the rim finder's band and a cell's clusters are
+#: a few decimetres deep, so such a point lands in the wrong one about as often as in its own, m (a quarter metre
+#: already drops the far rim of a small-baseline module on the mast and it loses the cart)
+GATE_SIGMA_M = 0.5
+
+
+def point_sigma_m(spec: Camera, focal_px: float, z_m):
+    """Expected depth 1-sigma (m, like ``z_m``) of one pixel at planar depth ``z_m`` (m, scalar or array); 0 for a
+    camera without depth."""
+    z = np.asarray(z_m, np.float64)
+    if isinstance(spec, StereoCamera):
+        return z * z * spec.disparity_sigma_px / (focal_px * spec.baseline_m)
+    if isinstance(spec, DepthCamera):
+        return spec.axial_a_m + spec.axial_b_per_m * (z - spec.axial_z0_m) ** 2
+    return np.zeros_like(z)
+
+
+def cell_sigma_m(spec: Camera, focal_px: float, stride: int, cell_m: float, z_m: float) -> float:
+    """Expected 1-sigma of a ``cell_m`` cell's height (m) measured at planar depth ``z_m`` (m) from every
+    ``stride``-th pixel (module docstring)."""
+    side = max(stride, spec.block_size) if isinstance(spec, StereoCamera) else stride
+    n = max(1.0, (cell_m * focal_px / z_m / side) ** 2)
+    return float(point_sigma_m(spec, focal_px, z_m)) / math.sqrt(n)
+
+
+def cart_depth_m(record: np.ndarray, level: np.ndarray, corners: np.ndarray) -> float:
+    """Median planar depth (m) of a camera's points inside the cart's rim rectangle seen from above; NaN when none.
+    ``record`` (M, 4) camera frame x y z range; ``level`` (M, 3) the same points in the level frame; ``corners``
+    (4, 3) the rim's interior corners, level frame, in order around the rectangle."""
+    xy = level[:, :2]
+    ok = np.isfinite(xy[:, 0])
+    c = np.asarray(corners, np.float64)[:, :2]
+    inside = ok.copy()
+    for k in range(4):
+        a, b = c[k], c[(k + 1) % 4]
+        cross = (b[0] - a[0]) * (xy[:, 1] - a[1]) - (b[1] - a[1]) * (xy[:, 0] - a[0])
+        inside &= np.where(ok, cross, 0.0) * _orientation(c) >= 0.0
+    z = record[inside, 2]
+    return float(np.median(z)) if z.size else math.nan
+
+
+def _orientation(c: np.ndarray) -> float:
+    """+1 for corners counter-clockwise in x-y, -1 clockwise."""
+    area = sum(c[k, 0] * c[(k + 1) % 4, 1] - c[(k + 1) % 4, 0] * c[k, 1] for k in range(4))
+    return 1.0 if area >= 0 else -1.0

@@ -1,0 +1,67 @@
+"""The stereo matcher's disparity made honest (docs/cameras.md): gross errors come back invalid, sub-pixel values
+do not lock to whole pixels.
+
+Two pure functions on the rectified grey pair and the matcher's disparity:
+
+* :func:`texture_mask`: where the left image has no texture to match. The mean absolute horizontal intensity
+  gradient over the matcher's block (grey levels per px, the 3 x 3 Sobel derivative divided by its weight 8) is
+  below ``threshold``: StereoBM's ``textureThreshold`` check, which StereoSGBM lacks. Without it SGBM's smoothness
+  term fills a textureless region (a surface so far or so oblique that its texture fades below the pixel) with the
+  disparity of its surroundings, and those pixels pass its uniqueness and left-right checks: on a wall seen
+  obliquely beyond 10 m they are the large majority of the "valid" pixels.
+* :func:`refine_disparity`: sub-pixel refinement by Gauss-Newton on the intensity difference (the Lucas-Kanade
+  step restricted to the epipolar line): with the right image warped by the current disparity, each iteration
+  adds -sum(e g) / sum(g^2) over a square window, e = L(x) - R(x - d) and g = dR/dx at x - d (linear
+  interpolation). OpenCV's matchers fit a parabola to three integer costs, which pulls a disparity towards the
+  nearest whole pixel (pixel locking: on a facing plane the error swings with the fractional disparity between
+  about -0.4 and +0.45 px); the continuous step has no preferred fraction. A pixel whose step leaves
+  ``max_step_px`` of the matcher's disparity, or whose window has no gradient, is invalid.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+__all__ = ["SOBEL_WEIGHT", "texture_mask", "refine_disparity"]
+
+#: the 3 x 3 Sobel x derivative of a unit ramp (1 grey level per px): its response is 8
+SOBEL_WEIGHT = 8.0
+#: a window's summed squared gradient below this, (grey levels / px)^2, gives no step (no texture to align)
+MIN_GRADIENT_ENERGY = 1e-3
+
+
+def texture_mask(left: np.ndarray, block_px: int, threshold: float) -> np.ndarray:
+    """(H, W) bool: True where the left grey image ``left`` (H, W) uint8 has less than ``threshold`` grey levels
+    per px of mean absolute horizontal gradient over a ``block_px`` square window (no texture to match)."""
+    gx = cv2.Sobel(left, cv2.CV_32F, 1, 0, ksize=3, scale=1.0 / SOBEL_WEIGHT)
+    energy = cv2.boxFilter(np.abs(gx), -1, (block_px, block_px), borderType=cv2.BORDER_REPLICATE)
+    return energy < np.float32(threshold)
+
+
+def refine_disparity(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, window_px: int = 5,
+                     iterations: int = 2, max_step_px: float = 1.0) -> np.ndarray:
+    """Sub-pixel refined disparity (H, W) float32 px of ``disparity`` (H, W) float32 px, NaN invalid, for the
+    rectified grey pair ``left``, ``right`` (H, W) uint8 (a point at disparity d in the left image is d px
+    further left in the right image): ``iterations`` Gauss-Newton steps over a ``window_px`` square window; NaN
+    where the input is NaN, the window has no gradient or the result is more than ``max_step_px`` from the
+    input."""
+    lft = left.astype(np.float32)
+    rgt = right.astype(np.float32)
+    h, w = lft.shape
+    grad = cv2.Sobel(rgt, cv2.CV_32F, 1, 0, ksize=3, scale=1.0 / SOBEL_WEIGHT)
+    cols = np.broadcast_to(np.arange(w, dtype=np.float32), (h, w))
+    rows = np.ascontiguousarray(np.broadcast_to(np.arange(h, dtype=np.float32)[:, None], (h, w)))
+    start = np.where(np.isfinite(disparity), disparity, 0.0).astype(np.float32)
+    d = start.copy()
+    flat = np.zeros((h, w), bool)
+    win = (window_px, window_px)
+    for _ in range(iterations):
+        map_x = cols - d
+        warped = cv2.remap(rgt, map_x, rows, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        g = cv2.remap(grad, map_x, rows, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        num = cv2.boxFilter((lft - warped) * g, -1, win, normalize=False, borderType=cv2.BORDER_REPLICATE)
+        den = cv2.boxFilter(g * g, -1, win, normalize=False, borderType=cv2.BORDER_REPLICATE)
+        flat = den < MIN_GRADIENT_ENERGY
+        d -= np.where(flat, np.float32(0.0), num / np.maximum(den, np.float32(MIN_GRADIENT_ENERGY)))
+    d[~np.isfinite(disparity) | flat | (np.abs(d - start) > max_step_px)] = np.nan
+    return d

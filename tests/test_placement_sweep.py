@@ -1,0 +1,57 @@
+"""The camera placement study's sweep files and table (docs/placement.md): 24 placements over 3 profiles, the CI
+file the same placements on short runs, and the table read from a sweep directory."""
+from __future__ import annotations
+
+import csv
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+
+from cosim.studies.sweepfile import load_sweep
+
+HERE = Path(__file__).resolve().parents[1] / "docs" / "examples" / "placement"
+
+
+def _table_module():
+    spec = importlib.util.spec_from_file_location("placement_table", HERE / "table.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_the_study_has_24_placements_over_3_profiles_and_ci_runs_the_same_ones_short():
+    full, ci = load_sweep(HERE / "placement_sweep.yaml"), load_sweep(HERE / "placement_ci_sweep.yaml")
+    assert len(full.runs) == len(ci.runs) == 24
+    profiles = {r.scenario.sensors["cam"].profile for r in full.runs}
+    assert profiles == {"multisense_s21b", "oak_d", "tof_kinect_class"}
+    mounts = {(r.scenario.sensors["cam"].mount.xyz_m, r.scenario.sensors["cam"].mount.rpy_deg) for r in full.runs}
+    assert len(mounts) == 8
+    assert {r.scenario.duration_s for r in full.runs} == {120.0} and {r.scenario.duration_s for r in ci.runs} == {0.6}
+    assert [r.scenario.sensors for r in full.runs] == [r.scenario.sensors for r in ci.runs]
+
+
+def test_the_table_reads_each_runs_summary(tmp_path):
+    run = tmp_path / "runs" / "a"
+    run.mkdir(parents=True)
+    np.save(run / "heightmap_perceived.npy", np.zeros((20, 10), np.float32))
+    (run / "summary.json").write_text(json.dumps({
+        "timing_ms": {"frame": 250.0},
+        "perception": {"fitness": {"height_sigma_m": 0.0175},
+                       "sensors": {"cam": {"measure_ms": 140.0, "fill_height": {"mean_rel_error": 0.007,
+                                                                                 "cells": 50.0}}}}}))
+    with (tmp_path / "results.csv").open("w", newline="") as f:
+        w = csv.DictWriter(f, ["base", "sensors.cam.mount.xyz_m", "sensors.cam.mount.rpy_deg", "outcome",
+                               "outcome_reason", "completed", "run_dir"])
+        w.writeheader()
+        w.writerow({"base": "base_s21b.yaml", "sensors.cam.mount.xyz_m": "[-2.0, 7.45, 6.0]",
+                    "sensors.cam.mount.rpy_deg": "[0.0, 90.0, -90.0]", "outcome": "filled", "outcome_reason": "",
+                    "completed": "True", "run_dir": "runs/a"})
+    mod = _table_module()
+    (row,) = mod.rows(tmp_path)
+    assert row["profile"] == "s21b" and row["outcome"] == "filled"
+    assert abs(row["fill-height error %"] - 0.7) < 1e-9 and row["cart seen %"] == 25.0
+    assert abs(row["expected sigma cm"] - 1.75) < 1e-9 and row["frame ms"] == 250.0
+    assert "| s21b |" in mod.markdown([row])
+    assert mod.main([str(tmp_path)]) == 0 and (tmp_path / "placement.png").stat().st_size > 0
