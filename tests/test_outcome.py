@@ -54,6 +54,17 @@ def test_perception_that_never_found_the_cart_is_a_safe_stop_never_a_success():
     assert out["cart_found_frames"] == 0 and out["perception_frames"] == 1201
 
 
+def test_a_sensor_unfit_for_the_target_is_a_safe_stop_that_names_its_figure():
+    """Perception withheld every height map because its cameras' expected error at the cart exceeds what the
+    target allows: the outcome names that figure, not only the controller's hold."""
+    why = "the cameras' expected error of a cell's height at the cart, 4.6 cm at 5.5 m, exceeds the 2.5 cm"
+    summary = {**_summary([1.0] * 9), "perception": {"fitness": {"reason": why}}}
+    out = judge(SC, summary, _series(n=101, auger=False, hold=HOLD_NO_MEASUREMENT))
+    assert out["status"] == "stopped_safe" and out["reason"].startswith(why + "; 0 of 9 sections at target")
+    plain = judge(SC, _summary([1.0] * 9), _series(n=101, auger=False, hold=HOLD_NO_MEASUREMENT))
+    assert plain["reason"].startswith("no usable height map yet")
+
+
 def test_a_controller_that_holds_says_why_and_with_what_confidence():
     out = judge(SC, _summary([TARGET] * 5 + [1.2] * 4), _series(hold=HOLD_LOST, sigma=0.062,
                                                                   cart_valid=np.r_[np.ones(300), np.zeros(301)]))

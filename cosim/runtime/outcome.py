@@ -147,7 +147,8 @@ def judge(scenario: Scenario, summary: Mapping, series: Mapping[str, np.ndarray]
         return {"status": STOPPED_SAFE, "reason": f"perception never found the cart: 0 of {cart[1]} frames; "
                 f"{started}; {shortfall}", **facts}
     if code != HOLD_NONE and stopped:
-        return {"status": STOPPED_SAFE, "reason": f"{_hold_text(series, code)}; {shortfall}", **facts}
+        why = _unfit(summary) if code == HOLD_NO_MEASUREMENT else None
+        return {"status": STOPPED_SAFE, "reason": f"{why or _hold_text(series, code)}; {shortfall}", **facts}
     end = float(t[-1]) if t.size else 0.0
     if auger_on_s == 0.0:
         return {"status": JOB_FAILED, "reason": f"the auger never started and the controller gave no reason; "
@@ -158,6 +159,13 @@ def judge(scenario: Scenario, summary: Mapping, series: Mapping[str, np.ndarray]
     done = f"{facts['fill_fraction'] * 100.0:.1f} % filled, " if facts["fill_fraction"] is not None else ""
     return {"status": UNFINISHED, "reason": f"the run ended at its duration, {end:.1f} s, before the job was done: "
             f"{done}{shortfall}", **facts}
+
+
+def _unfit(summary: Mapping) -> str | None:
+    """Why perception withheld every height map (its cameras' expected error at the cart exceeds what the target
+    allows: ``perception.fitness.reason``, perception_proc's summary), or None."""
+    fitness = (summary.get("perception") or {}).get("fitness") or {}
+    return fitness.get("reason") if isinstance(fitness, Mapping) else None
 
 
 def outcome_line(outcome: Mapping | None) -> str:
