@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from cosim.cli import main
+from cosim.errors import OutputError
 from cosim.fmi.export.build import model_identifier
 from cosim.fmi.export.destination import DestinationError, fmu_destination, shown, write_atomically
 
@@ -51,8 +52,8 @@ def test_a_failed_write_leaves_nothing_truncated(tmp_path, monkeypatch):
     def full(*_a, **_k):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr("shutil.copyfileobj", full)
-    with pytest.raises(OSError, match="No space left"):
+    monkeypatch.setattr("shutil.copyfile", full)
+    with pytest.raises(OutputError, match="no space left on device writing .*out.fmu"):
         write_atomically(built, out)
     assert out.read_bytes() == b"the earlier FMU" and sorted(p.name for p in tmp_path.iterdir()) == \
         ["built.fmu", "out.fmu"]

@@ -24,6 +24,7 @@ from xml.etree import ElementTree
 
 import yaml
 
+from cosim.errors import OutputError
 from cosim.scenario.config import Scenario
 from cosim.scenario.loader import load_scenario, path_fields
 from cosim.scenario.plugins import is_import_path
@@ -190,9 +191,9 @@ def export_command(args, s: Scenario) -> int:
     except (ValueError, BuilderMissing) as e:
         sys.stderr.write(f"export-fmu: {e}\n")
         return 2
-    except OSError as e:
-        sys.stderr.write(f"export-fmu: --out {shown(args.out)}: cannot write the FMU: {e.strerror or e}; nothing was "
-                         "written\n")
+    except (OSError, OutputError) as e:
+        why = e.strerror if isinstance(e, OSError) and e.strerror else e
+        sys.stderr.write(f"export-fmu: --out {shown(args.out)}: cannot write the FMU: {why}; nothing was written\n")
         return 1
     sys.stdout.write(f"wrote {shown(path)}: FMI {args.fmi}.0 co-simulation, one doStep per "
                      f"{s.timing.sensor_period_s:g} s sensor frame, {s.controller.sections} sections (docs/fmu.md)\n")

@@ -17,11 +17,11 @@ from __future__ import annotations
 
 import os
 import shutil
-import tempfile
 import zipfile
 from pathlib import Path
 
 from cosim.errors import shown_path as shown
+from cosim.runtime.files import atomic_replace
 
 __all__ = ["DestinationError", "FMU_SUFFIX", "shown", "fmu_destination", "write_atomically"]
 
@@ -77,21 +77,8 @@ def fmu_destination(out: str | os.PathLike, name: str, *, overwrite: bool = Fals
 
 
 def write_atomically(built: Path, out: Path) -> None:
-    """Copy the file ``built`` to ``out`` through a temporary file beside it and ``os.replace``; on any error the
-    temporary file is removed and ``out`` is as it was (OSError is raised)."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent)
-    try:
-        with os.fdopen(fd, "wb") as dst, open(built, "rb") as src:
-            shutil.copyfileobj(src, dst)
-            dst.flush()
-            os.fsync(dst.fileno())
-        mask = os.umask(0)
-        os.umask(mask)
-        os.chmod(tmp, 0o666 & ~mask)                    # as an ordinary new file (mkstemp makes it 0600)
-        os.replace(tmp, out)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+    """Copy the file ``built`` to ``out`` through a temporary file beside it and ``os.replace``
+    (cosim.runtime.files.atomic_replace); on any error the temporary file is removed and ``out`` is as it was
+    (:class:`cosim.errors.OutputError`, naming ``out``, is raised)."""
+    with atomic_replace(out) as tmp:
+        shutil.copyfile(built, tmp)
