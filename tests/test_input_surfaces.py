@@ -82,7 +82,7 @@ def test_visibility_and_dust_mass_together_are_refused():
 
 
 def test_a_packaged_dust_window_and_visibility_stay_valid():
-    s = load_scenario(resolve_scenario_arg("dense_dust"))
+    s = load_scenario(resolve_scenario_arg("dense_dust"), ["field.draw=[]"])   # the file's values, nothing drawn
     assert s.atmosphere.dust_window_s == (40.0, 70.0) and s.atmosphere.visibility_m == 20.0
 
 

@@ -96,6 +96,8 @@ def export_scenario(s: Scenario, folder: Path, renderer: str = "mock") -> Path:
     d = s.model_dump(mode="json")
     d.update(feedback="perception", renderer=renderer)
     d["timing"]["schedule"] = "sequential"
+    # the master drives the vehicles: no Machine Sync pose of the world's own to gate the found cart against
+    d["perception"]["pose_gate_m"] = 0.0
     d["vehicles"]["tractor_cart"]["fmu"] = None
     d["controller"].update(fmu=None, model="section_fill", model_options={}, strategy="front_to_back",
                            strategy_options={})
