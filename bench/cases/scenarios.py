@@ -27,6 +27,7 @@ from pathlib import Path
 
 from harness import Context, case, rotating
 from harness.launched import launch_run
+from harness.report import put_results_section
 
 __all__ = ["RT_TARGET", "SECTION", "TARGETS", "put_section", "scenarios"]
 
@@ -127,14 +128,4 @@ def put_section(results_md: Path, tables: dict, duration: float, repeats: int) -
              + ", ".join(f"`{n}` <= {v:g}x" for n, v in TARGETS.items())
              + f"; every scenario >= {RT_TARGET:g}x real time (ring). CPU per frame is the steadier figure on a "
              "shared machine.", ""]
-    for title, rows in tables.items():
-        cols = list(next(iter(rows.values())))
-        lines += [f"**{title}**", "", "| | " + " | ".join(cols) + " |", "|---|" + "---:|" * len(cols)]
-        for name, row in rows.items():
-            lines.append(f"| {name} | " + " | ".join(_cell(v) for v in row.values()) + " |")
-        lines.append("")
-    text = results_md.read_text() if results_md.exists() else "# Current benchmark results\n"
-    head, _, rest = text.partition(SECTION)
-    nxt = rest.find("\n## ")
-    tail = rest[nxt:] if rest and nxt >= 0 else ""
-    results_md.write_text(head.rstrip("\n") + "\n\n" + "\n".join(lines) + tail)
+    put_results_section(results_md, SECTION, lines[2:], tables, _cell)

@@ -32,6 +32,7 @@ import time
 from pathlib import Path
 
 from harness import Context, case
+from harness.report import put_results_section
 
 __all__ = ["underload", "SECTION", "put_section"]
 
@@ -165,17 +166,6 @@ def underload(ctx: Context) -> dict:
 
 def put_section(results_md: Path, tables: dict) -> None:
     """Write ``tables`` as the "Under load" section of ``results_md``, replacing the one there."""
-    lines = [SECTION, "", "Written by `python bench/run.py underload --opt results=bench/results.md` "
-             f"({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).", ""]
-    for title, rows in tables.items():
-        cols = list(next(iter(rows.values())))
-        lines += [f"**{title}**", "", "| | " + " | ".join(cols) + " |", "|---|" + "---:|" * len(cols)]
-        for name, row in rows.items():
-            lines.append(f"| {name} | " + " | ".join(f"{v:.2f}" if isinstance(v, float) else str(v)
-                                                     for v in row.values()) + " |")
-        lines.append("")
-    text = results_md.read_text() if results_md.exists() else "# Current benchmark results\n"
-    head, _, rest = text.partition(SECTION)
-    nxt = rest.find("\n## ")
-    tail = rest[nxt:] if rest and nxt >= 0 else ""
-    results_md.write_text(head.rstrip("\n") + "\n\n" + "\n".join(lines) + tail)
+    put_results_section(results_md, SECTION, ["Written by `python bench/run.py underload --opt "
+                                              f"results=bench/results.md` ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).",
+                                              ""], tables)

@@ -10,7 +10,7 @@ from .machine import describe
 from .rounds import Stat
 from .session import Result, Session
 
-__all__ = ["case_markdown", "fmt", "markdown", "table", "to_json", "write_json"]
+__all__ = ["case_markdown", "fmt", "markdown", "put_results_section", "table", "to_json", "write_json"]
 
 
 def fmt(v) -> str:
@@ -126,3 +126,21 @@ def to_json(s: Session) -> dict:
 
 def write_json(s: Session, path: Path) -> None:
     path.write_text(json.dumps(to_json(s), indent=1, allow_nan=False) + "\n")
+
+
+def put_results_section(results_md: Path, heading: str, intro: list[str], tables: dict[str, dict],
+                        cell=lambda v: f"{v:.2f}" if isinstance(v, float) else str(v)) -> None:
+    """Write ``tables`` ({title: {row: {column: value}}}) under ``heading`` (a second-level heading) with the
+    ``intro`` lines as that section of ``results_md`` (bench/results.md), replacing the one there and keeping
+    the rest of the file; ``cell(value) -> str`` formats a value."""
+    lines = [heading, "", *intro]
+    for title, rows in tables.items():
+        cols = list(next(iter(rows.values())))
+        lines += [f"**{title}**", "", "| | " + " | ".join(cols) + " |", "|---|" + "---:|" * len(cols)]
+        lines += [f"| {name} | " + " | ".join(cell(v) for v in row.values()) + " |" for name, row in rows.items()]
+        lines.append("")
+    text = results_md.read_text() if results_md.exists() else "# Current benchmark results\n"
+    head, _, rest = text.partition(heading)
+    nxt = rest.find("\n## ")
+    tail = rest[nxt:] if rest and nxt >= 0 else ""
+    results_md.write_text(head.rstrip("\n") + "\n\n" + "\n".join(lines) + tail)
