@@ -44,12 +44,13 @@ LAUNCH_DURATION_S = 60.0
 
 def _master():
     """examples/simulink_master/master.py as a module (registered: its dataclasses look themselves up)."""
-    if "simulink_master" not in sys.modules:
-        spec = importlib.util.spec_from_file_location("simulink_master", EXAMPLE / "master.py")
+    name = "example_simulink_master_master"     # a name no other test registers ("simulink_master" may be the folder)
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, EXAMPLE / "master.py")
         module = importlib.util.module_from_spec(spec)
         sys.modules[spec.name] = module
         spec.loader.exec_module(module)
-    return sys.modules["simulink_master"]
+    return sys.modules[name]
 
 
 @pytest.fixture(scope="module")
