@@ -44,7 +44,8 @@ from renderer_proc.gl.surface import Surface
 from renderer_proc.gl.surface import mat_bytes as _mat
 from renderer_proc.projection import NEAR_M, far_plane_m, gl_projection, gl_view
 
-__all__ = ["GL_REQUIRE", "SHADER_DIR", "GLResources", "GLRenderer", "create_gl_context", "set_uniform", "upload_instances"]
+__all__ = ["GL_REQUIRE", "SHADER_DIR", "GLResources", "GLRenderer", "create_gl_context", "render_solids", "set_uniform",
+           "upload_instances"]
 
 #: directory of the GLSL sources
 SHADER_DIR = Path(__file__).parents[1] / "shaders"
@@ -81,6 +82,20 @@ def _fragment_source(rgb: bool, float_depth: bool, mishandled: bool) -> str:
     if float_depth:
         defines.append(f"#define OUT_ZF {loc}")
     return "\n".join([head, *defines, _source("codec.glsl"), body])
+
+
+def render_solids(units: dict, surface: Surface) -> None:
+    """Draw the instanced cylinders (stream, auger), the grain surface and the boxes, open then closed, in that
+    order (roughly front to back: early depth rejection skips hidden shading); ``units`` maps a unit name to its
+    (vertex array, instance buffer, instance count)."""
+    vao, _, n = units["cyl"]
+    if n:
+        vao.render(instances=n)
+    surface.render()
+    for name in ("box_open", "box"):
+        vao, _, n = units[name]
+        if n:
+            vao.render(instances=n)
 
 
 @dataclass
@@ -338,14 +353,7 @@ class GLRenderer(GLResources):
         # drawn roughly front to back (stream and auger, grain, boxes, the ground slab last when not cached) so
         # that early depth rejection skips the shading of hidden fragments; llvmpipe still rasterises and
         # depth-tests them (a hidden layer costs about 3/4 of a visible one), hence the skipped hidden faces
-        vao, _, n = self._unit["cyl"]
-        if n:
-            vao.render(instances=n)
-        self._surface.render()
-        for name in ("box_open", "box"):
-            vao, _, n = self._unit[name]
-            if n:
-                vao.render(instances=n)
+        render_solids(self._unit, self._surface)
         if key is None:
             self._draw_ground()
         self.ctx.disable(self._cull)

@@ -26,7 +26,7 @@ from cosim.world.labels import GRAIN, GRAIN_MAT, NONE, STEEL, mesh_label, mesh_m
 from cosim.world.lighting import sun_direction
 from cosim.world.meshes import box_instances, cylinder_instances, pack_instances, unit_cube, unit_cylinder
 from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, Scene
-from renderer_proc.gl.backend import SHADER_DIR, GLResources, upload_instances
+from renderer_proc.gl.backend import SHADER_DIR, GLResources, render_solids, upload_instances
 from renderer_proc.gl.surface import Surface, mat_bytes
 from renderer_proc.projection import NEAR_M, gl_projection, gl_view
 
@@ -198,14 +198,7 @@ class GLCameraRenderer(GLResources):
     def _draw_parts(self) -> None:
         """Draw every part into the framebuffer in use (solids culled, meshes two-sided)."""
         self.ctx.enable(self._cull)
-        vao, _, n = self._unit["cyl"]
-        if n:
-            vao.render(instances=n)
-        self._surface.render()
-        for name in ("box_open", "box"):
-            vao, _, n = self._unit[name]
-            if n:
-                vao.render(instances=n)
+        render_solids(self._unit, self._surface)
         self.ctx.disable(self._cull)
         for name in self._mesh_names:
             self._meshes[name][0].render(instances=1)
