@@ -19,7 +19,7 @@ from cosim.runtime.launcher import EXIT_RUN_ERROR, launch
 from cosim.runtime.liveness import LOOK_AFTER_S
 from cosim.scenario.loader import load_scenario, resolve_scenario_arg
 from cosim.testing import fakes
-from cosim.testing.load import promised
+from cosim.testing.load import loaded, promised
 
 #: the promise: from a fault to the launcher's return (named, every child ended, outputs written)
 BACK_WITHIN_S = 2.0
@@ -68,7 +68,10 @@ def test_the_launcher_is_back_within_2_s_of_any_fault_naming_the_child(role, kin
     error_type, words = KINDS[kind][1:]
     assert type(res.error) is error_type and words in str(res.error), res.error
     assert res.error.process == role and res.exit_code == EXIT_RUN_ERROR
-    assert took < promised(BACK_WITHIN_S), f"{role} {kind}: back {took:.2f} s after the fault"
+    # a runaway's budget is CPU time: on a busy machine it ends when the child's share of a core has added up to
+    # it, which the wall clock cannot tell from here; its return is timed on a quiet machine only
+    if kind != "runaway" or not loaded():
+        assert took < promised(BACK_WITHIN_S), f"{role} {kind}: back {took:.2f} s after the fault"
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summary["error"]["process"] == role and summary["status"] == "failed"
     assert FAULT_FRAME - 2 <= summary["frames"] <= FAULT_FRAME  # the pipelined schedule completes frames later
