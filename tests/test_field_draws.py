@@ -125,3 +125,26 @@ def test_a_profile_jitter_that_could_reorder_the_events_is_refused():
         """)
     with pytest.raises(ScenarioError, match=r"case.yaml:8:\d+: field.profile: .*10 s and 11 s are 1 s apart"):
         load_scenario_text(text, "case.yaml")
+
+
+@pytest.mark.parametrize("case, override, key", [
+    ("high_flow", "auger.flow_variation.sigma=0.05", "auger.flow_variation.sigma"),
+    ("high_flow", "machine_sync={initial_lat_error_m: 0.1}", "machine_sync.initial_lat_error_m"),
+    ("dusty", "atmosphere.visibility_m=30", "atmosphere.visibility_m"),
+    ("rough_terrain", "terrain.roughness_rms_m=0.01", "terrain.roughness_rms_m"),
+])
+def test_a_value_the_seed_draws_is_refused_when_set_with_its_range_named(case, override, key):
+    """A --set of a drawn key would be drawn over unseen: it is refused at the --set, naming the range to set."""
+    path = packaged_scenarios()[case]
+    with pytest.raises(ScenarioError) as e:
+        load_scenario(path, [override])
+    text = str(e.value)
+    assert text.startswith("<--set>:1:") and f"'{key}' is drawn per seed" in text and "field.draw" in text
+    assert "[" in text.split("its ranges:")[1]            # the ranges, to set instead
+
+
+def test_a_drawn_key_is_free_to_set_once_its_condition_is_off_and_a_jittered_one_always():
+    path = packaged_scenarios()["high_flow"]
+    s = load_scenario(path, ["field.draw=[profile]", "auger.flow_variation.sigma=0.05", "combine.speed_mps=1.5"])
+    assert s.auger.flow_variation.sigma == 0.05
+    assert s.field.draw == ("profile",)                   # the speed is jittered around the value set

@@ -38,6 +38,7 @@ from pydantic import ValidationError
 from cosim.errors import Problem, ScenarioError
 
 from .config import FORMAT_VERSION, Scenario
+from .config.fielddraw import replaced_keys
 from .config.limits import LIMIT_ERROR, unit_of
 from .extends import apply_extends
 from .files import (
@@ -257,6 +258,49 @@ def _overrides_given(overrides: Sequence[str], extra: Mapping) -> list[tuple[Pro
     return out
 
 
+def _given_value(raw: str):
+    try:
+        return yaml.safe_load(raw)
+    except yaml.YAMLError:
+        return None
+
+
+def _reaches(value, rest: tuple) -> bool:
+    """Whether the plain data ``value`` holds the key path ``rest``."""
+    for part in rest:
+        if not isinstance(value, dict) or part not in value:
+            return False
+        value = value[part]
+    return True
+
+
+def _show_ranges(ranges: dict) -> str:
+    return ", ".join(f"{k} [{v[0]:g}, {v[1]:g}]" if isinstance(v, (list, tuple)) else f"{k} {v}" for k, v in ranges.items())
+
+
+def _refuse_drawn(doc: _Doc, overrides: Sequence[str], extra: Mapping) -> None:
+    """Refuse an override of a key the scenario's seed draws (``field:``): the draw would replace it unseen. The
+    problem names the condition and its range, to set instead or to switch off."""
+    field = doc.data.get("field") if isinstance(doc.data, dict) else None
+    drawn = replaced_keys(field) if isinstance(field, dict) else {}
+    if not drawn:
+        return
+    given = [(loc, _given_value(text.partition("=")[2]), mark) for (mark, loc, _), text
+             in zip(_overrides_given(overrides, {}), overrides)]
+    given += [(tuple(str(k).split(".")), v, Problem(OPTIONS_FILE, 0, 0, "", "")) for k, v in extra.items()
+              if v is not None]
+    for loc, value, mark in given:
+        for key, (condition, ranges) in drawn.items():
+            kloc = tuple(key.split("."))
+            if loc[: len(kloc)] == kloc or (kloc[: len(loc)] == loc and _reaches(value, kloc[len(loc):])):
+                doc.problem(mark, loc,
+                            f"'{key}' is drawn per seed by this scenario's field (field.draw has '{condition}'; "
+                            f"its ranges: {_show_ranges(ranges)}), so a value set here would be drawn over: set "
+                            f"its range (e.g. --set field.{condition}.{next(iter(ranges))}=[a, b]) or take "
+                            f"'{condition}' out of field.draw")
+                break
+
+
 def load_scenario_text(
     text: str,
     filename: str = "<string>",
@@ -324,6 +368,7 @@ def _load(text: str, filename: str, overrides: Sequence[str], extra: Mapping, ba
     for i, text_i in enumerate(overrides, start=1):
         apply_set(doc, text_i, i)
     apply_extra(doc, extra)
+    _refuse_drawn(doc, overrides, extra)
     fill_partial(doc)
     _resolve_paths(doc, folders, base_dir)
     _set_plugin_dir(doc, folders, base_dir)

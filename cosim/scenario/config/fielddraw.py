@@ -19,7 +19,7 @@ from pydantic import BaseModel
 
 from .draws import CONDITIONS, FieldDraws
 
-__all__ = ["OWNED", "draw_field", "condition_rng", "realise", "profile_problem"]
+__all__ = ["OWNED", "draw_field", "condition_rng", "realise", "profile_problem", "replaced_keys"]
 
 #: the scenario keys each condition's draw replaces (dotted paths)
 OWNED: dict[str, tuple[str, ...]] = {
@@ -32,6 +32,27 @@ OWNED: dict[str, tuple[str, ...]] = {
 }
 #: keys whose values are tuples (the validators refuse lists where a draw writes them)
 _TUPLES = {"combine.profile", "atmosphere.dust_window_s"}
+
+
+def replaced_keys(field: Any) -> dict[str, tuple[str, dict]]:
+    """The keys a scenario's ``field`` block (its mapping, as written) replaces with a drawn value, dotted key ->
+    (its condition, that condition's ranges as validated). A profile's draw jitters the values written (every point's speed, curvature and time, or the
+    speed), so a profile key is not replaced; a dust key is replaced only where its range is given. An invalid
+    block replaces nothing (validation reports it)."""
+    try:
+        spec = FieldDraws.model_validate(_plain(field), strict=False)
+    except (ValueError, TypeError):
+        return {}
+    out: dict[str, tuple[str, dict]] = {}
+    for condition in spec.draw:
+        keys = OWNED[condition]
+        if condition == "profile":
+            keys = ()
+        elif condition == "dust":
+            keys = tuple(k for k, given in zip(keys, (spec.dust.visibility_m, spec.dust.start_s)) if given is not None)
+        ranges = {k: v for k, v in getattr(spec, condition).model_dump().items() if v is not None}
+        out.update({k: (condition, ranges) for k in keys})
+    return out
 
 
 def condition_rng(seed: int, condition: str) -> np.random.Generator:
