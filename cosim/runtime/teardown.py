@@ -39,10 +39,11 @@ EXIT_OK, EXIT_RUN_ERROR, EXIT_INTERRUPTED = 0, 1, 130
 JOIN_TIMEOUT_S = 10.0
 #: how long a terminated child gets before SIGKILL, s
 TERMINATE_GRACE_S = 0.5
-#: how long an observer may take to end after the SIGTERM that tells it a completed run has ended (the viewer
-#: shows the last frame to a watching page, at most cosim.viewer.server.LINGER_S, then drains), s; after a
-#: failed run, TERMINATE_GRACE_S (the launcher is back within 2 s of a fault)
-OBSERVER_GRACE_S = 1.5
+#: how long an observer may take to end after the SIGTERM that tells it a completed run has ended, s (the viewer
+#: shows the last frame to a page that is watching, cosim.viewer.server.LINGER_S or longer for a page that polls
+#: late, at most LINGER_MAX_S = 8 s, then drains; an observer that is done ends at once and a viewer nobody
+#: watches does not linger); after a failed run, TERMINATE_GRACE_S (the launcher is back within 2 s of a fault)
+OBSERVER_GRACE_S = 10.0
 
 
 def at_fault(run: RunState, error: RunError) -> RunError:

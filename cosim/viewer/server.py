@@ -23,6 +23,7 @@ on the run's last frame; the page then keeps it on screen when the viewer is gon
 """
 from __future__ import annotations
 
+import collections
 import contextlib
 import json
 import logging
@@ -46,7 +47,7 @@ from .snapshot import fullness
 from .viewinfo import ViewInfo, default_fill
 
 __all__ = ["DashboardServer", "state_json", "fill_band_of", "observe", "serve", "ServerStop", "DEFAULT_PORT",
-           "DEFAULT_HOST", "NICE", "DRAIN_S", "LINGER_S", "WATCHED_S", "RUN_ENDED"]
+           "DEFAULT_HOST", "NICE", "DRAIN_S", "LINGER_S", "WATCHED_S", "LINGER_MAX_S", "RUN_ENDED"]
 
 log = logging.getLogger("cosim.viewer")
 
@@ -57,14 +58,24 @@ NICE = 10
 #: how often the server checks whether the run has ended (to unmap promptly), s
 HOUSEKEEPING_S = 1.0
 #: longest wait, when stopping, for the responses being sent to finish, s (the launcher allows its observers
-#: cosim.runtime.teardown.OBSERVER_GRACE_S = 1.5 s after SIGTERM at the end of a completed run, 0.5 s after a
+#: cosim.runtime.teardown.OBSERVER_GRACE_S = 10 s after SIGTERM at the end of a completed run, 0.5 s after a
 #: failed one, before it kills them)
 DRAIN_S = 0.3
-#: longest time the viewer keeps answering after the run ended, for a watching page to fetch its last frame, s (a
-#: page polls the state every cosim.viewer.page.POLL_MS and then fetches the image panels of a new frame)
+#: time the viewer keeps answering after the run ended, for a watching page to fetch its last frame, s (a page
+#: polls the state every cosim.viewer.page.POLL_MS and then fetches the image panels of a new frame). It grows
+#: with the gaps between the page's polls as the viewer saw them (a starved page on a busy machine polls late),
+#: to at most LINGER_MAX_S; a page that has fetched the end ends it at once
 LINGER_S = 1.0
-#: a page counts as watching if it asked for the state this recently when the run ended, s
+#: a page counts as watching if it asked for the state this recently when the run ended, s (also scaled by the
+#: page's own gaps, at most LINGER_MAX_S)
 WATCHED_S = 1.0
+#: the longest linger and watching window whatever the page's gaps, s (cosim.runtime.teardown.OBSERVER_GRACE_S
+#: leaves the viewer this long, and its drain, after a completed run)
+LINGER_MAX_S = 8.0
+#: the linger and the watching window are this many of the page's longest recent gap between polls
+GAPS = 3.0
+#: how many of the latest gaps between the page's polls are kept
+_RECENT_GAPS = 8
 #: the status of a live source whose run has ended (cosim.viewer.live)
 RUN_ENDED = "run ended"
 
@@ -207,6 +218,7 @@ class DashboardServer(ThreadingHTTPServer):
         #: when a page last asked for the state (monotonic s), and what it has had of the run's end: the final
         #: state, the image panels fetched after it (guarded by _end_seen)
         self._t_state = -math.inf
+        self._gaps: collections.deque[float] = collections.deque(maxlen=_RECENT_GAPS)
         self._end_state_sent = False
         self._end_panels: set[str] = set()
         self._end_seen = threading.Condition()
@@ -231,7 +243,10 @@ class DashboardServer(ThreadingHTTPServer):
                 self._last_frame = max(self._last_frame, doc["frame"])
             doc["dropped_total"] = self._dropped
         with self._end_seen:
-            self._t_state = time.monotonic()
+            now = time.monotonic()
+            if math.isfinite(self._t_state):
+                self._gaps.append(now - self._t_state)
+            self._t_state = now
             if doc["status"] == RUN_ENDED:
                 self._end_state_sent = True
                 self._end_seen.notify_all()
@@ -253,8 +268,9 @@ class DashboardServer(ThreadingHTTPServer):
             return
         finish()
         with self._end_seen:
-            if time.monotonic() - self._t_state > WATCHED_S:
+            if time.monotonic() - self._t_state > self._scaled(WATCHED_S):
                 return  # nobody is watching
+            linger_s = self._scaled(linger_s)
         shown = {pid for pid, info in panel_info(self.source.snapshot()).items()
                  if pid in IMAGE_PANELS and info["available"] and info["frame"] is not None}
         server = threading.Thread(target=self.serve_forever, kwargs={"poll_interval": 0.05}, name="viewer-end",
@@ -264,6 +280,11 @@ class DashboardServer(ThreadingHTTPServer):
             self._end_seen.wait_for(lambda: self._end_state_sent and shown <= self._end_panels, timeout=linger_s)
         self.shutdown()
         server.join()
+
+    def _scaled(self, base_s: float) -> float:
+        """``base_s``, or GAPS times the longest of the page's recent gaps between polls if longer, at most
+        LINGER_MAX_S (call with ``_end_seen`` held)."""
+        return min(LINGER_MAX_S, max(base_s, GAPS * max(self._gaps, default=0.0)))
 
     @contextlib.contextmanager
     def answering(self):
