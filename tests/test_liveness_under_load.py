@@ -57,6 +57,27 @@ def test_threads_progress_sees_cpu_time_and_leaves_out_the_named_thread():
     assert threads_progress(2**22 + 12345)[0] == -1  # no such process
 
 
+def test_a_heartbeat_thread_starved_while_it_holds_the_gil_is_starvation_not_a_hang():
+    """Preempted mid-beat (holding the GIL) on a busy machine, the heartbeat thread is runnable and gains no CPU
+    time, while the working threads sleep on the GIL: the member is waited for. In a GIL deadlock the heartbeat
+    thread is woken by the GIL's timed wait and gains CPU time between samples: no evidence, named after IDLE_S."""
+    ms = 1_000_000
+    starved = liveness.Progress((2, 5, 0), since_ns=0)
+    starved.sample(0, cpu=100 * ms, busy=False, beat=(7 * ms, True))             # the count starts
+    for t in range(1, 31):                                                        # 3 s of samples, 0.1 s apart
+        starved.sample(t * 100 * ms, cpu=100 * ms, busy=False, beat=(7 * ms, True))
+    assert starved.moved_ns == 3000 * ms                                          # waited for at every sample
+    deadlock = liveness.Progress((2, 5, 0), since_ns=0)
+    deadlock.sample(0, cpu=100 * ms, busy=False, beat=(7 * ms, True))
+    for t in range(1, 31):                           # woken every 5 ms: a few us of CPU time between samples
+        deadlock.sample(t * 100 * ms, cpu=100 * ms, busy=False, beat=(7 * ms + t * 40_000, t % 2 == 0))
+    assert deadlock.moved_ns == 0 and (3000 * ms - deadlock.moved_ns) / 1e9 > IDLE_S
+    sleeping = liveness.Progress((2, 5, 0), since_ns=0)                           # the beat thread asleep
+    for t in range(0, 31):
+        sleeping.sample(t * 100 * ms, cpu=100 * ms, busy=False, beat=(7 * ms, False))
+    assert sleeping.moved_ns == 0
+
+
 def test_evidence_tells_a_sleeping_process_from_a_spinning_one():
     import subprocess
     import sys

@@ -9,7 +9,9 @@ no progress is at fault. The evidence is the kernel's:
 * The working threads' CPU time (every thread of the process but the heartbeat's, from
   ``/proc/<pid>/task/<tid>/schedstat``, nanoseconds) and their states (``R`` runnable, ``D`` in I/O) say which: a
   process whose working threads gain CPU time, or wait for a core, or wait for the disk, makes progress, however
-  slowly; one whose working threads all sleep without CPU time is blocked.
+  slowly; so does one whose heartbeat thread waits for a core and has had none since the last look (preempted
+  while it holds the GIL, it keeps the working threads asleep on the GIL); one whose working threads all sleep
+  without CPU time is blocked.
 
 :class:`Watch` (run by the supervisor between wait slices) names a ring member as hung when:
 
@@ -40,7 +42,8 @@ from shm_schema import Phase, Segment
 from shm_schema.layout import SLOT_WORD
 
 __all__ = ["BEAT_S", "STALL_S", "CONFIRM_S", "IDLE_S", "LOOK_AFTER_S", "STARTUP_REPORT_S", "Heartbeat", "Watch",
-           "Progress", "Evidence", "process_state", "cpu_ticks", "is_stopped", "threads_progress", "end_process",
+           "Progress", "Evidence", "process_state", "cpu_ticks", "is_stopped", "threads_progress", "thread_progress",
+           "end_process",
            "stop_processes", "child_failure"]
 
 #: period of a child's liveness beat, s
@@ -165,6 +168,21 @@ def threads_progress(pid: int, skip_tid: int = 0) -> tuple[int, bool]:
     return cpu, busy
 
 
+def thread_progress(pid: int, tid: int) -> tuple[int, bool]:
+    """(CPU time of thread ``tid`` of ``pid``, ns; whether it is runnable, ``R``); (-1, False) when it cannot be
+    read (no such thread)."""
+    base = f"/proc/{pid}/task/{tid}/"
+    try:
+        fields = _stat_fields(_read(base + "stat"))
+        try:
+            cpu = int(_read(base + "schedstat").split()[0])
+        except (OSError, IndexError, ValueError):
+            cpu = int((int(fields[11]) + int(fields[12])) * _TICK_NS)
+        return cpu, fields[0] == b"R"
+    except (OSError, IndexError, ValueError):
+        return -1, False
+
+
 @dataclass
 class Progress:
     """What the watch knows of one member since it entered its current (phase, frame, step): when, and the CPU
@@ -178,15 +196,28 @@ class Progress:
     sampled_ns: int = 0
     stopped_ns: int = 0
     reported_ns: int = 0
+    beat_cpu_ns: int = -1
 
-    def sample(self, now: int, cpu: int, busy: bool) -> None:
+    def sample(self, now: int, cpu: int, busy: bool, beat: tuple[int, bool] = (-1, False)) -> None:
         """Take one sample: progress when the working threads gained CPU time (more than _EPS_NS since the last
-        progress) or one of them wants a core or waits for the disk; the first sample starts the count."""
+        progress) or one of them wants a core or waits for the disk, or the heartbeat thread waits for a core
+        without having had one since the last sample (``beat``: its CPU time, ns, and whether it is runnable; see
+        :meth:`beat_starved`); the first sample starts the count."""
         if self.cpu0_ns < 0:
             self.cpu0_ns = cpu
-        if self.cpu_ns < 0 or busy or cpu - self.cpu_ns > _EPS_NS:
+        starved = self.beat_starved(*beat)
+        if self.cpu_ns < 0 or busy or starved or cpu - self.cpu_ns > _EPS_NS:
             self.cpu_ns, self.moved_ns = cpu, now
         self.sampled_ns = now
+
+    def beat_starved(self, cpu: int, runnable: bool) -> bool:
+        """Whether the heartbeat thread waits for a core and has had none since the last sample. Starved while it
+        holds the GIL (a busy machine preempted it mid-beat), it keeps the working threads asleep waiting for the
+        GIL, with no CPU time and not runnable: the process is starved, not hung. In a GIL deadlock it is woken
+        every few milliseconds by the GIL's own timed wait, so it gains CPU time between samples and is no
+        evidence; its CPU time never counts as progress."""
+        last, self.beat_cpu_ns = self.beat_cpu_ns, cpu
+        return runnable and last >= 0 and cpu == last
 
     @property
     def cpu_s(self) -> float:
@@ -259,9 +290,10 @@ class Watch:
             if phase not in _WORKING or (now - p.since_ns) / _NS < LOOK_AFTER_S:
                 continue
             if (now - p.sampled_ns) / _NS >= SAMPLE_S:
-                cpu, busy = threads_progress(pid, int(w[_TID]))
+                tid = int(w[_TID])
+                cpu, busy = threads_progress(pid, tid)
                 if cpu >= 0:
-                    p.sample(now, cpu, busy)
+                    p.sample(now, cpu, busy, thread_progress(pid, tid) if tid else (-1, False))
             self._judge(name, pid, w, p, now, phase)
 
     def _judge(self, name: str, pid: int, w, p: Progress, now: int, phase: int) -> None:
