@@ -359,3 +359,23 @@ def test_ctrl_c_during_a_sweep_stops_it_in_order_without_tracebacks(tmp_path):
     assert summaries and all(s["status"] == "interrupted" for s in summaries)  # one may not have begun its frames
     assert any(s["frames"] > 0 for s in summaries)
     _assert_nothing_left(out)
+
+
+def _patience():
+    import dask
+    return (dask.config.get("distributed.comm.timeouts.tcp"), dask.config.get("distributed.scheduler.worker-ttl"))
+
+
+def test_the_embedded_cluster_waits_for_starved_processes_instead_of_cutting_them_off():
+    """On a busy machine the embedded cluster's own processes go silent for minutes: the client, the scheduler
+    and the workers all carry the patient timeouts (Dask's 30 s TCP timeout cancelled every run of a sweep at
+    nice 19 beside ten busy processes), and they end with the sweep (the client's setting is not left behind)."""
+    from cosim.studies.sweep import PATIENT_CLUSTER, open_client
+
+    want = (PATIENT_CLUSTER["distributed.comm.timeouts.tcp"], PATIENT_CLUSTER["distributed.scheduler.worker-ttl"])
+    before = _patience()
+    with open_client(None, 1, gl=False) as client:
+        assert _patience() == want                                            # the client
+        assert client.run_on_scheduler(_patience) == want                     # the scheduler
+        assert list(client.run(_patience).values()) == [want]                 # the worker
+    assert _patience() == before

@@ -44,6 +44,13 @@ STOP_WAIT_S = 10.0
 QUIET_CLUSTER = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "1s",
                  "distributed.admin.system-monitor.interval": "2s",
                  "distributed.worker.memory.monitor-interval": "1s"}
+#: the embedded cluster's patience: its scheduler, workers and client are this machine's own processes, so a
+#: silent connection is a starved process on a busy machine (a laptop with other work, a sweep run at nice 19),
+#: not a lost host. Dask's defaults (30 s for a TCP comm, 5 min of worker heartbeats) cut the client off the
+#: scheduler at a load of 40 on 2 cores and cancelled every run. A worker process that dies is still seen at once
+#: by its nanny; a run that fails is retried (``retries``)
+PATIENT_CLUSTER = {"distributed.comm.timeouts.tcp": "900s", "distributed.comm.timeouts.connect": "300s",
+                   "distributed.scheduler.worker-ttl": "1h"}
 
 
 @dataclass(frozen=True)
@@ -100,13 +107,14 @@ def open_client(scheduler: str | None, jobs: int, gl: bool) -> Iterator:
     # no dashboard; Dask's HTTP routes (health, metrics) on a free loopback port, not 0.0.0.0:8787. The cluster's
     # threads are born with SIGINT blocked, and so are the worker processes they start (restarts included) and
     # the runs' children: a Ctrl-C on the terminal reaches this process alone, which stops the sweep
-    with dask.config.set(QUIET_CLUSTER), sigint_blocked_in_new_threads():
-        cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address=LOOPBACK_ANY_PORT, scheduler_kwargs={"dashboard": False},
-                               worker_dashboard_address=LOOPBACK_ANY_PORT, resources=resources,
-                               silence_logs=logging.ERROR)
-    with cluster, Client(cluster) as client:
-        yield client
+    with dask.config.set(PATIENT_CLUSTER):      # for the client too, as long as it is used
+        with dask.config.set(QUIET_CLUSTER), sigint_blocked_in_new_threads():
+            cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                   dashboard_address=LOOPBACK_ANY_PORT, scheduler_kwargs={"dashboard": False},
+                                   worker_dashboard_address=LOOPBACK_ANY_PORT, resources=resources,
+                                   silence_logs=logging.ERROR)
+        with cluster, Client(cluster) as client:
+            yield client
 
 
 def _check_egl(client, runs: list[RunSpec]) -> None:
