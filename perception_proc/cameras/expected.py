@@ -2,8 +2,8 @@
 cart, so that perception gates points by it and withholds a height map the sensor cannot support.
 
 * per point (perception drops a point whose 1-sigma exceeds :data:`GATE_SIGMA_M`): the stereo law
-  sigma_Z = Z^2 sigma_d / (f B) (``disparity_sigma_px``, the profile's stated figure), the depth camera's axial
-  model at normal incidence;
+  sigma_Z = Z^2 sigma_d / (f B) (``disparity_sigma_px``, the profile's stated figure), the depth camera's noise
+  model at normal incidence (perception_proc.cameras.depth_models);
 * per cell: a cell of ``cell_m`` seen at planar depth Z spans ``cell_m f / Z`` pixels each way; its height rests
   on n independent measurements, the cell's pixels divided into squares of the points' stride or, for stereo,
   of the matcher's block when larger (neighbouring windows share their pixels, so their errors are not
@@ -20,6 +20,7 @@ import math
 import numpy as np
 
 from cosim.scenario.config.cameras import Camera, DepthCamera, StereoCamera
+from perception_proc.cameras.depth_models import normal_sigma_m
 
 __all__ = ["FIT_SIGMAS", "GATE_SIGMA_M", "point_sigma_m", "cell_sigma_m", "cart_depth_m"]
 
@@ -38,7 +39,7 @@ def point_sigma_m(spec: Camera, focal_px: float, z_m):
     if isinstance(spec, StereoCamera):
         return z * z * spec.disparity_sigma_px / (focal_px * spec.baseline_m)
     if isinstance(spec, DepthCamera):
-        return spec.axial_a_m + spec.axial_b_per_m * (z - spec.axial_z0_m) ** 2
+        return normal_sigma_m(spec, z)
     return np.zeros_like(z)
 
 

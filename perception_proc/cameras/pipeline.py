@@ -8,7 +8,7 @@ its stride cell). Per frame:
    read of the shared images;
 2. the camera effects' ``images`` stage (``perception_proc.cameras.effects``: the seam where field conditions
    such as dust change what the sensor receives; nothing by default);
-3. ``measure``: the sensor's model: the depth camera's noise model (``perception_proc.cameras.tof``), the stereo
+3. ``measure``: the sensor's model: the depth camera's noise model (``perception_proc.cameras.depth_models``), the stereo
    matcher (``perception_proc.cameras.stereo``), nothing for an RGB camera;
 4. the effects' ``depth`` stage on the measured depth;
 5. ``points``: the strided pixels back-projected (Eq 5), mapped into the level frame, with their ranges and
@@ -30,11 +30,12 @@ from cosim.world.sensors import (
     level_from_sensor,
     points_stride,
 )
+from perception_proc.cameras.depth_models import depth_model, normal_sigma_m
 from perception_proc.cameras.effects import camera_effects
 from perception_proc.cameras.expected import GATE_SIGMA_M, point_sigma_m
 from perception_proc.cameras.images import SIGMA_DISTANCE_M, CameraImages
 from perception_proc.cameras.stereo import make_matcher, stereo_depth
-from perception_proc.cameras.tof import frame_generator, tof_depth
+from perception_proc.cameras.tof import frame_generator
 from perception_proc.estimates.rim import FOV_EDGE, border_beams
 
 __all__ = ["CameraImages", "CameraPipeline", "SIGMA_DISTANCE_M", "STEREO_DISPARITY_SIGMA_PX"]
@@ -100,11 +101,11 @@ class CameraPipeline:
 
     @property
     def typical_sigma_m(self) -> float:
-        """The depth 1-sigma at :data:`SIGMA_DISTANCE_M`, m: the depth camera's axial model at normal incidence,
+        """The depth 1-sigma at :data:`SIGMA_DISTANCE_M`, m: the depth camera's model at normal incidence,
         or the stereo law Z^2 dd / (f B) with dd = :data:`STEREO_DISPARITY_SIGMA_PX`; 0 for an RGB camera."""
         z = SIGMA_DISTANCE_M
         if isinstance(self.spec, DepthCamera):
-            return self.spec.axial_a_m + self.spec.axial_b_per_m * (z - self.spec.axial_z0_m) ** 2
+            return float(normal_sigma_m(self.spec, z))
         if isinstance(self.spec, StereoCamera):
             return z * z * STEREO_DISPARITY_SIGMA_PX / (self.pin.f * self.spec.baseline_m)
         return 0.0
@@ -120,7 +121,7 @@ class CameraPipeline:
         sc = self.scenario
         if isinstance(self.spec, DepthCamera):
             gen = frame_generator(sc.seed, images.frame, self.index) if self.spec.noise else None
-            z = tof_depth(images.depth, self.pin, self.spec, gen)
+            z = depth_model(self.spec)(images.depth, self.pin, self.spec, gen)
         elif isinstance(self.spec, StereoCamera):
             z = stereo_depth(self._matcher, self.spec, self.pin.f, images.rgb, images.right)
         else:

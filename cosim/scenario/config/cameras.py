@@ -4,9 +4,10 @@ and renderer_proc (docs/cameras.md).
 ``sensors`` maps a name to a sensor whose ``kind`` picks its record:
 
 * ``lidar`` (:class:`LidarSensor`): the LiDAR of ``sensor:`` (every key of it), at most one per scenario;
-* ``depth_camera`` (:class:`DepthCamera`): exact rendered depth with a published time-of-flight / Kinect-class
-  noise model (axial and lateral noise growing with range and incidence, flying pixels at depth edges,
-  invalid pixels beyond range or at grazing incidence), seeded;
+* ``depth_camera`` (:class:`DepthCamera`): exact rendered depth with a published noise model picked by ``model``:
+  ``structured_light`` (Nguyen et al. 2012, fitted to the structured-light Kinect: axial and lateral noise
+  growing with range and incidence) or ``time_of_flight`` (noise growing as the returned amplitude falls,
+  amplitude-weighted mixed pixels at depth edges); invalid pixels beyond range or at grazing incidence; seeded;
 * ``stereo_camera`` (:class:`StereoCamera`): left and right textured images ``baseline_m`` apart, disparity
   from OpenCV's StereoSGBM (or StereoBM), depth = f B / d; its error is the matcher's;
 * ``rgb_camera`` (:class:`RgbCamera`): a textured, lit colour image (no depth).
@@ -24,11 +25,11 @@ from typing import Annotated, Literal, Union
 
 from pydantic import AfterValidator, Field, model_validator
 
-from .base import Model, Mount, NonNegFloat, PosFloat
+from .base import Fraction, Model, Mount, NonNegFloat, PosFloat
 from .profiles import load_profile
 from .sensing import Sensor
 
-__all__ = ["SENSOR_NAME", "KINDS", "STEREO_BASELINE_M", "MAX_SENSORS", "DEPTH_KINDS", "Camera", "LidarSensor", "DepthCamera", "StereoCamera",
+__all__ = ["SENSOR_NAME", "KINDS", "STEREO_BASELINE_M", "MAX_SENSORS", "DEPTH_KINDS", "DEPTH_MODELS", "Camera", "LidarSensor", "DepthCamera", "StereoCamera",
            "RgbCamera", "SensorSpec", "SensorMap", "Sensors"]
 
 #: what a sensor name may look like (it names the sensor's shared-memory blocks, ``cam_<name>_...``)
@@ -37,6 +38,8 @@ SENSOR_NAME = r"^[a-z][a-z0-9_]{0,23}$"
 KINDS = ("lidar", "depth_camera", "stereo_camera", "rgb_camera")
 #: the kinds that give depth (points for the built-in perception)
 DEPTH_KINDS = ("lidar", "depth_camera", "stereo_camera")
+#: the depth camera's noise models (perception_proc.cameras.depth_models)
+DEPTH_MODELS = ("structured_light", "time_of_flight")
 #: OpenCV's disparity search must be a multiple of this, px
 DISPARITY_STEP_PX = 16
 #: StereoBM's smallest block, px
@@ -76,7 +79,8 @@ class Camera(Model):
     image, at least 1)."""
 
     profile: str | None = None
-    """A packaged device profile (oak_d, multisense_s21b, tof_kinect_class) that fills every key not set here."""
+    """A packaged device profile (cosim/scenario/profiles: oak_d, multisense_s21b, kinect_v1_structured_light,
+    azure_kinect_nfov, ...) that fills every key not set here; a renamed profile's old name resolves to its new one."""
     mount: Mount
     """Where the camera is: parent body, position and roll, pitch, yaw; the optical axis is the mount's x axis."""
     width_px: int = Field(default=640, ge=16, le=4096)
@@ -108,7 +112,7 @@ class Camera(Model):
         kind = data.get("kind")
         if prof.kind != kind:
             raise ValueError(f"profile {prof.name!r} describes a {prof.kind}, this sensor is a {kind}")
-        return _tuples({**prof.plain(), **data})
+        return _tuples({**prof.plain(), **data, "profile": prof.name})
 
     @model_validator(mode="after")
     def _limits(self) -> "Camera":
@@ -123,37 +127,63 @@ class Camera(Model):
 
 
 class DepthCamera(Camera):
-    """A time-of-flight style depth camera: the exact rendered depth with the noise model of Nguyen, Izadi and
-    Lovell (2012) for Kinect-class sensors (perception_proc.cameras.tof; defaults are the paper's coefficients).
+    """A depth camera: the exact rendered depth with the noise model ``model`` picks
+    (perception_proc.cameras.depth_models; docs/cameras.md gives each model's source and where it stops holding).
 
-    Axial 1-sigma ``axial_a_m + axial_b_per_m (z - axial_z0_m)^2`` m at planar depth z (m), plus
-    ``axial_grazing_m / sqrt(z) theta^2 / (pi/2 - theta)^2`` beyond ``grazing_from_deg`` of incidence theta;
-    lateral 1-sigma ``lateral_px + lateral_grazing_px theta / (pi/2 - theta)`` px (the pixel reads the depth of
-    a point displaced by it). Pixels at incidence beyond ``max_incidence_deg`` or outside the range are
-    invalid; a pixel whose 3 x 3 neighbourhood spans more than ``flying_edge_m`` of depth is a mixed ("flying")
-    pixel between its nearest and farthest neighbour. ``noise: false`` reports the exact depth (tests). ``rgb``:
-    also render the colour image (an RGB-D camera)."""
+    ``structured_light``: the model of Nguyen, Izadi and Lovell (2012), fitted to the structured-light Kinect
+    (defaults are the paper's coefficients). Axial 1-sigma ``axial_a_m + axial_b_per_m (z - axial_z0_m)^2`` m at
+    planar depth z (m), plus ``axial_grazing_m / sqrt(z) theta^2 / (pi/2 - theta)^2`` beyond
+    ``grazing_from_deg`` of incidence theta; lateral 1-sigma ``lateral_px + lateral_grazing_px theta / (pi/2 -
+    theta)`` px (the pixel reads the depth of a point displaced by it); a pixel whose 3 x 3 neighbourhood spans
+    more than ``flying_edge_m`` of depth is a mixed ("flying") pixel uniformly between its nearest and farthest
+    neighbour.
+
+    ``time_of_flight`` (continuous-wave time of flight, Lange and Seitz 2001): the returned amplitude of a
+    surface of ``albedo`` at range r and incidence theta is A = albedo cos(theta) / r^2; the axial 1-sigma is
+    ``tof_ref_sigma_m`` sqrt(s q + (1 - s) q^2), q = A_ref / A, A_ref that of a ``tof_ref_albedo`` surface at
+    ``tof_ref_range_m`` facing the camera, s = ``tof_signal_share`` (the share of the reference variance from
+    the signal's own shot noise; the rest is the background's); a pixel straddling a depth edge (as above)
+    reports the amplitude-weighted mixture of its nearest and farthest neighbour, a uniform share of its
+    footprint on each.
+
+    Both: pixels at incidence beyond ``max_incidence_deg`` or outside the range are invalid. ``noise: false``
+    reports the exact depth (tests). ``rgb``: also render the colour image (an RGB-D camera)."""
 
     kind: Literal["depth_camera"]
-    """depth_camera: exact rendered depth with the time-of-flight (Kinect-class) noise model."""
+    """depth_camera: exact rendered depth with the noise model of ``model``."""
+    model: Literal["structured_light", "time_of_flight"] = "structured_light"
+    """The noise model: structured_light (Nguyen et al. 2012, the structured-light Kinect) or time_of_flight
+    (amplitude-dependent noise and mixed pixels of a continuous-wave time-of-flight camera)."""
     rgb: bool = False
     """Also render the colour image (an RGB-D camera)."""
     noise: bool = True
     """Apply the noise model (false: the exact depth within the range limits)."""
     axial_a_m: NonNegFloat = 0.0012
-    """Axial 1-sigma at z0, m (Nguyen et al. 2012: 0.0012)."""
+    """structured_light: axial 1-sigma at z0, m (Nguyen et al. 2012: 0.0012)."""
     axial_b_per_m: NonNegFloat = 0.0019
-    """Axial 1-sigma's growth with (z - z0)^2, m per m^2 (Nguyen et al. 2012: 0.0019)."""
+    """structured_light: axial 1-sigma's growth with (z - z0)^2, m per m^2 (Nguyen et al. 2012: 0.0019)."""
     axial_z0_m: NonNegFloat = 0.4
-    """Depth of the axial model's minimum, m (Nguyen et al. 2012: 0.4)."""
+    """structured_light: depth of the axial model's minimum, m (Nguyen et al. 2012: 0.4)."""
     axial_grazing_m: NonNegFloat = 0.0001
-    """Axial grazing term's coefficient, m (Nguyen et al. 2012: 0.0001 / sqrt(z) theta^2 / (pi/2 - theta)^2)."""
+    """structured_light: axial grazing term's coefficient, m (Nguyen et al. 2012: 0.0001 / sqrt(z) theta^2 /
+    (pi/2 - theta)^2)."""
     grazing_from_deg: float = Field(default=60.0, ge=0.0, lt=90.0, allow_inf_nan=False)
-    """Incidence beyond which the axial grazing term applies, deg (Nguyen et al. 2012: 60)."""
+    """structured_light: incidence beyond which the axial grazing term applies, deg (Nguyen et al. 2012: 60)."""
     lateral_px: NonNegFloat = 0.8
-    """Lateral 1-sigma at normal incidence, px (Nguyen et al. 2012: 0.8)."""
+    """structured_light: lateral 1-sigma at normal incidence, px (Nguyen et al. 2012: 0.8)."""
     lateral_grazing_px: NonNegFloat = 0.035
-    """Lateral growth with theta / (pi/2 - theta), px (Nguyen et al. 2012: 0.035)."""
+    """structured_light: lateral growth with theta / (pi/2 - theta), px (Nguyen et al. 2012: 0.035)."""
+    albedo: float = Field(default=0.3, gt=0.0, le=1.0, allow_inf_nan=False)
+    """time_of_flight: the scene's diffuse reflectance at the camera's near-infrared wavelength (0-1]."""
+    tof_ref_sigma_m: float = Field(default=0.017, gt=0.0, le=1.0, allow_inf_nan=False)
+    """time_of_flight: axial 1-sigma of the reference return, m (Azure Kinect datasheet: at most 17 mm)."""
+    tof_ref_range_m: float = Field(default=3.86, gt=0.0, le=100.0, allow_inf_nan=False)
+    """time_of_flight: range of the reference return, m (Azure Kinect NFOV unbinned: 3.86, its range's end)."""
+    tof_ref_albedo: float = Field(default=0.15, gt=0.0, le=1.0, allow_inf_nan=False)
+    """time_of_flight: reflectance of the reference return (Azure Kinect datasheet: 15 %, its darkest target)."""
+    tof_signal_share: Fraction = 0.5
+    """time_of_flight: share of the reference variance from the signal's own shot noise (variance ~ 1 / A); the
+    rest is the background light's (variance ~ 1 / A^2)."""
     max_incidence_deg: float = Field(default=80.0, gt=0.0, lt=90.0, allow_inf_nan=False)
     """Pixels seen at a steeper incidence are invalid, deg."""
     flying_edge_m: PosFloat = 0.1

@@ -5,6 +5,9 @@ A profile is ``cosim/scenario/profiles/<name>.yaml``: the ``kind`` of sensor it 
 published figure; ``paper``: a published measurement or model; ``tuned``: chosen here, the reason given) and
 ``ref``, where it comes from. A camera that names ``profile: <name>`` takes every value it does not set itself
 from the profile (cosim.scenario.config.cameras); the resolved scenario then carries them all.
+
+A profile renamed keeps its old name working (:data:`RENAMED`): the old name loads the same values under the new
+name, which the resolved scenario shows.
 """
 from __future__ import annotations
 
@@ -14,12 +17,15 @@ from pathlib import Path
 
 import yaml
 
-__all__ = ["PROFILE_DIR", "SOURCES", "ProfileValue", "Profile", "load_profile", "profile_names"]
+__all__ = ["PROFILE_DIR", "SOURCES", "RENAMED", "ProfileValue", "Profile", "load_profile", "profile_names"]
 
 #: where the packaged profiles live
 PROFILE_DIR = Path(__file__).resolve().parents[1] / "profiles"
 #: what a value's ``source`` may be
 SOURCES = ("datasheet", "paper", "tuned")
+#: old profile name -> its name now: the Kinect v2 image with the structured-light noise model was named for a
+#: time-of-flight camera; it loads unchanged under the name of what it models
+RENAMED = {"tof_kinect_class": "kinect_class_structured_light"}
 
 
 @dataclass(frozen=True)
@@ -52,8 +58,10 @@ def profile_names() -> list[str]:
 
 @functools.lru_cache(maxsize=32)
 def load_profile(name: str) -> Profile:
-    """The packaged profile ``name``; ValueError naming the profiles there are when it does not exist, and when
-    a value lacks its source or reference."""
+    """The packaged profile ``name`` (an old name of :data:`RENAMED` gives the renamed profile, under its new
+    name); ValueError naming the profiles there are when it does not exist, and when a value lacks its source or
+    reference."""
+    name = RENAMED.get(name, name)
     path = PROFILE_DIR / f"{name}.yaml"
     if not name.replace("_", "").isalnum() or not path.is_file():
         raise ValueError(f"no sensor profile {name!r} (packaged: {', '.join(profile_names())})")
