@@ -1,5 +1,6 @@
-"""The depth camera's measurement model: exact rendered depth -> what a Kinect-class time-of-flight camera
-reports (docs/cameras.md). Pure functions, seeded per frame.
+"""The depth camera's structured-light measurement model (``model: structured_light``, docs/cameras.md): exact
+rendered depth -> what a Kinect-class structured-light camera reports. Pure functions, seeded per frame; the
+time-of-flight model (perception_proc.cameras.time_of_flight) shares its incidence and edge detection.
 
 The noise model is Nguyen, Izadi and Lovell (2012), "Modeling Kinect Sensor Noise for Improved 3D
 Reconstruction and Tracking" (3DIMPVT), with its coefficients as the record's defaults
