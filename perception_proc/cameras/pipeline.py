@@ -7,7 +7,8 @@ its stride cell). Per frame:
 1. ``gather(views)``: copies of the renderer's blocks (``rgb``, ``right``, ``depth``, ``labels``), the only
    read of the shared images;
 2. the camera effects' ``images`` stage (``perception_proc.cameras.effects``: the seam where field conditions
-   such as dust change what the sensor receives; nothing by default);
+   such as dust change what the sensor receives; nothing by default), then for a stereo camera its image formation
+   (``perception_proc.cameras.imaging``: lens distortion, shot and read noise, rectification; off by default);
 3. ``measure``: the sensor's model: the depth camera's noise model (``perception_proc.cameras.depth_models``), the stereo
    matcher (``perception_proc.cameras.stereo``), nothing for an RGB camera;
 4. the effects' ``depth`` stage on the measured depth;
@@ -17,6 +18,8 @@ its stride cell). Per frame:
    the columns its matcher cannot search).
 """
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
@@ -34,6 +37,7 @@ from perception_proc.cameras.depth_models import depth_model, normal_sigma_m
 from perception_proc.cameras.effects import camera_effects
 from perception_proc.cameras.expected import GATE_SIGMA_M, point_sigma_m
 from perception_proc.cameras.images import SIGMA_DISTANCE_M, CameraImages
+from perception_proc.cameras.imaging import ImageFormation
 from perception_proc.cameras.stereo import make_matcher, stereo_depth
 from perception_proc.cameras.tof import frame_generator
 from perception_proc.estimates.rim import FOV_EDGE, border_beams
@@ -73,6 +77,8 @@ class CameraPipeline:
         self.unit_points = np.stack([(uu - w / 2.0) / self.pin.f, (h / 2.0 - vv) / self.pin.f,
                                      np.ones_like(uu)], axis=-1).reshape(-1, 3)
         self._matcher = make_matcher(spec) if isinstance(spec, StereoCamera) else None
+        self.formation = ImageFormation(spec, self.pin, scenario.seed, index) if isinstance(
+            spec, StereoCamera) and (spec.image_noise is not None or spec.distortion is not None) else None
         self.edge = self._edge_band()
         self.effects = camera_effects(scenario, name)
 
@@ -123,6 +129,9 @@ class CameraPipeline:
             gen = frame_generator(sc.seed, images.frame, self.index) if self.spec.noise else None
             z = depth_model(self.spec)(images.depth, self.pin, self.spec, gen)
         elif isinstance(self.spec, StereoCamera):
+            if self.formation is not None:                      # the eyes' images as the sensor gives them
+                images = replace(images, rgb=self.formation.eye(images.rgb, 0, images.frame),
+                                 right=self.formation.eye(images.right, 1, images.frame))
             z = stereo_depth(self._matcher, self.spec, self.pin.f, images.rgb, images.right)
         else:
             return None

@@ -26,6 +26,7 @@ from typing import Annotated, Literal, Union
 from pydantic import AfterValidator, Field, model_validator
 
 from .base import Fraction, Model, Mount, NonNegFloat, PosFloat
+from .imaging import ImageNoise, LensDistortion
 from .profiles import load_profile
 from .sensing import Sensor
 
@@ -201,8 +202,9 @@ class StereoCamera(Camera):
     (odd; BM needs >= 5), ``uniqueness_ratio``, ``speckle_window_px``, ``speckle_range_px`` and
     ``disp12_max_diff_px`` are OpenCV's parameters of the same names; ``texture_threshold`` invalidates blocks without
     texture (StereoBM's check, which SGBM lacks), ``subpixel`` picks the sub-pixel step and ``disparity_sigma_px``
-    states the disparity error the camera is expected to hold (perception weighs and gates its points by it). It
-    needs the GL renderer's textured images: the mock renderer's plain shading has nothing to match."""
+    states the disparity error the camera is expected to hold (perception weighs and gates its points by it).
+    ``image_noise`` and ``distortion`` (cosim.scenario.config.imaging; off by default) make the eyes' images what a
+    real sensor gives before the matcher sees them. It needs the GL renderer's textured images: the mock renderer's plain shading has nothing to match."""
 
     kind: Literal["stereo_camera"]
     """stereo_camera: left and right textured images, disparity from OpenCV's matcher, depth = f B / d."""
@@ -234,6 +236,11 @@ class StereoCamera(Camera):
     (OpenCV's parabola over whole-pixel costs, which locks towards whole disparities)."""
     disparity_sigma_px: PosFloat = 0.25
     """The disparity 1-sigma the camera is expected to hold, px: its depth 1-sigma is Z^2 sigma / (f B)."""
+    image_noise: ImageNoise | None = None
+    """Shot and read noise of the eyes' images before the matcher (EMVA 1288 photon transfer); null: none."""
+    distortion: LensDistortion | None = None
+    """Each lens's Brown-Conrady distortion and its rectification from a calibration with a stated residual; null:
+    ideal pinholes, rectified exactly."""
 
     @model_validator(mode="after")
     def _matcher(self) -> "StereoCamera":
