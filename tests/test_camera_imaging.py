@@ -12,6 +12,8 @@ from cosim.errors import ScenarioError
 from cosim.scenario.config.cameras import StereoCamera
 from cosim.scenario.config.imaging import ImageNoise, LensDistortion
 from cosim.scenario.loader import load_scenario_text
+from cosim.testing.stereo_error import VARIANTS, measure
+from cosim.testing.stereo_plane import textured_plane_pair
 from cosim.world.camera import Pinhole
 from perception_proc.cameras.imaging import (
     ImageFormation,
@@ -134,3 +136,21 @@ def test_bad_image_keys_are_reported_at_their_key(body, where, match):
     with pytest.raises(ScenarioError, match=match) as info:
         load_scenario_text(src, check_world=False)
     assert any(p.path == where for p in info.value.problems), [str(p) for p in info.value.problems]
+
+
+@pytest.mark.gl
+def test_noise_and_a_worse_calibration_raise_the_stereo_error(ctx):
+    """The textured plane of cosim.testing.stereo_error (OAK-D pair, 3-9 m): the fitted disparity error of the ideal
+    images is the matcher's (about 0.25 px); shot and read noise raise it, and a 0.5 px calibration more than a
+    0.15 px one; the error still grows about as Z^2 (slope 2-3)."""
+    base = StereoCamera(kind="stereo_camera", profile="oak_d", mount={"parent": "world"})
+    pin = Pinhole(base.width_px, base.height_px, math.radians(base.hfov_deg))
+    left, right, z = textured_plane_pair(ctx, pin, base.baseline_m)
+    dd = {name: measure(base.model_copy(update=VARIANTS[name]), pin, left, right, z, frames=1)
+          for name in ("ideal", "shot+read noise (CMV2000)", "distortion, calibration 0.15 px",
+                       "distortion, calibration 0.5 px")}
+    ideal = dd["ideal"]["dd_px"]
+    assert 0.15 < ideal < 0.35
+    assert dd["shot+read noise (CMV2000)"]["dd_px"] > 1.1 * ideal
+    assert dd["distortion, calibration 0.5 px"]["dd_px"] > dd["distortion, calibration 0.15 px"]["dd_px"] > ideal
+    assert all(1.8 < r["slope"] < 3.2 for r in dd.values()), {k: r["slope"] for k, r in dd.items()}

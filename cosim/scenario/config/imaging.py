@@ -1,13 +1,11 @@
-"""Scenario records of a stereo camera's image formation (``sensors.<name>.image_noise``, ``.distortion``,
-``.motion_blur``): what a real sensor does to the image before the matcher sees it (perception_proc.cameras.imaging,
+"""Scenario records of a stereo camera's image formation (``sensors.<name>.image_noise``, ``.distortion``): what a real sensor does to the image before the matcher sees it (perception_proc.cameras.imaging,
 docs/cameras.md). Each is off (null) by default, and off the images are the renderer's, to the byte.
 
 * :class:`ImageNoise`: photon transfer after EMVA 1288 (the standard for characterising machine-vision sensors):
   the pixel value is the signal's electrons over the full well, which draw Poisson shot noise, plus Gaussian read
   noise, quantised back to 8 bits;
 * :class:`LensDistortion`: the Brown-Conrady model (k1, k2 radial, p1, p2 tangential, OpenCV's convention) of each
-  lens, undone by rectification from a calibration whose coefficients carry the stated reprojection residual;
-* :class:`MotionBlur`: the image of the scene moving under the camera during the exposure.
+  lens, undone by rectification from a calibration whose coefficients carry the stated reprojection residual.
 """
 from __future__ import annotations
 
@@ -15,15 +13,13 @@ from pydantic import Field
 
 from .base import Model
 
-__all__ = ["FULL_WELL_E", "DISTORTION_MAX", "EXPOSURE_MAX_S", "ImageNoise", "LensDistortion", "MotionBlur"]
+__all__ = ["FULL_WELL_E", "DISTORTION_MAX", "ImageNoise", "LensDistortion"]
 
 #: (smallest, largest) full-well capacity, electrons: from small-pixel phone sensors (~1 ke-) to large-pixel
 #: machine-vision sensors (~100 ke-)
 FULL_WELL_E = (500.0, 200_000.0)
 #: largest magnitude of a Brown-Conrady coefficient (fisheye lenses go beyond what the polynomial model holds)
 DISTORTION_MAX = 2.0
-#: longest exposure, s (a frame at 10 Hz)
-EXPOSURE_MAX_S = 0.1
 
 
 class ImageNoise(Model):
@@ -54,11 +50,3 @@ class LensDistortion(Model):
     """Second tangential coefficient (OpenCV's p2)."""
     calibration_rms_px: float = Field(default=0.0, ge=0.0, le=5.0, allow_inf_nan=False)
     """Reprojection RMS of the calibration that rectifies the images, px (0: the true coefficients)."""
-
-
-class MotionBlur(Model):
-    """Motion blur: the image integrates the scene over ``exposure_s`` while the camera moves with its parent at the
-    parent's ground speed (each pixel smeared along its own image motion, from its depth)."""
-
-    exposure_s: float = Field(default=0.005, gt=0.0, le=EXPOSURE_MAX_S, allow_inf_nan=False)
-    """Exposure time, s."""
