@@ -15,6 +15,7 @@ from cosim.scenario.loader import load_scenario_text
 from cosim.world.camera import Pinhole
 from perception_proc.cameras.depth_models import depth_model, normal_sigma_m
 from perception_proc.cameras.expected import point_sigma_m
+from perception_proc.cameras.multipath import multipath_range_bias, pixel_range_bias
 from perception_proc.cameras.time_of_flight import (
     amplitude,
     mixed_depth,
@@ -142,3 +143,57 @@ def test_bad_time_of_flight_keys_are_reported_at_their_key(body, where, match):
     with pytest.raises(ScenarioError, match=match) as info:
         load_scenario_text(src, check_world=False)
     assert any(p.path == where for p in info.value.problems), [str(p) for p in info.value.problems]
+
+
+def test_multipath_of_two_patches_is_the_one_bounce_closed_form():
+    """Two patches facing each other across a corner: patch 0 on the floor (normal up, towards the camera side),
+    patch 1 on a wall; the bias of patch 1 is (E1 r1 + E01 (r0 + d + r1) / 2) / (E1 + E01) - r1 with
+    E = cos / r^2 and E01 = albedo E0 a0 cos_out cos_in / (pi d^2)."""
+    p = np.array([[0.0, -1.0, 3.0], [0.0, 0.0, 4.0]])
+    n = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0]])
+    a = np.array([0.04, 0.04])
+    r = np.linalg.norm(p, axis=1)
+    e = np.abs(np.sum(n * p, 1)) / r ** 3
+    dvec = p[0] - p[1]
+    d = np.linalg.norm(dvec)
+    u = dvec / d                                              # from patch 1 towards patch 0
+    e01 = 0.5 * e[0] * a[0] * float(-u @ n[0]) * float(u @ n[1]) / (math.pi * d * d)
+    e10 = 0.5 * e[1] * a[1] * float(u @ n[1]) * float(-u @ n[0]) / (math.pi * d * d)
+    half = (r[0] + d + r[1]) / 2.0
+    want = [(e[0] * r[0] + e10 * half) / (e[0] + e10) - r[0], (e[1] * r[1] + e01 * half) / (e[1] + e01) - r[1]]
+    np.testing.assert_allclose(multipath_range_bias(p, n, a, 0.5), want, rtol=1e-12)
+    assert all(w > 0 for w in want)
+
+
+def _fold(depth_at_centre: float, slope: float) -> np.ndarray:
+    """Planar depth of the two planes Z = c + slope |X| meeting along the image's vertical centre line: z = c /
+    (1 - slope |x|), x the normalised image column (slope > 0: the centre line nearest, a ridge; < 0: the centre
+    line farthest, a corner seen from inside)."""
+    uu, _ = PIN.pixel_centres()
+    x = (uu - PIN.width / 2.0) / PIN.f
+    return (depth_at_centre / (1.0 - slope * np.abs(x))).astype(np.float32)
+
+
+def test_multipath_is_nil_on_a_plane_and_on_a_ridge_and_reads_a_corner_farther():
+    flat = np.full((PIN.height, PIN.width), 3.0, np.float32)
+    assert np.max(np.abs(pixel_range_bias(PIN, flat, 0.5))) < 1e-9
+    ridge = _fold(3.0, 0.8)                         # the centre line nearest: the two halves face away
+    assert np.max(np.abs(pixel_range_bias(PIN, ridge, 0.5))) < 1e-9
+    corner = _fold(3.0, -0.8)                       # the centre line farthest: the halves face each other
+    bias = pixel_range_bias(PIN, corner, 0.5)
+    assert np.all(bias > 1e-3) and np.all(bias < 0.1), (bias.min(), bias.max())
+    darker = pixel_range_bias(PIN, corner, 0.1)
+    assert np.all(darker < bias / 3.0), "the detours' weight is proportional to the albedo"
+
+
+def test_multipath_on_moves_the_reported_depth_by_the_bias():
+    corner = _fold(3.0, -0.8)
+    on = TOF.model_copy(update={"multipath": True, "tof_ref_sigma_m": 1e-9})
+    off = on.model_copy(update={"multipath": False})
+    k = ray_length_factor(PIN)
+    got = time_of_flight_depth(corner, PIN, on, frame_generator(1, 0, 0)).astype(np.float64)
+    base = time_of_flight_depth(corner, PIN, off, frame_generator(1, 0, 0)).astype(np.float64)
+    want = pixel_range_bias(PIN, corner, TOF.albedo) / k
+    ok = np.isfinite(got) & np.isfinite(base)
+    np.testing.assert_allclose((got - base)[ok], want[ok], atol=2e-6)
+    assert TOF.multipath is False

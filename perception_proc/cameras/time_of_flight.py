@@ -20,8 +20,9 @@ their amplitude ratio is the inverse square of their depths on the pixel's ray; 
 the near return alone, at its share of the amplitude. Each pixel measures its own ray: there is no lateral
 displacement. The noise is along the ray (range); the planar depth's is it divided by the ray's length per unit
 depth (:func:`ray_length_factor`). Pixels beyond ``max_incidence_deg`` or outside ``range_min_m`` .. ``range_max_m`` or with no hit are
-invalid (NaN). Not modelled: multipath (a concave scene such as a cart's inside reads farther; the studies
-measure it but give no closed model), phase wrapping beyond the unambiguous range, systematic wiggling error.
+invalid (NaN). ``multipath: true`` adds each pixel's one-bounce diffuse multipath range bias
+(perception_proc.cameras.multipath: a concave scene such as a cart's inside reads farther) before the noise. Not
+modelled: phase wrapping beyond the unambiguous range, the systematic wiggling error.
 """
 from __future__ import annotations
 
@@ -31,6 +32,7 @@ import numpy as np
 
 from cosim.scenario.config.cameras import DepthCamera
 from cosim.world.camera import Pinhole
+from perception_proc.cameras.multipath import pixel_range_bias
 from perception_proc.cameras.tof import flying_mask, incidence
 
 __all__ = ["ray_length_factor", "amplitude", "reference_amplitude", "tof_sigma_m", "normal_sigma_m", "mixed_depth",
@@ -103,6 +105,8 @@ def time_of_flight_depth(z: np.ndarray, pin: Pinhole, cam: DepthCamera, gen: np.
         amp_near = amplitude(near * k, np.nan_to_num(theta, nan=0.0), cam.albedo)
         out = np.where(fly, mixed, z)
         amp = np.where(fly, amp_near * weight, amp)
+        if cam.multipath:
+            out = out + pixel_range_bias(pin, z, cam.albedo) / k                  # range bias, as planar depth
         out = out + gen.standard_normal((h, w)) * (tof_sigma_m(amp, cam) / k)     # range noise, as planar depth
     with np.errstate(invalid="ignore"):
         bad = ~np.isfinite(out) | (out < cam.range_min_m) | (out > cam.range_max_m) | (

@@ -145,7 +145,7 @@ class DepthCamera(Camera):
     ``tof_ref_range_m`` facing the camera, s = ``tof_signal_share`` (the share of the reference variance from
     the signal's own shot noise; the rest is the background's); a pixel straddling a depth edge (as above)
     reports the amplitude-weighted mixture of its nearest and farthest neighbour, a uniform share of its
-    footprint on each.
+    footprint on each; ``multipath`` adds the one-bounce diffuse multipath (Fuchs 2010).
 
     Both: pixels at incidence beyond ``max_incidence_deg`` or outside the range are invalid. ``noise: false``
     reports the exact depth (tests). ``rgb``: also render the colour image (an RGB-D camera)."""
@@ -185,6 +185,9 @@ class DepthCamera(Camera):
     tof_signal_share: Fraction = 0.5
     """time_of_flight: share of the reference variance from the signal's own shot noise (variance ~ 1 / A); the
     rest is the background light's (variance ~ 1 / A^2)."""
+    multipath: bool = False
+    """time_of_flight: add the one-bounce diffuse multipath of the camera's own light (Fuchs 2010): concave scenes
+    read farther."""
     max_incidence_deg: float = Field(default=80.0, gt=0.0, lt=90.0, allow_inf_nan=False)
     """Pixels seen at a steeper incidence are invalid, deg."""
     flying_edge_m: PosFloat = 0.1
