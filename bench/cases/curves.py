@@ -8,8 +8,8 @@ side by side in one process (sweep throughput with 1 and 2 local workers: the ``
   member's step (process CPU over the step: llvmpipe's threads included), medians over ``frames`` after ``warmup``.
   The cost per beam is the slope of a least-squares line through the points.
 * cells: the same with ``grain.cell_m`` 0.1 to 0.025 m (cells per cart 1,800 to 28,800).
-* sensors: the default scenario's LiDAR (beam-native) and 0 to 3 depth cameras beside it (the ``tof_mast`` camera,
-  Kinect-class profile, 512 x 424, an image every frame; a scenario has at most one LiDAR); the cost per added
+* sensors: the default scenario's LiDAR (beam-native) and 0 to 3 depth cameras beside it (the ``sensor_cost`` case's
+  Kinect-class camera, 512 x 424, an image every frame; a scenario has at most one LiDAR); the cost per added
   camera is the slope. What each other kind costs: the ``sensor_cost`` case.
 """
 from __future__ import annotations

@@ -3,8 +3,8 @@ pile height beside the published stereo result.
 
 ``sensor_cost``: configurations, each the default scenario's world with other sensors (``sensors:``), GL renderer,
 perception feedback, every sensor taking an image every frame: ``lidar`` (the default itself: beam-native
-Honeycomb-like LiDAR, 38,400 beams), ``depth_camera`` (the ``tof_mast`` camera, Kinect-class profile, 512 x 424),
-``stereo_camera`` (the ``stereo_spout`` head, MultiSense S21B profile, 2 x 1024 x 544, SGBM, 128 disparities),
+Honeycomb-like LiDAR, 38,400 beams), ``depth_camera`` (a Kinect-class camera on ``tof_mast``'s mount, profile
+``kinect_class_structured_light``, 512 x 424), ``stereo_camera`` (the ``stereo_spout`` head, MultiSense S21B profile, 2 x 1024 x 544, SGBM, 128 disparities),
 ``stereo_camera_bm`` (the same with StereoBM), ``rgb_camera`` (a 640 x 480 colour camera beside the LiDAR: its cost is
 the renderer's) and ``lidar_and_stereo`` (fused). Each a launched run (OS processes) of ``duration`` simulated
 seconds, the configurations in rotating order: medians per frame of the renderer's step, perception's step, the
@@ -33,7 +33,7 @@ __all__ = ["sensor_cost", "stereo_pile_height"]
 
 STEREO = {"kind": "stereo_camera", "profile": "multisense_s21b", "points_stride": 4, "every_frames": 1,
           "mount": {"parent": "combine", "xyz_m": [-2.0, 7.45, 6.0], "rpy_deg": [0.0, 90.0, -90.0]}}
-TOF = {"kind": "depth_camera", "profile": "tof_kinect_class", "range_max_m": 8.0, "points_stride": 3,
+TOF = {"kind": "depth_camera", "profile": "kinect_class_structured_light", "range_max_m": 8.0, "points_stride": 3,
        "mount": {"parent": "combine", "xyz_m": [-3.5, 5.0, 6.0], "rpy_deg": [0.0, 52.0, 116.0]}}
 LIDAR = {"kind": "lidar", "method": "beam_native"}
 RGB = {"kind": "rgb_camera", "width_px": 640, "height_px": 480, "hfov_deg": 70.0,
