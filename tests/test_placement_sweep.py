@@ -25,7 +25,7 @@ def test_the_study_has_24_placements_over_3_profiles_and_ci_runs_the_same_ones_s
     full, ci = load_sweep(HERE / "placement_sweep.yaml"), load_sweep(HERE / "placement_ci_sweep.yaml")
     assert len(full.runs) == len(ci.runs) == 24
     profiles = {r.scenario.sensors["cam"].profile for r in full.runs}
-    assert profiles == {"multisense_s21b", "oak_d", "tof_kinect_class"}
+    assert profiles == {"multisense_s21b", "oak_d", "kinect_class_structured_light"}   # tof_kinect_class, renamed
     mounts = {(r.scenario.sensors["cam"].mount.xyz_m, r.scenario.sensors["cam"].mount.rpy_deg) for r in full.runs}
     assert len(mounts) == 8
     assert {r.scenario.duration_s for r in full.runs} == {120.0} and {r.scenario.duration_s for r in ci.runs} == {0.6}
