@@ -27,7 +27,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["EmbreeUnavailable", "Geometry", "api", "handles", "instance", "prototype_scene", "refit", "set_transform",
+__all__ = ["EmbreeUnavailable", "Geometry", "api", "handles", "instance", "prototype_scene", "refit", "set_packed_transform",
+           "set_transform",
            "triangles"]
 
 # enum values of the Embree 4 API
@@ -174,8 +175,18 @@ def instance(device: int, top: int, proto: int, inst_id: int) -> Geometry:
 def set_transform(inst: Geometry, top_from_proto: np.ndarray) -> None:
     """Place an instance: ``top_from_proto`` (3, 4) or (4, 4) affine, float64 in, float32 column-major to
     Embree; the geometry is committed."""
+    inst.buffers[0][...] = np.asarray(top_from_proto)[:3, :4].T
+    _commit_transform(inst)
+
+
+def set_packed_transform(inst: Geometry, packed: np.ndarray) -> None:
+    """:func:`set_transform` of a transform already packed as Embree reads it: (4, 3) float32, the 3 x 4
+    affine's columns (the linear map's three, then the translation)."""
+    inst.buffers[0][...] = packed
+    _commit_transform(inst)
+
+
+def _commit_transform(inst: Geometry) -> None:
     lib = api()
-    m = inst.buffers[0]
-    m[...] = np.asarray(top_from_proto)[:3, :4].T
-    lib.rtcSetGeometryTransform(inst.handle, 0, FORMAT_FLOAT3X4_COLUMN_MAJOR, m.ctypes.data)
+    lib.rtcSetGeometryTransform(inst.handle, 0, FORMAT_FLOAT3X4_COLUMN_MAJOR, inst.buffers[0].ctypes.data)
     lib.rtcCommitGeometry(inst.handle)

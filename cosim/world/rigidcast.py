@@ -129,6 +129,17 @@ def _planes(v: np.ndarray, f: np.ndarray) -> np.ndarray:
     return np.concatenate([n, np.einsum("fi,fi->f", n, tri[:, 0])[:, None]], axis=1)
 
 
+def _distinct(rows: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct values of ``rows`` (H,) int in [0, ``size``), ascending (U,), and each row's index among them
+    (H,): ``np.unique(rows, return_inverse=True)`` by a mark table of ``size`` entries, without sorting."""
+    mark = np.zeros(size, bool)
+    mark[rows] = True
+    used = np.flatnonzero(mark)
+    index = np.empty(size, np.intp)
+    index[used] = np.arange(len(used))
+    return used, np.take(index, rows)
+
+
 def _release(holder: list, protos: list) -> None:
     """Drop the embreex top scene and device (``holder``: the last references; the top scene releases its
     instances), then release every prototype scene, then let their buffers go."""
@@ -154,6 +165,14 @@ class _Proto:
     def place(self, lin: np.ndarray, trans: np.ndarray) -> None:
         """Instance at x_top = lin @ x + trans (lin (3, 3), trans (3,), float64, origin-relative)."""
         emb.set_transform(self.inst, np.concatenate([lin, trans[:, None]], axis=1))
+        if not self.enabled:
+            emb.api().rtcEnableGeometry(self.inst.handle)
+            emb.api().rtcCommitGeometry(self.inst.handle)
+            self.enabled = True
+
+    def place_packed(self, m: np.ndarray) -> None:
+        """:meth:`place` with the transform already packed: (4, 3) float32, Embree's column-major 3 x 4."""
+        emb.set_packed_transform(self.inst, m)
         if not self.enabled:
             emb.api().rtcEnableGeometry(self.inst.handle)
             emb.api().rtcCommitGeometry(self.inst.handle)
@@ -245,7 +264,7 @@ class RigidCaster:
                 self._hf.planes = np.zeros((0, 4))
             self._hf = self._new(self._hf_v, self._hf_f, emb.QUALITY_REFIT)
             self._hf_key = key
-        else:
+        elif not np.array_equal(self._hf_v[:, 2], padded):     # unchanged heights: the BVH stands
             self._hf_v[:, 2] = padded
             self._hf.geom.buffers[0][:-1, 2] = padded
             emb.refit(self._hf.geom)
@@ -260,11 +279,12 @@ class RigidCaster:
             if mesh.name in self._bodies:
                 continue
             key = (len(mesh.vertices), len(mesh.faces))
-            v = np.asarray(mesh.vertices, np.float64)
             if key not in self._extra:
+                v = np.asarray(mesh.vertices, np.float64)
                 self._extra[key] = [self._new(v, np.asarray(mesh.faces, np.int64), emb.QUALITY_REFIT), mesh.name]
             proto, name = self._extra[key]
             if name != mesh.name:
+                v = np.asarray(mesh.vertices, np.float64)
                 proto.geom.buffers[0][:-1, :3] = v
                 emb.refit(proto.geom)
                 emb.api().rtcCommitScene(proto.scene)
@@ -293,6 +313,21 @@ class RigidCaster:
             lin[k], trans[k] = scene.poses[name][:3, :3], scene.poses[name][:3, 3] - o
             idx.append(k)
         return idx
+
+    def _place(self, ks: np.ndarray, lin: np.ndarray, trans: np.ndarray) -> None:
+        """Place prototypes ``ks`` (M,) at their ``lin`` and ``trans`` (rows k), their float32 transforms made in
+        one pass; an instance shown and already at that transform (to the bit) is left as it is."""
+        m = np.empty((len(ks), 4, 3), np.float32)         # Embree's column-major 3 x 4: lin's columns, trans
+        m[:, :3] = lin[ks].transpose(0, 2, 1)
+        m[:, 3] = trans[ks]
+        protos = [self._protos[k] for k in ks.tolist()]
+        if not protos:
+            return
+        last = np.stack([p.inst.buffers[0] for p in protos])
+        same = (last.view(np.uint32) == m.view(np.uint32)).all(axis=(1, 2))
+        for proto, m_k, keep in zip(protos, m, same.tolist()):
+            if not (keep and proto.enabled):
+                proto.place_packed(m_k)
 
     def cast(self, scene: Scene, origin: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Exact ranges (N,) float64 m (inf on a miss) of rays from ``origin`` (3,) along unit ``directions``
@@ -345,11 +380,10 @@ class RigidCaster:
         idx = np.asarray(idx, np.int64)
         solid = has_volume(lin[idx], trans[idx])
         lin[idx[~solid]], trans[idx[~solid]] = np.eye(3), 0.0     # no volume: hidden, never inverted
-        for k, keep in zip(idx.tolist(), solid.tolist()):
-            if keep and k != ground_k:
-                self._protos[k].place(lin[k], trans[k])
-            else:
-                self._protos[k].hide()
+        cast = solid & (idx != ground_k)
+        for k in idx[~cast].tolist():
+            self._protos[k].hide()
+        self._place(idx[cast], lin, trans)
         self._top_obj.is_committed = 0                     # run() commits the top scene
         tfar = None
         if ground is not None:                             # a hit before the ground is all Embree must find
@@ -361,26 +395,33 @@ class RigidCaster:
     def _ranges(self, out: dict, d: np.ndarray, lin: np.ndarray, trans: np.ndarray) -> np.ndarray:
         """The float64 range of each hit: the ray (from the origin, along ``d``) against its triangle's plane
         n . x = c placed in the world by x_w = lin x + trans: n_w = lin^-T n, c_w = c + n_w . trans,
-        t = c_w / (n_w . d)."""
+        t = c_w / (n_w . d). The placed planes are computed once per distinct triangle hit (the grain surface's
+        from its vertices of this frame), not for every triangle of the scene."""
         t = np.full(len(d), np.inf)
-        geom, prim = out["geomID"], out["primID"]
+        geom = out["geomID"]
         hit = np.flatnonzero((geom >= 0) & (out["tfar"] < _MISS_M))
         if hit.size == 0:
             return t
+        rows = np.take(self._base, np.take(geom, hit)) + np.take(out["primID"], hit)    # (H,) table rows
+        used, inverse = _distinct(rows, len(self._planes_all))
+        own = self._owner[used]
+        planes = self._planes_all[used]                                     # (U, 4) copies: the table is kept
         k_hf = self._hf.k
-        planes = self._planes_all
-        planes[self._base[k_hf]:self._base[k_hf + 1]] = _grid_planes(self._hf_v, self._hf_f)
-        inv = np.linalg.inv(lin)                                    # (K, 3, 3)
-        own = self._owner
-        table = np.empty((len(planes), 5))                          # n_w, c_w, graze threshold
-        table[:, :3] = np.einsum("pi,pij->pj", planes[:, :3], inv[own])
+        on_hf = np.flatnonzero(own == k_hf)
+        if on_hf.size:
+            planes[on_hf] = _grid_planes(self._hf_v, self._hf_f[used[on_hf] - self._base[k_hf]])
+        placed = np.flatnonzero(np.bincount(own, minlength=len(lin)))      # the prototypes hit
+        at = np.zeros(len(lin), np.intp)
+        at[placed] = np.arange(len(placed))
+        inv = np.linalg.inv(lin[placed])[at[own]]                           # (U, 3, 3)
+        table = np.empty((len(used), 5))                            # n_w, c_w, graze threshold
+        table[:, :3] = np.einsum("pi,pij->pj", planes[:, :3], inv)
         table[:, 3] = planes[:, 3] + np.einsum("pi,pi->p", table[:, :3], trans[own])
         table[:, 4] = _GRAZE * np.sqrt(np.einsum("pi,pi->p", table[:, :3], table[:, :3]))
-        sel = np.take(table, self._base[np.take(geom, hit)] + np.take(prim, hit), axis=0)
-        dh = np.take(d, hit, axis=0)
-        nd = sel[:, 0] * dh[:, 0] + sel[:, 1] * dh[:, 1] + sel[:, 2] * dh[:, 2]
+        nx, ny, nz, c, graze = (np.take(col, inverse) for col in table.T.copy())     # (H,) each
+        nd = nx * np.take(d[:, 0], hit) + ny * np.take(d[:, 1], hit) + nz * np.take(d[:, 2], hit)
         with np.errstate(divide="ignore", invalid="ignore"):
-            t_hit = np.where(np.abs(nd) > sel[:, 4], sel[:, 3] / nd, np.take(out["tfar"], hit))
+            t_hit = np.where(np.abs(nd) > graze, c / nd, np.take(out["tfar"], hit))
         t[hit] = np.where(t_hit > T_MIN_M, t_hit, np.inf)
         return t
 
