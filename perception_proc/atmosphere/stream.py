@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-__all__ = ["STREAM_PARTICLES", "disk_overlap", "beam_crossings", "kernel_density", "occlude"]
+__all__ = ["STREAM_PARTICLES", "beam_crossings", "beam_range_order", "disk_overlap", "kernel_density", "occlude"]
 
 #: the random stream of the kernels' draws (apart from the other seeded streams)
 STREAM_PARTICLES = 3
@@ -116,6 +116,28 @@ def kernel_density(rows: np.ndarray, flow_m3ps: float, packing: float, kernel_d_
     return phi / (math.pi * kernel_d_m ** 3 / 6.0)
 
 
+def beam_range_order(beam: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """The permutation (M,) that sorts kernels by ``beam`` (M,) int, then by range ``r`` (M,) m: the order of
+    ``np.lexsort((r, beam))``, found by one sort of a float key, each beam's rank times a power of two above the
+    spread of ``r`` plus ``r`` (rounding keeps the order within a beam and never reaches the next beam's keys);
+    where two keys come out equal the order is left to ``np.lexsort`` itself."""
+    if beam.size == 0:
+        return np.zeros(0, np.intp)
+    present = np.zeros(int(beam.max()) + 1, np.int64)
+    present[beam] = 1
+    rank = np.take(np.cumsum(present) - 1, beam)                     # np.unique(beam, return_inverse=True)[1]
+    lo, hi = float(r.min()), float(r.max())
+    if not (math.isfinite(lo) and math.isfinite(hi)) or (int(rank.max()) + 1) * (hi - lo + 1.0) >= 2.0 ** 51:
+        return np.lexsort((r, beam))
+    span = 2.0 ** math.ceil(math.log2(hi - lo + 1.0))
+    key = rank * span + (r - lo)
+    order = np.argsort(key)
+    sorted_key = key[order]
+    if (sorted_key[1:] == sorted_key[:-1]).any():
+        return np.lexsort((r, beam))
+    return order
+
+
 def occlude(ranges: np.ndarray, beams: np.ndarray, mids: np.ndarray, chords: np.ndarray, density: np.ndarray,
             kernel_d_m: float, divergence_rad: float, rng: np.random.Generator):
     """The kernels the beams meet: crossing k (beam ``beams[k]``, chord of length ``chords[k]`` centred at range
@@ -129,12 +151,12 @@ def occlude(ranges: np.ndarray, beams: np.ndarray, mids: np.ndarray, chords: np.
     k = np.repeat(np.arange(len(beams)), counts)
     r = (mids - 0.5 * chords)[k] + chords[k] * rng.random(k.size)
     off = reach[k] * np.sqrt(rng.random(k.size))                     # uniform over the disk of reach
-    share = np.minimum(disk_overlap(off, 0.5 * kernel_d_m, 0.5 * w[k]) / (math.pi * 0.25 * w[k] ** 2), 1.0)
     beam = beams[k]
     target = ranges[beam]
-    front = ~(np.isfinite(target) & (r >= target))                  # kernels behind the target are never met
-    beam, r, share = beam[front], r[front], share[front]
-    order = np.lexsort((r, beam))
+    front = np.flatnonzero(~(np.isfinite(target) & (r >= target)))  # kernels behind the target are never met
+    k, beam, r, off = k[front], beam[front], r[front], off[front]
+    share = np.minimum(disk_overlap(off, 0.5 * kernel_d_m, 0.5 * w[k]) / (math.pi * 0.25 * w[k] ** 2), 1.0)
+    order = beam_range_order(beam, r)
     beam, r, share = beam[order], r[order], share[order]
     starts = np.concatenate([[True], beam[1:] != beam[:-1]]) if beam.size else np.zeros(0, bool)
     first = np.flatnonzero(starts)                                  # each beam's first kernel (beam is sorted)
