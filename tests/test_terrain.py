@@ -4,6 +4,7 @@ spill edge in a tilted cart, mass balance and determinism on rough ground."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -87,6 +88,22 @@ def test_the_drawn_ground_is_the_surface_the_wheels_stand_on():
     xy = np.array([[state["cart_x_m"] + 9.0, state["cart_y_m"] - 7.0]])
     hit = raycast(scene, np.c_[xy, [[20.0]]], np.array([[0.0, 0.0, -1.0]]))
     assert 20.0 - hit[0] == pytest.approx(float(t.height(xy[0, 0], xy[0, 1])), abs=1e-9)
+
+
+def test_a_patch_is_made_once_while_the_cart_stays_in_its_step():
+    """The patch's arrays are shared (read-only) by the frames within its quarter step, and a new one is made,
+    equal to one made afresh, when the cart moves on."""
+    s = scen({"roughness_rms_m": 0.05, "grade_pct": 2.0})
+    t = terrain_of(s)
+    first = t.mesh((10.0, 3.0))
+    again = t.mesh((10.0 + 1e-3, 3.0))
+    assert again[0] == first[0] and all(a is b for a, b in zip(again[1:], first[1:]))
+    assert not first[1].flags.writeable
+    moved = t.mesh((10.0 + t.render_extent_m / 2.0, 3.0))
+    assert moved[0] != first[0]
+    fresh = replace(t, _patch={}).mesh((10.0 + t.render_extent_m / 2.0, 3.0))
+    for a, b in zip(moved[1:], fresh[1:]):
+        np.testing.assert_array_equal(a, b)
 
 
 def test_the_min_plus_envelope_is_the_brute_force_one():

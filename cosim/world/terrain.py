@@ -18,7 +18,7 @@ Flat ground is :data:`None` throughout: :func:`terrain_of` returns None and ever
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -62,6 +62,9 @@ class Terrain:
     origin_xy: tuple[float, float]
     periodic: bool
     render_extent_m: float
+    #: the last patch made (name -> (name, vertices, faces, translation), read-only): a patch is the same
+    #: while the cart stays within its quarter step, so it is made once per step, not per frame
+    _patch: dict = field(default_factory=dict, compare=False, repr=False)
 
     def _indices(self, x: np.ndarray, y: np.ndarray):
         """Cell (i, j) (int64) and the fractions (fx, fy) in [0, 1] of points (x, y) m."""
@@ -106,6 +109,16 @@ class Terrain:
         snap = max(1, n // 4)
         ci = int(np.floor((centre_xy[0] - self.origin_xy[0]) / step / snap)) * snap - n // 2
         cj = int(np.floor((centre_xy[1] - self.origin_xy[1]) / step / snap)) * snap - n // 2
+        name = f"terrain@{ci},{cj}"
+        if name not in self._patch:
+            self._patch.clear()
+            self._patch[name] = self._lattice_patch(name, ci, cj, n)
+        return self._patch[name]
+
+    def _lattice_patch(self, name: str, ci: int, cj: int, n: int) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`mesh` of the samples: the patch of ``n`` cells a side from sample (``ci``, ``cj``), its
+        arrays read-only (shared by every frame that draws it)."""
+        step = self.cell_m
         x0, y0 = self.origin_xy[0] + ci * step, self.origin_xy[1] + cj * step
         u = np.arange(n + 1) * step
         xs, ys = np.meshgrid(x0 + u, y0 + u, indexing="ij")
@@ -114,7 +127,10 @@ class Terrain:
         k = np.arange(n)
         a = (k[:, None] * (n + 1) + k[None, :]).ravel()                  # vertex (i, j)
         faces = np.concatenate([np.stack([a, a + n + 1, a + n + 2], 1), np.stack([a, a + n + 2, a + 1], 1)])
-        return f"terrain@{ci},{cj}", verts, faces.astype(np.int64), np.array([x0, y0, 0.0])
+        out = (verts, faces.astype(np.int64), np.array([x0, y0, 0.0]))
+        for arr in out:
+            arr.flags.writeable = False
+        return (name, *out)
 
 
     def _plane_mesh(self, centre_xy: tuple[float, float]) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
