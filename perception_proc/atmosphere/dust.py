@@ -91,14 +91,27 @@ class DustModel:
     peak: np.ndarray
     peak_at: np.ndarray
 
+    def cell(self, reach: np.ndarray) -> np.ndarray:
+        """Index (N,) int64 of the last ``grid`` point at or before each of ``reach`` (N,) m, clipped to the grid
+        (as ``np.searchsorted(grid, reach, side="right") - 1``, the grid's even step used for a first guess that
+        one comparison either side corrects; NaN: the last point)."""
+        n = len(self.grid)
+        if n < 2:
+            return np.zeros(np.shape(reach), np.int64)
+        with np.errstate(invalid="ignore"):
+            guess = np.floor(np.asarray(reach, np.float64) / TABLE_STEP_M)
+        k = np.clip(np.nan_to_num(guess, nan=n - 1.0), 0, n - 2).astype(np.int64)
+        k -= (np.take(self.grid, k) > reach) & (k > 0)                 # one step back where the guess overshot
+        k += np.take(self.grid, k + 1) <= reach                         # or one forward where it fell short
+        return np.where(np.isnan(reach), n - 1, k)
+
     def returns(self, ranges: np.ndarray) -> np.ndarray:
         """The ranges (N,) float32 m the sensor reports for hard returns ``ranges`` (N,) float32 m (NaN: the beam
         met nothing): attenuated, replaced by the medium's peak where that is stronger (strongest) or the hard
         return is lost (last), NaN where nothing is detected. New array."""
         r0 = np.asarray(ranges, np.float64)
         h = hard_power(r0, self.alpha, self.reflectivity, 0.0, 0.0)
-        reach = np.where(np.isfinite(r0), r0, self.grid[-1])
-        k = np.clip(np.searchsorted(self.grid, reach, side="right") - 1, 0, len(self.grid) - 1)
+        k = self.cell(np.where(np.isfinite(r0), r0, self.grid[-1]))
         s, at = self.peak[k], self.peak_at[k]
         hard_ok, soft_ok = h >= self.p_min, s >= self.p_min
         if self.last:

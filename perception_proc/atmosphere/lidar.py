@@ -100,7 +100,7 @@ class LidarAtmosphere:
             best = np.maximum(best, np.where(hp >= self.p_min, hp, -1.0))
         if dust is not None:                                         # the dust's near return may still win
             reach = np.nan_to_num(np.fmin(res, r0), nan=dust.grid[-1])
-            k = np.clip(np.searchsorted(dust.grid, reach, side="right") - 1, 0, len(dust.grid) - 1)
+            k = dust.cell(reach)
             s = dust.peak[k]
             wins = (s >= self.p_min) & ((s > best) if not self.last else ~np.isfinite(res))
             res = np.where(wins, dust.peak_at[k], res)
