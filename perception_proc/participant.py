@@ -42,7 +42,7 @@ from perception_proc.atmosphere.lidar import lidar_atmosphere
 from perception_proc.blocks import ACCURACY_FIELDS, HEIGHTS_BLOCK, POINTS_BLOCK, STATE_BLOCK, WRITER, sensor_state_block
 from perception_proc.cameras.expected import FIT_SIGMAS
 from perception_proc.cameras.sensors import PerceptionCameras
-from perception_proc.estimates.posegate import pose_gate
+from perception_proc.estimates.posegate import level_prior, pose_gate
 from perception_proc.leveling import level_from_parent
 from perception_proc.pipeline import FrameResult, Perception
 from perception_proc.sensor_report import record_of, sensor_values
@@ -189,8 +189,10 @@ class PerceptionParticipant:
         if lfp is not None:                               # uneven ground: the level frame on the cart's plane
             wfp = wfp @ invert(lfp)
         heading = self._heading(state, wfp)
-        res = pipe.perceive(ranges, heading, with_points=False, frame=frame, cameras=cams, level_from_parent=lfp)
-        res = pose_gate(res, state, wfp, self.scenario.perception.pose_gate_m, self.scenario.perception.pose_gate_deg)
+        gate = self.scenario.perception
+        res = pipe.perceive(ranges, heading, with_points=False, frame=frame, cameras=cams, level_from_parent=lfp,
+                            cart_prior=level_prior(state, wfp, gate.pose_gate_m, gate.pose_gate_deg))
+        res = pose_gate(res, state, wfp, gate.pose_gate_m, gate.pose_gate_deg)
         self.last = res
         pipe.points(ranges, out=out.points)
         t2 = time.perf_counter()

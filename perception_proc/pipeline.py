@@ -29,6 +29,7 @@ from perception_proc.cameras.pipeline import CameraPipeline
 from perception_proc.estimates.heightmap import HeightMap, grid_shape
 from perception_proc.estimates.impact import Impact
 from perception_proc.estimates.rim import CartEstimate, border_beams
+from perception_proc.estimates.rimfit import CartPrior
 from perception_proc.fusion import merge
 from perception_proc.lidar.beam_decode import BeamDecoder
 from perception_proc.lidar.resample import beam_words, build_table, resample, resample_words
@@ -235,14 +236,15 @@ class Perception:
     def perceive(self, ranges: np.ndarray, heading_xy=(1.0, 0.0), points_out: np.ndarray | None = None,
                  heights_out: np.ndarray | None = None, with_points: bool = True, frame: int = -1,
                  cameras: Sequence[tuple[SensorFrame, np.ndarray]] = (),
-                 level_from_parent: np.ndarray | None = None) -> FrameResult:
+                 level_from_parent: np.ndarray | None = None, cart_prior: CartPrior | None = None) -> FrameResult:
         """Cart, height map and impact from the frame's ranges (N,) float32 (the LiDAR's; (0,) without one) and
         the ``cameras``' frames with their border flags [(SensorFrame, (M,) uint8)], merged in the level frame.
         ``heading_xy``: the towing direction in the level frame. ``points_out`` (N, 4) / ``heights_out``
         (nx, ny): optional destinations. ``with_points`` False leaves the ``lidar_points`` record out
         (``FrameResult.points`` is None): a caller that writes it straight into shared memory uses
         :meth:`points`. ``frame``: named in a plug-in's fault. ``level_from_parent`` (4, 4): this frame's level
-        frame on uneven ground (perception_proc.leveling; None: the parent's body frame)."""
+        frame on uneven ground (perception_proc.leveling; None: the parent's body frame). ``cart_prior``: where
+        Machine Sync puts the cart in that level frame (``PerceptionInput.cart_prior``)."""
         t0 = time.perf_counter()
         pts = self.points(ranges, out=points_out) if with_points or points_out is not None else None
         lvl = self.level_points(ranges)
@@ -269,7 +271,7 @@ class Perception:
             sensors[lidar_name] = SensorFrame(lidar_name, "lidar", frame, lvl, ranges)
         sensors.update(frames)
         t1 = time.perf_counter()
-        inp = PerceptionInput(frame, all_ranges, merged, border, heading_xy, heights_out, sensors)
+        inp = PerceptionInput(frame, all_ranges, merged, border, heading_xy, heights_out, sensors, cart_prior)
         ref = self.scenario.perception.algorithm
         try:
             out = check_output(self.algorithm(context, inp), self.grid, ref)

@@ -38,6 +38,7 @@ from cosim.scenario.config import Scenario
 from perception_proc.estimates.heightmap import HeightMap
 from perception_proc.estimates.impact import Impact
 from perception_proc.estimates.rim import CartEstimate
+from perception_proc.estimates.rimfit import CartPrior
 
 __all__ = ["PerceptionContext", "PerceptionInput", "PerceptionOutput", "SensorFrame", "StageSet", "ALGORITHM_POINT",
            "STAGE_POINTS", "check_cart", "check_heightmap", "check_impact", "check_output"]
@@ -120,7 +121,9 @@ class PerceptionInput:
     ``FOV_EDGE`` / ``OCCLUDED``); the pose hint ``heading_xy``: the towing direction in the level frame (unit
     (x, y)); ``heights_out``: an optional (nx, ny) float32 destination a height map stage may fill;
     ``sensors``: every sensor's :class:`SensorFrame` by name. With several depth-giving sensors, ``ranges``,
-    ``points`` and ``border`` hold theirs one after the other, in declaration order."""
+    ``points`` and ``border`` hold theirs one after the other, in declaration order. ``cart_prior``: where
+    Machine Sync puts the cart in the level frame, with the pose gate's reach
+    (perception_proc.estimates.rimfit.CartPrior; None when the frame has no cart pose or the gate is off)."""
 
     frame: int
     ranges: np.ndarray
@@ -129,6 +132,7 @@ class PerceptionInput:
     heading_xy: tuple[float, float]
     heights_out: np.ndarray | None = None
     sensors: Mapping[str, SensorFrame] = field(default_factory=dict)
+    cart_prior: CartPrior | None = None
 
 
 @dataclass

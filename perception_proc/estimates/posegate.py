@@ -21,9 +21,10 @@ import numpy as np
 
 from perception_proc.estimates.impact import Impact
 from perception_proc.estimates.rim import NO_CART
+from perception_proc.estimates.rimfit import CartPrior
 from perception_proc.pipeline import FrameResult
 
-__all__ = ["expected_cart", "pose_offset", "pose_gate"]
+__all__ = ["expected_cart", "pose_offset", "pose_gate", "level_prior"]
 
 
 def expected_cart(state: Mapping[str, float]) -> tuple[float, float, float] | None:
@@ -36,6 +37,18 @@ def expected_cart(state: Mapping[str, float]) -> tuple[float, float, float] | No
     cy = float(state.get("combine_yaw_rad", 0.0))
     el, et = float(state.get("gnss_error_long_m", 0.0)), float(state.get("gnss_error_lat_m", 0.0))
     return x + math.cos(cy) * el - math.sin(cy) * et, y + math.sin(cy) * el + math.cos(cy) * et, yaw
+
+
+def level_prior(state: Mapping[str, float], wfp: np.ndarray, gate_m: float, gate_deg: float) -> CartPrior | None:
+    """:func:`expected_cart` in the level frame (``wfp`` (4, 4): world from it) with the gate's reach, for the rim
+    fit (perception_proc.estimates.rimfit); None without a cart pose or with the gate off (``gate_m`` 0)."""
+    expected = expected_cart(state) if state and gate_m > 0.0 else None
+    if expected is None:
+        return None
+    lw = np.linalg.inv(wfp)
+    c = lw @ np.array([expected[0], expected[1], 0.0, 1.0])
+    yaw = expected[2] + math.atan2(lw[1, 0], lw[0, 0])
+    return CartPrior(float(c[0]), float(c[1]), math.atan2(math.sin(yaw), math.cos(yaw)), gate_m, gate_deg)
 
 
 def pose_offset(res: FrameResult, wfp: np.ndarray, expected: tuple[float, float, float]) -> tuple[float, float]:
