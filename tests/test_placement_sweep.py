@@ -55,3 +55,34 @@ def test_the_table_reads_each_runs_summary(tmp_path):
     assert abs(row["expected sigma cm"] - 1.75) < 1e-9 and row["frame ms"] == 250.0
     assert "| s21b |" in mod.markdown([row])
     assert mod.main([str(tmp_path)]) == 0 and (tmp_path / "placement.png").stat().st_size > 0
+
+
+def _documented_sweeps() -> list[tuple[str, str]]:
+    """(sweep file, table directory) of every ``python launch.py sweep`` command in docs/placement.md and
+    .ci/run."""
+    root = HERE.parents[2]
+    lines = (root / "docs" / "placement.md").read_text().splitlines() + (root / ".ci" / "run").read_text().splitlines()
+    return [(ln.split()[ln.split().index("sweep") + 1], ln) for ln in lines
+            if "launch.py sweep docs/examples/placement/" in ln]
+
+
+def test_the_documented_sweep_commands_parse_and_their_files_validate():
+    """Every placement sweep command in the docs and in CI: the CLI parses it and its file validates (runs, bases,
+    keys); CI runs the smoke file, two profiles on the spout for 0.4 s."""
+    import shlex
+
+    from cosim.cli import build_parser
+
+    root = HERE.parents[2]
+    found = _documented_sweeps()
+    assert {Path(f).name for f, _ in found} >= {"placement_sweep.yaml", "placement_ci_sweep.yaml",
+                                                 "placement_smoke_sweep.yaml"}
+    for file, line in found:
+        argv = shlex.split(line.split("#")[0].replace('"${TMPDIR:-/tmp}', '"/tmp'))
+        args = build_parser().parse_args(argv[argv.index("launch.py") + 1:])
+        assert args.verb == "sweep" and str(args.file) == file
+        assert load_sweep(root / file).runs, file
+    ci = [f for f, ln in found if "cosim-ci" in ln]
+    assert ci == ["docs/examples/placement/placement_smoke_sweep.yaml"]
+    smoke = load_sweep(root / ci[0])
+    assert len(smoke.runs) == 2 and {r.scenario.duration_s for r in smoke.runs} == {0.4}
