@@ -26,13 +26,13 @@ __all__ = ["capture", "pile_errors", "main"]
 def capture(matcher: str, fill: float) -> tuple:
     """(scenario, camera pipeline, dyn_state, measured depth (H, W), exact planar depth of the strided pixels (M,))
     of frame 0 of ``stereo_spout`` with ``matcher`` and the grain flat at ``fill`` m (in-process, GL)."""
+    import perception_proc.accuracy.sensors as cacc
     import perception_proc.participant as part
     from cosim.runtime.inprocess import simulate
     from cosim.scenario.files import resolve_scenario_arg
     from cosim.scenario.loader import load_scenario
     from cosim.world.scene import scene_from_state
     from cosim.world.sensors import world_from_sensor
-    import perception_proc.accuracy.sensors as cacc
 
     sc = load_scenario(resolve_scenario_arg("stereo_spout"), extra={"grain.initial_fill_m": fill, "sensors.spout.matcher": matcher,
                                               "sensors.spout.every_frames": 1, "perception.accuracy_every_frames": 1})
