@@ -86,3 +86,28 @@ def test_the_documented_sweep_commands_parse_and_their_files_validate():
     assert ci == ["docs/examples/placement/placement_smoke_sweep.yaml"]
     smoke = load_sweep(root / ci[0])
     assert len(smoke.runs) == 2 and {r.scenario.duration_s for r in smoke.runs} == {0.4}
+
+
+def test_the_pile_height_by_the_studys_definition_adds_the_floors_error():
+    """docs/examples/placement/pile_height.py: a nadir camera 5 m above the floor, grain at 1 m; the floor measured
+    1 cm too far and the surface 1 cm too near: the study's h (floor minus surface, both measured) errs by 2 cm,
+    2 %; ours (the floor known) by 1 %. Pixels whose exact ray misses the floor or the grain are no key points."""
+    from types import SimpleNamespace
+
+    spec = importlib.util.spec_from_file_location("pile_height", HERE / "pile_height.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    from cosim.scenario.config import Cart
+    from cosim.scenario.config.cameras import StereoCamera
+
+    cart = Cart()
+    cam = StereoCamera(kind="stereo_camera", mount={"parent": "world", "xyz_m": [0.0, 0.0, cart.floor_height_m + 5.0],
+                                                    "rpy_deg": [0.0, 90.0, 0.0]})
+    sc, pipe = SimpleNamespace(cart=cart), SimpleNamespace(spec=cam)
+    zf_exact = np.array([5.0, 5.0, 5.0, 2.0])              # the last pixel meets something above the cart
+    zs_exact = np.array([4.0, 4.0, 4.0, 2.0])
+    empty = (sc, pipe, {}, zf_exact + 0.01, zf_exact)
+    loaded = (sc, pipe, {}, zs_exact - 0.01, zs_exact)
+    r = mod.pile_errors(empty, loaded, 1.0)
+    assert r["key points"] == 3
+    assert abs(r["study %"] - 2.0) < 1e-6 and abs(r["project %"] - 1.0) < 1e-6

@@ -34,8 +34,9 @@ def capture(matcher: str, fill: float) -> tuple:
     from cosim.world.scene import scene_from_state
     from cosim.world.sensors import world_from_sensor
 
-    sc = load_scenario(resolve_scenario_arg("stereo_spout"), extra={"grain.initial_fill_m": fill, "sensors.spout.matcher": matcher,
-                                              "sensors.spout.every_frames": 1, "perception.accuracy_every_frames": 1})
+    extra = {"grain.initial_fill_m": fill, "sensors.spout.matcher": matcher, "sensors.spout.every_frames": 1,
+             "perception.accuracy_every_frames": 1}
+    sc = load_scenario(resolve_scenario_arg("stereo_spout"), extra=extra)
     got = {}
     original = part.PerceptionParticipant._finish
 
@@ -72,7 +73,8 @@ def pile_errors(empty: tuple, loaded: tuple, fill: float) -> dict:
     study = np.abs((zf[key] - zs[key]) - h_true) / h_true
     ours = np.abs((cam_z - zs[key] - floor) - h_true) / h_true
     return {"key points": int(np.count_nonzero(key)), "study %": 100 * float(np.mean(study)),
-            "project %": 100 * float(np.mean(ours)), "floor depth error cm": 100 * float(np.mean(zf[key] - zf_exact[key])),
+            "project %": 100 * float(np.mean(ours)),
+            "floor depth error cm": 100 * float(np.mean(zf[key] - zf_exact[key])),
             "surface depth error cm": 100 * float(np.mean(zs[key] - zs_exact[key]))}
 
 
