@@ -18,7 +18,7 @@ from perception_proc.estimates.heightmap import HeightMap, height_map
 from perception_proc.estimates.impact import Impact, blank_under_stream, find_impact
 from perception_proc.estimates.pointsigma import CAMERA_DEPTH, point_sigmas
 from perception_proc.estimates.rim import CartEstimate, find_cart
-from perception_proc.estimates.rimfit import fit_cart
+from perception_proc.estimates.rimfit import fit_cart, within_gate
 from perception_proc.protocol import (
     STAGE_POINTS,
     PerceptionContext,
@@ -38,10 +38,12 @@ _MS_PER_S = 1e3
 
 def rim_stage(ctx: PerceptionContext, inp: PerceptionInput) -> CartEstimate:
     """The cart rim from the level-frame points (perception_proc.estimates.rim.find_cart); where that finds no
-    cart and a depth camera sees, the known rim fitted to what is seen from Machine Sync's pose
+    cart, or one outside the pose gate of Machine Sync's pose (a wrong group of rim-height points, which the
+    gate would reject), and a depth camera sees, the known rim fitted to what is seen from Machine Sync's pose
     (perception_proc.estimates.rimfit.fit_cart), each point weighted by its sensor's expected error."""
     cart = find_cart(inp.points, inp.border, ctx.scenario.cart, inp.heading_xy, ctx.noise_sigma_m)
-    if cart.valid or inp.cart_prior is None or not any(
+    prior = inp.cart_prior
+    if prior is None or (cart.valid and within_gate(cart, prior)) or not any(
             f.kind in CAMERA_DEPTH and len(f.points) for f in inp.sensors.values()):
         return cart
     fit = fit_cart(inp.points, point_sigmas(ctx, inp), ctx.scenario.cart, inp.cart_prior)

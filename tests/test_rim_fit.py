@@ -138,3 +138,14 @@ def test_the_oak_d_view_from_the_spout_on_exact_depth():
     assert abs(r.centre_xy[0] - c[0]) < 0.03
     assert abs(math.degrees(r.yaw_rad - yaw)) < 1.5
     assert r.centre_xy[1] == pytest.approx(c[1] - 0.2, abs=0.01)
+
+
+def test_a_found_cart_outside_the_gate_is_refitted():
+    """The rim finder's answer is kept within the pose gate of the prior and replaced by the fit outside it (a wrong
+    group of rim-height points, 35 deg turned, as the S21B head turned across the cart found)."""
+    from perception_proc.estimates.rimfit import within_gate
+
+    pose = (-4.6, 7.3, 0.0)
+    near = fit_cart(ring(pose), np.full(len(ring(pose)), 0.01), CART, prior(pose, 0.2, 0.0, 2.0))
+    assert within_gate(near, prior(pose, 0.2, 0.0, 2.0))
+    assert not within_gate(near, prior(pose, 0.0, 0.0, 6.0)) and not within_gate(near, prior(pose, 0.0, 0.6))

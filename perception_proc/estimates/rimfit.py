@@ -37,7 +37,7 @@ from cosim.scenario.config import Cart
 from cosim.world.geometry import cart_body_from_grid, make_transform, rot_z
 from perception_proc.estimates.rim import RIM_BAND_M, CartEstimate
 
-__all__ = ["CartPrior", "fit_cart", "PRIOR_SIGMA_M", "PRIOR_SIGMA_DEG", "MIN_RIM_LENGTH_M", "FINAL_WINDOW_M",
+__all__ = ["CartPrior", "fit_cart", "within_gate", "PRIOR_SIGMA_M", "PRIOR_SIGMA_DEG", "MIN_RIM_LENGTH_M", "FINAL_WINDOW_M",
            "MIN_INSIDE_SHARE"]
 
 #: 1-sigma of the prior's position in the fit, m (half the default pose gate: the points rule wherever they see)
@@ -195,6 +195,13 @@ def fit_cart(points: np.ndarray, sigma_m: np.ndarray, cart: Cart, prior: CartPri
         return _estimate(cart, np.array([prior.x, prior.y, prior.yaw]), 0, True)
     return _reason(none, f"{cand.shape[0]} points at rim height: under {MIN_RIM_LENGTH_M:.1f} m of rim seen "
                          "where Machine Sync puts the cart")
+
+
+def within_gate(cart: CartEstimate, prior: CartPrior) -> bool:
+    """Whether a found ``cart`` lies within the pose gate of ``prior`` (both in the level frame)."""
+    moved = math.hypot(cart.centre_xy[0] - prior.x, cart.centre_xy[1] - prior.y)
+    turned = abs(math.degrees(math.remainder(cart.yaw_rad - prior.yaw, 2 * math.pi)))
+    return moved <= prior.gate_m and turned <= prior.gate_deg
 
 
 def _leans_on_prior(info: np.ndarray, yaw: float) -> bool:
