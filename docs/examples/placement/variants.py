@@ -23,6 +23,8 @@ REPO = Path(__file__).resolve().parents[3]
 CV = "examples/camera_variants"
 SPOUT = "sensors.spout.mount"
 MAST_TOF = "sensors.tof.mount"
+#: the structured-light Kinect-class profile (Nguyen et al. 2012 noise) on tof_mast's mount
+KINECT = "sensors.tof.profile=kinect_class_structured_light"
 #: name -> (scenario, renderer, overrides)
 VARIANTS: dict[str, tuple[str, str, list[str]]] = {
     "stereo_spout (S21B, SGBM)": ("stereo_spout", "gl", []),
@@ -39,16 +41,17 @@ VARIANTS: dict[str, tuple[str, str, list[str]]] = {
     "lidar_and_stereo, StereoBM": ("lidar_and_stereo", "gl", ["sensors.spout.matcher=bm"]),
     "lidar_and_stereo, OAK-D": ("lidar_and_stereo", "gl", ["sensors.spout.profile=oak_d",
                                                            "sensors.spout.points_stride=2"]),
-    "tof_mast (mock renderer)": ("tof_mast", "mock", []),
-    "ToF mast 1 m higher": ("tof_mast", "mock", [f"{MAST_TOF}.xyz_m=[-3.5, 5.0, 7.0]"]),
-    "ToF mast pitched 45 deg": ("tof_mast", "mock", [f"{MAST_TOF}.rpy_deg=[0.0, 45.0, 116.0]"]),
-    "ToF mast pitched 60 deg": ("tof_mast", "mock", [f"{MAST_TOF}.rpy_deg=[0.0, 60.0, 116.0]"]),
-    "ToF on the spout": ("tof_mast", "mock", [f"{MAST_TOF}.xyz_m=[-2.0, 7.45, 6.0]",
-                                              f"{MAST_TOF}.rpy_deg=[0.0, 90.0, -90.0]"]),
-    "ToF on the spout, 1 m forward": ("tof_mast", "mock", [f"{MAST_TOF}.xyz_m=[-1.0, 7.45, 6.0]",
+    "Kinect-class on the mast (tof_mast's mount)": ("tof_mast", "mock", [KINECT]),
+    "Kinect-class mast 1 m higher": ("tof_mast", "mock", [KINECT, f"{MAST_TOF}.xyz_m=[-3.5, 5.0, 7.0]"]),
+    "Kinect-class mast pitched 45 deg": ("tof_mast", "mock", [KINECT, f"{MAST_TOF}.rpy_deg=[0.0, 45.0, 116.0]"]),
+    "Kinect-class mast pitched 60 deg": ("tof_mast", "mock", [KINECT, f"{MAST_TOF}.rpy_deg=[0.0, 60.0, 116.0]"]),
+    "Kinect-class on the spout": ("tof_mast", "mock", [KINECT, f"{MAST_TOF}.xyz_m=[-2.0, 7.45, 6.0]",
+                                                      f"{MAST_TOF}.rpy_deg=[0.0, 90.0, -90.0]"]),
+    "Kinect-class on the spout, 1 m forward": ("tof_mast", "mock", [KINECT, f"{MAST_TOF}.xyz_m=[-1.0, 7.45, 6.0]",
                                                            f"{MAST_TOF}.rpy_deg=[0.0, 90.0, -90.0]"]),
-    "ToF mast, twice the axial noise": ("tof_mast", "mock", ["sensors.tof.axial_b_per_m=0.0038"]),
-    "ToF mast, 6 m range": ("tof_mast", "mock", ["sensors.tof.range_max_m=6.0"]),
+    "Kinect-class mast, twice the axial noise": ("tof_mast", "mock", [KINECT, "sensors.tof.axial_b_per_m=0.0038"]),
+    "Kinect-class mast, 6 m range": ("tof_mast", "mock", [KINECT, "sensors.tof.range_max_m=6.0"]),
+    "tof_mast (Azure Kinect NFOV, time of flight)": ("tof_mast", "mock", []),
 }
 
 
