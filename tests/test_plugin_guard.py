@@ -58,14 +58,31 @@ def test_an_import_that_ends_the_interpreter_is_refused_naming_the_plugin(tmp_pa
 
 @pytest.mark.parametrize("fork", [True, False], ids=["fork", "fresh interpreter"])
 def test_an_import_that_hangs_is_refused_after_the_time_limit(tmp_path, capsys, monkeypatch, fork):
-    monkeypatch.setattr(probe, "PLUGIN_IMPORT_TIMEOUT_S", 1.0)
+    monkeypatch.setattr(probe, "PLUGIN_IMPORT_IDLE_S", 1.0)
     monkeypatch.setattr(probe, "can_fork", lambda: fork)
     path, name = _scenario(tmp_path, "import time\ntime.sleep(600)\n")
     t = time.monotonic()
     assert main(["validate", str(path)]) == 2
     assert time.monotonic() - t < promised(30.0, 120.0)
     err = capsys.readouterr().err
-    assert f"controller.strategy: plug-in '{name}:f': importing module '{name}' did not finish within 1 s" in err
+    assert f"controller.strategy: plug-in '{name}:f': importing module '{name}' made no progress for 1 s" in err
+
+
+@pytest.mark.parametrize("fork", [True, False], ids=["fork", "fresh interpreter"])
+def test_a_slow_import_that_progresses_is_waited_for_and_a_loop_is_stopped_by_its_cpu_time(tmp_path, fork,
+                                                                                           monkeypatch):
+    """The probe judges progress, not the clock: an import that computes for 3 s (a large library's first import
+    on a busy machine) passes a 1 s idle limit; one that loops forever is stopped by its CPU budget."""
+    monkeypatch.setattr(probe, "PLUGIN_IMPORT_IDLE_S", 1.0)
+    slow = f"slow_{uuid.uuid4().hex[:8]}"
+    (tmp_path / f"{slow}.py").write_text("import time\nt = time.process_time() + 3.0\n"
+                                         "while time.process_time() < t:\n    pass\n")
+    assert probe.probe_imports([slow], [str(tmp_path), *sys.path], fork=fork) == {}
+    monkeypatch.setattr(probe, "PLUGIN_IMPORT_CPU_S", 1.0)
+    loop = f"loop_{uuid.uuid4().hex[:8]}"
+    (tmp_path / f"{loop}.py").write_text("while True:\n    pass\n")
+    refused = probe.probe_imports([loop], [str(tmp_path), *sys.path], fork=fork)
+    assert refused[loop].startswith(f"importing module '{loop}' did not finish within 1 s of CPU time")
 
 
 @pytest.mark.parametrize("fork", [True, False], ids=["fork", "fresh interpreter"])

@@ -3,7 +3,7 @@
 Importing a plug-in runs its module's code. A module that calls ``sys.exit`` or ``os._exit`` at import, kills its
 process, or never returns would otherwise end or stall ``validate`` and ``run`` with nothing said (exit 0, nothing
 run). :func:`probe_imports` imports the modules, in order, in a child process with the caller's ``sys.path``,
-under a time limit (:data:`PLUGIN_IMPORT_TIMEOUT_S`), and returns why each one that did not finish is refused;
+while it makes progress (:data:`PLUGIN_IMPORT_IDLE_S`, :data:`PLUGIN_IMPORT_CPU_S`), and returns why each one that did not finish is refused;
 the caller then imports the others itself (a module that raises is imported again there and reported with its
 exception). Only modules that are not imported yet are probed, so a sweep pays once.
 
@@ -26,10 +26,17 @@ import sys
 import threading
 import time
 
-__all__ = ["PLUGIN_IMPORT_TIMEOUT_S", "probe_imports", "can_fork"]
+__all__ = ["PLUGIN_IMPORT_IDLE_S", "PLUGIN_IMPORT_CPU_S", "probe_imports", "can_fork"]
 
-#: longest a plug-in's modules may take to import, s (a first import of a large library takes seconds)
-PLUGIN_IMPORT_TIMEOUT_S = 30.0
+#: longest a plug-in's import may go without progress, s: no CPU time gained and no thread waiting for a core or
+#: the disk (it sleeps, or waits for something at import time). Judged by the kernel's evidence
+#: (cosim.runtime.liveness.Evidence), not the clock: a first import of a large library on a busy machine takes
+#: as long as its share of a core makes it
+PLUGIN_IMPORT_IDLE_S = 5.0
+#: the CPU time a plug-in's modules may spend importing, s (a loop at import time)
+PLUGIN_IMPORT_CPU_S = 60.0
+#: how often the probe looks at the importing child, s
+_LOOK_S = 0.1
 
 _SPAWNED = """
 import importlib, json, os, sys
@@ -82,17 +89,12 @@ def _forked(modules: list[str], path: list[str], write_fd: int) -> None:
         os._exit(0)
 
 
-def _run(modules: list[str], path: list[str], limit: float, fork: bool) -> tuple[str, int | None]:
-    """Run one child over ``modules``: (what it reported, its wait status; None when it timed out and was killed)."""
+def _start(modules: list[str], path: list[str], fork: bool) -> tuple[int, int, subprocess.Popen | None]:
+    """Start one child over ``modules``: (its pid, the read end of its report, the Popen of a fresh interpreter)."""
     if not fork:
-        argv = [sys.executable, "-c", _SPAWNED, json.dumps(path), *modules]
-        try:
-            done = subprocess.run(argv, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=limit)
-        except subprocess.TimeoutExpired as e:
-            out = e.stdout.decode(errors="replace") if isinstance(e.stdout, bytes) else (e.stdout or "")
-            return out, None
-        code = done.returncode
-        return done.stdout, (code << 8) if code >= 0 else -code
+        proc = subprocess.Popen([sys.executable, "-c", _SPAWNED, json.dumps(path), *modules], stdin=subprocess.DEVNULL,
+                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+        return proc.pid, proc.stdout.fileno(), proc
     read_fd, write_fd = os.pipe()
     sys.stdout.flush()
     sys.stderr.flush()
@@ -101,24 +103,43 @@ def _run(modules: list[str], path: list[str], limit: float, fork: bool) -> tuple
         os.close(read_fd)
         _forked(modules, path, write_fd)
     os.close(write_fd)
-    deadline, report = time.monotonic() + limit, b""
+    return pid, read_fd, None
+
+
+def _run(modules: list[str], path: list[str], fork: bool) -> tuple[str, int | str]:
+    """Run one child over ``modules``: (what it reported, its wait status; or why it was killed: "idle" after
+    PLUGIN_IMPORT_IDLE_S without progress, "cpu" past PLUGIN_IMPORT_CPU_S of CPU time)."""
+    from cosim.runtime.liveness import Evidence
+
+    pid, read_fd, proc = _start(modules, path, fork)
+    evidence, report, killed = Evidence(pid), b"", ""
+    evidence.idle_s()
     try:
         while True:
-            left = deadline - time.monotonic()
-            if left <= 0 or not select.select([read_fd], [], [], left)[0]:
-                os.kill(pid, signal.SIGKILL)
-                os.waitpid(pid, 0)
-                return report.decode(errors="replace"), None
+            if not select.select([read_fd], [], [], _LOOK_S)[0]:
+                killed = "idle" if evidence.idle_s() > PLUGIN_IMPORT_IDLE_S else \
+                    "cpu" if evidence.cpu_s > PLUGIN_IMPORT_CPU_S else ""
+                if killed:
+                    os.kill(pid, signal.SIGKILL)
+                    break
+                continue
             chunk = os.read(read_fd, 65536)
             if not chunk:                               # the child ended (or closed the pipe)
                 break
             report += chunk
     finally:
-        os.close(read_fd)
-    return report.decode(errors="replace"), os.waitpid(pid, 0)[1]
+        if proc is None:
+            os.close(read_fd)
+    if proc is not None:
+        proc.stdout.close()
+        code = proc.wait()
+        status = (code << 8) if code >= 0 else -code
+    else:
+        status = os.waitpid(pid, 0)[1]
+    return report.decode(errors="replace"), killed or status
 
 
-def _verdict(report: str, status: int | None, modules: list[str], limit: float) -> tuple[dict[str, str], str | None]:
+def _verdict(report: str, status: int | str, modules: list[str]) -> tuple[dict[str, str], str | None]:
     """(refusals, the module after which the rest was not tried) from a child's report and wait status."""
     started, steps = modules[0], {}
     for line in report.splitlines():
@@ -136,9 +157,13 @@ def _verdict(report: str, status: int | None, modules: list[str], limit: float) 
     if step == "exit":
         return {started: f"importing module {started!r} calls sys.exit({arg}); a plug-in module must only define "
                          "things when imported"}, started
-    if status is None:
-        return {started: f"importing module {started!r} did not finish within {limit:g} s (it hangs, or waits for "
-                         "something at import time)"}, started
+    if status == "idle":
+        return {started: f"importing module {started!r} made no progress for {PLUGIN_IMPORT_IDLE_S:g} s: no CPU "
+                         "time, no thread waiting for a core or the disk (it sleeps, or waits for something at "
+                         "import time)"}, started
+    if status == "cpu":
+        return {started: f"importing module {started!r} did not finish within {PLUGIN_IMPORT_CPU_S:g} s of CPU "
+                         "time (a loop at import time?)"}, started
     if os.WIFSIGNALED(status):
         try:
             sig = signal.Signals(os.WTERMSIG(status)).name
@@ -150,20 +175,18 @@ def _verdict(report: str, status: int | None, modules: list[str], limit: float) 
                      "imported"}, started
 
 
-def probe_imports(modules: list[str], path: list[str] | None = None, timeout_s: float | None = None,
-                  fork: bool | None = None) -> dict[str, str]:
-    """Module name -> why it is refused, for each of ``modules`` whose import ends the interpreter, kills it or
-    does not finish within ``timeout_s`` (default :data:`PLUGIN_IMPORT_TIMEOUT_S`); ``path``: the ``sys.path``
-    to import with (default: this process's); ``fork``: probe in a fork (default: :func:`can_fork`) or a fresh
-    interpreter. A module whose import raises is not in the result."""
+def probe_imports(modules: list[str], path: list[str] | None = None, fork: bool | None = None) -> dict[str, str]:
+    """Module name -> why it is refused, for each of ``modules`` whose import ends the interpreter, kills it,
+    makes no progress for :data:`PLUGIN_IMPORT_IDLE_S` or spends more than :data:`PLUGIN_IMPORT_CPU_S` of CPU
+    time; ``path``: the ``sys.path`` to import with (default: this process's); ``fork``: probe in a fork (default:
+    :func:`can_fork`) or a fresh interpreter. A module whose import raises is not in the result."""
     modules = [m for m in dict.fromkeys(modules) if m not in sys.modules]
-    limit = PLUGIN_IMPORT_TIMEOUT_S if timeout_s is None else timeout_s
     path = list(sys.path if path is None else path)
     fork = can_fork() if fork is None else fork
     refused: dict[str, str] = {}
     while modules:
-        report, status = _run(modules, path, limit, fork)
-        bad, stop = _verdict(report, status, modules, limit)
+        report, status = _run(modules, path, fork)
+        bad, stop = _verdict(report, status, modules)
         refused.update(bad)
         if stop is None:
             break
