@@ -24,7 +24,6 @@ import signal
 import subprocess
 import sys
 import threading
-import time
 
 __all__ = ["PLUGIN_IMPORT_IDLE_S", "PLUGIN_IMPORT_CPU_S", "probe_imports", "can_fork"]
 
