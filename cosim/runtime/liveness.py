@@ -143,10 +143,21 @@ def is_stopped(pid: int) -> bool:
     return process_state(pid) in ("T", "t")
 
 
+def _thread(pid: int, tid: int) -> tuple[int, bytes]:
+    """(CPU time of thread ``tid`` of ``pid``, ns: its ``schedstat`` (exact), or its ``stat`` ticks where there is
+    none; its one-letter state). Raises OSError (and IndexError, ValueError) when it cannot be read."""
+    base = f"/proc/{pid}/task/{tid}/"
+    fields = _stat_fields(_read(base + "stat"))
+    try:
+        cpu = int(_read(base + "schedstat").split()[0])
+    except (OSError, IndexError, ValueError):
+        cpu = int((int(fields[11]) + int(fields[12])) * _TICK_NS)
+    return cpu, fields[0]
+
+
 def threads_progress(pid: int, skip_tid: int = 0) -> tuple[int, bool]:
     """(CPU time of ``pid``'s threads but ``skip_tid``, ns; whether one of them is runnable or in I/O: ``R`` or
-    ``D``). CPU time from each thread's ``schedstat`` (exact), or its ``stat`` ticks where there is none. (-1,
-    False) when the process cannot be read (gone)."""
+    ``D``). (-1, False) when the process cannot be read (gone)."""
     try:
         tids = os.listdir(f"/proc/{pid}/task")
     except OSError:
@@ -155,32 +166,23 @@ def threads_progress(pid: int, skip_tid: int = 0) -> tuple[int, bool]:
     for tid in tids:
         if int(tid) == skip_tid:
             continue
-        base = f"/proc/{pid}/task/{tid}/"
         try:
-            fields = _stat_fields(_read(base + "stat"))
-            busy = busy or fields[0] in (b"R", b"D")
-            try:
-                cpu += int(_read(base + "schedstat").split()[0])
-            except (OSError, IndexError, ValueError):
-                cpu += int((int(fields[11]) + int(fields[12])) * _TICK_NS)
+            t_cpu, state = _thread(pid, int(tid))
         except (OSError, IndexError, ValueError):  # a thread that ended meanwhile
             continue
+        cpu += t_cpu
+        busy = busy or state in (b"R", b"D")
     return cpu, busy
 
 
 def thread_progress(pid: int, tid: int) -> tuple[int, bool]:
     """(CPU time of thread ``tid`` of ``pid``, ns; whether it is runnable, ``R``); (-1, False) when it cannot be
     read (no such thread)."""
-    base = f"/proc/{pid}/task/{tid}/"
     try:
-        fields = _stat_fields(_read(base + "stat"))
-        try:
-            cpu = int(_read(base + "schedstat").split()[0])
-        except (OSError, IndexError, ValueError):
-            cpu = int((int(fields[11]) + int(fields[12])) * _TICK_NS)
-        return cpu, fields[0] == b"R"
+        cpu, state = _thread(pid, tid)
     except (OSError, IndexError, ValueError):
         return -1, False
+    return cpu, state == b"R"
 
 
 @dataclass
