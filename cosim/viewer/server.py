@@ -15,6 +15,9 @@ on SIGTERM between the two (the launcher terminates its observers when the run e
 headers of a JSON document and none of its bytes (``http.client.IncompleteRead``). :func:`serve` turns SIGTERM
 (and Ctrl-C) into a graceful stop: stop accepting, let the requests being answered finish (at most
 DRAIN_S), then unmap and exit. A connection idle between requests is simply closed, which HTTP clients expect.
+The signal only asks the serving loop to stop after its current turn: an exception raised from the handler could
+land between ``accept()`` and the start of the request's thread, and that connection was closed unanswered
+(``RemoteDisconnected`` on a page still watching a run that was about to show its end).
 
 The end of a run (``observe``: the launcher sends SIGTERM once the ring has stopped) is shown, not cut off: the
 viewer takes the segment's last frame as its final snapshot (``run ended``) and, if a page was watching, keeps
@@ -46,7 +49,7 @@ from .panels import IMAGE_PANELS, PanelRenderer, panel_info
 from .snapshot import fullness
 from .viewinfo import ViewInfo, default_fill
 
-__all__ = ["DashboardServer", "state_json", "fill_band_of", "observe", "serve", "ServerStop", "DEFAULT_PORT",
+__all__ = ["DashboardServer", "state_json", "fill_band_of", "observe", "serve", "DEFAULT_PORT",
            "DEFAULT_HOST", "NICE", "DRAIN_S", "LINGER_S", "WATCHED_S", "LINGER_MAX_S", "RUN_ENDED"]
 
 log = logging.getLogger("cosim.viewer")
@@ -78,12 +81,6 @@ GAPS = 3.0
 _RECENT_GAPS = 8
 #: the status of a live source whose run has ended (cosim.viewer.live)
 RUN_ENDED = "run ended"
-
-
-class ServerStop(BaseException):
-    """Raised in the serving thread by SIGTERM: stop serving, finish the responses under way, exit. A
-    BaseException, like KeyboardInterrupt, so that socketserver's per-request ``except Exception`` does not
-    swallow it."""
 
 
 def _finite(x):
@@ -337,10 +334,6 @@ def _tell_when_answering(name: str, url: str) -> None:
         log.info("viewer of %s at %s", name, url)
 
 
-def _raise_stop(signum, frame) -> None:
-    raise ServerStop(signal.Signals(signum).name)
-
-
 def serve(source, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, announce: str | None = None,
           show_end: bool = False) -> bool:
     """Serve ``source`` until SIGTERM or Ctrl-C, then stop gracefully (module docstring). ``announce``: a file to
@@ -355,27 +348,38 @@ def serve(source, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, announce: 
     # the address is told once it answers, not when the socket is bound (the page took ~1.5 s more then)
     threading.Thread(target=_tell_when_answering, args=(source.name, srv.url), name="viewer-address",
                      daemon=True).start()
-    previous = None
+    received: list[int] = []
+
+    def on_signal(signum, frame) -> None:
+        # the serving loop ends after its current turn (shutdown waits for that, so not from this thread): an
+        # exception raised here could drop a connection accepted but not yet handed to its thread
+        if not received:
+            received.append(signum)
+            threading.Thread(target=srv.shutdown, name="viewer-stop", daemon=True).start()
+
+    previous = {}
     if threading.current_thread() is threading.main_thread():
-        previous = signal.signal(signal.SIGTERM, _raise_stop)
+        previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGTERM, signal.SIGINT)}
     if announce:
         atomic_write(Path(announce), json.dumps({"url": srv.url, "pid": os.getpid()}))
-    signalled = False
     try:
-        srv.serve_forever(poll_interval=0.5)
-    except (ServerStop, KeyboardInterrupt) as exc:
-        signalled = True
-        log.info("viewer of %s stopping (%s)", source.name, type(exc).__name__)
-        if previous is not None:
-            signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second SIGTERM must not cut the end short
-        if show_end and isinstance(exc, ServerStop):
-            srv.show_the_end()
+        try:
+            srv.serve_forever(poll_interval=0.5)
+        except KeyboardInterrupt:  # Ctrl-C where the handler could not be ours (serving off the main thread)
+            received.append(signal.SIGINT)
+        if received:
+            log.info("viewer of %s stopping (%s)", source.name, signal.Signals(received[0]).name)
+            for sig in previous:
+                signal.signal(sig, signal.SIG_IGN)  # a second signal must not cut the end or the drain short
+            if show_end and received[0] == signal.SIGTERM:
+                srv.show_the_end()
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second SIGTERM must not cut the drain short
         srv.drain()
         srv.server_close()
-    return signalled
+        if not received:  # after a signal they stay ignored: the process is on its way out
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+    return bool(received)
 
 
 def observe(segment_name: str, port: int = DEFAULT_PORT, host: str = DEFAULT_HOST, announce: str | None = None,
