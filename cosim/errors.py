@@ -86,7 +86,12 @@ class ParticipantDied(RunError):
 
 
 class ParticipantHung(RunError):
-    """A participant process stopped running (SIGSTOP, a deadlock): its liveness heartbeat stopped."""
+    """A participant process stopped running (SIGSTOP, a deadlock): its liveness heartbeat stopped. ``threads``:
+    what its threads were doing when it was named (cosim.runtime.threadreport), one line each."""
+
+    def __init__(self, message: str, *, threads: list[str] | None = None, **kwargs):
+        super().__init__(message, **kwargs)
+        self.threads = list(threads or [])
 
 
 class OutputError(RunError):

@@ -57,6 +57,12 @@ def test_a_child_that_stops_running_is_named_within_2_s(role, fault, at, words, 
     assert res.exit_code == EXIT_RUN_ERROR
     assert res.summary["frames"] == max(at, 0) and res.summary["status"] == "failed"
     assert all(code is not None for code in res.children.values())
+    if fault == "deadlock_at":  # what its threads did is told in summary.json and log.txt (the console is spared)
+        threads = res.summary["error"]["threads"]
+        assert any(" MainThread S " in t or " python" in t for t in threads), threads
+        assert any(t.startswith("tid ") and "run-queue wait" in t and "voluntary" in t for t in threads), threads
+        assert "the watch's samples" in "\n".join(threads)
+        assert "the threads of dynamics when it was named" in (tmp_path / "run" / "log.txt").read_text()
 
 
 def test_a_runaway_frame_meets_its_cpu_budget_not_the_heartbeat(tmp_path, shm_clean):

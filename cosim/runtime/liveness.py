@@ -29,17 +29,20 @@ every ``STARTUP_REPORT_S`` what they do (``activity``: "compiling shaders"), how
 """
 from __future__ import annotations
 
+import collections
 import logging
 import os
 import signal
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable, Mapping, Sequence
 
 from cosim.errors import HandoffTimeout, ParticipantCrashed, ParticipantDied, ParticipantHung, RunError
 from shm_schema import Phase, Segment
 from shm_schema.layout import SLOT_WORD
+
+from .threadreport import thread_report
 
 __all__ = ["BEAT_S", "STALL_S", "CONFIRM_S", "IDLE_S", "LOOK_AFTER_S", "STARTUP_REPORT_S", "Heartbeat", "Watch",
            "Progress", "Evidence", "process_state", "cpu_ticks", "is_stopped", "threads_progress", "thread_progress",
@@ -64,6 +67,8 @@ SAMPLE_S = 0.1
 STARTUP_REPORT_S = 5.0
 #: CPU time below this over IDLE_S is no progress (a timer thread of a library), ns
 _EPS_NS = 2_000_000
+#: samples of a member kept for the report of a hang
+_HISTORY = 16
 
 log = logging.getLogger("cosim.runtime.liveness")
 
@@ -199,6 +204,8 @@ class Progress:
     stopped_ns: int = 0
     reported_ns: int = 0
     beat_cpu_ns: int = -1
+    #: the latest samples, (time ns, working threads' CPU ns, one runnable, heartbeat thread's CPU ns, it runnable)
+    history: collections.deque = field(default_factory=lambda: collections.deque(maxlen=_HISTORY))
 
     def sample(self, now: int, cpu: int, busy: bool, beat: tuple[int, bool] = (-1, False)) -> None:
         """Take one sample: progress when the working threads gained CPU time (more than _EPS_NS since the last
@@ -207,6 +214,7 @@ class Progress:
         :meth:`beat_starved`); the first sample starts the count."""
         if self.cpu0_ns < 0:
             self.cpu0_ns = cpu
+        self.history.append((now, cpu, busy) + tuple(beat))
         starved = self.beat_starved(*beat)
         if self.cpu_ns < 0 or busy or starved or cpu - self.cpu_ns > _EPS_NS:
             self.cpu_ns, self.moved_ns = cpu, now
@@ -344,7 +352,19 @@ class Watch:
         else:
             text = (f"{name} (pid {pid}) is blocked {where}: it beats, but its working threads used no CPU time "
                     f"for {idle_s:.1f} s (a deadlock on a lock, or a wait on something outside the run)")
-        return ParticipantHung(text, process=name, frame=frame)
+        p = self._progress.get(name)
+        return ParticipantHung(text, process=name, frame=frame,
+                               threads=thread_report(pid) + (_samples(p, now, int(w[_TID])) if p else []))
+
+
+def _samples(p: Progress, now: int, beat_tid: int) -> list[str]:
+    """The watch's latest samples of a member, oldest first, for the report of a hang."""
+    lines = [f"the watch's samples (heartbeat thread {beat_tid}), seconds before the verdict:"]
+    for t, cpu, busy, beat_cpu, beat_runnable in p.history:
+        lines.append(f"  -{(now - t) / _NS:.2f} s: working threads {cpu / 1e6:.1f} ms CPU"
+                     f"{', one runnable' if busy else ''}; heartbeat {beat_cpu / 1e6:.1f} ms"
+                     f"{', runnable' if beat_runnable else ''}")
+    return lines
 
 
 def _activity(seg: Segment, name: str) -> str:

@@ -131,9 +131,13 @@ def compose_summary(scenario: Scenario, recorder: Recorder | None, ring: Sequenc
 
 
 def error_entry(error: RunError) -> dict:
-    """summary.json's ``error``: type, message, the process that failed, the frame and the traceback."""
-    return {"type": type(error).__name__, "message": str(error), "process": error.process, "frame": error.frame,
-            "traceback": error.detail}
+    """summary.json's ``error``: type, message, the process that failed, the frame and the traceback; for a hung
+    member, what its threads were doing (``threads``, one line each)."""
+    entry = {"type": type(error).__name__, "message": str(error), "process": error.process, "frame": error.frame,
+             "traceback": error.detail}
+    if getattr(error, "threads", None):
+        entry["threads"] = list(error.threads)
+    return entry
 
 
 def fail_summary(summary: dict, error: RunError) -> dict:

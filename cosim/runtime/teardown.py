@@ -92,6 +92,8 @@ def tear_down(run: RunState, error: RunError | None) -> tuple[dict, RunError | N
         log.error("run failed: %s", error)
         if error.detail:
             log.error("traceback of %s:\n%s", error.process, error.detail)
+        if getattr(error, "threads", None):  # log.txt only: no child's detail on the console for a hang
+            log.info("the threads of %s when it was named:\n%s", error.process, "\n".join(error.threads))
     figures = figures_plan(run.run_dir, run.scenario, run.recorder, error)
     try:
         summary, failure = finish_outputs(run.run_dir, run.scenario, run.recorder, run.ring, wall_time_s=wall,
