@@ -78,6 +78,40 @@ def test_a_heartbeat_thread_starved_while_it_holds_the_gil_is_starvation_not_a_h
     assert sleeping.moved_ns == 0
 
 
+#: the watch's samples of a real false fault (perception of dusty at nice 19 beside ten busy processes, named
+#: "stopped beating" before the watch counted its looks): seconds before the verdict, the working threads' CPU ms,
+#: one of them runnable, the heartbeat thread's CPU ms, it runnable. The supervisor, starved too, looked 0.1-2.6 s
+#: apart; the working threads were runnable at almost every look, and the last look came 1.17 s after the one before
+STARVED_AT_NICE_19 = [
+    (9.46, 1174.3, True, 132.0, False), (9.02, 1178.1, True, 132.1, True), (8.91, 1178.1, True, 132.1, True),
+    (7.64, 1178.1, True, 132.6, True), (7.04, 1178.1, True, 132.8, True), (4.45, 1178.1, True, 133.6, False),
+    (3.87, 1180.6, True, 134.0, False), (3.60, 1180.6, True, 134.1, True), (2.64, 1184.1, True, 134.6, True),
+    (2.50, 1184.1, True, 134.6, False), (2.18, 1187.9, True, 135.0, False), (1.96, 1187.9, True, 135.0, False),
+    (1.81, 1189.4, True, 135.2, False), (1.60, 1194.3, True, 135.3, True), (1.17, 1194.3, True, 135.4, True),
+    (0.00, 1194.4, False, 135.9, True)]
+
+
+def test_a_verdict_needs_idle_looks_in_a_row_not_one_look_after_a_long_gap():
+    """The recorded false fault is no longer one: one idle look after a 1.17 s gap is not IDLE_LOOKS of them. A
+    real deadlock is still named: after IDLE_S when looked at every 0.1 s, after IDLE_LOOKS looks when the
+    supervisor looks every 0.5 s."""
+    ms = 1_000_000
+    p = liveness.Progress((3, 35, 0), since_ns=0)
+    for ago, cpu, busy_now, beat, beat_runnable in STARVED_AT_NICE_19:
+        now = int((10.0 - ago) * 1000) * ms
+        p.sample(now, int(cpu * ms), busy_now, (int(beat * ms), beat_runnable))
+    assert (now - p.moved_ns) / 1e9 > IDLE_S          # what the watch once named hung on
+    assert p.idle_looks == 1 and p.idle_s(now) == 0.0
+    for gap_ms, named_after_ms in ((100, 1000), (500, 2500)):
+        deadlock = liveness.Progress((3, 35, 0), since_ns=0)
+        for k in range(100):                     # nothing moves: no CPU time, nothing runnable
+            t = k * gap_ms * ms
+            deadlock.sample(t, cpu=100 * ms, busy=False, beat=(7 * ms + k * 40_000, False))
+            if deadlock.idle_s(t) >= IDLE_S:
+                break
+        assert t == named_after_ms * ms and deadlock.idle_looks >= liveness.IDLE_LOOKS, (gap_ms, t)
+
+
 def test_evidence_tells_a_sleeping_process_from_a_spinning_one():
     import subprocess
     import sys
@@ -90,11 +124,12 @@ def test_evidence_tells_a_sleeping_process_from_a_spinning_one():
         assert sleeper.stdout.readline() == spinner.stdout.readline() == "up\n"  # both interpreters started
         ev_sleep, ev_spin = Evidence(sleeper.pid), Evidence(spinner.pid)
         ev_sleep.idle_s(), ev_spin.idle_s()
-        t_end = time.monotonic() + 1.2 * IDLE_S
-        while time.monotonic() < t_end:
+        t_end, looks = time.monotonic() + 1.2 * IDLE_S, 0
+        while time.monotonic() < t_end or looks < liveness.IDLE_LOOKS:   # a verdict needs that many looks
             time.sleep(0.1)
-            idle_spin = ev_spin.idle_s()
-        assert ev_sleep.idle_s() > IDLE_S
+            idle_spin, idle_sleep = ev_spin.idle_s(), ev_sleep.idle_s()
+            looks += 1
+        assert idle_sleep > IDLE_S
         assert idle_spin < 0.5 and ev_spin.cpu_s > 0  # runnable, and it ran (however starved)
     finally:
         sleeper.kill(), spinner.kill()

@@ -17,7 +17,9 @@ no progress is at fault. The evidence is the kernel's:
 
 * the kernel reports it stopped (``T``: SIGSTOP, Ctrl-Z, a debugger), confirmed ``CONFIRM_S`` later;
 * it is starting or stepping and its working threads gained no CPU time, and none was runnable, for ``IDLE_S``
-  (a GIL deadlock: its beat ages too; a lock deadlock or a wait on something outside the run: it still beats);
+  and at least ``IDLE_LOOKS`` looks in a row (a GIL deadlock: its beat ages too; a lock deadlock or a wait on
+  something outside the run: it still beats). The looks count because the watch judges only what it saw: a
+  supervisor starved itself looks seconds apart, and two looks a second apart prove nothing of the time between;
 * it spent more than the scenario's ``timing.handoff_timeout_s`` of its own CPU time on one frame (a runaway
   loop; :class:`cosim.errors.HandoffTimeout`), or more than ``timing.startup_timeout_s`` of CPU time starting.
 
@@ -44,7 +46,7 @@ from shm_schema.layout import SLOT_WORD
 
 from .threadreport import thread_report
 
-__all__ = ["BEAT_S", "STALL_S", "CONFIRM_S", "IDLE_S", "LOOK_AFTER_S", "STARTUP_REPORT_S", "Heartbeat", "Watch",
+__all__ = ["BEAT_S", "STALL_S", "CONFIRM_S", "IDLE_S", "IDLE_LOOKS", "LOOK_AFTER_S", "STARTUP_REPORT_S", "Heartbeat", "Watch",
            "Progress", "Evidence", "process_state", "cpu_ticks", "is_stopped", "threads_progress", "thread_progress",
            "end_process",
            "stop_processes", "child_failure"]
@@ -63,6 +65,9 @@ IDLE_S = 1.0
 LOOK_AFTER_S = 0.25
 #: how often a member under look is sampled, s
 SAMPLE_S = 0.1
+#: a member is idle only once this many looks in a row saw no progress: the verdict rests on what the watch saw,
+#: and a supervisor starved itself (its looks seconds apart) waits for as many looks as a quiet one takes in IDLE_S
+IDLE_LOOKS = 5
 #: while members start, the watch reports their activity after this long and every this long again, s
 STARTUP_REPORT_S = 5.0
 #: CPU time below this over IDLE_S is no progress (a timer thread of a library), ns
@@ -200,6 +205,7 @@ class Progress:
     cpu0_ns: int = -1
     cpu_ns: int = -1
     moved_ns: int = 0
+    idle_looks: int = 0
     sampled_ns: int = 0
     stopped_ns: int = 0
     reported_ns: int = 0
@@ -217,8 +223,15 @@ class Progress:
         self.history.append((now, cpu, busy) + tuple(beat))
         starved = self.beat_starved(*beat)
         if self.cpu_ns < 0 or busy or starved or cpu - self.cpu_ns > _EPS_NS:
-            self.cpu_ns, self.moved_ns = cpu, now
+            self.cpu_ns, self.moved_ns, self.idle_looks = cpu, now, 0
+        else:
+            self.idle_looks += 1
         self.sampled_ns = now
+
+    def idle_s(self, now: int) -> float:
+        """Seconds since the last progress, once IDLE_LOOKS samples in a row saw none (0.0 before: a verdict needs
+        that many looks, however far apart a starved supervisor took them)."""
+        return (now - self.moved_ns) / _NS if self.idle_looks >= IDLE_LOOKS else 0.0
 
     def beat_starved(self, cpu: int, runnable: bool) -> bool:
         """Whether the heartbeat thread waits for a core and has had none since the last sample. Starved while it
@@ -243,14 +256,15 @@ class Evidence:
         self._p = Progress((0, 0, 0), clock())
 
     def idle_s(self) -> float:
-        """Seconds since its working threads last gained CPU time or waited for a core or the disk (0 at the first
-        call; 0 when it cannot be read: a process that ended is for its exit status to tell)."""
+        """Seconds since its working threads last gained CPU time or waited for a core or the disk, once IDLE_LOOKS
+        calls in a row saw none (0.0 before; 0.0 when it cannot be read: a process that ended is for its exit status
+        to tell)."""
         now = self._clock()
         cpu, busy = threads_progress(self.pid, self._skip)
         if cpu < 0:
             return 0.0
         self._p.sample(now, cpu, busy)
-        return (now - self._p.moved_ns) / _NS
+        return self._p.idle_s(now)
 
     @property
     def cpu_s(self) -> float:
@@ -309,8 +323,9 @@ class Watch:
     def _judge(self, name: str, pid: int, w, p: Progress, now: int, phase: int) -> None:
         if p.cpu0_ns < 0:
             return
-        if (now - p.moved_ns) / _NS >= IDLE_S:
-            raise self._hung(name, pid, w, now, stopped=False, idle_s=(now - p.moved_ns) / _NS)
+        idle_s = p.idle_s(now)
+        if idle_s >= IDLE_S:
+            raise self._hung(name, pid, w, now, stopped=False, idle_s=idle_s)
         starting = phase in _STARTING
         limit = self._startup_cpu_s if starting else self._frame_cpu_s
         if p.cpu_s > limit:
