@@ -40,6 +40,7 @@ from cosim.world.geometry import invert
 from cosim.world.sensors import world_from_parent
 from perception_proc.atmosphere.lidar import lidar_atmosphere
 from perception_proc.blocks import ACCURACY_FIELDS, HEIGHTS_BLOCK, POINTS_BLOCK, STATE_BLOCK, WRITER, sensor_state_block
+from perception_proc.cameras.expected import error_basis
 from perception_proc.cameras.sensors import PerceptionCameras
 from perception_proc.estimates.posegate import level_prior, pose_gate
 from perception_proc.leveling import level_from_parent
@@ -85,6 +86,7 @@ class PerceptionParticipant:
         self.pipeline = Perception(self.scenario, rig, self.cameras.pipes)
         self.cameras.level_parent = self.pipeline.level_parent
         self.selection = FusionSelection(has_lidar=lidar is not None)
+        self._basis = {n: error_basis(c) for n, c in self.scenario.cameras.items()}
         self._atmosphere = lidar_atmosphere(self.scenario, self.pipeline.directions) if lidar is not None else None
         self._images = []
         for name, want in _image_blocks(self.pipeline, rig):
@@ -294,7 +296,7 @@ class PerceptionParticipant:
             if not len(self.cameras) or not res.cart.valid:
                 return res, {}
             sigmas = self.cameras.sigmas_at_cart(np.asarray(res.cart.corners))
-            return res, judge(sigmas, self.scenario.outcome.overfill_tolerance_m)
+            return res, judge(sigmas, self.scenario.outcome.overfill_tolerance_m, self._basis)
 
         fused = self.selection.fused(cams)
         res, fits = run(fused)

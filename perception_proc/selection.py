@@ -26,30 +26,34 @@ log = logging.getLogger("cosim.perception")
 class CameraFit:
     """One camera's verdict in one frame: ``sigma_m`` the expected 1-sigma of a cell's height at the cart (m),
     ``depth_m`` the planar depth at which it sees the cart (m), ``unfit`` when FIT_SIGMAS sigmas exceed the
-    overfill tolerance ``tolerance_m`` (m)."""
+    overfill tolerance ``tolerance_m`` (m); ``basis`` what the figure rests on."""
 
     sigma_m: float
     depth_m: float
     tolerance_m: float
+    #: what the figure rests on (perception_proc.cameras.expected.error_basis)
+    basis: str = ""
 
     @property
     def unfit(self) -> bool:
         return self.sigma_m * FIT_SIGMAS > self.tolerance_m
 
 
-def judge(sigmas: Mapping[str, tuple[float, float]], tolerance_m: float) -> dict[str, CameraFit]:
+def judge(sigmas: Mapping[str, tuple[float, float]], tolerance_m: float,
+          basis: Mapping[str, str] | None = None) -> dict[str, CameraFit]:
     """The verdicts of the cameras that see the cart: ``sigmas`` name -> (sigma m, depth m)
     (perception_proc.cameras.sensors.PerceptionCameras.sigmas_at_cart); ``tolerance_m`` the overfill
-    tolerance (m)."""
-    return {n: CameraFit(s, z, tolerance_m) for n, (s, z) in sigmas.items()}
+    tolerance (m); ``basis`` name -> what each camera's figure rests on."""
+    basis = basis or {}
+    return {n: CameraFit(s, z, tolerance_m, basis.get(n, "")) for n, (s, z) in sigmas.items()}
 
 
 def unfit_reason(name: str, fit: CameraFit) -> str:
     """The sentence naming camera ``name``'s figure against what the target allows."""
     allowed = fit.tolerance_m / FIT_SIGMAS
     return (f"camera {name}: expected error of a cell's height at the cart {100 * fit.sigma_m:.1f} cm at "
-            f"{fit.depth_m:.1f} m, more than the {100 * allowed:.1f} cm the {100 * fit.tolerance_m:.0f} cm "
-            "overfill tolerance allows")
+            f"{fit.depth_m:.1f} m{f' ({fit.basis})' if fit.basis else ''}, more than the {100 * allowed:.1f} cm "
+            f"the {100 * fit.tolerance_m:.0f} cm overfill tolerance allows")
 
 
 @dataclass

@@ -151,7 +151,7 @@ def fitness(scenario: Scenario, series: Mapping[str, np.ndarray]) -> dict:
     (``allowed_sigma_m``: the overfill tolerance over FIT_SIGMAS) and ``reason``, a sentence naming the figure
     when every frame at the cart was unfit (perception withheld its height map, so the controller never started
     the auger), else None."""
-    from perception_proc.cameras.expected import FIT_SIGMAS
+    from perception_proc.cameras.expected import FIT_SIGMAS, error_basis
 
     sigma, depth, unfit = (_col(series, k) for k in ("height_sigma_m", "height_sigma_depth_m", "sensor_unfit"))
     seen = np.isfinite(sigma) if sigma.size else np.zeros(0, bool)
@@ -160,8 +160,9 @@ def fitness(scenario: Scenario, series: Mapping[str, np.ndarray]) -> dict:
            "height_sigma_m": _median(sigma[seen]) if seen.any() else math.nan,
            "depth_m": _median(depth[seen]) if seen.any() else math.nan, "allowed_sigma_m": allowed, "reason": None}
     if out["frames_at_cart"] and out["unfit_frames"] == out["frames_at_cart"]:
+        basis = "; ".join(f"{n}: {error_basis(c)}" for n, c in scenario.cameras.items() if error_basis(c))
         out["reason"] = (f"the cameras' expected error of a cell's height at the cart, {100 * out['height_sigma_m']:.1f}"
-                         f" cm at {out['depth_m']:.1f} m, exceeds the {100 * allowed:.1f} cm the "
+                         f" cm at {out['depth_m']:.1f} m ({basis}), exceeds the {100 * allowed:.1f} cm the "
                          f"{100 * scenario.outcome.overfill_tolerance_m:.0f} cm overfill tolerance allows: no height "
                          "map was published and the auger was not started")
     return out
@@ -172,7 +173,7 @@ def camera_fitness(scenario: Scenario, series: Mapping[str, np.ndarray]) -> dict
     it saw the found cart), ``unfit_frames``, ``left_out_frames`` (frames its points were not fused), the median
     ``height_sigma_m`` and ``depth_m`` over the frames at the cart, and ``reason``: a sentence naming the figure
     when it was left out of the fusion, else None."""
-    from perception_proc.cameras.expected import FIT_SIGMAS
+    from perception_proc.cameras.expected import FIT_SIGMAS, error_basis
 
     out = {}
     tol = scenario.outcome.overfill_tolerance_m
@@ -189,7 +190,7 @@ def camera_fitness(scenario: Scenario, series: Mapping[str, np.ndarray]) -> dict
              "depth_m": _median(depth[seen]) if seen.any() else math.nan, "reason": None}
         if v["left_out_frames"]:
             v["reason"] = (f"camera {name}: expected error of a cell's height at the cart {100 * v['height_sigma_m']:.1f}"
-                           f" cm at {v['depth_m']:.1f} m, more than the {100 * tol / FIT_SIGMAS:.1f} cm the "
+                           f" cm at {v['depth_m']:.1f} m ({error_basis(scenario.cameras[name])}), more than the {100 * tol / FIT_SIGMAS:.1f} cm the "
                            f"{100 * tol:.0f} cm overfill tolerance allows: left out of the fusion in "
                            f"{v['left_out_frames']} of {fused.size} frames, the fit sensors fused")
         out[name] = v

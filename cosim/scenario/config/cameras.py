@@ -238,7 +238,8 @@ class StereoCamera(Camera):
     """Sub-pixel disparity: refine (Gauss-Newton on the intensity difference, no pixel locking) or matcher
     (OpenCV's parabola over whole-pixel costs, which locks towards whole disparities)."""
     disparity_sigma_px: PosFloat = 0.25
-    """The disparity 1-sigma the camera is expected to hold, px: its depth 1-sigma is Z^2 sigma / (f B)."""
+    """The disparity 1-sigma the camera is expected to hold with SGBM, px; perception scales it by the matcher's
+    measured ratio (BM 1.36, docs/cameras.md): its depth 1-sigma is Z^2 sigma / (f B)."""
     image_noise: ImageNoise | None = None
     """Shot and read noise of the eyes' images before the matcher (EMVA 1288 photon transfer); null: none."""
     distortion: LensDistortion | None = None
