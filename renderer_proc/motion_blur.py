@@ -46,23 +46,37 @@ def pixel_displacement(depth: np.ndarray, pin: Pinhole, world_from_camera_end: n
     ``depth`` (H, W) planar depth m at the exposure's end (NaN: nothing, no motion); the camera's poses
     (4, 4, camera axes) at the exposure's end and start; ``body`` (H, W) int index into ``start_from_end``
     [(4, 4)], each body's world motion from the end back to the start (world_from_body(start) @
-    inv(world_from_body(end))); None or an index beyond the list: the point is still in the world."""
-    uu, vv = pin.pixel_centres()
-    z = np.asarray(depth, np.float64)
+    inv(world_from_body(end))); None or an index beyond the list: the point is still in the world.
+
+    Per body one transform takes a point from the camera at the end to the camera at the start,
+    inv(camera_start) @ motion @ camera_end; each pixel takes its body's (12 coefficients gathered per pixel)."""
+    inv_start = np.linalg.inv(world_from_camera_start)
+    chain = [inv_start @ m @ world_from_camera_end for m in start_from_end] + [inv_start @ world_from_camera_end]
+    table = np.array([t[:3, :4].ravel() for t in chain], np.float32)                  # (bodies + 1, 12)
+    z = np.asarray(depth, np.float32)
     ok = np.isfinite(z) & (z > 0.0)
-    p = pin.backproject(uu, vv, np.where(ok, z, 1.0))                      # (H, W, 3) camera frame at the end
-    w = p @ world_from_camera_end[:3, :3].T + world_from_camera_end[:3, 3]
-    if body is not None:
-        for k, m in enumerate(start_from_end):
-            sel = body == k
-            if sel.any():
-                w[sel] = w[sel] @ m[:3, :3].T + m[:3, 3]
-    inv = np.linalg.inv(world_from_camera_start)
-    q = w @ inv[:3, :3].T + inv[:3, 3]                                       # camera frame at the start
-    q[..., 2] = np.where(q[..., 2] > 1e-6, q[..., 2], np.nan)
-    d = np.stack([uu, vv], axis=-1) - pin.project(q)
-    d[~ok | ~np.isfinite(d).all(axis=-1)] = 0.0
-    return d.astype(np.float32)
+    z = np.where(ok, z, np.float32(1.0))
+    h, w = z.shape
+    f = np.float32(pin.f)
+    u = np.arange(w, dtype=np.float32) + np.float32(0.5)
+    v = np.arange(h, dtype=np.float32) + np.float32(0.5)
+    x = (u[None, :] - np.float32(pin.width / 2.0)) * z / f                              # camera frame at the end
+    y = (np.float32(pin.height / 2.0) - v[:, None]) * z / f
+    static = len(chain) - 1
+    if body is None:
+        idx = np.full(z.shape, static, np.intp)
+    else:
+        b = np.asarray(body, np.intp)
+        idx = np.where((b >= 0) & (b < static), b, static)
+    c = table[idx]                                                                      # (H, W, 12)
+    q = [c[..., 4 * r] * x + c[..., 4 * r + 1] * y + c[..., 4 * r + 2] * z + c[..., 4 * r + 3] for r in range(3)]
+    moving = ok & (q[2] > np.float32(1e-6))
+    qz = np.where(moving, q[2], np.float32(1.0))
+    du = (u[None, :] - np.float32(pin.width / 2.0)) - f * q[0] / qz          # end minus start, px
+    dv = (v[:, None] - np.float32(pin.height / 2.0)) + f * q[1] / qz
+    d = np.stack([du, dv], axis=-1)
+    d[~moving] = 0.0
+    return d
 
 
 def blur(image: np.ndarray, displacement: np.ndarray) -> np.ndarray:

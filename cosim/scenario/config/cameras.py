@@ -245,6 +245,12 @@ class StereoCamera(Camera):
     distortion: LensDistortion | None = None
     """Each lens's Brown-Conrady distortion and its rectification from a calibration with a stated residual; null:
     ideal pinholes, rectified exactly."""
+    motion_blur: bool = False
+    """Blur each eye's image by the scene's motion relative to the camera over the exposure ``exposure_ms``
+    (renderer_proc.motion_blur); false: the renderer's bytes."""
+    exposure_ms: float = Field(default=5.0, gt=0.0, le=100.0, allow_inf_nan=False)
+    """Exposure time of each image, ms, ending at the frame's time (the motion blur's); the packaged profiles
+    state theirs."""
 
     @model_validator(mode="after")
     def _matcher(self) -> "StereoCamera":
