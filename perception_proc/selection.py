@@ -7,7 +7,7 @@ cart and :data:`perception_proc.cameras.expected.FIT_SIGMAS` of its cell 1-sigma
 tolerance, unfit where they are not, and undecided where it does not see the found cart (it keeps its last
 verdict). :class:`FusionSelection` holds the verdicts between frames: a camera judged unfit is left out of the
 next frames' fusion (and of the frame that judged it, which is perceived again without it) until it is judged
-fit again; perception's log says why, once per camera.
+fit again; perception's log says why, once per camera (and, once, that it is fused again).
 """
 from __future__ import annotations
 
@@ -89,5 +89,7 @@ class FusionSelection:
                     log.warning("%s: left out of the fusion, the fit sensors are fused", self.dropped[name])
             elif not fit.unfit and name in self.dropped:
                 del self.dropped[name]
-                log.info("camera %s: fit again (%.1f cm at %.1f m), fused", name, 100 * fit.sigma_m, fit.depth_m)
+                if ("fit", name) not in self._logged:
+                    self._logged.add(("fit", name))
+                    log.info("camera %s: fit again (%.1f cm at %.1f m), fused", name, 100 * fit.sigma_m, fit.depth_m)
         return again
