@@ -172,7 +172,7 @@ def camera_fitness(scenario: Scenario, series: Mapping[str, np.ndarray]) -> dict
     """Per depth camera with a ``sensor_<name>`` record (perception_proc.selection): ``frames_at_cart`` (frames
     it saw the found cart), ``unfit_frames``, ``left_out_frames`` (frames its points were not fused), the median
     ``height_sigma_m`` and ``depth_m`` over the frames at the cart, and ``reason``: a sentence naming the figure
-    when it was left out of the fusion, else None."""
+    when it was left out of the fusion, or saying that it never saw the cart where others found it, else None."""
     from perception_proc.cameras.expected import FIT_SIGMAS, error_basis
 
     out = {}
@@ -188,6 +188,10 @@ def camera_fitness(scenario: Scenario, series: Mapping[str, np.ndarray]) -> dict
              "left_out_frames": int(np.count_nonzero(fused == 0)),
              "height_sigma_m": _median(sigma[seen]) if seen.any() else math.nan,
              "depth_m": _median(depth[seen]) if seen.any() else math.nan, "reason": None}
+        carts = int(np.nansum(_col(series, "cart_valid")))
+        if not v["frames_at_cart"] and carts:
+            v["reason"] = (f"camera {name}: never saw the found cart ({carts} frames with a cart): none of its points "
+                           "reached the cart's height map")
         if v["left_out_frames"]:
             v["reason"] = (f"camera {name}: expected error of a cell's height at the cart {100 * v['height_sigma_m']:.1f}"
                            f" cm at {v['depth_m']:.1f} m ({error_basis(scenario.cameras[name])}), more than the {100 * tol / FIT_SIGMAS:.1f} cm the "

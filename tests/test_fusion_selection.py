@@ -108,3 +108,18 @@ def test_the_same_camera_alone_stops_safe_naming_its_figure():
     assert fit["unfit_frames"] == fit["frames_at_cart"] > 0
     assert f"{100 * fit['height_sigma_m']:.1f} cm at {fit['depth_m']:.1f} m" in fit["reason"]
     assert camera_fitness(s, ser)["tof"]["left_out_frames"] == 0
+
+
+def test_a_camera_that_never_sees_the_cart_is_named_and_the_lidar_fills():
+    """The camera turned to look ahead of the combine (the scenario check refuses such a mount at the start; a
+    camera can lose the cart later): the LiDAR finds the cart and maps it alone; the summary says the camera never
+    saw it."""
+    from perception_proc.summary import camera_fitness
+
+    s = load_scenario_text(LIDAR_AND_FAR_TOF, check_world=False, overrides=[
+        "duration_s=0.5", "sensors.tof.mount={parent: combine, xyz_m: [5.0, 0.0, 4.0], rpy_deg: [0.0, 40.0, 0.0]}"])
+    ser = simulate(s).recorder.series()
+    assert np.all(ser["perc_state.cart_valid"] == 1) and np.all(ser["perc_state.coverage"] > 0.5)
+    assert np.all(ser["perc_state.sensor_unfit"] == 0) and np.all(ser["sensor_tof.points"] > 0)
+    fit = camera_fitness(s, ser)["tof"]
+    assert fit["frames_at_cart"] == 0 and fit["reason"].startswith("camera tof: never saw the found cart")
