@@ -60,8 +60,9 @@ _BASE: tuple[tuple[str, str, str, str], ...] = (
     ("height_sigma_m", "m", "f8", "the depth cameras' expected 1-sigma of a cell's height at the cart (largest; NaN: "
      "no camera sees it)"),
     ("height_sigma_depth_m", "m", "f8", "the planar depth at which that camera sees the cart"),
-    ("sensor_unfit", "", "i8", "1 when that sigma exceeds what outcome.overfill_tolerance_m allows: no height map "
-     "is published and the controller holds"),
+    ("sensor_unfit", "", "i8", "1 when a camera's sigma exceeds what outcome.overfill_tolerance_m allows and no fit "
+     "sensor is left: no height map is published and the controller holds"),
+    ("sensors_dropped", "", "i8", "cameras left out of the fusion as unfit for the target (a fit sensor is left)"),
     ("lidar_ms", "ms", "f8", "decode, resample, noise"),
     ("cart_ms", "ms", "f8", "cart boundary"),
     ("heightmap_ms", "ms", "f8", "height map"),
@@ -120,6 +121,11 @@ SENSOR_FIELDS: tuple[tuple[str, str, str, str], ...] = (
     ("fill_rel_err", "", "f8", "mean |h - h_true| / h_true over the cells this sensor alone maps"),
     ("fill_bias_m", "m", "f8", "mean h - h_true over those cells"),
     ("fill_cells", "", "f8", "controller cells this sensor alone maps"),
+    ("cart_sigma_m", "m", "f8", "a camera's expected 1-sigma of a cell's height at the found cart (NaN: a LiDAR, or "
+     "the camera does not see it)"),
+    ("cart_depth_m", "m", "f8", "the planar depth at which the camera sees the cart"),
+    ("unfit", "", "i8", "1 when that sigma exceeds what outcome.overfill_tolerance_m allows"),
+    ("fused", "", "i8", "1 when the sensor's points entered this frame's fusion (0: left out as unfit)"),
 )
 
 

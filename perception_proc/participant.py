@@ -40,11 +40,12 @@ from cosim.world.geometry import invert
 from cosim.world.sensors import world_from_parent
 from perception_proc.atmosphere.lidar import lidar_atmosphere
 from perception_proc.blocks import ACCURACY_FIELDS, HEIGHTS_BLOCK, POINTS_BLOCK, STATE_BLOCK, WRITER, sensor_state_block
-from perception_proc.cameras.expected import FIT_SIGMAS
+from perception_proc.cameras.expected import error_basis
 from perception_proc.cameras.sensors import PerceptionCameras
 from perception_proc.estimates.posegate import level_prior, pose_gate
 from perception_proc.leveling import level_from_parent
 from perception_proc.pipeline import FrameResult, Perception
+from perception_proc.selection import CameraFit, FusionSelection, judge
 from perception_proc.sensor_report import record_of, sensor_values
 
 if TYPE_CHECKING:
@@ -84,6 +85,8 @@ class PerceptionParticipant:
         self.cameras = PerceptionCameras(self.scenario)
         self.pipeline = Perception(self.scenario, rig, self.cameras.pipes)
         self.cameras.level_parent = self.pipeline.level_parent
+        self.selection = FusionSelection(has_lidar=lidar is not None)
+        self._basis = {n: error_basis(c) for n, c in self.scenario.cameras.items()}
         self._atmosphere = lidar_atmosphere(self.scenario, self.pipeline.directions) if lidar is not None else None
         self._images = []
         for name, want in _image_blocks(self.pipeline, rig):
@@ -188,11 +191,7 @@ class PerceptionParticipant:
         lfp = level_from_parent(self.scenario, state, pipe.level_parent)
         if lfp is not None:                               # uneven ground: the level frame on the cart's plane
             wfp = wfp @ invert(lfp)
-        heading = self._heading(state, wfp)
-        gate = self.scenario.perception
-        res = pipe.perceive(ranges, heading, with_points=False, frame=frame, cameras=cams, level_from_parent=lfp,
-                            cart_prior=level_prior(state, wfp, gate.pose_gate_m, gate.pose_gate_deg))
-        res = pose_gate(res, state, wfp, gate.pose_gate_m, gate.pose_gate_deg)
+        res, fits, fused = self._perceive(ranges, self._heading(state, wfp), frame, cams, lfp, state, wfp)
         self.last = res
         pipe.points(ranges, out=out.points)
         t2 = time.perf_counter()
@@ -202,8 +201,8 @@ class PerceptionParticipant:
             out.heights[...] = res.heightmap.heights
         lfs = pipe.level_from_sensor if lfp is None else lfp @ pipe.level_from_sensor
         values = self._outputs(frame, state, ranges, res, wfp, lfs)
-        values.update(self._fitness(res))
-        if values["sensor_unfit"]:                       # the sensor cannot support the target: no height map
+        values.update(self._fitness(fits))
+        if values["sensor_unfit"]:                       # no sensor can support the target: no height map
             out.heights.fill(np.nan)
             values["coverage"] = 0.0
         values["lidar_ms"] = _MS_PER_S * (t1 - t0)
@@ -225,6 +224,7 @@ class PerceptionParticipant:
         if self._sensor_blocks:
             per = sensor_values(pipe, self.cameras, frame, state, ranges, values["lidar_ms"], res, lidar_acc, truth,
                                 lfp)
+            _fit_fields(per, fits, fused)
             out.records = {block: record_of(per[n], self.segment.view(block).array.dtype)
                            for n, block in self._sensor_blocks.items() if n in per}
         out.frame, out.values = frame, values
@@ -279,15 +279,46 @@ class PerceptionParticipant:
             v[f"{key}_ms"] = res.timing_ms.get(key, math.nan)
         return v
 
-    def _fitness(self, res: FrameResult) -> dict:
-        """``height_sigma_m``, ``height_sigma_depth_m``, ``sensor_unfit`` of the frame: the cameras' expected
-        error of a cell's height at the found cart; unfit when :data:`FIT_SIGMAS` of it exceed the overfill
-        tolerance (perception_proc.cameras.expected)."""
-        if not len(self.cameras) or not res.cart.valid:
-            return {"height_sigma_m": math.nan, "height_sigma_depth_m": math.nan, "sensor_unfit": 0}
-        sigma, _, z = self.cameras.height_sigma_at_cart(np.asarray(res.cart.corners))
-        unfit = math.isfinite(sigma) and sigma * FIT_SIGMAS > self.scenario.outcome.overfill_tolerance_m
-        return {"height_sigma_m": sigma, "height_sigma_depth_m": z, "sensor_unfit": int(unfit)}
+    def _perceive(self, ranges: np.ndarray, heading: tuple[float, float], frame: int, cams: list,
+                  lfp: np.ndarray | None, state: dict, wfp: np.ndarray
+                  ) -> tuple[FrameResult, dict[str, CameraFit], set[str]]:
+        """The frame's perception from the fit sensors (perception_proc.selection): the cameras left out by
+        earlier frames' verdicts are not fused; where this frame's verdicts leave out a camera that was fused,
+        the frame is perceived again without it. Returns (result, the cameras' verdicts at its cart, the names
+        of the cameras fused)."""
+        gate, pipe = self.scenario.perception, self.pipeline
+        prior = level_prior(state, wfp, gate.pose_gate_m, gate.pose_gate_deg)
+
+        def run(fused: list) -> tuple[FrameResult, dict[str, CameraFit]]:
+            res = pipe.perceive(ranges, heading, with_points=False, frame=frame, cameras=fused,
+                                level_from_parent=lfp, cart_prior=prior)
+            res = pose_gate(res, state, wfp, gate.pose_gate_m, gate.pose_gate_deg)
+            if not len(self.cameras) or not res.cart.valid:
+                return res, {}
+            sigmas = self.cameras.sigmas_at_cart(np.asarray(res.cart.corners))
+            return res, judge(sigmas, self.scenario.outcome.overfill_tolerance_m, self._basis)
+
+        fused = self.selection.fused(cams)
+        res, fits = run(fused)
+        if self.selection.update(fits):
+            fused = self.selection.fused(cams)
+            res, fits = run(fused)
+        lidar = {self.scenario.lidar_name} if self.scenario.lidar is not None else set()
+        return res, fits, {f.name for f, _ in fused} | lidar
+
+    def _fitness(self, fits: dict[str, CameraFit]) -> dict:
+        """``height_sigma_m``, ``height_sigma_depth_m``, ``sensor_unfit``, ``sensors_dropped`` of the frame: the
+        largest expected error of a cell's height among the cameras that see the found cart
+        (perception_proc.cameras.expected), whether the height map is withheld (a camera unfit and no fit
+        sensor left: perception_proc.selection) and how many cameras are left out of the fusion."""
+        dropped = len(self.selection.dropped)
+        if not fits:
+            return {"height_sigma_m": math.nan, "height_sigma_depth_m": math.nan, "sensor_unfit": 0,
+                    "sensors_dropped": dropped}
+        worst = max(fits.values(), key=lambda f: f.sigma_m)
+        withheld = any(f.unfit for f in fits.values()) and not self.selection.fit_left(fits)
+        return {"height_sigma_m": worst.sigma_m, "height_sigma_depth_m": worst.depth_m,
+                "sensor_unfit": int(withheld), "sensors_dropped": dropped}
 
     def _accuracy(self, state: dict, beams: np.ndarray, clean: np.ndarray, res: FrameResult, wfp: np.ndarray,
                   lfs: np.ndarray, truth_h: np.ndarray, stream: np.ndarray) -> dict:
@@ -308,6 +339,17 @@ class PerceptionParticipant:
         out["corner_error_m"] = acc.corner_error(est, truth_corners)
         out["impact_error_m"] = acc.impact_error(res.impact.xyz, state)
         return out
+
+
+def _fit_fields(per: dict[str, dict], fits: dict[str, CameraFit], fused: set[str]) -> None:
+    """Add each depth-giving sensor's verdict to its ``sensor_<name>`` values ``per`` (in place):
+    ``cart_sigma_m``, ``cart_depth_m`` (NaN for the LiDAR and where a camera does not see the cart), ``unfit``,
+    ``fused`` (``fused``: the names of the sensors fused this frame)."""
+    for name, values in per.items():
+        fit = fits.get(name)
+        values.update({"cart_sigma_m": fit.sigma_m if fit else math.nan,
+                       "cart_depth_m": fit.depth_m if fit else math.nan,
+                       "unfit": int(bool(fit and fit.unfit)), "fused": int(name in fused)})
 
 
 def _image_blocks(pipe: Perception, rig: Rig | None) -> list[tuple[str, tuple[int, int, int]]]:

@@ -18,7 +18,7 @@ import perception_proc.accuracy.stage as acc
 from cosim.scenario.config import Scenario
 from perception_proc.blocks import RANGE_BANDS_M, SENSOR_FIELDS, band_name, sensor_state_block
 
-__all__ = ["summarize", "clean_json", "evaluation_caster", "evaluation_note", "sensor_blocks"]
+__all__ = ["summarize", "clean_json", "evaluation_caster", "evaluation_note", "sensor_blocks", "camera_fitness"]
 
 _P = "perc_state."
 
@@ -136,17 +136,22 @@ def summarize(scenario: Scenario, series: Mapping[str, np.ndarray], heightmap_tr
     }
     out["sensors"] = sensor_blocks(scenario, series, range_error, heightmap_truth, heightmap_perceived)
     out["fitness"] = fitness(scenario, series)
+    for name, verdict in camera_fitness(scenario, series).items():
+        out["sensors"][name]["fit"] = verdict
+        if verdict["left_out_frames"]:
+            out["fitness"].setdefault("left_out", {})[name] = verdict["reason"]
     return {"perception": clean_json(out)}
 
 
 def fitness(scenario: Scenario, series: Mapping[str, np.ndarray]) -> dict:
     """Whether the cameras' expected error at the cart supports the fill target (perception_proc.cameras.expected):
-    ``unfit_frames`` of ``frames_at_cart`` (frames with a camera seeing the found cart), the median expected
+    ``unfit_frames`` (frames whose height map was withheld: a camera unfit and no fit sensor left,
+    perception_proc.selection) of ``frames_at_cart`` (frames with a camera seeing the found cart), the median expected
     1-sigma of a cell's height ``height_sigma_m`` at the median depth ``depth_m``, what the target allows
     (``allowed_sigma_m``: the overfill tolerance over FIT_SIGMAS) and ``reason``, a sentence naming the figure
     when every frame at the cart was unfit (perception withheld its height map, so the controller never started
     the auger), else None."""
-    from perception_proc.cameras.expected import FIT_SIGMAS
+    from perception_proc.cameras.expected import FIT_SIGMAS, error_basis
 
     sigma, depth, unfit = (_col(series, k) for k in ("height_sigma_m", "height_sigma_depth_m", "sensor_unfit"))
     seen = np.isfinite(sigma) if sigma.size else np.zeros(0, bool)
@@ -155,10 +160,44 @@ def fitness(scenario: Scenario, series: Mapping[str, np.ndarray]) -> dict:
            "height_sigma_m": _median(sigma[seen]) if seen.any() else math.nan,
            "depth_m": _median(depth[seen]) if seen.any() else math.nan, "allowed_sigma_m": allowed, "reason": None}
     if out["frames_at_cart"] and out["unfit_frames"] == out["frames_at_cart"]:
+        basis = "; ".join(f"{n}: {error_basis(c)}" for n, c in scenario.cameras.items() if error_basis(c))
         out["reason"] = (f"the cameras' expected error of a cell's height at the cart, {100 * out['height_sigma_m']:.1f}"
-                         f" cm at {out['depth_m']:.1f} m, exceeds the {100 * allowed:.1f} cm the "
+                         f" cm at {out['depth_m']:.1f} m ({basis}), exceeds the {100 * allowed:.1f} cm the "
                          f"{100 * scenario.outcome.overfill_tolerance_m:.0f} cm overfill tolerance allows: no height "
                          "map was published and the auger was not started")
+    return out
+
+
+def camera_fitness(scenario: Scenario, series: Mapping[str, np.ndarray]) -> dict:
+    """Per depth camera with a ``sensor_<name>`` record (perception_proc.selection): ``frames_at_cart`` (frames
+    it saw the found cart), ``unfit_frames``, ``left_out_frames`` (frames its points were not fused), the median
+    ``height_sigma_m`` and ``depth_m`` over the frames at the cart, and ``reason``: a sentence naming the figure
+    when it was left out of the fusion, or saying that it never saw the cart where others found it, else None."""
+    from perception_proc.cameras.expected import FIT_SIGMAS, error_basis
+
+    out = {}
+    tol = scenario.outcome.overfill_tolerance_m
+    for name in scenario.depth_sensors:
+        block = sensor_state_block(name)
+        if scenario.sensor_set[name].kind == "lidar" or f"{block}.cart_sigma_m" not in series:
+            continue
+        sigma, depth, unfit, fused = (np.asarray(series[f"{block}.{k}"], np.float64)
+                                      for k in ("cart_sigma_m", "cart_depth_m", "unfit", "fused"))
+        seen = np.isfinite(sigma)
+        v = {"frames_at_cart": int(np.count_nonzero(seen)), "unfit_frames": int(np.nansum(unfit)),
+             "left_out_frames": int(np.count_nonzero(fused == 0)),
+             "height_sigma_m": _median(sigma[seen]) if seen.any() else math.nan,
+             "depth_m": _median(depth[seen]) if seen.any() else math.nan, "reason": None}
+        carts = int(np.nansum(_col(series, "cart_valid")))
+        if not v["frames_at_cart"] and carts:
+            v["reason"] = (f"camera {name}: never saw the found cart ({carts} frames with a cart): none of its points "
+                           "reached the cart's height map")
+        if v["left_out_frames"]:
+            v["reason"] = (f"camera {name}: expected error of a cell's height at the cart {100 * v['height_sigma_m']:.1f}"
+                           f" cm at {v['depth_m']:.1f} m ({error_basis(scenario.cameras[name])}), more than the {100 * tol / FIT_SIGMAS:.1f} cm the "
+                           f"{100 * tol:.0f} cm overfill tolerance allows: left out of the fusion in "
+                           f"{v['left_out_frames']} of {fused.size} frames, the fit sensors fused")
+        out[name] = v
     return out
 
 

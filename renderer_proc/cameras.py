@@ -69,6 +69,8 @@ class CameraSet:
             self.views += views
         self.backend = None
         self._segment: "Segment | None" = None
+        #: the previous frame's state (a stereo camera's motion blur interpolates the exposure's start from it)
+        self._before: dict | None = None
 
     def __len__(self) -> int:
         return len(self.views)
@@ -95,9 +97,12 @@ class CameraSet:
             if frame % v.spec.every_frames:
                 continue
             backend.draw(k, world_from_sensor(v.spec, state) @ v.sensor_from_view)
+            image = self._blurred(k, v, state)
             for part, block in v.parts.items():
                 with seg.write(block, frame) as out:
-                    if part in ("rgb", "right"):
+                    if part in ("rgb", "right") and image is not None:
+                        np.copyto(out, image)
+                    elif part in ("rgb", "right"):
                         backend.read_rgb(k, out)
                     elif part == "depth":
                         backend.read_depth(k, out)
@@ -105,7 +110,22 @@ class CameraSet:
                         total += out.size
                     else:
                         backend.read_labels(k, out)
+        self._before = dict(state)
         return valid, total
+
+    def _blurred(self, k: int, v: View, state: Mapping[str, float]) -> np.ndarray | None:
+        """View ``k``'s colour image blurred over its camera's exposure (``motion_blur``,
+        renderer_proc.exposure); None where the camera has no motion blur or there is no earlier state."""
+        if not getattr(v.spec, "motion_blur", False) or self._before is None or not state:
+            return None
+        from renderer_proc.exposure import blurred
+
+        shape = (v.pin.height, v.pin.width)
+        image, depth, label = np.empty(shape + (4,), np.uint8), np.empty(shape, np.float32), np.empty(shape, np.uint8)
+        self.backend.read_rgb(k, image)
+        self.backend.read_depth(k, depth)
+        self.backend.read_labels(k, label)
+        return blurred(image, depth, label, v.pin, v.spec, v.sensor_from_view, self._before, state)
 
     def close(self) -> None:
         """Release the backend; safe to call more than once."""

@@ -11,7 +11,8 @@ import pytest
 
 from cosim.scenario.config.cameras import DepthCamera, StereoCamera
 from cosim.scenario.loader import load_scenario
-from perception_proc.cameras.expected import cart_depth_m, cell_sigma_m, point_sigma_m
+from perception_proc.cameras.expected import MATCHER_DD_RATIO, cart_depth_m, cell_sigma_m, point_sigma_m
+from perception_proc.selection import judge, unfit_reason
 
 VARIANTS = Path(__file__).resolve().parents[1] / "examples" / "camera_variants"
 #: the acceptance: at most this much above the target, m
@@ -25,6 +26,22 @@ def test_a_stereo_points_sigma_is_z_squared_sigma_d_over_f_b():
     assert point_sigma_m(S21B, f, 8.0) == pytest.approx(4.0 * point_sigma_m(S21B, f, 4.0), rel=1e-12)
     tof = DepthCamera(kind="depth_camera", mount={"parent": "world"})
     assert point_sigma_m(tof, 300.0, 2.4) == pytest.approx(0.0012 + 0.0019 * 2.0**2, rel=1e-12)
+
+
+def test_each_matcher_has_its_own_disparity_error_in_the_law_and_the_gate():
+    """sigma_Z = Z^2 dd / (f B) with the matcher's dd: the profile's 0.25 px for SGBM, 1.36 times that for BM. At
+    4.3 m (the packaged spout head 0.3 m higher) a cell's sigma is 2.2 cm with SGBM, fit for the 2.5 cm the 5 cm
+    tolerance allows, and 2.9 cm with BM, refused naming StereoBM's 0.34 px."""
+    bm = S21B.model_copy(update={"matcher": "bm"})
+    f, b = S21B.focal_px, S21B.baseline_m
+    assert MATCHER_DD_RATIO["sgbm"] == 1.0 and MATCHER_DD_RATIO["bm"] > 1.2
+    assert point_sigma_m(S21B, f, 4.0) == pytest.approx(16.0 * 0.25 / (f * b), rel=1e-12)
+    assert point_sigma_m(bm, f, 4.0) == pytest.approx(16.0 * 0.25 * MATCHER_DD_RATIO["bm"] / (f * b), rel=1e-12)
+    sigmas = {"sgbm": (cell_sigma_m(S21B, f, 4, 0.1, 4.3), 4.3), "bm": (cell_sigma_m(bm, f, 4, 0.1, 4.3), 4.3)}
+    fits = judge(sigmas, 0.05, {"bm": "StereoBM, disparity 1-sigma 0.34 px"})
+    assert 0.020 < fits["sgbm"].sigma_m < 0.025 and not fits["sgbm"].unfit
+    assert 0.025 < fits["bm"].sigma_m < 0.032 and fits["bm"].unfit
+    assert "(StereoBM, disparity 1-sigma 0.34 px)" in unfit_reason("bm", fits["bm"])
 
 
 def test_a_cells_sigma_divides_by_the_independent_blocks_it_spans():
@@ -93,6 +110,24 @@ def test_bm_on_the_spout_finds_the_cart_every_frame_and_starts_the_auger(tmp_pat
     out, fit = s["outcome"], s["perception"]["fitness"]
     assert res.completed and out["cart_found_frames"] == out["perception_frames"] > 0, out
     assert fit["unfit_frames"] == 0 and out["auger_on_s"] > 0.0 and s["spill"]["mass_kg"] == 0.0
+
+
+@pytest.mark.gl
+def test_bm_where_sgbm_would_fill_stops_safe_naming_the_matchers_figure(tmp_path):
+    """The BM head 0.3 m higher on the spout: its expected error at the cart with StereoBM's disparity error is more
+    than the target allows, and the run stops safe naming StereoBM's figure; SGBM's at the same depth would pass."""
+    from cosim.runtime.launcher import launch
+
+    s = load_scenario(VARIANTS / "stereo_spout_bm.yaml", extra={"duration_s": 1.0},
+                      overrides=["sensors.spout.mount.xyz_m=[-2.0, 7.45, 6.3]"])
+    res = launch(s, tmp_path / "bm_high", console_log=False)
+    out, fit = res.summary["outcome"], res.summary["perception"]["fitness"]
+    assert res.completed and out["status"] == "stopped_safe" and out["auger_on_s"] == 0.0, out
+    assert fit["unfit_frames"] == fit["frames_at_cart"] > 0, fit
+    assert "spout: StereoBM, disparity 1-sigma 0.34 px" in out["reason"], out["reason"]
+    sgbm = s.sensor_set["spout"].model_copy(update={"matcher": "sgbm"})
+    f = sgbm.focal_px
+    assert 2.0 * cell_sigma_m(sgbm, f, 4, s.controller.grid_cell_m, fit["depth_m"]) <= 0.05 < 2.0 * fit["height_sigma_m"]
 
 
 @pytest.mark.gl

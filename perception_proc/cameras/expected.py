@@ -2,8 +2,10 @@
 cart, so that perception gates points by it and withholds a height map the sensor cannot support.
 
 * per point (perception drops a point whose 1-sigma exceeds :data:`GATE_SIGMA_M`): the stereo law
-  sigma_Z = Z^2 sigma_d / (f B) (``disparity_sigma_px``, the profile's stated figure), the depth camera's noise
-  model at normal incidence (perception_proc.cameras.depth_models);
+  sigma_Z = Z^2 sigma_d / (f B) with the matcher's expected disparity error sigma_d
+  (:func:`disparity_sigma_px`: the profile's stated figure, which is SGBM's, times the matcher's measured
+  :data:`MATCHER_DD_RATIO`), the depth camera's noise model at normal incidence
+  (perception_proc.cameras.depth_models);
 * per cell: a cell of ``cell_m`` seen at planar depth Z spans ``cell_m f / Z`` pixels each way; its height rests
   on n independent measurements, the cell's pixels divided into squares of the points' stride or, for stereo,
   of the matcher's block when larger (neighbouring windows share their pixels, so their errors are not
@@ -22,7 +24,8 @@ import numpy as np
 from cosim.scenario.config.cameras import Camera, DepthCamera, StereoCamera
 from perception_proc.cameras.depth_models import normal_sigma_m
 
-__all__ = ["FIT_SIGMAS", "GATE_SIGMA_M", "point_sigma_m", "cell_sigma_m", "cart_depth_m"]
+__all__ = ["FIT_SIGMAS", "GATE_SIGMA_M", "MATCHER_DD_RATIO", "disparity_sigma_px", "error_basis", "point_sigma_m",
+           "cell_sigma_m", "cart_depth_m"]
 
 #: the overfill tolerance must hold this many of a cell's expected 1-sigma
 FIT_SIGMAS = 2.0
@@ -31,13 +34,36 @@ FIT_SIGMAS = 2.0
 #: already drops the far rim of a small-baseline module on the mast and it loses the cart)
 GATE_SIGMA_M = 0.5
 
+#: each matcher's disparity error over SGBM's on the same rendered pairs (the profiles' ``disparity_sigma_px`` is
+#: SGBM's): dd fitted to dZ = Z^2 dd / (f B) over 3-9 m on the textured plane seen 40 deg down from 3 m, both
+#: with the camera's texture check and sub-pixel refinement, ideal images; BM's is the larger of the packaged
+#: profiles' (S21B 0.321 / 0.236 px, OAK-D 0.319 / 0.253 px): ``python bench/stereo_matchers.py``
+MATCHER_DD_RATIO = {"sgbm": 1.0, "bm": 1.36}
+
+
+def disparity_sigma_px(spec: StereoCamera) -> float:
+    """The disparity 1-sigma (px) stereo camera ``spec`` is expected to hold with its matcher: its profile's
+    stated (SGBM) figure times :data:`MATCHER_DD_RATIO` of its ``matcher``."""
+    return spec.disparity_sigma_px * MATCHER_DD_RATIO[spec.matcher]
+
+
+def error_basis(spec: Camera) -> str:
+    """What a camera's expected error rests on, for a reason's sentence: "StereoBM, disparity 1-sigma 0.34 px"
+    for a stereo camera, the model for a depth camera."""
+    if isinstance(spec, StereoCamera):
+        name = {"sgbm": "StereoSGBM", "bm": "StereoBM"}[spec.matcher]
+        return f"{name}, disparity 1-sigma {disparity_sigma_px(spec):.2f} px"
+    if isinstance(spec, DepthCamera):
+        return f"{spec.model.replace('_', ' ')} model"
+    return ""
+
 
 def point_sigma_m(spec: Camera, focal_px: float, z_m):
     """Expected depth 1-sigma (m, like ``z_m``) of one pixel at planar depth ``z_m`` (m, scalar or array); 0 for a
     camera without depth."""
     z = np.asarray(z_m, np.float64)
     if isinstance(spec, StereoCamera):
-        return z * z * spec.disparity_sigma_px / (focal_px * spec.baseline_m)
+        return z * z * disparity_sigma_px(spec) / (focal_px * spec.baseline_m)
     if isinstance(spec, DepthCamera):
         return normal_sigma_m(spec, z)
     return np.zeros_like(z)

@@ -124,23 +124,28 @@ class PerceptionCameras:
                                                float(state.get("t_s", np.nan)) if state else np.nan)
         return [(self.latest[p.name].frame, self.latest[p.name].border) for p in self.pipes if p.name in self.latest]
 
-    def height_sigma_at_cart(self, corners: np.ndarray) -> tuple[float, str, float]:
-        """(sigma m, camera name, depth m): the largest expected 1-sigma of a controller cell's height among the
-        depth-giving cameras that see the cart (``corners`` (4, 3), its rim corners in the level frame), at the
-        median planar depth of each camera's points inside the rim (perception_proc.cameras.expected); NaN, "",
-        NaN when none sees it."""
+    def sigmas_at_cart(self, corners: np.ndarray) -> dict[str, tuple[float, float]]:
+        """Per depth-giving camera that sees the cart (``corners`` (4, 3), its rim corners in the level frame):
+        name -> (expected 1-sigma of a controller cell's height m, the median planar depth m of its points inside
+        the rim), perception_proc.cameras.expected; a camera that does not see it is absent."""
         cell_m = self.scenario.controller.grid_cell_m
-        worst = (math.nan, "", math.nan)
+        out = {}
         for p in self.pipes:
             r = self.latest.get(p.name)
             if not p.depth_giving or r is None or r.record is None:
                 continue
             z = cart_depth_m(r.record, r.frame.points, corners)
-            if not math.isfinite(z):
-                continue
-            sigma = cell_sigma_m(p.spec, p.pin.f, p.stride, cell_m, z)
+            if math.isfinite(z):
+                out[p.name] = (cell_sigma_m(p.spec, p.pin.f, p.stride, cell_m, z), z)
+        return out
+
+    def height_sigma_at_cart(self, corners: np.ndarray) -> tuple[float, str, float]:
+        """(sigma m, camera name, depth m): the largest of :meth:`sigmas_at_cart`; NaN, "", NaN when no camera
+        sees the cart."""
+        worst = (math.nan, "", math.nan)
+        for name, (sigma, z) in self.sigmas_at_cart(corners).items():
             if not sigma <= worst[0]:
-                worst = (sigma, p.name, z)
+                worst = (sigma, name, z)
         return worst
 
     def sensor_values(self, name: str) -> dict:

@@ -238,12 +238,19 @@ class StereoCamera(Camera):
     """Sub-pixel disparity: refine (Gauss-Newton on the intensity difference, no pixel locking) or matcher
     (OpenCV's parabola over whole-pixel costs, which locks towards whole disparities)."""
     disparity_sigma_px: PosFloat = 0.25
-    """The disparity 1-sigma the camera is expected to hold, px: its depth 1-sigma is Z^2 sigma / (f B)."""
+    """The disparity 1-sigma the camera is expected to hold with SGBM, px; perception scales it by the matcher's
+    measured ratio (BM 1.36, docs/cameras.md): its depth 1-sigma is Z^2 sigma / (f B)."""
     image_noise: ImageNoise | None = None
     """Shot and read noise of the eyes' images before the matcher (EMVA 1288 photon transfer); null: none."""
     distortion: LensDistortion | None = None
     """Each lens's Brown-Conrady distortion and its rectification from a calibration with a stated residual; null:
     ideal pinholes, rectified exactly."""
+    motion_blur: bool = False
+    """Blur each eye's image by the scene's motion relative to the camera over the exposure ``exposure_ms``
+    (renderer_proc.motion_blur); false: the renderer's bytes."""
+    exposure_ms: float = Field(default=5.0, gt=0.0, le=100.0, allow_inf_nan=False)
+    """Exposure time of each image, ms, ending at the frame's time (the motion blur's); the packaged profiles
+    state theirs."""
 
     @model_validator(mode="after")
     def _matcher(self) -> "StereoCamera":
