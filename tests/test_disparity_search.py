@@ -1,0 +1,95 @@
+"""The stereo matcher's disparity search from the depths in view (perception_proc.cameras.disparity_search): the
+closed form d = f B / Z, the smallest search, and the packaged stereo heads' searches against their geometry at
+the start pose."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.runtime.specs import DEFAULT_SPECS, load_callable
+from cosim.scenario.config.cameras import StereoCamera
+from cosim.scenario.loader import load_scenario, resolve_scenario_arg
+from cosim.world.geometry import entity_pose
+from cosim.world.sensors import world_from_sensor
+from perception_proc.cameras.disparity_search import (
+    disparity_of_depth,
+    disparity_search,
+    searched_depths_m,
+    spout_view_depths_m,
+)
+from perception_proc.cameras.stereo import SEARCH_EDGE_PX
+
+ROOT = Path(__file__).resolve().parents[1]
+#: every packaged scenario and example with a stereo camera
+STEREO_FILES = ("stereo_spout", "lidar_and_stereo", *sorted(str(p) for p in (ROOT / "examples" / "camera_variants").glob("*.yaml")))
+
+
+def test_the_disparity_is_f_b_over_z():
+    assert disparity_of_depth(2.0, 500.0, 0.2) == pytest.approx(50.0, rel=1e-15)
+    assert disparity_of_depth(4.0, 500.0, 0.2) == pytest.approx(25.0, rel=1e-15)
+
+
+def test_the_spout_heads_search_by_hand():
+    """S21B at half width (f = 512 / tan(47.7 deg) px, B = 0.21 m) 6.0 m above the ground, rim top 3.06 m: near
+    6.0 - 3.56 = 2.44 m (d = 40.10 px), far 6.5 m (d = 15.05 px); with the 1 px edge 14 .. 42 px, 29 px, so 32."""
+    f = 512.0 / math.tan(math.radians(95.4 / 2.0))
+    near, far = spout_view_depths_m(6.0, 3.06)
+    assert (near, far) == pytest.approx((2.44, 6.5), abs=1e-12)
+    assert f * 0.21 / near == pytest.approx(40.10, abs=0.01) and f * 0.21 / far == pytest.approx(15.05, abs=0.01)
+    assert disparity_search(f, 0.21, near, far) == (14, 32)
+
+
+@pytest.mark.parametrize("focal_px, baseline_m", [(465.9, 0.21), (441.25, 0.075), (931.98, 0.21), (300.0, 0.5)])
+@pytest.mark.parametrize("near, far", [(0.9, 1.2), (2.44, 6.5), (3.94, 8.0), (1.0, 30.0), (5.0, 5.5)])
+def test_the_search_is_the_smallest_holding_every_depth_inside_its_edge(focal_px, baseline_m, near, far):
+    lo, num = disparity_search(focal_px, baseline_m, near, far)
+    d_far, d_near = focal_px * baseline_m / far, focal_px * baseline_m / near   # d = f B / Z
+    e = SEARCH_EDGE_PX
+    assert num % 16 == 0 and lo >= 0
+    assert lo + e <= d_far and d_near <= lo + num - 1 - e, "both ends at least the edge inside"
+    assert lo + 1 + e > d_far or lo + 1 + num - 1 - e < d_near, "a larger minimum would lose a depth"
+    assert num == 16 or lo + num - 16 - 1 - e < d_near, "16 fewer disparities would lose the near end"
+    z_near, z_far = searched_depths_m(focal_px, baseline_m, lo, num)
+    assert z_near <= near * (1 + 1e-12) and z_far >= far * (1 - 1e-12)
+    d = np.linspace(d_far, d_near, 101)
+    assert np.all((d >= lo + e) & (d <= lo + num - 1 - e))
+
+
+def test_the_whole_search_ends_at_the_edge_from_zero_and_bad_depths_are_refused():
+    assert searched_depths_m(465.9, 0.21, 0, 128) == pytest.approx((465.9 * 0.21 / 126.0, 465.9 * 0.21 / 1.0),
+                                                                   rel=1e-12)
+    with pytest.raises(ValueError, match="0 < z_near_m < z_far_m"):
+        disparity_search(465.9, 0.21, 3.0, 2.0)
+    with pytest.raises(ValueError, match="within 1.0 px of 0"):
+        disparity_search(441.25, 0.075, 1.0, 40.0)                  # f B / 40 m = 0.83 px
+
+
+def _cart_depths(s, cam: StereoCamera) -> np.ndarray:
+    """Planar depths (8,), m, of the cart interior's corners at the floor and at the rim top in ``cam``'s frame
+    at the start pose."""
+    state = load_callable(DEFAULT_SPECS["dynamics"].initial_state)(s)[0]
+    c = s.cart
+    corners = np.array([[x, y, z, 1.0] for z in (c.floor_height_m, c.rim_top_m)
+                        for x in (-c.interior_length_m / 2, c.interior_length_m / 2)
+                        for y in (-c.interior_width_m / 2, c.interior_width_m / 2)])
+    cam_from_world = np.linalg.inv(world_from_sensor(cam, state))
+    return (cam_from_world @ entity_pose(state, "cart") @ corners.T)[2]
+
+
+@pytest.mark.parametrize("name", STEREO_FILES, ids=lambda n: Path(n).stem)
+def test_every_stereo_heads_search_holds_the_cart_and_a_spout_heads_is_derived(name):
+    """Each packaged stereo head's search holds the cart's whole depth span at the start pose; a head looking
+    straight down (pitch 90 deg) with a cut search has exactly the one its height derives (a variant that
+    inherits a search from its base and moves the head would fail here)."""
+    s = load_scenario(resolve_scenario_arg(name))
+    for cam in (c for c in s.cameras.values() if isinstance(c, StereoCamera)):
+        z = _cart_depths(s, cam)
+        z_near, z_far = searched_depths_m(cam.focal_px, cam.baseline_m, cam.min_disparity_px, cam.num_disparities)
+        assert z_near < z.min() and z.max() < z_far, (name, z, z_near, z_far)
+        if cam.mount.rpy_deg[1] == 90.0 and (cam.min_disparity_px, cam.num_disparities) != (0, 128):
+            near, far = spout_view_depths_m(cam.mount.xyz_m[2], s.cart.rim_top_m)
+            assert (cam.min_disparity_px, cam.num_disparities) == disparity_search(cam.focal_px, cam.baseline_m,
+                                                                                   near, far), name
