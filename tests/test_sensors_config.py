@@ -29,7 +29,7 @@ def test_the_shorthand_is_one_lidar_named_lidar_with_every_legacy_block():
 
 def test_profiles_name_a_source_and_a_reference_for_every_value():
     assert {"oak_d", "multisense_s21b", "kinect_class_structured_light", "kinect_v1_structured_light",
-            "azure_kinect_nfov"} <= set(profile_names())
+            "azure_kinect_nfov", "azure_kinect_nfov_binned"} <= set(profile_names())
     kinds = {load_profile(n).kind for n in profile_names()}
     assert {"stereo_camera", "depth_camera"} <= kinds
     for name in profile_names():

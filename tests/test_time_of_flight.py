@@ -43,6 +43,22 @@ def test_the_reference_return_has_the_datasheet_sigma_and_the_law_has_both_terms
     assert float(point_sigma_m(dark, 500.0, 3.86)) == pytest.approx(0.017, rel=1e-12)
 
 
+def test_the_binned_mode_is_the_datasheets_and_carries_17_mm_to_its_own_range_end():
+    """NFOV 2x2 binned: 320 x 288, the unbinned field, 0.5-5.46 m; sigma at its reference (15 % at 5.46 m, facing)
+    is 17 mm, and at albedo 0.3 a facing surface at 5.46 m has what the unbinned mode has at 3.86 m (the same
+    amplitude ratio to each mode's reference)."""
+    binned = DepthCamera(kind="depth_camera", mount={"parent": "world"}, profile="azure_kinect_nfov_binned")
+    unbinned = DepthCamera(kind="depth_camera", mount={"parent": "world"}, profile="azure_kinect_nfov")
+    assert (binned.width_px, binned.height_px, binned.hfov_deg) == (320, 288, unbinned.hfov_deg)
+    assert (binned.range_min_m, binned.range_max_m, binned.model) == (0.5, 5.46, "time_of_flight")
+    assert binned.focal_px == pytest.approx(unbinned.focal_px / 2.0, rel=1e-12)
+    ref = amplitude(np.array(5.46), np.array(0.0), 0.15)
+    assert float(tof_sigma_m(ref, binned)) == pytest.approx(0.017, rel=1e-12)
+    assert float(normal_sigma_m(binned, 5.46)) == pytest.approx(float(normal_sigma_m(unbinned, 3.86)), rel=1e-12)
+    values = load_profile("azure_kinect_nfov_binned").values
+    assert all(values[k].source == "datasheet" for k in ("width_px", "height_px", "hfov_deg", "range_max_m"))
+
+
 def _plane(normal_cam: np.ndarray, d: float) -> np.ndarray:
     """Planar depth (H, W) of the plane n . p = d seen by PIN (n in the camera frame X right, Y up, Z forward)."""
     uu, vv = PIN.pixel_centres()
