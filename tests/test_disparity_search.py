@@ -11,10 +11,12 @@ import pytest
 
 from cosim.runtime.specs import DEFAULT_SPECS, load_callable
 from cosim.scenario.config.cameras import StereoCamera
+from cosim.scenario.config.machines import Auger
 from cosim.scenario.loader import load_scenario, resolve_scenario_arg
 from cosim.world.geometry import entity_pose
 from cosim.world.sensors import world_from_sensor
 from perception_proc.cameras.disparity_search import (
+    auger_top_m,
     disparity_of_depth,
     disparity_search,
     searched_depths_m,
@@ -33,13 +35,18 @@ def test_the_disparity_is_f_b_over_z():
 
 
 def test_the_spout_heads_search_by_hand():
-    """S21B at half width (f = 512 / tan(47.7 deg) px, B = 0.21 m) 6.0 m above the ground, rim top 3.06 m: near
-    6.0 - 3.56 = 2.44 m (d = 40.10 px), far 6.5 m (d = 15.05 px); with the 1 px edge 14 .. 42 px, 29 px, so 32."""
+    """S21B at half width (f = 512 / tan(47.7 deg) px, B = 0.21 m) 6.0 m above the ground; the auger's top at the
+    spout 3.8 + 6 sin(8 deg) + 0.2 = 4.835 m, nearer than the rim top (3.06 m) + 0.5 m: near 1.165 m (d = 83.98
+    px), far 6.5 m (d = 15.05 px); with the 1 px edge 14 .. 85 px, 72 px, so 80. Without the tube: 2.44 m, 32."""
     f = 512.0 / math.tan(math.radians(95.4 / 2.0))
-    near, far = spout_view_depths_m(6.0, 3.06)
-    assert (near, far) == pytest.approx((2.44, 6.5), abs=1e-12)
-    assert f * 0.21 / near == pytest.approx(40.10, abs=0.01) and f * 0.21 / far == pytest.approx(15.05, abs=0.01)
-    assert disparity_search(f, 0.21, near, far) == (14, 32)
+    top = auger_top_m(Auger())
+    assert top == pytest.approx(3.8 + 6.0 * math.sin(math.radians(8.0)) + 0.2, rel=1e-12)
+    near, far = spout_view_depths_m(6.0, 3.06, top)
+    assert (near, far) == pytest.approx((1.16496, 6.5), abs=1e-5)
+    assert f * 0.21 / near == pytest.approx(83.98, abs=0.01) and f * 0.21 / far == pytest.approx(15.05, abs=0.01)
+    assert disparity_search(f, 0.21, near, far) == (14, 80)
+    assert spout_view_depths_m(6.0, 3.06, 6.5) == pytest.approx((2.44, 6.5), abs=1e-12), "a tube above the camera"
+    assert disparity_search(f, 0.21, 2.44, 6.5) == (14, 32)
 
 
 @pytest.mark.parametrize("focal_px, baseline_m", [(465.9, 0.21), (441.25, 0.075), (931.98, 0.21), (300.0, 0.5)])
@@ -67,7 +74,7 @@ def test_the_whole_search_ends_at_the_edge_from_zero_and_bad_depths_are_refused(
         disparity_search(441.25, 0.075, 1.0, 40.0)                  # f B / 40 m = 0.83 px
 
 
-def _cart_depths(s, cam: StereoCamera) -> np.ndarray:
+def _cart_depths(s, cam) -> np.ndarray:
     """Planar depths (8,), m, of the cart interior's corners at the floor and at the rim top in ``cam``'s frame
     at the start pose."""
     state = load_callable(DEFAULT_SPECS["dynamics"].initial_state)(s)[0]
@@ -90,6 +97,6 @@ def test_every_stereo_heads_search_holds_the_cart_and_a_spout_heads_is_derived(n
         z_near, z_far = searched_depths_m(cam.focal_px, cam.baseline_m, cam.min_disparity_px, cam.num_disparities)
         assert z_near < z.min() and z.max() < z_far, (name, z, z_near, z_far)
         if cam.mount.rpy_deg[1] == 90.0 and (cam.min_disparity_px, cam.num_disparities) != (0, 128):
-            near, far = spout_view_depths_m(cam.mount.xyz_m[2], s.cart.rim_top_m)
+            near, far = spout_view_depths_m(cam.mount.xyz_m[2], s.cart.rim_top_m, auger_top_m(s.auger))
             assert (cam.min_disparity_px, cam.num_disparities) == disparity_search(cam.focal_px, cam.baseline_m,
                                                                                    near, far), name

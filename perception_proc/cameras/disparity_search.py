@@ -9,12 +9,12 @@ search here is the smallest that keeps every depth of [z_near, z_far] at least t
 ``min_disparity_px`` and then the fewest ``num_disparities`` that do. The matcher's work per pixel is linear in
 ``num_disparities``, so a search limited to where the cart can be costs that share of the full one.
 
-:func:`spout_view_depths_m` gives the span for a camera looking straight down on a level cart over level ground:
-the near end the rim top raised by a margin (grain heaped to the rim, the cart's bounce: nothing of the cart comes
-nearer), the far end the ground lowered by one. The far end is the ground, not the cart floor, because the ground
-beside the cart is in view and a surface beyond the search is matched to a wrong disparity inside it (docs/cameras.md
-gives the measured share); a nearer surface that is not the cart (the auger tube under a spout camera) is cut off
-and mostly invalid at the search's near end.
+:func:`spout_view_depths_m` gives the span for a camera looking straight down from the spout on a level cart over
+level ground. The far end is the ground lowered by a margin: the ground beside the cart is in view, and a surface
+beyond the search is matched to a wrong disparity inside it (docs/cameras.md gives the measured share). The near
+end is the nearer of the rim top raised by a margin (grain heaped to the rim, the cart's bounce) and the auger
+tube's top at the spout (:func:`auger_top_m`), which lies over the cart in view: a search that stops short of it
+reads the tube's pixels as points inside the cart (docs/cameras.md: the fill-height error more than doubles).
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ from cosim.scenario.config.cameras import DISPARITY_STEP_PX
 from perception_proc.cameras.stereo import SEARCH_EDGE_PX
 
 __all__ = ["CART_MARGIN_M", "disparity_of_depth", "disparity_search", "searched_depths_m",
-           "spout_view_depths_m"]
+           "auger_top_m", "spout_view_depths_m"]
 
 #: margin above the rim top and below the ground in the depth span of a spout camera's view, m
 CART_MARGIN_M = 0.5
@@ -60,9 +60,19 @@ def searched_depths_m(focal_px: float, baseline_m: float, min_disparity_px: int,
     return focal_px * baseline_m / hi, focal_px * baseline_m / lo
 
 
-def spout_view_depths_m(camera_height_m: float, rim_top_m: float, margin_m: float = CART_MARGIN_M
-                         ) -> tuple[float, float]:
+def auger_top_m(auger) -> float:
+    """Height of the auger tube's top at the spout above the combine frame's origin (the ground), m: the pivot's
+    height + ``length_m`` sin(``elevation_deg``) + ``tube_radius_m`` (``auger``: the scenario's Auger)."""
+    return auger.pivot_xyz_m[2] + auger.length_m * math.sin(math.radians(auger.elevation_deg)) + auger.tube_radius_m
+
+
+def spout_view_depths_m(camera_height_m: float, rim_top_m: float, auger_top_m: float,
+                        margin_m: float = CART_MARGIN_M) -> tuple[float, float]:
     """(near, far) planar depth, m, for a camera looking straight down from ``camera_height_m`` above level ground
-    onto a level cart whose rim top lies ``rim_top_m`` above it: the rim top raised and the ground lowered by
-    ``margin_m`` (module docstring)."""
-    return camera_height_m - (rim_top_m + margin_m), camera_height_m + margin_m
+    onto a level cart whose rim top lies ``rim_top_m`` above it, past the auger tube whose top at the spout lies
+    ``auger_top_m`` above it: near the nearer of the rim top raised by ``margin_m`` and the tube's top (where the
+    tube lies below the camera), far the ground lowered by ``margin_m`` (module docstring)."""
+    near = camera_height_m - (rim_top_m + margin_m)
+    if auger_top_m < camera_height_m:
+        near = min(near, camera_height_m - auger_top_m)
+    return near, camera_height_m + margin_m
