@@ -9,7 +9,8 @@ and the share of those valid pixels off by more than 10 times the profile's sigm
 Configurations: ``opencv`` (StereoSGBM's one-pass mode with its own checks and its parabola, nothing after it),
 ``refined`` (the camera's default: the texture check and the Gauss-Newton sub-pixel step), ``refined_3way``
 (the same on OpenCV's parallel three-way mode), ``refined_3way_search`` (and the search cut to the disparities a
-camera 0.9-6.1 m above what it sees needs, the packaged ``stereo_spout`` head's: 16 to 111 px) and ``bm``
+camera 0.9-6.1 m above what it sees needs: 16 to 111 px; the packaged ``stereo_spout`` head's is derived in
+perception_proc/cameras/disparity_search.py) and ``bm``
 (StereoBM, refined).
 """
 from __future__ import annotations
