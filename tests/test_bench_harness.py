@@ -91,6 +91,8 @@ def test_aggregate_and_paired_leave_out_what_is_missing():
                {"t": {"r": {"x": 3.0}}}]
     agg = aggregate(samples)
     assert (agg["t"]["r"]["x"].median, agg["t"]["r"]["x"].n) == (2.0, 2) and agg["t"]["r"]["y"] == "text"
+    verdicts = aggregate([{"t": {"r": {"v": "met"}}}, {"t": {"r": {"v": "NOT met"}}}, {"t": {"r": {"v": "met"}}}])
+    assert verdicts["t"]["r"]["v"] == "round 1: met / round 2: NOT met / round 3: met"  # not the first round's word
     ratios = paired_ratios([{"t": {"r": {"x": 2.0, "d": "abc"}}}, {"t": {"r": {"x": 0.0, "d": "abc"}}}],
                            [{"t": {"r": {"x": 3.0, "d": "abc"}}}, {"t": {"r": {"x": 5.0, "d": "abd"}}}])
     assert ratios["t"]["r"]["x"].n == 1 and ratios["t"]["r"]["x"].median == 1.5 and ratios["t"]["r"]["d"] == "differs"

@@ -65,8 +65,8 @@ def _keys(dicts: Iterable[dict]) -> list:
 
 
 def aggregate(samples: Sequence[Sample]) -> dict:
-    """Per table, row and column: the :class:`Stat` over the samples of the numbers, or the first non-empty
-    string (a label the measurement wrote)."""
+    """Per table, row and column: the :class:`Stat` over the samples of the numbers, or the text the samples
+    wrote (a label; each round's where they differ, :func:`_texts`)."""
     out: dict = {}
     for table in _keys(samples):
         rows = [s.get(table, {}) for s in samples]
@@ -79,8 +79,18 @@ def aggregate(samples: Sequence[Sample]) -> dict:
                 if any(_number(v) for v in values):
                     out[table][row][col] = stat(values)
                 else:
-                    out[table][row][col] = next((v for v in values if v not in (None, "")), None)
+                    out[table][row][col] = _texts(values)
     return out
+
+
+def _texts(values: Sequence) -> str | None:
+    """The rounds' text of one cell: the text where every round that wrote one agrees, else each round's in
+    order, ``" / "``-joined (a verdict that differs between rounds is not one round's word)."""
+    texts = [v for v in values if v not in (None, "")]
+    if not texts:
+        return None
+    return texts[0] if len(set(texts)) == 1 else " / ".join(f"round {i + 1}: {v}" for i, v in enumerate(values)
+                                                           if v not in (None, ""))
 
 
 def paired_ratios(base: Sequence[Sample], other: Sequence[Sample], columns: Sequence[str] = ()) -> dict:
