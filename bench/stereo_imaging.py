@@ -6,27 +6,15 @@ from 3 m by the OAK-D profile's pair, rendered by the GL renderer; prints the ta
 """
 from __future__ import annotations
 
-import math
-
-from cosim.scenario.config.cameras import StereoCamera
 from cosim.testing.stereo_error import VARIANTS, measure
-from cosim.testing.stereo_plane import textured_plane_pair
-from cosim.world.camera import Pinhole
+from cosim.testing.stereo_plane import profile_plane
 
 __all__ = ["main"]
 
 
 def main() -> None:
     """Render the plane once and print the table of every variant."""
-    from renderer_proc.gl.backend import create_gl_context
-
-    base = StereoCamera(kind="stereo_camera", profile="oak_d", mount={"parent": "world"})
-    pin = Pinhole(base.width_px, base.height_px, math.radians(base.hfov_deg))
-    ctx = create_gl_context()
-    try:
-        left, right, z = textured_plane_pair(ctx, pin, base.baseline_m)
-    finally:
-        ctx.release()
+    base, pin, left, right, z = profile_plane("oak_d")
     print("| variant | valid 3-9 m | dd fitted (px) | log-log slope | > 10 sigma | RMS at 3.5 / 5.5 / 8.5 m (mm) |")
     print("|---|---|---|---|---|---|")
     for name, keys in VARIANTS.items():

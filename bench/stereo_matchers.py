@@ -3,18 +3,14 @@
 pair, rendered once by the GL renderer, matched by StereoSGBM and StereoBM (both with the camera's texture check and
 sub-pixel refinement), ideal images and with the image formation of bench/stereo_imaging.py; prints dd (px) fitted
 to dZ = Z^2 dd / (f B) over 3-9 m and the valid share. The ratio of BM's dd to SGBM's on the ideal pair is the
-constant perception_proc.cameras.expected.MATCHER_DD_PX holds.
+constant perception_proc.cameras.expected.MATCHER_DD_RATIO holds.
 
     python bench/stereo_matchers.py
 """
 from __future__ import annotations
 
-import math
-
-from cosim.scenario.config.cameras import StereoCamera
 from cosim.testing.stereo_error import VARIANTS, measure
-from cosim.testing.stereo_plane import textured_plane_pair
-from cosim.world.camera import Pinhole
+from cosim.testing.stereo_plane import profile_plane
 
 __all__ = ["main", "PROFILES", "FORMATIONS"]
 
@@ -24,26 +20,18 @@ FORMATIONS = ("ideal", "noise + distortion 0.15 px")
 
 def main() -> None:
     """Render each profile's plane once and print a row per (profile, images, matcher)."""
-    from renderer_proc.gl.backend import create_gl_context
-
     print("| profile | images | matcher | valid 3-9 m | dd fitted (px) | BM / SGBM |")
     print("|---|---|---|---|---|---|")
-    ctx = create_gl_context()
-    try:
-        for profile in PROFILES:
-            base = StereoCamera(kind="stereo_camera", profile=profile, mount={"parent": "world"})
-            pin = Pinhole(base.width_px, base.height_px, math.radians(base.hfov_deg))
-            left, right, z = textured_plane_pair(ctx, pin, base.baseline_m)
-            for images in FORMATIONS:
-                dd = {}
-                for matcher in ("sgbm", "bm"):
-                    r = measure(base.model_copy(update={**VARIANTS[images], "matcher": matcher}), pin, left, right, z)
-                    dd[matcher] = r["dd_px"]
-                    ratio = f"{dd['bm'] / dd['sgbm']:.2f}" if matcher == "bm" else ""
-                    print(f"| {profile} | {images} | {matcher} | {r['valid']:.1%} | {r['dd_px']:.3f} | {ratio} |",
-                          flush=True)
-    finally:
-        ctx.release()
+    for profile in PROFILES:
+        base, pin, left, right, z = profile_plane(profile)
+        for images in FORMATIONS:
+            dd = {}
+            for matcher in ("sgbm", "bm"):
+                r = measure(base.model_copy(update={**VARIANTS[images], "matcher": matcher}), pin, left, right, z)
+                dd[matcher] = r["dd_px"]
+                ratio = f"{dd['bm'] / dd['sgbm']:.2f}" if matcher == "bm" else ""
+                print(f"| {profile} | {images} | {matcher} | {r['valid']:.1%} | {r['dd_px']:.3f} | {ratio} |",
+                      flush=True)
 
 
 if __name__ == "__main__":

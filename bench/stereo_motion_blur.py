@@ -10,14 +10,10 @@ after the blur (one draw), and the blur at 3 and 9 m.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from cosim.scenario.config.cameras import StereoCamera
 from cosim.testing.stereo_error import CMV2000, measure
-from cosim.testing.stereo_plane import textured_plane_pair
-from cosim.world.camera import Pinhole
+from cosim.testing.stereo_plane import profile_plane
 from cosim.world.geometry import make_transform
 from renderer_proc.motion_blur import blur, pixel_displacement
 
@@ -30,15 +26,7 @@ EXPOSURE_S = 0.005
 
 def main() -> None:
     """Render the plane once; blur it for each speed and direction; print the table."""
-    from renderer_proc.gl.backend import create_gl_context
-
-    cam = StereoCamera(kind="stereo_camera", profile="oak_d", mount={"parent": "world"})
-    pin = Pinhole(cam.width_px, cam.height_px, math.radians(cam.hfov_deg))
-    ctx = create_gl_context()
-    try:
-        left, right, z = textured_plane_pair(ctx, pin, cam.baseline_m)
-    finally:
-        ctx.release()
+    cam, pin, left, right, z = profile_plane("oak_d")
     noisy = cam.model_copy(update={"image_noise": CMV2000})
     print("| motion | v (m/s) | blur at 3 / 9 m (px) | valid 3-9 m | dd fitted (px) | with noise: valid | dd (px) |")
     print("|---|---|---|---|---|---|---|")

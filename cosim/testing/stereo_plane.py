@@ -18,7 +18,7 @@ from cosim.world.geometry import body_from_camera_axes, make_transform, rpy_matr
 from cosim.world.labels import GRAIN_MAT, GROUND
 from cosim.world.scene import Boxes, Cylinders, HeightField, Scene
 
-__all__ = ["textured_plane_pair"]
+__all__ = ["textured_plane_pair", "profile_plane"]
 
 
 def _plane_scene() -> Scene:
@@ -55,3 +55,19 @@ def textured_plane_pair(ctx: Any, pin: Pinhole, baseline_m: float, pitch_deg: fl
     finally:
         r.close()
     return img[0], img[1], z
+
+
+def profile_plane(profile: str, **plane) -> tuple[Any, Pinhole, np.ndarray, np.ndarray, np.ndarray]:
+    """(camera, pinhole, left, right, depth): the packaged stereo ``profile``'s camera (a
+    :class:`~cosim.scenario.config.cameras.StereoCamera` on the world), its eyes' pinhole and
+    :func:`textured_plane_pair` seen by it (``plane``: that function's pose keywords), in a GL context of its own."""
+    from cosim.scenario.config.cameras import StereoCamera
+    from renderer_proc.gl.backend import create_gl_context
+
+    cam = StereoCamera(kind="stereo_camera", profile=profile, mount={"parent": "world"})
+    pin = Pinhole(cam.width_px, cam.height_px, math.radians(cam.hfov_deg))
+    ctx = create_gl_context()
+    try:
+        return (cam, pin, *textured_plane_pair(ctx, pin, cam.baseline_m, **plane))
+    finally:
+        ctx.release()
