@@ -6,6 +6,7 @@ import errno
 import fcntl
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -59,7 +60,9 @@ def test_a_child_that_stops_running_is_named_within_2_s(role, fault, at, words, 
     assert all(code is not None for code in res.children.values())
     if fault == "deadlock_at":  # what its threads did is told in summary.json and log.txt (the console is spared)
         threads = res.summary["error"]["threads"]
-        assert any(" MainThread S " in t or " python" in t for t in threads), threads
+        pid = re.search(r"\(pid (\d+)\)", str(res.error)).group(1)
+        main = next(t for t in threads if t.startswith(f"tid {pid} "))  # the process's main thread
+        assert " S cpu " in main, main                                # the deadlocked thread sleeps in C
         assert any(t.startswith("tid ") and "run-queue wait" in t and "voluntary" in t for t in threads), threads
         assert "the watch's samples" in "\n".join(threads)
         assert "the threads of dynamics when it was named" in (tmp_path / "run" / "log.txt").read_text()

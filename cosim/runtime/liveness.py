@@ -44,7 +44,7 @@ from cosim.errors import HandoffTimeout, ParticipantCrashed, ParticipantDied, Pa
 from shm_schema import Phase, Segment
 from shm_schema.layout import SLOT_WORD
 
-from .threadreport import thread_report
+from .threadreport import read_proc, stat_fields, thread_report
 
 __all__ = ["BEAT_S", "STALL_S", "CONFIRM_S", "IDLE_S", "IDLE_LOOKS", "LOOK_AFTER_S", "STARTUP_REPORT_S", "Heartbeat", "Watch",
            "Progress", "Evidence", "process_state", "cpu_ticks", "is_stopped", "threads_progress", "thread_progress",
@@ -114,20 +114,10 @@ class Heartbeat:
             self._thread.join(2 * self._period)
 
 
-def _read(path: str) -> bytes:
-    with open(path, "rb") as f:
-        return f.read()
-
-
-def _stat_fields(raw: bytes) -> list[bytes]:
-    """The fields of a /proc stat line after ``comm`` (which may hold spaces and parentheses): state first."""
-    return raw[raw.rfind(b")") + 2:].split()
-
-
 def _proc_stat(pid: int) -> tuple[str, int]:
     """(one-letter state, user + system CPU clock ticks) of ``pid``; ("", -1) when it cannot be read."""
     try:
-        fields = _stat_fields(_read(f"/proc/{pid}/stat"))
+        fields = stat_fields(read_proc(f"/proc/{pid}/stat"))
     except OSError:
         return "", -1
     # utime, stime are fields 14 and 15 of the line (the 12th and 13th after the state)
@@ -157,9 +147,9 @@ def _thread(pid: int, tid: int) -> tuple[int, bytes]:
     """(CPU time of thread ``tid`` of ``pid``, ns: its ``schedstat`` (exact), or its ``stat`` ticks where there is
     none; its one-letter state). Raises OSError (and IndexError, ValueError) when it cannot be read."""
     base = f"/proc/{pid}/task/{tid}/"
-    fields = _stat_fields(_read(base + "stat"))
+    fields = stat_fields(read_proc(base + "stat"))
     try:
-        cpu = int(_read(base + "schedstat").split()[0])
+        cpu = int(read_proc(base + "schedstat").split()[0])
     except (OSError, IndexError, ValueError):
         cpu = int((int(fields[11]) + int(fields[12])) * _TICK_NS)
     return cpu, fields[0]

@@ -16,12 +16,22 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["thread_report"]
+__all__ = ["thread_report", "read_proc", "stat_fields"]
+
+
+def read_proc(path: str) -> bytes:
+    """The bytes of a /proc file (raises OSError when it cannot be read: the process or thread is gone)."""
+    with open(path, "rb") as f:
+        return f.read()
+
+
+def stat_fields(raw: bytes) -> list[bytes]:
+    """The fields of a /proc stat line after ``comm`` (which may hold spaces and parentheses): state first."""
+    return raw[raw.rfind(b")") + 2:].split()
 
 
 def _text(path: str) -> str:
-    with open(path, "rb") as f:
-        return f.read().decode("utf-8", "replace").strip()
+    return read_proc(path).decode("utf-8", "replace").strip()
 
 
 def _switches(status: str) -> tuple[str, str]:
@@ -35,8 +45,7 @@ def _switches(status: str) -> tuple[str, str]:
 
 def _line(pid: int, tid: str) -> str:
     base = f"/proc/{pid}/task/{tid}/"
-    stat = _text(base + "stat")
-    state = stat[stat.rfind(")") + 2:].split()[0]
+    state = stat_fields(read_proc(base + "stat"))[0].decode("ascii", "replace")
     name = _text(base + "comm")
     try:
         cpu_ns, wait_ns, slices = (int(x) for x in _text(base + "schedstat").split()[:3])
