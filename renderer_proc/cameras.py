@@ -49,9 +49,10 @@ def camera_backend(scenario: Scenario, views: list[View], context: Any = None):
         return GLCameraRenderer(pins, scenario.render.lighting, context=context,
                                 parts=[{"rgb" if p == "right" else p for p in v.parts} for v in views])
     if scenario.renderer == "mock":
+        from cosim.world.parts import entity_parts
         from renderer_proc.mock.camera import MockCameraRenderer
 
-        return MockCameraRenderer(pins, scenario.render.lighting, labelled)
+        return MockCameraRenderer(pins, scenario.render.lighting, labelled, parts=entity_parts(scenario))
     raise ValueError(f"scenario.renderer is {scenario.renderer!r}: this scenario runs no renderer")
 
 

@@ -2,7 +2,8 @@
 
 Depth and labels are exact: each pixel centre's ray is cast through the :class:`~cosim.world.scene.Scene`
 (``cosim.world.labelcast``, the numpy ray caster's intersectors grouped by label, when labels or colour are
-wanted; else ``cosim.world.fastcast``, Embree when installed), planar depth Z = t cos(angle to the optical
+wanted; else the run's exact caster from ``cosim.world.fastcast.make_caster``: the rigid bodies built once in
+Embree when installed and ``parts`` are given, else the scene cast per frame), planar depth Z = t cos(angle to the optical
 axis), NaN where the ray meets nothing. The colour image is plain: each label's flat colour (the scene's
 colours), lit by ``render.lighting`` (cosim.world.lighting) with normals estimated from the depth image, no
 texture. A stereo matcher has nothing to match on it, so a stereo camera is refused with the mock at
@@ -14,7 +15,7 @@ import numpy as np
 
 from cosim.scenario.config.rendering import Lighting
 from cosim.world.camera import Pinhole
-from cosim.world.fastcast import cast_from
+from cosim.world.fastcast import make_caster
 from cosim.world.labelcast import cast_labels
 from cosim.world.labels import AUGER, CART_RIM, CART_WALL, COMBINE, GRAIN, GROUND, STREAM, TRACTOR
 from cosim.world.lighting import irradiance, sun_direction
@@ -43,10 +44,13 @@ def normals_from_depth(pin: Pinhole, z: np.ndarray) -> tuple[np.ndarray, np.ndar
 class MockCameraRenderer:
     """Same interface as ``renderer_proc.gl.camera.GLCameraRenderer``: ``set_scene``, ``draw``, ``read_rgb``,
     ``read_depth``, ``read_labels``. ``pins``: one pinhole per view; ``labelled``: per view, whether labels or
-    colour are read from it (the label cast), else only depth (the fast cast)."""
+    colour are read from it (the label cast), else only depth (the fast cast); ``parts``
+    (``cosim.world.parts.entity_parts(scenario)``): the scenes' rigid bodies, built once for the run for the fast
+    cast when Embree allows (``caster.name`` says which ray caster runs)."""
 
-    def __init__(self, pins: list[Pinhole], lighting: Lighting, labelled: list[bool]):
+    def __init__(self, pins: list[Pinhole], lighting: Lighting, labelled: list[bool], parts=None):
         self.pins, self.lighting, self.labelled = pins, lighting, labelled
+        self.caster = make_caster(parts)
         self._sun = sun_direction(lighting)
         self._light: np.ndarray | None = None
         self._scene: Scene | None = None
@@ -70,7 +74,7 @@ class MockCameraRenderer:
             t, lab = cast_labels(self._scene, origin, d)
             self._labels[k] = lab.reshape(pin.height, pin.width)
         else:
-            t = cast_from(self._scene, origin, d)
+            t = self.caster.cast(self._scene, origin, d)
         z = t.reshape(pin.height, pin.width) * d_cam[..., 2]
         self._z[k] = np.where(np.isfinite(z), z, np.nan)
         self._pose[k] = world_from_camera
@@ -109,5 +113,6 @@ class MockCameraRenderer:
         out[..., 3] = 255
 
     def close(self) -> None:
-        """Nothing to release."""
+        """Release the ray caster's scenes."""
         self._scene = None
+        self.caster.close()
