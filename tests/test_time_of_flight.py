@@ -23,7 +23,7 @@ from perception_proc.cameras.time_of_flight import (
     time_of_flight_depth,
     tof_sigma_m,
 )
-from perception_proc.cameras.tof import flying_mask, frame_generator, tof_depth
+from perception_proc.cameras.tof import flying_mask, frame_generator, incidence, tof_depth
 
 PIN = Pinhole(200, 160, math.radians(60.0))
 MOUNT = "{parent: combine, xyz_m: [-2.0, 7.6, 5.6], rpy_deg: [0.0, 90.0, 90.0]}"
@@ -122,6 +122,41 @@ def test_mixed_pixels_appear_only_at_depth_edges_and_lie_between_the_surfaces():
         assert np.all((out[off] > 2.0) & (out[off] < 3.5))
     edge = np.stack([o[:, step - 1:step + 1] for o in outs])
     assert np.mean(np.abs(edge - z[None, :, step - 1:step + 1]) > 1e-3) > 0.9
+
+
+def _whole_image_reference(z, pin, cam, gen):
+    """The model written over the whole image (each return's amplitude from :func:`amplitude`, the mixture
+    computed everywhere and chosen on the edge pixels): the readable form the kernel is checked against."""
+    z = np.asarray(z, np.float64)
+    theta = np.nan_to_num(incidence(pin, z), nan=0.0)
+    k = ray_length_factor(pin)
+    fly, near, far = flying_mask(z, cam.flying_edge_m)
+    mixed, weight = mixed_depth(near, far, gen.random(z.shape))
+    out = np.where(fly, mixed, z)
+    amp = np.where(fly, amplitude(near * k, theta, cam.albedo) * weight, amplitude(z * k, theta, cam.albedo))
+    out = out + gen.standard_normal(z.shape) * (tof_sigma_m(amp, cam) / k)
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isfinite(out) | (out < cam.range_min_m) | (out > cam.range_max_m) | (
+            incidence(pin, z) > math.radians(cam.max_incidence_deg))
+    out[bad] = np.nan
+    return out.astype(np.float32)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_model_equals_its_whole_image_reference_to_the_bit(seed):
+    """A floor, a box in front of it (depth edges), sky and single missing pixels: the kernel, which mixes the
+    returns of the edge pixels only, gives the whole-image form's bytes."""
+    rng = np.random.default_rng(seed)
+    v = np.arange(PIN.height)[:, None] + 0.5
+    z = 2.5 + 30.0 / np.maximum(v, 4.0) + 0.002 * rng.standard_normal((PIN.height, PIN.width))
+    z[40:90, 60:140] = 2.0 + 0.01 * np.arange(80)[None, :]
+    z[:8] = np.nan
+    z[rng.integers(0, PIN.height, 20), rng.integers(0, PIN.width, 20)] = np.nan
+    z = z.astype(np.float32)
+    got = time_of_flight_depth(z, PIN, TOF, frame_generator(seed, 3, 0))
+    want = _whole_image_reference(z, PIN, TOF, frame_generator(seed, 3, 0))
+    assert flying_mask(np.asarray(z, np.float64), TOF.flying_edge_m)[0].mean() > 0.01
+    assert 0.5 < np.isfinite(got).mean() and got.tobytes() == want.tobytes()
 
 
 def test_without_noise_the_exact_depth_within_the_limits():

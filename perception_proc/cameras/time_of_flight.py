@@ -26,6 +26,7 @@ modelled: phase wrapping beyond the unambiguous range, the systematic wiggling e
 """
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -45,6 +46,14 @@ def ray_length_factor(pin: Pinhole) -> np.ndarray:
     x = (uu - pin.width / 2.0) / pin.f
     y = (pin.height / 2.0 - vv) / pin.f
     return np.sqrt(1.0 + x * x + y * y)
+
+
+@functools.lru_cache(maxsize=8)
+def _ray_length_factor(pin: Pinhole) -> np.ndarray:
+    """:func:`ray_length_factor` of ``pin``, made once per pinhole (read-only)."""
+    k = ray_length_factor(pin)
+    k.flags.writeable = False
+    return k
 
 
 def amplitude(range_m: np.ndarray, theta: np.ndarray, albedo: float) -> np.ndarray:
@@ -96,15 +105,20 @@ def time_of_flight_depth(z: np.ndarray, pin: Pinhole, cam: DepthCamera, gen: np.
     out = z.copy()
     if gen is not None and cam.noise:
         h, w = z.shape
-        k = ray_length_factor(pin)
-        amp = amplitude(z * k, np.nan_to_num(theta, nan=0.0), cam.albedo)
+        k = _ray_length_factor(pin)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            lit = cam.albedo * np.cos(np.nan_to_num(theta, nan=0.0))   # :func:`amplitude`'s numerator, both returns'
+            r = z * k
+            amp = lit / (r * r)
         fly, near, far = flying_mask(z, cam.flying_edge_m)
         share = gen.random((h, w))
-        mixed, weight = mixed_depth(near, far, share)
-        # the mixed return's amplitude: its share-weighted sum, the near surface's amplitude scaled by the weight
-        amp_near = amplitude(near * k, np.nan_to_num(theta, nan=0.0), cam.albedo)
-        out = np.where(fly, mixed, z)
-        amp = np.where(fly, amp_near * weight, amp)
+        # the mixed return on the edge pixels only (elementwise, so the same numbers as over the whole image): its
+        # depth, and its amplitude as the share-weighted sum, the near surface's amplitude scaled by the weight
+        mixed, weight = mixed_depth(near[fly], far[fly], share[fly])
+        out[fly] = mixed
+        with np.errstate(invalid="ignore", divide="ignore"):
+            r_near = near[fly] * k[fly]
+            amp[fly] = lit[fly] / (r_near * r_near) * weight
         if cam.multipath:
             out = out + pixel_range_bias(pin, z, cam.albedo) / k                  # range bias, as planar depth
         out = out + gen.standard_normal((h, w)) * (tof_sigma_m(amp, cam) / k)     # range noise, as planar depth
