@@ -63,7 +63,6 @@ _SIGNATURES = {
     "rtcAttachGeometryByID": (None, [_P, _P, _U]), "rtcSetGeometryInstancedScene": (None, [_P, _P]),
     "rtcSetGeometryTransform": (None, [_P, _U, _I, _P]), "rtcEnableGeometry": (None, [_P]),
     "rtcDisableGeometry": (None, [_P]), "rtcDetachGeometry": (None, [_P, _U]), "rtcGetDeviceError": (_I, [_P]),
-    "rtcGetDeviceProperty": (ctypes.c_ssize_t, [_P, _I]),
 }
 
 

@@ -163,19 +163,6 @@ def _distinct(rows: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
     return used, np.take(index, rows)
 
 
-def _tracer(device: int, packets: bool | int):
-    """The packet tracer ``packets`` asks for (True: at the device's native width where numba and the device
-    allow, else None; an int: that width, numba required; False: None)."""
-    if packets is False:
-        return None
-    from .embree_packets import packet_tracer
-
-    tracer = packet_tracer(device, None if packets is True else int(packets))
-    if tracer is None and packets is not True:
-        raise ImportError(f"packets of {packets} need numba")
-    return tracer
-
-
 def _release(holder: list, protos: list) -> None:
     """Drop the embreex top scene and device (``holder``: the last references; the top scene releases its
     instances), then release every prototype scene, then let their buffers go."""
@@ -229,16 +216,12 @@ class RigidCaster:
     the entities' geometry built once. Raises :class:`~cosim.world.embree_api.EmbreeUnavailable` (or
     ImportError without embreex) when Embree cannot be used so; call :meth:`close` when done."""
 
-    def __init__(self, parts: Mapping[str, EntityParts], packets: bool | int = True):
+    def __init__(self, parts: Mapping[str, EntityParts]):
         from embreex import rtcore, rtcore_scene
 
         self._device_obj = rtcore.EmbreeDevice()
         self._top_obj = rtcore_scene.EmbreeScene(self._device_obj)
         self._top, self._dev = emb.handles(self._top_obj, self._device_obj)
-        self._packets = _tracer(self._dev, packets)
-        #: how Embree traverses the rays: ``packets of N`` (rtcIntersectN in a compiled loop) or ``one ray at a
-        #: time`` (embreex's ``EmbreeScene.run``)
-        self.traversal = f"packets of {self._packets.width}" if self._packets else "one ray at a time"
         self._protos: list[_Proto] = []
         # everything released in order (the instances with the top scene, then the prototypes, then the buffers
         # they share) by close(), or when this caster is collected or the interpreter exits without it
@@ -427,24 +410,13 @@ class RigidCaster:
         for k in idx[~cast].tolist():
             self._protos[k].hide()
         self._place(idx[cast], lin, trans)
+        self._top_obj.is_committed = 0                     # run() commits the top scene
         tfar = None
         if ground is not None:                             # a hit before the ground is all Embree must find
             tfar = np.where(np.isfinite(ground), ground * (1.0 + _TFAR_SLACK) + _TFAR_SLACK, _NO_HIT).astype(np.float32)
-        t = self._ranges(self._traverse(d, tfar), d, lin, trans)
+        out = self._top_obj.run(np.zeros(d.shape, np.float32), d.astype(np.float32), dists=tfar, output=True)
+        t = self._ranges(out, d, lin, trans)
         return t if ground is None else np.minimum(t, ground)
-
-    def _traverse(self, d: np.ndarray, tfar: np.ndarray | None) -> dict:
-        """Embree's closest hits of the rays from the origin along ``d`` (N, 3) up to ``tfar`` (N,) float32 (None:
-        unbounded): ``geomID``, ``primID`` (N,) int32 (-1 on a miss), ``tfar`` (N,) float32, as embreex's
-        ``EmbreeScene.run`` gives them; the top scene is committed first."""
-        d32 = d.astype(np.float32)
-        if self._packets is None:
-            self._top_obj.is_committed = 0                 # run() commits the top scene
-            return self._top_obj.run(np.zeros(d.shape, np.float32), d32, dists=tfar, output=True)
-        emb.api().rtcCommitScene(self._top)
-        tfar = np.full(len(d), _NO_HIT, np.float32) if tfar is None else tfar
-        geom, prim = self._packets.trace(self._top, d32, tfar)
-        return {"geomID": geom, "primID": prim, "tfar": tfar}
 
     def _ranges(self, out: dict, d: np.ndarray, lin: np.ndarray, trans: np.ndarray) -> np.ndarray:
         """The float64 range of each hit: the ray (from the origin, along ``d``) against its triangle's plane
