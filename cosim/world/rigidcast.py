@@ -447,7 +447,8 @@ class RigidCaster:
         table[:, 3] = planes[:, 3] + np.einsum("pi,pi->p", table[:, :3], trans[own])
         table[:, 4] = _GRAZE * np.sqrt(np.einsum("pi,pi->p", table[:, :3], table[:, :3]))
         nx, ny, nz, c, graze = (np.take(col, inverse) for col in table.T.copy())     # (H,) each
-        nd = nx * np.take(d[:, 0], hit) + ny * np.take(d[:, 1], hit) + nz * np.take(d[:, 2], hit)
+        dh = np.take(d, hit, axis=0)                                        # (H, 3)
+        nd = nx * dh[:, 0] + ny * dh[:, 1] + nz * dh[:, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
             t_hit = np.where(np.abs(nd) > graze, c / nd, np.take(out["tfar"], hit))
         t[hit] = np.where(t_hit > T_MIN_M, t_hit, np.inf)
