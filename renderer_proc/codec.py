@@ -33,8 +33,8 @@ VALID_ALPHA = 255
 def valid_depth_mask(depth_m: np.ndarray, codec: Codec) -> np.ndarray:
     """Pixels that carry a depth: finite, > 0 and < alpha. ``depth_m`` any shape, m; returns bool, same shape."""
     d = np.asarray(depth_m, dtype=np.float64)
-    with np.errstate(invalid="ignore"):
-        return np.isfinite(d) & (d > 0.0) & (d * CM_PER_M < codec.alpha_cm)
+    with np.errstate(invalid="ignore"):     # NaN and +-inf fail one of the two comparisons
+        return (d > 0.0) & (d * CM_PER_M < codec.alpha_cm)
 
 
 def encode_depth(depth_m: np.ndarray, codec: Codec, out: np.ndarray | None = None) -> np.ndarray:
@@ -52,20 +52,22 @@ def encode_depth(depth_m: np.ndarray, codec: Codec, out: np.ndarray | None = Non
     # both channels come from one quantity, the period count q = d / beta: x_B = frac(q) and
     # 255 x_R = q (255 beta / alpha). At alpha / beta = 255 the factor is exactly 1, so R and B round
     # consistently even at the ties (d / beta a half-integer) where separate float products could disagree
-    # and decode a whole period off.
-    q = np.where(valid, d_m * (CM_PER_M / codec.beta_cm), 0.0)
+    # and decode a whole period off. An invalid pixel has q = 0, hence R = G = B = 0.
+    q = np.multiply(d_m, CM_PER_M / codec.beta_cm, out=np.zeros(d_m.shape), where=valid)
     x_b = q - np.floor(q)
     r255 = np.minimum(q * (BYTE_MAX * codec.beta_cm / codec.alpha_cm), float(BYTE_MAX))
     if codec.gamma_mode == "mishandled":
         r255 = BYTE_MAX * (r255 / BYTE_MAX) ** codec.gamma
         x_b = x_b**codec.gamma
     # round half up, as the shader's floor(x + 0.5) for x >= 0
-    r = np.floor(r255 + 0.5).astype(np.uint8)
-    b = np.floor(x_b * BYTE_MAX + 0.5).astype(np.uint8)
-    out[..., 0] = np.where(valid, r, 0)
+    r255 += 0.5
+    x_b *= BYTE_MAX
+    x_b += 0.5
+    out[..., 0] = np.floor(r255, out=r255)
     out[..., 1] = out[..., 0]
-    out[..., 2] = np.where(valid, b, 0)
-    out[..., 3] = np.where(valid, VALID_ALPHA, 0)
+    out[..., 2] = np.floor(x_b, out=x_b)
+    out[..., 3] = valid
+    out[..., 3] *= VALID_ALPHA
     return out
 
 

@@ -113,3 +113,26 @@ def test_codec_ratios_above_254_are_refused():
     for alpha in (25450.0, 25500.0):
         with pytest.raises(ValidationError, match="exceeds 254"):
             Codec(alpha_cm=alpha, beta_cm=100.0)
+
+
+@pytest.mark.parametrize("gamma_mode", ["linear", "mishandled"])
+def test_bytes_equal_the_masked_formula_bit_for_bit(gamma_mode):
+    """The encoder against Eqs 1-2 written with every channel masked by validity (invalid pixels: all zero),
+    byte for byte, over valid depths (ties of the rounding included) and every kind of invalid one."""
+    codec = Codec(gamma_mode=gamma_mode)
+    rng = np.random.default_rng(7)
+    d = np.concatenate([rng.uniform(0.0, 1.2 * codec.max_depth_m, 20_000),
+                        (np.arange(0, 5000) + 0.5) * codec.beta_cm / 100.0 / 255.0,        # B ties
+                        [np.inf, -np.inf, np.nan, 0.0, -0.0, -1.0, codec.max_depth_m, 5e-324, 1e300]])
+    valid = np.isfinite(d) & (d > 0.0) & (d * 100.0 < codec.alpha_cm)
+    with np.errstate(invalid="ignore", over="ignore"):
+        q = np.where(valid, d * (100.0 / codec.beta_cm), 0.0)
+    x_b = q - np.floor(q)
+    r255 = np.minimum(q * (255.0 * codec.beta_cm / codec.alpha_cm), 255.0)
+    if gamma_mode == "mishandled":
+        r255, x_b = 255.0 * (r255 / 255.0) ** codec.gamma, x_b**codec.gamma
+    r = np.where(valid, np.floor(r255 + 0.5), 0).astype(np.uint8)
+    b = np.where(valid, np.floor(x_b * 255.0 + 0.5), 0).astype(np.uint8)
+    want = np.stack([r, r, b, np.where(valid, 255, 0).astype(np.uint8)], axis=-1)
+    np.testing.assert_array_equal(encode_depth(d[None], codec)[0], want)
+    np.testing.assert_array_equal(valid_depth_mask(d, codec), valid)

@@ -74,3 +74,21 @@ def test_packed_transform_is_the_affines_columns():
         assert embree_api.api().rtcGetDeviceError(caster._dev) == 0
     finally:
         caster.close()
+
+
+@pytest.mark.parametrize("nx,ny,cell", [(20, 12, 0.25), (7, 31, 0.4)])
+def test_grid_planes_from_kept_terms_equal_the_plain_planes_bit_for_bit(nx, ny, cell):
+    """The grain surface's planes from the terms its grid keeps (x, y) and this frame's heights: the planes of
+    ``_grid_planes`` bit for bit, for a subset of faces in any order and heights from flat to rough."""
+    from cosim.world.heightfield import grid_triangles, grid_vertices
+    from cosim.world.rigidcast import _grid_planes, _grid_planes_at, _grid_terms
+
+    rng = np.random.default_rng(nx)
+    xy = grid_vertices(nx, ny, cell, nx * cell, ny * cell, np.float64)
+    f = grid_triangles(nx, ny).astype(np.int64)
+    for z in (np.zeros(len(xy)), rng.uniform(0.0, 2.0, len(xy)), rng.normal(0.0, 1e3, len(xy))):
+        v = np.column_stack([xy, z])
+        terms = _grid_terms(v, f)
+        faces = rng.permutation(len(f))[:len(f) // 3]
+        got = _grid_planes_at(terms[faces], z, f[faces])
+        np.testing.assert_array_equal(got.view(np.uint64), _grid_planes(v, f[faces]).view(np.uint64))

@@ -122,6 +122,29 @@ def _grid_planes(v: np.ndarray, f: np.ndarray) -> np.ndarray:
     return out
 
 
+def _grid_terms(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """The terms of :func:`_grid_planes` that depend on x and y alone, which a grid keeps while its heights change:
+    (F, 7) float64 per face: the edges from the first vertex e1 = v1 - v0 (x, y), e2 = v2 - v0 (x, y), the first
+    vertex's x, y, and the normal's z = e1 x e2 along z."""
+    a, b, c = (np.take(v, f[:, k], axis=0) for k in range(3))
+    e1, e2 = b - a, c - a
+    return np.stack([e1[:, 0], e1[:, 1], e2[:, 0], e2[:, 1], a[:, 0], a[:, 1],
+                     e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]], axis=1)
+
+
+def _grid_planes_at(terms: np.ndarray, z: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """:func:`_grid_planes` of faces ``f`` (U, 3) from their :func:`_grid_terms` (U, 7) and the vertex heights
+    ``z`` (V,): the same operations on the same operands, so the same bits."""
+    az, bz, cz = (np.take(z, f[:, k]) for k in range(3))
+    e1z, e2z = bz - az, cz - az
+    out = np.empty((len(f), 4))
+    out[:, 0] = terms[:, 1] * e2z - e1z * terms[:, 3]
+    out[:, 1] = e1z * terms[:, 2] - terms[:, 0] * e2z
+    out[:, 2] = terms[:, 6]
+    out[:, 3] = out[:, 0] * terms[:, 4] + out[:, 1] * terms[:, 5] + out[:, 2] * az
+    return out
+
+
 def _planes(v: np.ndarray, f: np.ndarray) -> np.ndarray:
     """Each triangle's plane n . x = c: (F, 4) float64 [n, c], n = (v1 - v0) x (v2 - v0) (not unit)."""
     tri = v[f]
@@ -251,7 +274,8 @@ class RigidCaster:
 
     def _heightfield(self, scene: Scene) -> None:
         """The grain surface's vertex heights for this frame, refitted (the grid made on first use or when it
-        changes); ``_hf_v`` (V, 3) float64 grid-frame vertices, ``_hf_f`` (F, 3) faces."""
+        changes); ``_hf_v`` (V, 3) float64 grid-frame vertices, ``_hf_z`` (V,) their heights, ``_hf_f`` (F, 3)
+        faces, ``_hf_terms`` (F, 7) their planes' terms that the heights leave alone (:func:`_grid_terms`)."""
         hf = scene.heightfield
         nx, ny = hf.heights.shape
         key = (nx, ny, hf.cell_m, hf.length_m, hf.width_m)
@@ -259,6 +283,7 @@ class RigidCaster:
         if key != self._hf_key:
             xy = grid_vertices(nx, ny, hf.cell_m, hf.length_m, hf.width_m, np.float64)
             self._hf_v, self._hf_f = np.column_stack([xy, padded]), grid_triangles(nx, ny).astype(np.int64)
+            self._hf_terms, self._hf_z = _grid_terms(self._hf_v, self._hf_f), padded
             if self._hf is not None:                        # another grid: the old surface is left hidden
                 self._hf.hide()
                 self._hf.planes = np.zeros((0, 4))
@@ -266,6 +291,7 @@ class RigidCaster:
             self._hf_key = key
         elif not np.array_equal(self._hf_v[:, 2], padded):     # unchanged heights: the BVH stands
             self._hf_v[:, 2] = padded
+            self._hf_z = padded
             self._hf.geom.buffers[0][:-1, 2] = padded
             emb.refit(self._hf.geom)
             emb.api().rtcCommitScene(self._hf.scene)
@@ -409,7 +435,9 @@ class RigidCaster:
         k_hf = self._hf.k
         on_hf = np.flatnonzero(own == k_hf)
         if on_hf.size:
-            planes[on_hf] = _grid_planes(self._hf_v, self._hf_f[used[on_hf] - self._base[k_hf]])
+            faces = used[on_hf] - self._base[k_hf]
+            planes[on_hf] = _grid_planes_at(np.take(self._hf_terms, faces, axis=0), self._hf_z,
+                                            np.take(self._hf_f, faces, axis=0))
         placed = np.flatnonzero(np.bincount(own, minlength=len(lin)))      # the prototypes hit
         at = np.zeros(len(lin), np.intp)
         at[placed] = np.arange(len(placed))
@@ -419,7 +447,8 @@ class RigidCaster:
         table[:, 3] = planes[:, 3] + np.einsum("pi,pi->p", table[:, :3], trans[own])
         table[:, 4] = _GRAZE * np.sqrt(np.einsum("pi,pi->p", table[:, :3], table[:, :3]))
         nx, ny, nz, c, graze = (np.take(col, inverse) for col in table.T.copy())     # (H,) each
-        nd = nx * np.take(d[:, 0], hit) + ny * np.take(d[:, 1], hit) + nz * np.take(d[:, 2], hit)
+        dh = np.take(d, hit, axis=0)                                        # (H, 3)
+        nd = nx * dh[:, 0] + ny * dh[:, 1] + nz * dh[:, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
             t_hit = np.where(np.abs(nd) > graze, c / nd, np.take(out["tfar"], hit))
         t[hit] = np.where(t_hit > T_MIN_M, t_hit, np.inf)

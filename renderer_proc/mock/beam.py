@@ -82,8 +82,10 @@ class MockBeamRenderer:
         lay = self.layout
         if out.shape != lay.shape + (4,) or out.dtype != np.uint8:
             raise ValueError(f"destination must be {lay.shape + (4,)} uint8, got {out.shape} {out.dtype}")
-        full = np.full(lay.pixels, np.inf)
-        full[:lay.n_beams] = r
+        full = r
+        if lay.pixels != lay.n_beams:                   # padding pixels: no hit
+            full = np.full(lay.pixels, np.inf)
+            full[:lay.n_beams] = r
         encode_depth(full.reshape(lay.shape), self.codec, out=out)
 
     def read_rgb(self, k: int, out: np.ndarray) -> None:
