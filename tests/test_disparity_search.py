@@ -1,4 +1,4 @@
-"""The stereo matcher's disparity search from the depths in view (perception_proc.cameras.disparity_search): the
+"""The stereo matcher's disparity search from the depths in view (cosim.world.disparity_search): the
 closed form d = f B / Z, the smallest search, and the packaged stereo heads' searches against their geometry at
 the start pose."""
 from __future__ import annotations
@@ -10,19 +10,18 @@ import numpy as np
 import pytest
 
 from cosim.runtime.specs import DEFAULT_SPECS, load_callable
-from cosim.scenario.config.cameras import StereoCamera
+from cosim.scenario.config.cameras import SEARCH_EDGE_PX, StereoCamera
 from cosim.scenario.config.machines import Auger
 from cosim.scenario.loader import load_scenario, resolve_scenario_arg
-from cosim.world.geometry import entity_pose
-from cosim.world.sensors import world_from_sensor
-from perception_proc.cameras.disparity_search import (
+from cosim.world.disparity_search import (
     auger_top_m,
     disparity_of_depth,
     disparity_search,
     searched_depths_m,
     spout_view_depths_m,
 )
-from perception_proc.cameras.stereo import SEARCH_EDGE_PX
+from cosim.world.geometry import entity_pose
+from cosim.world.sensors import world_from_sensor
 
 ROOT = Path(__file__).resolve().parents[1]
 #: every packaged scenario and example with a stereo camera

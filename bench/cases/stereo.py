@@ -10,7 +10,7 @@ Configurations: ``opencv`` (StereoSGBM's one-pass mode with its own checks and i
 ``refined`` (the camera's default: the texture check and the Gauss-Newton sub-pixel step), ``refined_3way``
 (the same on OpenCV's parallel three-way mode), ``refined_3way_search`` (and the search cut to the disparities a
 camera 0.9-6.1 m above what it sees needs: 16 to 111 px; the packaged ``stereo_spout`` head's is derived in
-perception_proc/cameras/disparity_search.py) and ``bm``
+cosim/world/disparity_search.py) and ``bm``
 (StereoBM, refined).
 """
 from __future__ import annotations

@@ -17,7 +17,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from cosim.scenario.config.cameras import StereoCamera
+from cosim.scenario.config.cameras import SEARCH_EDGE_PX, StereoCamera
 from perception_proc.cameras.subpixel import refine_disparity, texture_mask
 
 __all__ = ["FIXED_POINT", "SGBM_MODES", "make_matcher", "grey", "disparity", "camera_disparity", "depth_from_disparity",
@@ -25,9 +25,6 @@ __all__ = ["FIXED_POINT", "SGBM_MODES", "make_matcher", "grey", "disparity", "ca
 
 #: OpenCV's disparity fixed point: 16 steps per pixel
 FIXED_POINT = 16.0
-#: a disparity within this of either end of the search is invalid: a surface outside the searched depths has its
-#: cost minimum at the end of the search, px
-SEARCH_EDGE_PX = 1.0
 #: SGBM's smoothness penalties per unit of cn b^2 (OpenCV's documentation: 8 and 32)
 P1_PER_AREA, P2_PER_AREA = 8, 32
 #: ``sgbm_mode`` -> OpenCV's StereoSGBM mode

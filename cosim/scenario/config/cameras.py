@@ -30,7 +30,8 @@ from .imaging import ImageNoise, LensDistortion
 from .profiles import load_profile
 from .sensing import Sensor
 
-__all__ = ["SENSOR_NAME", "KINDS", "STEREO_BASELINE_M", "MAX_SENSORS", "DEPTH_KINDS", "DEPTH_MODELS", "Camera", "LidarSensor", "DepthCamera", "StereoCamera",
+__all__ = ["SENSOR_NAME", "KINDS", "STEREO_BASELINE_M", "MAX_SENSORS", "DEPTH_KINDS", "DEPTH_MODELS", "DISPARITY_STEP_PX",
+           "SEARCH_EDGE_PX", "Camera", "LidarSensor", "DepthCamera", "StereoCamera",
            "RgbCamera", "SensorSpec", "SensorMap", "Sensors"]
 
 #: what a sensor name may look like (it names the sensor's shared-memory blocks, ``cam_<name>_...``)
@@ -43,6 +44,9 @@ DEPTH_KINDS = ("lidar", "depth_camera", "stereo_camera")
 DEPTH_MODELS = ("structured_light", "time_of_flight")
 #: OpenCV's disparity search must be a multiple of this, px
 DISPARITY_STEP_PX = 16
+#: a disparity within this of either end of the search is invalid: a surface outside the searched depths has its
+#: cost minimum at the end of the search, px (perception_proc.cameras.stereo)
+SEARCH_EDGE_PX = 1.0
 #: StereoBM's smallest block, px
 BM_MIN_BLOCK_PX = 5
 #: (shortest, longest) stereo baseline, m: from a compact module's (Intel RealSense D405: 18 mm) with room below,

@@ -4,7 +4,7 @@ A rectified pair of focal length f (px) and baseline B (m) sees a point at plana
 axis) at disparity d = f B / Z (px). A surface between planar depths ``z_near_m`` and ``z_far_m`` therefore lies
 between f B / z_far and f B / z_near; OpenCV searches ``num_disparities`` (a multiple of 16) disparities from
 ``min_disparity_px``, and the stereo model invalidates a disparity within ``SEARCH_EDGE_PX`` of either end of the
-search (perception_proc.cameras.stereo: a surface outside the searched depths has its cost minimum at an end). The
+search (the stereo model in perception: a surface outside the searched depths has its cost minimum at an end). The
 search here is the smallest that keeps every depth of [z_near, z_far] at least that edge inside it: the largest
 ``min_disparity_px`` and then the fewest ``num_disparities`` that do. The matcher's work per pixel is linear in
 ``num_disparities``, so a search limited to where the cart can be costs that share of the full one.
@@ -20,8 +20,7 @@ from __future__ import annotations
 
 import math
 
-from cosim.scenario.config.cameras import DISPARITY_STEP_PX
-from perception_proc.cameras.stereo import SEARCH_EDGE_PX
+from cosim.scenario.config.cameras import DISPARITY_STEP_PX, SEARCH_EDGE_PX
 
 __all__ = ["CART_MARGIN_M", "disparity_of_depth", "disparity_search", "searched_depths_m",
            "auger_top_m", "spout_view_depths_m"]
