@@ -4,11 +4,13 @@ the start pose."""
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from cosim.errors import ScenarioError
 from cosim.runtime.specs import DEFAULT_SPECS, load_callable
 from cosim.scenario.config.cameras import SEARCH_EDGE_PX, StereoCamera
 from cosim.scenario.config.machines import Auger
@@ -99,3 +101,41 @@ def test_every_stereo_heads_search_holds_the_cart_and_a_spout_heads_is_derived(n
             near, far = spout_view_depths_m(cam.mount.xyz_m[2], s.cart.rim_top_m, auger_top_m(s.auger))
             assert (cam.min_disparity_px, cam.num_disparities) == disparity_search(cam.focal_px, cam.baseline_m,
                                                                                    near, far), name
+
+
+SPOUT = resolve_scenario_arg("stereo_spout")
+LOWER = "sensors.spout.mount.xyz_m=[-2.0, 7.45, 5.5]"
+
+
+def test_a_head_moved_nearer_the_auger_with_its_old_search_is_refused_naming_the_search_that_holds_it():
+    """stereo_spout's head 0.5 m lower keeps the search cut for 6.0 m (14-93 px: 1.06-6.52 m); the auger tube's
+    top at the spout is then 5.5 - 4.835 = 0.665 m below it, nearer than the search holds (its pixels would be
+    matched inside the cart): refused at the search's key, naming the tube and a search holding the tube to the
+    ground, which is valid."""
+    with pytest.raises(ScenarioError, match=r"sensors.spout.num_disparities: camera 'spout': its disparity search "
+                                            r"\(14-93 px: min_disparity_px 14, num_disparities 80\) holds planar "
+                                            r"depths 1.06-6.52 m, but at the start the auger over the cart at "
+                                            r"0.6\d m is nearer") as info:
+        load_scenario(SPOUT, [LOWER])
+    text = str(info.value)
+    m, n = (int(x) for x in re.search(r"holds [\d.-]+ m: min_disparity_px (\d+), num_disparities (\d+)", text).groups())
+    near, far = (float(x) for x in re.search(r"the search that holds ([\d.]+)-([\d.]+) m", text).groups())
+    assert near == pytest.approx(5.5 - auger_top_m(Auger()), abs=0.02) and far == pytest.approx(5.5, abs=0.01)
+    cam = load_scenario(SPOUT, check_world=False).sensors["spout"]
+    z_near, z_far = searched_depths_m(cam.focal_px, cam.baseline_m, m, n)
+    assert z_near < near and far < z_far and n % 16 == 0
+    load_scenario(SPOUT, [LOWER, f"sensors.spout.min_disparity_px={m}", f"sensors.spout.num_disparities={n}"])
+
+
+def test_a_smaller_head_with_the_wide_heads_search_is_refused_and_told_its_derived_search():
+    """The OAK-D module (f B = 33.1 px m) in lidar_and_stereo's head keeps the S21B's search, which holds 0.36-2.21
+    m: the grain at 4 m is farther. The search the message gives is the one the spout geometry derives for the
+    OAK-D (examples/camera_variants/stereo_spout_oak_d.yaml: 4, 32)."""
+    sets = ["sensors.spout.profile=oak_d"]
+    with pytest.raises(ScenarioError, match=r"holds planar depths 0.36-2.21 m, but at the start the grain in the "
+                                            r"cart at 4.00 m is farther.*min_disparity_px 4, num_disparities 32"):
+        load_scenario(resolve_scenario_arg("lidar_and_stereo"), sets)
+    oak = load_scenario(resolve_scenario_arg("examples/camera_variants/stereo_spout_oak_d.yaml"), check_world=False)
+    assert (oak.sensors["spout"].min_disparity_px, oak.sensors["spout"].num_disparities) == (4, 32)
+    load_scenario(resolve_scenario_arg("lidar_and_stereo"),
+                  sets + ["sensors.spout.min_disparity_px=4", "sensors.spout.num_disparities=32"])

@@ -12,6 +12,8 @@ what they refuse is what the run would have got wrong:
 * the combine standing inside the cart (a cart far larger than the machines);
 * the cart never in a sensor's field of view at the start pose: no beam (of at most ``FOV_BEAMS``, spread over
   the pattern) or camera ray (``FOV_PIXELS`` over the image) hits the cart within ``range_max_m``;
+* a stereo head's disparity search that does not hold every surface its start view sees over the cart
+  (cosim.scenario.stereo_search);
 * a ``mesh_file`` that trimesh cannot load (or that holds no triangles);
 * a CSV beam table that cannot be read, holds a non-finite or out-of-range angle, or is larger than
   ``MAX_CSV_BYTES``;
@@ -255,7 +257,27 @@ def _sensor_problems(s: Scenario, name: str, sensor, state: dict, scene, cart_fr
         return [(_where(s, name, "mount"), f"the cart is never in {what} field of view at the start pose: none of "
                                            f"{rays} hits it within range_max_m {sensor.range_max_m:g} m "
                                            f"({'sensor' if is_lidar else 'camera'} {_at(origin)})")]
+    if sensor.kind == "stereo_camera":
+        return _search_problems(s, name, sensor, scene, cart_from_world, origin, d, along)
     return []
+
+
+def _search_problems(s: Scenario, name: str, cam, scene, cart_from_world: np.ndarray, origin: np.ndarray,
+                     d: np.ndarray, along: np.ndarray) -> list[tuple[Loc, str]]:
+    """A stereo head's disparity search that misses what its start view's rays ``d`` (N, 3) world, ``along`` (N,)
+    their planar depth per unit range, see over the cart (cosim.scenario.stereo_search)."""
+    from cosim.world.labelcast import cast_labels
+
+    from .stereo_search import AROUND_M, over_cart, search_problem
+
+    t, label = cast_labels(scene, origin, d)
+    hit = np.isfinite(t)
+    over, around = np.zeros(len(t), dtype=bool), np.zeros(len(t), dtype=bool)
+    points = origin + t[hit, None] * d[hit]
+    over[hit] = over_cart(s, cart_from_world, points)
+    around[hit] = over_cart(s, cart_from_world, points, AROUND_M)
+    problem = search_problem(cam, t * along, label, over, around)
+    return [(_where(s, name, "num_disparities"), f"camera {name!r}: {problem}")] if problem else []
 
 
 def _solids_at(s: Scenario, state: dict, point: np.ndarray) -> str:
