@@ -47,13 +47,22 @@ def camera_backend(scenario: Scenario, views: list[View], context: Any = None):
         from renderer_proc.gl.camera import GLCameraRenderer
 
         return GLCameraRenderer(pins, scenario.render.lighting, context=context,
-                                parts=[{"rgb" if p == "right" else p for p in v.parts} for v in views])
+                                parts=[_gl_parts(v) for v in views])
     if scenario.renderer == "mock":
         from cosim.world.parts import entity_parts
         from renderer_proc.mock.camera import MockCameraRenderer
 
         return MockCameraRenderer(pins, scenario.render.lighting, labelled, parts=entity_parts(scenario))
     raise ValueError(f"scenario.renderer is {scenario.renderer!r}: this scenario runs no renderer")
+
+
+def _gl_parts(v: View) -> set[str]:
+    """The parts the GL backend draws for view ``v``: those read into blocks (``right`` is a colour image), and
+    depth and labels too where the camera's motion blur reads them (``CameraSet._blurred``)."""
+    parts = {"rgb" if p == "right" else p for p in v.parts}
+    if getattr(v.spec, "motion_blur", False):
+        parts |= {"depth", "labels"}
+    return parts
 
 
 class CameraSet:

@@ -101,7 +101,7 @@ class GLCameraRenderer(GLResources):
         self._mesh_names: list[str] = []
         self._origin = np.zeros(3)
         self._lamp: np.ndarray | None = None
-        self.views = [self._view(p, "labels" in q if parts is not None else True)
+        self.views = [self._view(p, set(q) if parts is not None else {"rgb", "depth", "labels"})
                       for p, q in zip(pins, parts or pins)]
         self._sun = sun_direction(lighting)
         ctx.enable(moderngl.DEPTH_TEST)
@@ -119,13 +119,18 @@ class GLCameraRenderer(GLResources):
                                        index_buffer=ibo, index_element_size=4, skip_errors=not self.colour))
         return [vao, inst, 0]
 
-    def _view(self, pin: Pinhole, labels: bool) -> _View:
-        """One view's framebuffers: colour, depth and labels when drawn textured, else depth and, where read
-        (``labels``), labels; and the depth renderbuffer of the visibility test."""
+    def _view(self, pin: Pinhole, read: set) -> _View:
+        """One view's framebuffers for the parts ``read`` from it: drawn textured, colour, and depth and labels
+        where either is read (the shader's outputs keep their locations; a view read for colour alone has no
+        other attachment, so nothing else is cleared or written); else depth and, where read, labels; and the
+        depth renderbuffer of the visibility test."""
         ctx = self.ctx
         size = (pin.width, pin.height)
         depth = self._m(ctx.depth_renderbuffer(size))
-        names = ["rgb", "depth", "labels"] if self.colour else ["depth"] + (["labels"] if labels else [])
+        if self.colour:
+            names = ["rgb", "depth", "labels"] if read & {"depth", "labels"} else ["rgb"]
+        else:
+            names = ["depth"] + (["labels"] if "labels" in read else [])
         sky = tuple(SKY_RGBA) if not self.lighting.night else (*(c * self.lighting.night_ambient
                                                                  for c in SKY_RGBA[:3]), 1.0)
         make = {"rgb": lambda: ctx.renderbuffer(size, 4, dtype="f1"), "depth": lambda: ctx.renderbuffer(

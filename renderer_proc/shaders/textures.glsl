@@ -16,13 +16,42 @@ float rand3(vec3 cell) {                  // uniform in [0, 1) per integer cell
     return float(hash3(uvec3(ivec3(cell) + 1048576)) & 0xffffffu) / 16777216.0;
 }
 
-float value_noise(vec3 p) {               // smooth value noise, [0, 1), one cell per unit
+float value_noise_reference(vec3 p) {     // smooth value noise, [0, 1), one cell per unit: the readable form
     vec3 i = floor(p);
     vec3 f = p - i;
     vec3 u = f * f * (3.0 - 2.0 * f);
     float n000 = rand3(i), n100 = rand3(i + vec3(1, 0, 0)), n010 = rand3(i + vec3(0, 1, 0));
     float n110 = rand3(i + vec3(1, 1, 0)), n001 = rand3(i + vec3(0, 0, 1)), n101 = rand3(i + vec3(1, 0, 1));
     float n011 = rand3(i + vec3(0, 1, 1)), n111 = rand3(i + vec3(1, 1, 1));
+    return mix(mix(mix(n000, n100, u.x), mix(n010, n110, u.x), u.y),
+               mix(mix(n001, n101, u.x), mix(n011, n111, u.x), u.y), u.z);
+}
+
+// value_noise_reference's corners, the same bits for less work: hash3's first step v * HASH_MUL + HASH_ADD is
+// made once for the cell and its neighbour (a cell one step along an axis differs by HASH_MUL there), and its
+// first product y * z is shared by the two corners that differ in x only
+const uint HASH_MUL = 1664525u;
+const uint HASH_ADD = 1013904223u;
+
+float rand3_mixed(uint x, uint y, uint z, uint yz) {   // rand3 of the cell whose first step gave (x, y, z), yz = y * z
+    uvec3 v = uvec3(x + yz, y, z);
+    v.y += v.z * v.x; v.z += v.x * v.y;
+    v ^= v >> 16u;
+    v.x += v.y * v.z; v.y += v.z * v.x; v.z += v.x * v.y;
+    return float((v.x ^ v.y ^ v.z) & 0xffffffu) / 16777216.0;
+}
+
+float value_noise(vec3 p) {               // smooth value noise, [0, 1), one cell per unit (value_noise_reference)
+    vec3 i = floor(p);
+    vec3 f = p - i;
+    vec3 u = f * f * (3.0 - 2.0 * f);
+    uvec3 m = uvec3(ivec3(i) + 1048576) * HASH_MUL + HASH_ADD;   // the cell's first step
+    uvec3 s = m + HASH_MUL;                                        // its neighbour's along each axis
+    uint mm = m.y * m.z, sm = s.y * m.z, ms = m.y * s.z, ss = s.y * s.z;
+    float n000 = rand3_mixed(m.x, m.y, m.z, mm), n100 = rand3_mixed(s.x, m.y, m.z, mm);
+    float n010 = rand3_mixed(m.x, s.y, m.z, sm), n110 = rand3_mixed(s.x, s.y, m.z, sm);
+    float n001 = rand3_mixed(m.x, m.y, s.z, ms), n101 = rand3_mixed(s.x, m.y, s.z, ms);
+    float n011 = rand3_mixed(m.x, s.y, s.z, ss), n111 = rand3_mixed(s.x, s.y, s.z, ss);
     return mix(mix(mix(n000, n100, u.x), mix(n010, n110, u.x), u.y),
                mix(mix(n001, n101, u.x), mix(n011, n111, u.x), u.y), u.z);
 }
