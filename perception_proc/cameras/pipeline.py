@@ -147,7 +147,7 @@ class CameraPipeline:
         if depth_m is None:
             empty = np.zeros((0, 3))
             return empty, np.zeros(0, np.float32), np.zeros(0, np.uint8), np.zeros((0, 4), np.float32)
-        z = np.asarray(depth_m, np.float64)[np.ix_(self.rows, self.cols)].reshape(-1)
+        z = np.asarray(depth_m)[np.ix_(self.rows, self.cols)].reshape(-1).astype(np.float64)
         with np.errstate(invalid="ignore"):
             z[point_sigma_m(self.spec, self.pin.f, z) > GATE_SIGMA_M] = np.nan    # gated by its own error
         cam = self.unit_points * z[:, None]                                    # camera frame, m

@@ -51,16 +51,18 @@ def make_matcher(cam: StereoCamera):
 
 
 def grey(rgba: np.ndarray) -> np.ndarray:
-    """(H, W) uint8 luma of an (H, W, 4) or (H, W, 3) uint8 RGB(A) image."""
-    return cv2.cvtColor(np.ascontiguousarray(rgba[..., :3]), cv2.COLOR_RGB2GRAY)
+    """(H, W) uint8 luma of an (H, W, 4) or (H, W, 3) uint8 RGB(A) image (alpha ignored: OpenCV's RGBA and RGB
+    conversions weigh R, G and B alike)."""
+    code = cv2.COLOR_RGBA2GRAY if rgba.shape[-1] == 4 else cv2.COLOR_RGB2GRAY
+    return cv2.cvtColor(rgba if rgba.flags.c_contiguous else np.ascontiguousarray(rgba), code)
 
 
 def disparity(matcher, left: np.ndarray, right: np.ndarray, min_disparity_px: int = 0) -> np.ndarray:
     """Disparity (H, W) float32 px of the left image, NaN where the matcher has no answer (or gives 0). ``left``,
     ``right``: (H, W) uint8 grey images."""
     raw = matcher.compute(left, right)
-    d = raw.astype(np.float32) / np.float32(FIXED_POINT)
-    d[(raw <= (min_disparity_px - 1) * FIXED_POINT) | (raw <= 0)] = np.nan
+    d = np.divide(raw, np.float32(FIXED_POINT), dtype=np.float32)
+    d[raw <= max((min_disparity_px - 1) * FIXED_POINT, 0)] = np.nan      # below the search, or 0 (infinity)
     return d
 
 
@@ -82,7 +84,7 @@ def camera_disparity(matcher, cam: StereoCamera, left: np.ndarray, right: np.nda
 
 def depth_from_disparity(d: np.ndarray, focal_px: float, baseline_m: float) -> np.ndarray:
     """Planar depth Z = f B / d (H, W) float32 m of disparities ``d`` (px, NaN invalid)."""
-    return (np.float32(focal_px * baseline_m) / d).astype(np.float32)
+    return np.divide(np.float32(focal_px * baseline_m), d, dtype=np.float32)
 
 
 def stereo_depth(matcher, cam: StereoCamera, focal_px: float, left_rgba: np.ndarray, right_rgba: np.ndarray

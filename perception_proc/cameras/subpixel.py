@@ -19,10 +19,12 @@ Two pure functions on the rectified grey pair and the matcher's disparity:
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import cv2
 import numpy as np
 
-__all__ = ["SOBEL_WEIGHT", "texture_mask", "refine_disparity"]
+__all__ = ["SOBEL_WEIGHT", "texture_mask", "refine_disparity", "refine_disparity_reference"]
 
 #: the 3 x 3 Sobel x derivative of a unit ramp (1 grey level per px): its response is 8
 SOBEL_WEIGHT = 8.0
@@ -34,17 +36,17 @@ def texture_mask(left: np.ndarray, block_px: int, threshold: float) -> np.ndarra
     """(H, W) bool: True where the left grey image ``left`` (H, W) uint8 has less than ``threshold`` grey levels
     per px of mean absolute horizontal gradient over a ``block_px`` square window (no texture to match)."""
     gx = cv2.Sobel(left, cv2.CV_32F, 1, 0, ksize=3, scale=1.0 / SOBEL_WEIGHT)
-    energy = cv2.boxFilter(np.abs(gx), -1, (block_px, block_px), borderType=cv2.BORDER_REPLICATE)
+    energy = cv2.boxFilter(np.abs(gx, out=gx), -1, (block_px, block_px), borderType=cv2.BORDER_REPLICATE)
     return energy < np.float32(threshold)
 
 
-def refine_disparity(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, window_px: int = 5,
+def refine_disparity_reference(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, window_px: int = 5,
                      iterations: int = 2, max_step_px: float = 1.0) -> np.ndarray:
     """Sub-pixel refined disparity (H, W) float32 px of ``disparity`` (H, W) float32 px, NaN invalid, for the
     rectified grey pair ``left``, ``right`` (H, W) uint8 (a point at disparity d in the left image is d px
     further left in the right image): ``iterations`` Gauss-Newton steps over a ``window_px`` square window; NaN
     where the input is NaN, the window has no gradient or the result is more than ``max_step_px`` from the
-    input."""
+    input. The readable form of :func:`refine_disparity`, which gives the same bits."""
     lft = left.astype(np.float32)
     rgt = right.astype(np.float32)
     h, w = lft.shape
@@ -64,4 +66,49 @@ def refine_disparity(left: np.ndarray, right: np.ndarray, disparity: np.ndarray,
         flat = den < MIN_GRADIENT_ENERGY
         d -= np.where(flat, np.float32(0.0), num / np.maximum(den, np.float32(MIN_GRADIENT_ENERGY)))
     d[~np.isfinite(disparity) | flat | (np.abs(d - start) > max_step_px)] = np.nan
+    return d
+
+
+@lru_cache(maxsize=4)
+def _pixel_grid(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
+    """(column index (W,) float32, row index (H, W) float32 C-contiguous) of an H x W image, read-only: the
+    x offset and the y map of the warp."""
+    cols = np.arange(w, dtype=np.float32)
+    rows = np.ascontiguousarray(np.broadcast_to(np.arange(h, dtype=np.float32)[:, None], (h, w)))
+    cols.setflags(write=False)
+    rows.setflags(write=False)
+    return cols, rows
+
+
+def refine_disparity(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, window_px: int = 5,
+                     iterations: int = 2, max_step_px: float = 1.0) -> np.ndarray:
+    """:func:`refine_disparity_reference` (same arguments, the same bits) with the pixel grid made once per
+    image size and each iteration's products in reused buffers."""
+    lft = left.astype(np.float32)
+    rgt = right.astype(np.float32)
+    h, w = lft.shape
+    grad = cv2.Sobel(rgt, cv2.CV_32F, 1, 0, ksize=3, scale=1.0 / SOBEL_WEIGHT)
+    cols, rows = _pixel_grid(h, w)
+    finite = np.isfinite(disparity)
+    start = np.where(finite, disparity, np.float32(0.0)).astype(np.float32, copy=False)
+    d = start.copy()
+    flat = np.zeros((h, w), bool)
+    win = (window_px, window_px)
+    map_x, prod, num, den = (np.empty((h, w), np.float32) for _ in range(4))
+    floor = np.float32(MIN_GRADIENT_ENERGY)
+    for _ in range(iterations):
+        np.subtract(cols, d, out=map_x)
+        warped = cv2.remap(rgt, map_x, rows, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        g = cv2.remap(grad, map_x, rows, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        np.subtract(lft, warped, out=prod)
+        np.multiply(prod, g, out=prod)
+        cv2.boxFilter(prod, -1, win, dst=num, normalize=False, borderType=cv2.BORDER_REPLICATE)
+        np.multiply(g, g, out=prod)
+        cv2.boxFilter(prod, -1, win, dst=den, normalize=False, borderType=cv2.BORDER_REPLICATE)
+        flat = den < floor
+        np.maximum(den, floor, out=den)
+        np.divide(num, den, out=num)
+        num[flat] = 0.0
+        d -= num
+    d[~finite | flat | (np.abs(d - start) > max_step_px)] = np.nan
     return d
