@@ -81,15 +81,16 @@ def cart_depth_m(record: np.ndarray, level: np.ndarray, corners: np.ndarray) -> 
     """Median planar depth (m) of a camera's points inside the cart's rim rectangle seen from above; NaN when none.
     ``record`` (M, 4) camera frame x y z range; ``level`` (M, 3) the same points in the level frame; ``corners``
     (4, 3) the rim's interior corners, level frame, in order around the rectangle."""
-    xy = level[:, :2]
-    ok = np.isfinite(xy[:, 0])
+    ok = np.flatnonzero(np.isfinite(level[:, 0]))
+    x, y = level[ok, 0], level[ok, 1]
     c = np.asarray(corners, np.float64)[:, :2]
-    inside = ok.copy()
+    orientation = _orientation(c)
+    inside = np.ones(ok.size, bool)
     for k in range(4):
         a, b = c[k], c[(k + 1) % 4]
-        cross = (b[0] - a[0]) * (xy[:, 1] - a[1]) - (b[1] - a[1]) * (xy[:, 0] - a[0])
-        inside &= np.where(ok, cross, 0.0) * _orientation(c) >= 0.0
-    z = record[inside, 2]
+        cross = (b[0] - a[0]) * (y - a[1]) - (b[1] - a[1]) * (x - a[0])
+        inside &= cross * orientation >= 0.0
+    z = record[ok[inside], 2]
     return float(np.median(z)) if z.size else math.nan
 
 
