@@ -95,12 +95,19 @@ class CameraSet:
         self._segment = segment
         self.backend = camera_backend(self.scenario, self.views, context)
 
-    def render(self, frame: int, state: Mapping[str, float], scene: Scene) -> tuple[int, int]:
+    def due(self, frame: int) -> bool:
+        """Whether some view is drawn at ``frame`` (its camera's ``every_frames`` divides it)."""
+        return any(frame % v.spec.every_frames == 0 for v in self.views)
+
+    def render(self, frame: int, state: Mapping[str, float], scene: Scene | None) -> tuple[int, int]:
         """Draw the views due at ``frame`` and write their parts; returns (valid depth pixels, depth pixels)
-        of the depth parts written."""
+        of the depth parts written. ``scene`` may be None at a frame where no view is due (:meth:`due`)."""
         seg, backend = self._segment, self.backend
         if seg is None or backend is None:
             raise RuntimeError("camera set rendered before start")
+        if not self.due(frame):                         # nothing drawn: no scene to upload
+            self._before = dict(state)
+            return 0, 0
         backend.set_scene(scene, work_light_world(self.scenario.render.lighting, state))
         valid = total = 0
         for k, v in enumerate(self.views):

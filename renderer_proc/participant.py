@@ -3,9 +3,10 @@ writes the image blocks.
 
 Thin shell: ``start`` makes the LiDAR's backend (GL context or the numpy mock; none without a LiDAR) and the
 cameras' (``renderer_proc.cameras``, sharing the GL context) and binds the segment's views; ``step(frame)``
-checks the state's frame stamp, rebuilds the :class:`~cosim.world.scene.Scene`, uploads it (poses as
-instance records, grain heights as a buffer write where they changed), then per LiDAR camera (or the beams
-target) and per camera sensor view draws and reads straight into the shared-memory blocks under their seqlocks.
+checks the state's frame stamp, rebuilds the :class:`~cosim.world.scene.Scene` where something is drawn, uploads
+it (poses as instance records, grain heights as a buffer write where they changed), then per LiDAR camera (or the
+beams target) and per camera sensor view due draws and reads straight into the shared-memory blocks under their
+seqlocks.
 """
 from __future__ import annotations
 
@@ -153,7 +154,8 @@ class RendererParticipant:
         # the inputs copied first (the whole record in one read, the arrays a few KiB): under the pipelined
         # schedule dynamics may write the next frame once this member writes its first output
         state = dict(zip(self._state_names, self._state.array.item()))
-        scene = scene_from_state(self.scenario, state, self._heights.copy(), self._stream.copy())
+        drawn = self.backend is not None or self.cameras.due(frame)      # else no scene to build this frame
+        scene = scene_from_state(self.scenario, state, self._heights.copy(), self._stream.copy()) if drawn else None
         valid = total = 0
         if self.backend is not None:
             self.backend.set_scene(scene)
