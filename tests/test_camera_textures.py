@@ -1,6 +1,6 @@
-"""The camera shader's value noise (renderer_proc/shaders/textures.glsl): ``value_noise``, which shares hash work
-across a cell's corners, gives the bits of its readable form ``value_noise_reference`` on the GPU path the camera
-renderer uses (llvmpipe)."""
+"""The camera shader's noise (renderer_proc/shaders/textures.glsl): ``value_noise``, which shares hash work across a
+cell's corners, and ``fbm``, which scales instead of dividing per octave, give the bits of their readable forms
+``value_noise_reference`` and ``fbm_reference`` on the GPU path the camera renderer uses (llvmpipe)."""
 from __future__ import annotations
 
 import numpy as np
@@ -26,6 +26,11 @@ FRAG = """#version 330
 uniform float u_scale;
 uniform vec3 u_offset;
 out float o_value;
+// the painted steel's dust octaves (5 from 0.6 m) at a footprint of 0.4-100 mm per px (every octave faded in part or whole at some), p in m
+float dust(vec3 p) {{ return fbm(p, 0.6, 5, 0.55, 0.0004 + 0.1 * fract(0.37 * p.x + 0.11 * p.y)); }}
+float dust_reference(vec3 p) {{
+    return fbm_reference(p, 0.6, 5, 0.55, 0.0004 + 0.1 * fract(0.37 * p.x + 0.11 * p.y));
+}}
 void main() {{
     vec3 p = u_offset + u_scale * vec3(gl_FragCoord.x, gl_FragCoord.y, 0.37 * gl_FragCoord.x - 0.61 * gl_FragCoord.y);
     o_value = {function}(p);
@@ -60,6 +65,14 @@ def test_value_noise_gives_the_bits_of_its_reference(ctx, scale, offset):
     fast = _noise(ctx, "value_noise", scale, offset)
     ref = _noise(ctx, "value_noise_reference", scale, offset)
     assert 0.0 <= ref.min() and ref.max() < 1.0 and ref.std() > 0.01       # a noise, not a constant
+    np.testing.assert_array_equal(fast.view(np.uint32), ref.view(np.uint32))
+
+
+@pytest.mark.parametrize(("scale", "offset"), [(0.0021, (-0.7, 1.3, 0.2)), (0.05, (-300.0, 120.0, 0.0))])
+def test_fbm_gives_the_bits_of_its_reference(ctx, scale, offset):
+    fast = _noise(ctx, "dust", scale, offset)
+    ref = _noise(ctx, "dust_reference", scale, offset)
+    assert ref.std() > 0.01
     np.testing.assert_array_equal(fast.view(np.uint32), ref.view(np.uint32))
 
 

@@ -57,14 +57,31 @@ float value_noise(vec3 p) {               // smooth value noise, [0, 1), one cel
 }
 
 // octaves of value noise from wavelength w0 (m) down by halves, n of them, amplitude ratio gain; returns a
-// zero-mean value; footprint: the surface's size of one pixel, m
-float fbm(vec3 p, float w0, int n, float gain, float footprint) {
+// zero-mean value; footprint: the surface's size of one pixel, m. The readable form of fbm.
+float fbm_reference(vec3 p, float w0, int n, float gain, float footprint) {
     float sum = 0.0, amp = 1.0, w = w0;
     for (int k = 0; k < n; ++k) {
         float fade = clamp(w / (PIXELS_PER_WAVE * footprint) - 1.0, 0.0, 1.0);
-        sum += amp * fade * (value_noise(p / w + float(k) * 17.0) - 0.5);
+        sum += amp * fade * (value_noise_reference(p / w + float(k) * 17.0) - 0.5);
         amp *= gain;
         w *= 0.5;
+    }
+    return sum;
+}
+
+// fbm_reference with its bits and without its divisions per octave: w = w0 / 2^k, so p / w is (p / w0) * 2^k
+// and w / (PIXELS_PER_WAVE footprint) is its first octave's value / 2^k, exactly (scaling by a power of two
+// rounds alike)
+float fbm(vec3 p, float w0, int n, float gain, float footprint) {
+    float sum = 0.0, amp = 1.0;
+    vec3 q = p / w0;
+    float waves = w0 / (PIXELS_PER_WAVE * footprint);
+    for (int k = 0; k < n; ++k) {
+        float fade = clamp(waves - 1.0, 0.0, 1.0);
+        sum += amp * fade * (value_noise(q + float(k) * 17.0) - 0.5);
+        amp *= gain;
+        q *= 2.0;
+        waves *= 0.5;
     }
     return sum;
 }
