@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
@@ -39,7 +40,8 @@ _MS_PER_S = 1e3
 class CameraResult:
     """One camera's latest data: its ``frame`` (SensorFrame), the ``border`` flags (M,) of its points, what is
     published (``measured`` (H, W) float32 and ``record`` (M, 4) float32, None for an RGB camera), the
-    model's wall time ``measure_ms`` and the ``t_s`` of the state its images show."""
+    model's wall time ``measure_ms`` and the ``t_s`` of the state its images show; ``counts``: (valid pixels of
+    ``measured``, its pixels, finite points), made once (the frames in between report the same data)."""
 
     frame: SensorFrame
     border: np.ndarray
@@ -47,6 +49,12 @@ class CameraResult:
     record: np.ndarray | None
     measure_ms: float
     t_s: float
+
+    @cached_property
+    def counts(self) -> tuple[int, int, int]:
+        d = self.measured
+        valid, pixels = (int(np.count_nonzero(np.isfinite(d))), d.size) if d is not None else (0, 0)
+        return valid, pixels, int(np.count_nonzero(np.isfinite(self.frame.points[:, 0])))
 
 
 class PerceptionCameras:
@@ -151,10 +159,10 @@ class PerceptionCameras:
     def sensor_values(self, name: str) -> dict:
         """The non-accuracy fields of ``sensor_<name>`` for camera ``name``'s latest data."""
         r = self.latest[name]
-        d = r.measured
+        valid, pixels, points = r.counts
         return {"t_s": r.t_s, "frame": r.frame.frame,
-                "valid_fraction": float(np.count_nonzero(np.isfinite(d)) / d.size) if d is not None else np.nan,
-                "points": int(np.count_nonzero(np.isfinite(r.frame.points[:, 0]))), "measure_ms": r.measure_ms}
+                "valid_fraction": float(valid / pixels) if r.measured is not None else np.nan,
+                "points": points, "measure_ms": r.measure_ms}
 
     def depth_accuracy(self, name: str, scene, state: Mapping[str, float], frame: int) -> dict:
         """The depth-error fields of camera ``name``'s latest data against the exact ray cast of the state."""
