@@ -41,7 +41,7 @@ def texture_mask(left: np.ndarray, block_px: int, threshold: float) -> np.ndarra
 
 
 def refine_disparity_reference(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, window_px: int = 5,
-                     iterations: int = 2, max_step_px: float = 1.0) -> np.ndarray:
+                               iterations: int = 2, max_step_px: float = 1.0) -> np.ndarray:
     """Sub-pixel refined disparity (H, W) float32 px of ``disparity`` (H, W) float32 px, NaN invalid, for the
     rectified grey pair ``left``, ``right`` (H, W) uint8 (a point at disparity d in the left image is d px
     further left in the right image): ``iterations`` Gauss-Newton steps over a ``window_px`` square window; NaN
