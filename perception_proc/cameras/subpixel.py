@@ -16,6 +16,8 @@ Two pure functions on the rectified grey pair and the matcher's disparity:
   nearest whole pixel (pixel locking: on a facing plane the error swings with the fractional disparity between
   about -0.4 and +0.45 px); the continuous step has no preferred fraction. A pixel whose step leaves
   ``max_step_px`` of the matcher's disparity, or whose window has no gradient, is invalid.
+  :func:`refine_disparity_reference` is its readable form; :func:`refine_disparity` gives the same bits with its
+  pixel grid made once per image size and its products in reused buffers (tests/test_stereo_kernels.py).
 """
 from __future__ import annotations
 
