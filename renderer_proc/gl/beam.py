@@ -33,6 +33,7 @@ import numpy as np
 
 from cosim.scenario.config.sensing import Codec
 from cosim.world.beamtarget import BeamLayout
+from cosim.world.labels import TERRAIN_MESH_PREFIX
 from cosim.world.meshes import CYLINDER_SIDES, INSTANCE_FLOATS, box_instances, cylinder_instances, pack_instances
 from cosim.world.scene import GRAIN_COLOUR, SKY_RGBA, SUN_WORLD, Scene
 from renderer_proc.codec import BYTE_MAX, CM_PER_M
@@ -45,6 +46,7 @@ from renderer_proc.gl.backend import (
     set_uniform,
     upload_instances,
 )
+from renderer_proc.gl.meshcull import pattern_planes, visible_faces
 from renderer_proc.gl.surface import Surface
 from renderer_proc.gl.surface import mat_bytes as _mat
 from renderer_proc.mock.beam import check_target
@@ -159,10 +161,11 @@ class GLBeamRenderer(GLResources):
     """Beam-native GL renderer of a gridded :class:`BeamLayout`: ``set_scene``, ``draw(0, world_from_sensor)``,
     ``read_depth(0, out)``, ``read_rgb(0, out)``, ``close`` (the renderer interface with one target).
     ``surface_quads`` False draws the grain surface as single triangles, the path before the quads (for
-    side-by-side measurement, ``python bench/run.py beam_surface``)."""
+    side-by-side measurement, ``python bench/run.py beam_surface``). ``cull_terrain`` False draws every triangle
+    of the terrain's patch, not only those a beam may meet (``renderer_proc/gl/meshcull.py``; the same image)."""
 
     def __init__(self, layout: BeamLayout, codec: Codec, *, rgb: bool = False, context: Any = None,
-                 surface_quads: bool = True):
+                 surface_quads: bool = True, cull_terrain: bool = True):
         if not layout.gridded:
             raise ValueError("the GL beam-native renderer needs a grid or honeycomb pattern (a CSV table has no "
                              "angle grid); use the exact ray cast (renderer_proc.mock.beam.MockBeamRenderer)")
@@ -226,6 +229,10 @@ class GLBeamRenderer(GLResources):
         self._points = moderngl.POINTS
         self._meshes: dict[str, list] = {}
         self._mesh_names: list[str] = []
+        #: the terrain's patch, culled per frame: name -> (vertices (V, 3) float64, faces (F, 3) int32, index
+        #: buffer, world_from_mesh (4, 4) of this frame)
+        self._culled: dict[str, list] = {}
+        self._planes = pattern_planes(layout.direction_image()) if cull_terrain else None
         self._origin = np.zeros(3)
         self._depth_test = moderngl.DEPTH_TEST
 
@@ -246,7 +253,7 @@ class GLBeamRenderer(GLResources):
             (inst, "16f 12x/i", "in_model")
         vao = self._m(ctx.vertex_array(self.prog_inst, [(vbo, "3f", "in_pos"), fmt], index_buffer=ibo,
                                        index_element_size=4))
-        return [vao, inst, 0]
+        return [vao, inst, 0, ibo]
 
     def _buffers(self) -> _Buffers:
         """A framebuffer of the target's attachments (encoded RGBA8UI, depth, optional shaded RGBA8)."""
@@ -277,6 +284,11 @@ class GLBeamRenderer(GLResources):
         for mesh in scene.meshes:
             if mesh.name not in self._meshes:
                 self._meshes[mesh.name] = self._instanced(mesh.vertices, mesh.faces, reserve=1)
+            if self._planes is not None and mesh.name.startswith(TERRAIN_MESH_PREFIX):
+                if mesh.name not in self._culled:                     # the patch moved on: keep the new one's
+                    self._culled = {mesh.name: [np.asarray(mesh.vertices, np.float64),
+                                                np.asarray(mesh.faces, np.int32), self._meshes[mesh.name][3], None]}
+                self._culled[mesh.name][3] = np.asarray(mesh.world_from_mesh, np.float64)
             upload_instances(self._meshes[mesh.name],
                          pack_instances(mesh.world_from_mesh[None], np.array([mesh.colour]), self._origin))
         self._mesh_names = [m.name for m in scene.meshes]
@@ -308,7 +320,20 @@ class GLBeamRenderer(GLResources):
             self._render("ground")
         set_uniform(self.prog_inst, "u_cull", False)                  # mesh files have unknown winding: two-sided
         for name in self._mesh_names:
-            self._meshes[name][0].render(instances=1)
+            if name in self._culled:
+                self._render_culled(name, world_from_sensor)
+            else:
+                self._meshes[name][0].render(instances=1)
+
+    def _render_culled(self, name: str, world_from_sensor: np.ndarray) -> None:
+        """Draw the triangles of mesh ``name`` that a beam may meet (renderer_proc/gl/meshcull.py), in order."""
+        vertices, faces, ibo, world_from_mesh = self._culled[name]
+        sensor_from_mesh = np.linalg.inv(world_from_sensor) @ world_from_mesh
+        points = vertices @ sensor_from_mesh[:3, :3].T + sensor_from_mesh[:3, 3]
+        kept = visible_faces(points, faces, *self._planes)
+        if kept.size:
+            ibo.write(np.ascontiguousarray(kept).tobytes())
+            self._meshes[name][0].render(vertices=kept.size, instances=1)
 
     def _render(self, name: str) -> None:
         vao, _, n = self._units[name]
