@@ -19,7 +19,8 @@ difference of the two normals (under a tenth of a millimetre at 3 degrees).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import struct
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -44,6 +45,9 @@ class Stance:
     contacts: dict
     pinv: dict
     hitch_body: np.ndarray
+    #: the last :func:`machine_poses` asked ("key": its planar poses' bytes, "poses": its answer): a frame asks
+    #: it for the same planar poses more than once (the spout, the recorded signals)
+    _last: dict = field(default_factory=dict, compare=False, repr=False)
 
 
 def stance_of(s: Scenario, hitch_x_m: float) -> Stance | None:
@@ -71,7 +75,19 @@ def _ground_under(st: Stance, name: str, x: float, y: float, yaw: float) -> np.n
 
 def machine_poses(st: Stance, combine: tuple[float, float, float], tractor: tuple[float, float, float],
                   cart: tuple[float, float, float]) -> tuple[Pose3, Pose3, Pose3]:
-    """Full poses of the combine, the tractor and the cart from their planar poses (x m, y m, yaw rad)."""
+    """Full poses of the combine, the tractor and the cart from their planar poses (x m, y m, yaw rad); the
+    last answer again when asked for the same poses, bit for bit (:attr:`Stance._last`)."""
+    key = struct.pack("9d", *combine, *tractor, *cart)
+    if st._last.get("key") == key:
+        return st._last["poses"]
+    poses = _machine_poses(st, combine, tractor, cart)
+    st._last.update(key=key, poses=poses)
+    return poses
+
+
+def _machine_poses(st: Stance, combine: tuple[float, float, float], tractor: tuple[float, float, float],
+                   cart: tuple[float, float, float]) -> tuple[Pose3, Pose3, Pose3]:
+    """:func:`machine_poses` computed."""
     out = []
     for name, (x, y, yaw) in (("combine", combine), ("tractor", tractor)):
         out.append((x, y, yaw, *plane_pose(_ground_under(st, name, x, y, yaw), st.pinv[name])))
