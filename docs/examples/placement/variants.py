@@ -1,5 +1,6 @@
 """Held-out variants of the packaged camera scenarios (docs/cameras.md): another matcher, profile, mount height,
-mount pose and depth-camera profile, each run with perception feedback and tabled: the outcome, the frames with a
+mount pose and depth-camera profile, each run with perception feedback on the GL renderer (the mock's
+``render.mock_scale`` would shrink the depth cameras' images) and tabled: the outcome, the frames with a
 cart, the fill-height error, the largest overfill, the spill and the expected error at the cart.
 
     python docs/examples/placement/variants.py --out runs/variants                    # whole runs (slow: GL stereo)
@@ -47,17 +48,17 @@ VARIANTS: dict[str, tuple[str, str, list[str]]] = {
     "lidar_and_stereo, StereoBM": ("lidar_and_stereo", "gl", ["sensors.spout.matcher=bm"]),
     "lidar_and_stereo, OAK-D": ("lidar_and_stereo", "gl", ["sensors.spout.profile=oak_d", *SEARCH_OAK_D,
                                                            "sensors.spout.points_stride=2"]),
-    "Kinect-class on the mast (tof_mast's mount)": ("tof_mast", "mock", [KINECT]),
-    "Kinect-class mast 1 m higher": ("tof_mast", "mock", [KINECT, f"{MAST_TOF}.xyz_m=[-3.5, 5.0, 7.0]"]),
-    "Kinect-class mast pitched 45 deg": ("tof_mast", "mock", [KINECT, f"{MAST_TOF}.rpy_deg=[0.0, 45.0, 116.0]"]),
-    "Kinect-class mast pitched 60 deg": ("tof_mast", "mock", [KINECT, f"{MAST_TOF}.rpy_deg=[0.0, 60.0, 116.0]"]),
-    "Kinect-class on the spout": ("tof_mast", "mock", [KINECT, f"{MAST_TOF}.xyz_m=[-2.0, 7.45, 6.0]",
+    "Kinect-class on the mast (tof_mast's mount)": ("tof_mast", "gl", [KINECT]),
+    "Kinect-class mast 1 m higher": ("tof_mast", "gl", [KINECT, f"{MAST_TOF}.xyz_m=[-3.5, 5.0, 7.0]"]),
+    "Kinect-class mast pitched 45 deg": ("tof_mast", "gl", [KINECT, f"{MAST_TOF}.rpy_deg=[0.0, 45.0, 116.0]"]),
+    "Kinect-class mast pitched 60 deg": ("tof_mast", "gl", [KINECT, f"{MAST_TOF}.rpy_deg=[0.0, 60.0, 116.0]"]),
+    "Kinect-class on the spout": ("tof_mast", "gl", [KINECT, f"{MAST_TOF}.xyz_m=[-2.0, 7.45, 6.0]",
                                                       f"{MAST_TOF}.rpy_deg=[0.0, 90.0, -90.0]"]),
-    "Kinect-class on the spout, 1 m forward": ("tof_mast", "mock", [KINECT, f"{MAST_TOF}.xyz_m=[-1.0, 7.45, 6.0]",
+    "Kinect-class on the spout, 1 m forward": ("tof_mast", "gl", [KINECT, f"{MAST_TOF}.xyz_m=[-1.0, 7.45, 6.0]",
                                                            f"{MAST_TOF}.rpy_deg=[0.0, 90.0, -90.0]"]),
-    "Kinect-class mast, twice the axial noise": ("tof_mast", "mock", [KINECT, "sensors.tof.axial_b_per_m=0.0038"]),
-    "Kinect-class mast, 6 m range": ("tof_mast", "mock", [KINECT, "sensors.tof.range_max_m=6.0"]),
-    "tof_mast (Azure Kinect NFOV, time of flight)": ("tof_mast", "mock", []),
+    "Kinect-class mast, twice the axial noise": ("tof_mast", "gl", [KINECT, "sensors.tof.axial_b_per_m=0.0038"]),
+    "Kinect-class mast, 6 m range": ("tof_mast", "gl", [KINECT, "sensors.tof.range_max_m=6.0"]),
+    "tof_mast (Azure Kinect NFOV, time of flight)": ("tof_mast", "gl", []),
 }
 
 
