@@ -127,46 +127,6 @@ def test_perception_lost_dead_reckoning_fills_on_while_confident_then_holds_and_
     assert _outcome(s, simulate(s, measure=_lost_after(30.0, 0.1)))["status"] == "filled"
 
 
-def _far_strip(truth, frame):
-    """A view of three columns of cells along the far wall (y 2.4-2.7 m), never of the heap under the spout."""
-    m = np.full_like(truth, np.nan)
-    m[:, -6:-3] = truth[:, -6:-3]
-    return m
-
-
-def test_a_section_seen_away_from_its_heap_is_filled_only_while_its_dead_reckoned_peak_is_confident():
-    """Each section shows 18-21 cells, all far from the heap: the map covers the section but never shows its peak,
-    which is the estimate's dead reckoning. The controller fills only while that peak's 1-sigma stays within
-    ``fallback_sigma_m`` (5 cm), declares no section full on a peak it does not know, and then holds and says why:
-    stopped_safe (before, it filled on in its measured mode with the peak's 1-sigma at 6.7 cm)."""
-    s = scen()
-    r = simulate(s, measure=_far_strip)
-    on = r.series["dyn_state.auger_on"] == 1
-    assert on.sum() > 100 and np.nanmax(r.series["dyn_state.estimate_sigma_m"][on]) <= 0.05
-    assert np.all(r.series["dyn_state.control_mode"][on & (r.series["dyn_state.t_s"] > 5.0)] == MODE_DEAD_RECKONING)
-    out = _outcome(s, r)
-    assert out["status"] == "stopped_safe" and "1-sigma reached 5.0 cm" in out["reason"]
-    assert r.series["dyn_state.hold_reason"][-1] == HOLD_LOST
-
-
-def test_the_peak_a_map_shows_is_the_block_of_the_estimates_section_peak():
-    """peaks_seen: a map holding only the cell under one section's peak block shows that section's peak and no
-    other; an empty map shows none."""
-    from dynamics_proc.control.controller import ControllerParams, peaks_seen, section_blocks
-
-    p = ControllerParams.from_scenario(scen())
-    est = np.full((p.nx, 30), 1.0)
-    est[5:7, 10:12] = 1.5                              # section 1's heap (rows 0-6)
-    est[40:42, 20:22] = 1.7                            # a heap further back
-    _, blocks = section_blocks(est, p)
-    m = np.full(est.shape, np.nan)
-    m[6, 11] = 1.5
-    seen = peaks_seen(m, blocks, p)
-    k = int(np.searchsorted(p.section_start_rows, 40, side="right")) - 1
-    assert seen[0] and not seen[k] and seen.sum() == 1
-    assert not peaks_seen(np.full(est.shape, np.nan), blocks, p).any()
-
-
 @pytest.mark.parametrize("radius_m", [60.0, -80.0])
 def test_the_steady_turn_closed_form_matches_the_vehicle_model_at_steady_state(radius_m):
     s = scen(combine={"path": "arc", "path_radius_m": abs(radius_m)})

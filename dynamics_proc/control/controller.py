@@ -218,9 +218,8 @@ def _inside(x: float, y: float, margin: float, p: ControllerParams) -> bool:
 class Ingested:
     """What a decision knows after taking in the frame's inputs (:func:`ingest`): per-section ``heights`` (N,) m
     (NaN unknown), ``last_valid_t`` (N,) s, ``seen``, the fused ``estimate`` and ``delivered_m3`` it has taken in,
-    ``ok`` (N,) bool the sections the measurement covered (None: no measurement used), ``blocks`` the started
-    estimate's 2 x 2 block minima (:func:`section_blocks`, else None) and ``peak_seen`` (N,) bool whether the
-    measurement showed the block that sets each section's estimated peak (None: no fused measurement used)."""
+    ``ok`` (N,) bool the sections the measurement covered (None: no measurement used), and ``blocks`` the started
+    estimate's 2 x 2 block minima (:func:`section_blocks`, else None)."""
 
     heights: np.ndarray
     last_valid_t: np.ndarray
@@ -229,7 +228,6 @@ class Ingested:
     delivered_m3: float
     ok: np.ndarray | None
     blocks: tuple[np.ndarray, np.ndarray] | None
-    peak_seen: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -296,32 +294,10 @@ def ingest(st: ControllerState, p: ControllerParams, inp: ControllerInput) -> In
         seen = seen or bool(ok.any())                          # an all-NaN map is no measurement
     # the estimate's 2 x 2 block minima: its section peaks and the target's sigma read them
     blocks = section_blocks(est.height, p) if est is not None and est.started else None
-    peak_seen = None
     if blocks is not None:
         heights = section_heights(est.height, p, blocks)
-        if meas is not None:
-            peak_seen = peaks_seen(m, blocks[1], p)
     return Ingested(heights=heights, last_valid_t=last_valid, seen=seen, estimate=est, delivered_m3=delivered, ok=ok,
-                    blocks=blocks, peak_seen=peak_seen)
-
-
-def peaks_seen(m: np.ndarray, blocks: np.ndarray, p) -> np.ndarray:
-    """(N,) bool: whether the map ``m`` (nx, ny) m (NaN unseen) shows a cell of the 2 x 2 block that sets each
-    section's estimated peak (the highest of the estimate's block minima ``blocks`` (nx, ny) over the section's
-    rows, :func:`section_blocks`); false for a section without a block. A section the map covers with cells away
-    from its heap (a camera that sees a strip of it) does not show its peak."""
-    starts, nxt = section_pairing(p.nx, p.section_start_rows)
-    shown = np.isfinite(m)
-    col = np.minimum(np.arange(m.shape[1]) + 1, m.shape[1] - 1)
-    shown = shown | shown[nxt]
-    shown = shown | shown[:, col]
-    out = np.zeros(len(starts), dtype=bool)
-    for k, (a, b) in enumerate(zip(starts, list(starts[1:]) + [p.nx])):
-        sub_ = blocks[a:b]
-        if np.isfinite(sub_).any():
-            i, j = np.unravel_index(int(np.nanargmax(sub_)), sub_.shape)
-            out[k] = bool(shown[a + i, j])
-    return out
+                    blocks=blocks)
 
 
 def fullness(st: ControllerState, p: ControllerParams, inp: ControllerInput, ing: Ingested) -> Fullness:
@@ -339,15 +315,14 @@ def fullness(st: ControllerState, p: ControllerParams, inp: ControllerInput, ing
         forced = forced.copy()
         forced[st.target] = True
     with np.errstate(invalid="ignore"):
-        # NaN (unknown) is not full, nor a fused peak neither shown by the map nor known within the confidence limit
-        full = ((heights >= p.full_level_m) & _peaks_known(p, ing)) | forced
+        full = (heights >= p.full_level_m) | forced      # NaN (unknown) is not full
     full |= st.full                                       # latched: grain does not leave the cart
     target = _pick(p, full, heights, st.target) if seen else -1
     lead_rate = rise_at_nominal(rate, st.level_f, st.slowed, target, p.slow_flow) if p.lead_at_nominal else rate
     slowed = slowed_section(target, st.slowed, full, heights, lead_rate, inp.spout_x_m + inp.drift_x_m,
                             SlowLimits(p.full_lead_s, p.lead_allowance_m, p.full_level_m, p.centres_m,
                                        p.length_m / p.sections))
-    mode_, hold, sigma = _mode(p, seen, target, ing)
+    mode_, hold, sigma = _mode(p, seen, target, ing.ok, ing.estimate, ing.blocks)
     return Fullness(rate=rate, forced=forced, full=full, target=target, all_full=seen and target < 0, slowed=slowed,
                     mode=mode_, hold=hold, sigma_m=sigma)
 
@@ -430,31 +405,16 @@ def _over_overfull(p: ControllerParams, heights: np.ndarray, target: int, impact
     return k != target and bool(heights[k] >= p.target_m + p.overfull_margin_m)
 
 
-def _peaks_known(p: ControllerParams, ing: Ingested) -> np.ndarray:
-    """(N,) bool: whether each section's fused peak is shown by the frame's map (``ing.peak_seen``) or known to
-    within ``fallback_sigma_m`` (its 1-sigma, :func:`peak_sigma`); all true without a started fused estimate."""
-    if ing.estimate is None or ing.blocks is None:
-        return np.ones(p.sections, dtype=bool)
-    starts = section_pairing(p.nx, p.section_start_rows)[0]
-    ends = list(starts[1:]) + [p.nx]
-    known = np.array([peak_sigma(ing.blocks[1], ing.estimate.var, slice(int(a), int(b))) <= p.fallback_sigma_m
-                      for a, b in zip(starts, ends)])
-    return known if ing.peak_seen is None else known | ing.peak_seen
-
-
-def _mode(p: ControllerParams, seen: bool, target: int, ing: Ingested) -> tuple[int, int, float]:
-    """(mode, hold reason, target section's 1-sigma m) of a decision (:func:`dynamics_proc.control.coping.mode`).
-    With the fused estimate a target counts as seen only where the map shows its peak (``ing.peak_seen``): a map
-    that covers the section away from its heap leaves the peak to dead reckoning and its confidence limit."""
+def _mode(p: ControllerParams, seen: bool, target: int, ok: np.ndarray | None,
+          est: FillEstimate | None, blocks: tuple[np.ndarray, np.ndarray] | None) -> tuple[int, int, float]:
+    """(mode, hold reason, target section's 1-sigma m) of a decision (:func:`dynamics_proc.control.coping.mode`);
+    ``blocks``: :func:`section_blocks` of the started estimate, else None."""
     sigma = math.nan
-    est, blocks, ok = ing.estimate, ing.blocks, ing.ok
     if seen and target >= 0 and blocks is not None:
         starts = section_pairing(p.nx, p.section_start_rows)[0]
         rows = slice(int(starts[target]), int(starts[target + 1]) if target + 1 < p.sections else p.nx)
         sigma = peak_sigma(blocks[1], est.var, rows)
     seen_target = ok is not None and target >= 0 and bool(ok[target])
-    if seen_target and ing.peak_seen is not None:
-        seen_target = bool(ing.peak_seen[target])
     return (*mode(seen, target, seen_target, est is not None, sigma, p.fallback_sigma_m), sigma)
 
 
