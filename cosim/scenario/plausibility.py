@@ -258,25 +258,24 @@ def _sensor_problems(s: Scenario, name: str, sensor, state: dict, scene, cart_fr
                                            f"{rays} hits it within range_max_m {sensor.range_max_m:g} m "
                                            f"({'sensor' if is_lidar else 'camera'} {_at(origin)})")]
     if sensor.kind == "stereo_camera":
-        return _search_problems(s, name, sensor, scene, cart_from_world, origin, d, along)
+        return _search_problems(s, name, sensor, scene, cart_from_world, origin, d, t, depth)
     return []
 
 
 def _search_problems(s: Scenario, name: str, cam, scene, cart_from_world: np.ndarray, origin: np.ndarray,
-                     d: np.ndarray, along: np.ndarray) -> list[tuple[Loc, str]]:
-    """A stereo head's disparity search that misses what its start view's rays ``d`` (N, 3) world, ``along`` (N,)
-    their planar depth per unit range, see over the cart (cosim.scenario.stereo_search)."""
+                     d: np.ndarray, t: np.ndarray, depth: np.ndarray) -> list[tuple[Loc, str]]:
+    """A stereo head's disparity search that misses what its start view's rays ``d`` (N, 3) world, cast to range
+    ``t`` (N,) m and planar depth ``depth`` (N,) m (the field of view check's cast), see over the cart
+    (cosim.scenario.stereo_search); the label cast names the one surface the problem is about."""
     from cosim.world.labelcast import cast_labels
 
-    from .stereo_search import AROUND_M, over_cart, search_problem
+    from .stereo_search import footprint_masks, search_problem
 
-    t, label = cast_labels(scene, origin, d)
-    hit = np.isfinite(t)
+    hit = np.flatnonzero(np.isfinite(t))
     over, around = np.zeros(len(t), dtype=bool), np.zeros(len(t), dtype=bool)
-    points = origin + t[hit, None] * d[hit]
-    over[hit] = over_cart(s, cart_from_world, points)
-    around[hit] = over_cart(s, cart_from_world, points, AROUND_M)
-    problem = search_problem(cam, t * along, label, over, around)
+    over[hit], around[hit] = footprint_masks(s, cart_from_world, origin + t[hit, None] * d[hit])
+    problem = search_problem(cam, depth, over, around,
+                             lambda i: int(cast_labels(scene, origin, d[i:i + 1])[1][0]))
     return [(_where(s, name, "num_disparities"), f"camera {name!r}: {problem}")] if problem else []
 
 

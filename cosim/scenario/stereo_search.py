@@ -20,6 +20,8 @@ other objects (another vehicle's body) is checked where it starts.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from cosim.scenario.config import Scenario
@@ -27,41 +29,42 @@ from cosim.scenario.config.cameras import StereoCamera
 from cosim.world.disparity_search import disparity_search, searched_depths_m
 from cosim.world.labels import LABELS
 
-__all__ = ["AROUND_M", "over_cart", "search_problem"]
+__all__ = ["AROUND_M", "footprint_masks", "search_problem"]
 
 #: what a suggested search also holds: the surfaces seen within this of the cart's outer footprint, m
 AROUND_M = 1.0
 
 
-def over_cart(s: Scenario, cart_from_world: np.ndarray, points: np.ndarray, grow_m: float = 0.0) -> np.ndarray:
-    """(K,) bool: whether each world point (K, 3) m lies over the cart's outer footprint grown by ``grow_m`` m
-    (inside its walls' outer faces in the cart's x and y, at any height)."""
+def footprint_masks(s: Scenario, cart_from_world: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(over, around), each (K,) bool: whether each world point (K, 3) m lies over the cart's outer footprint
+    (inside its walls' outer faces in the cart's x and y, at any height), and over it grown by :data:`AROUND_M`."""
     c = s.cart
-    hl = c.interior_length_m / 2.0 + c.wall_thickness_m + grow_m
-    hw = c.interior_width_m / 2.0 + c.wall_thickness_m + grow_m
-    local = points @ cart_from_world[:3, :3].T + cart_from_world[:3, 3]
-    return (np.abs(local[:, 0]) <= hl) & (np.abs(local[:, 1]) <= hw)
+    hl, hw = c.interior_length_m / 2.0 + c.wall_thickness_m, c.interior_width_m / 2.0 + c.wall_thickness_m
+    local = np.abs(points @ cart_from_world[:3, :3].T + cart_from_world[:3, 3])
+    return ((local[:, 0] <= hl) & (local[:, 1] <= hw),
+            (local[:, 0] <= hl + AROUND_M) & (local[:, 1] <= hw + AROUND_M))
 
 
-def search_problem(cam: StereoCamera, depth: np.ndarray, label: np.ndarray, over: np.ndarray,
-                   around: np.ndarray) -> str:
+def search_problem(cam: StereoCamera, depth: np.ndarray, over: np.ndarray, around: np.ndarray,
+                   label_of: Callable[[int], int]) -> str:
     """The problem of stereo head ``cam``'s disparity search, "" when it holds every planar depth ``depth`` (N,) m
-    of its start view's rays that hit a surface over the cart (``over`` (N,) bool; ``label`` (N,) uint8, what
-    each ray hit, cosim.world.labels); ``around`` (N,) bool: the rays that hit within :data:`AROUND_M` of the
-    cart, which the suggested search holds too."""
+    of its start view's rays that hit a surface over the cart (``over`` (N,) bool); ``around`` (N,) bool: the rays
+    that hit within :data:`AROUND_M` of the cart, which the suggested search holds too; ``label_of(i)``: what ray
+    ``i`` hit (cosim.world.labels), asked for the one ray the problem names."""
     seen = over & np.isfinite(depth)
     if not seen.any():
         return ""                                   # the field of view check names a cart not in view
     f, b = cam.focal_px, cam.baseline_m
     z_near, z_far = searched_depths_m(f, b, cam.min_disparity_px, cam.num_disparities)
-    z, lab = depth[seen], label[seen]
+    rays = np.flatnonzero(seen)
+    z = depth[rays]
     i_near, i_far = int(np.argmin(z)), int(np.argmax(z))
     if z[i_near] >= z_near and z[i_far] <= z_far:
         return ""
     if z[i_near] < z_near:
-        what = f"the {LABELS[lab[i_near]].replace('_', ' ')} over the cart at {z[i_near]:.2f} m is nearer"
+        what = f"the {LABELS[label_of(int(rays[i_near]))].replace('_', ' ')} over the cart at {z[i_near]:.2f} m is nearer"
     else:
-        what = f"the {LABELS[lab[i_far]].replace('_', ' ')} in the cart at {z[i_far]:.2f} m is farther"
+        what = f"the {LABELS[label_of(int(rays[i_far]))].replace('_', ' ')} in the cart at {z[i_far]:.2f} m is farther"
     lo, hi = cam.disparity_range_px
     text = (f"its disparity search ({lo}-{hi} px: min_disparity_px {cam.min_disparity_px}, num_disparities "
             f"{cam.num_disparities}) holds planar depths {z_near:.2f}-{z_far:.2f} m, but at the start {what}: the "
