@@ -18,19 +18,27 @@ import perception_proc.accuracy.stage as acc
 from perception_proc.blocks import SENSOR_FIELDS
 from perception_proc.cameras.sensors import PerceptionCameras
 from perception_proc.estimates.heightmap import height_map
+from perception_proc.estimates.pointsigma import camera_sigmas, wall_sigma_xy
 from perception_proc.pipeline import FrameResult, Perception
 
 __all__ = ["sensor_values", "record_of"]
 
 
-def _own_map(pipe: Perception, points: np.ndarray, res: FrameResult) -> np.ndarray | None:
+def _own_map(pipe: Perception, points: np.ndarray, res: FrameResult, camera=None,
+             lfp: np.ndarray | None = None) -> np.ndarray | None:
     """The height map (nx, ny) the level-frame ``points`` (N, 3) alone give in the frame's perceived cart (None
-    without a cart)."""
+    without a cart); ``camera``: the depth-giving camera's ``SensorFrame`` they come from (its points kept clear
+    of the walls by their own error, as in the fused map), ``lfp`` the frame's level_from_parent."""
     if not res.cart.valid:
         return None
     sc = pipe.scenario
-    return height_map(points, res.cart.level_from_grid, sc.cart, sc.controller.grid_cell_m,
-                      sc.perception.min_points_per_cell, pipe.context.noise_sigma_m).heights
+    lfg = res.cart.level_from_grid
+    walls = None
+    if camera is not None and camera.level_from_camera is not None:
+        origin = _levelled(camera.level_from_camera[None, :3, 3], lfp)[0]
+        walls = wall_sigma_xy(points, origin, camera_sigmas(sc.cameras[camera.name], camera), lfg)
+    return height_map(points, lfg, sc.cart, sc.controller.grid_cell_m,
+                      sc.perception.min_points_per_cell, pipe.context.noise_sigma_m, wall_sigma_xy=walls).heights
 
 
 def _levelled(points: np.ndarray, lfp: np.ndarray | None) -> np.ndarray:
@@ -78,7 +86,8 @@ def sensor_values(pipe: Perception, cams: PerceptionCameras, frame: int, state: 
         if scene is not None and cams.latest[p.name].frame.frame == frame:
             v.update(cams.depth_accuracy(p.name, scene, state, frame))
             v["acc_evaluated"] = 1
-            own = _own_map(pipe, _levelled(cams.latest[p.name].frame.points, lfp), res)
+            cam = cams.latest[p.name].frame
+            own = _own_map(pipe, _levelled(cam.points, lfp), res, cam, lfp)
             if own is not None:
                 v.update(cacc.fill_error(own, truth_grid))
         out[p.name] = v

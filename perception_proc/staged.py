@@ -16,7 +16,7 @@ import numpy as np
 from cosim.errors import PluginFault
 from perception_proc.estimates.heightmap import HeightMap, height_map
 from perception_proc.estimates.impact import Impact, blank_under_stream, find_impact
-from perception_proc.estimates.pointsigma import CAMERA_DEPTH, point_sigmas
+from perception_proc.estimates.pointsigma import CAMERA_DEPTH, point_sigmas, wall_sigmas
 from perception_proc.estimates.rim import CartEstimate, find_cart
 from perception_proc.estimates.rimfit import fit_cart, within_gate
 from perception_proc.protocol import (
@@ -52,10 +52,12 @@ def rim_stage(ctx: PerceptionContext, inp: PerceptionInput) -> CartEstimate:
 
 def heightmap_stage(ctx: PerceptionContext, inp: PerceptionInput, cart: CartEstimate) -> HeightMap:
     """Lower-cluster medians per cell in the perceived cart grid (perception_proc.estimates.heightmap.height_map), written
-    into ``inp.heights_out`` when given."""
+    into ``inp.heights_out`` when given; camera points kept clear of the walls by their own error
+    (perception_proc.estimates.pointsigma.wall_sigmas)."""
     sc = ctx.scenario
     return height_map(inp.points, cart.level_from_grid, sc.cart, sc.controller.grid_cell_m,
-                      sc.perception.min_points_per_cell, ctx.noise_sigma_m, out=inp.heights_out)
+                      sc.perception.min_points_per_cell, ctx.noise_sigma_m, out=inp.heights_out,
+                      wall_sigma_xy=wall_sigmas(ctx, inp, cart.level_from_grid))
 
 
 def impact_stage(ctx: PerceptionContext, inp: PerceptionInput, cart: CartEstimate, hm: HeightMap) -> Impact:

@@ -12,7 +12,8 @@ its stride cell). Per frame:
 3. ``measure``: the sensor's model: the depth camera's noise model (``perception_proc.cameras.depth_models``), the stereo
    matcher (``perception_proc.cameras.stereo``), nothing for an RGB camera;
 4. the effects' ``depth`` stage on the measured depth;
-5. ``points``: the strided pixels back-projected (Eq 5), mapped into the level frame, with their ranges and
+5. ``points``: the strided pixels back-projected (Eq 5), a depth camera's flying pixels left out
+   (``perception_proc.cameras.jump_edges``), mapped into the level frame, with their ranges and
    border flags (``perception_proc.estimates.rim.border_beams`` on the strided grid: pixels next to a nearer one; and a
    band of :data:`EDGE_BAND_RAD` along the edge of the camera's field, which for a stereo pair begins right of
    the columns its matcher cannot search).
@@ -38,6 +39,7 @@ from perception_proc.cameras.effects import camera_effects
 from perception_proc.cameras.expected import GATE_SIGMA_M, point_sigma_m
 from perception_proc.cameras.images import SIGMA_DISTANCE_M, CameraImages
 from perception_proc.cameras.imaging import ImageFormation
+from perception_proc.cameras.jump_edges import flying_pixels
 from perception_proc.cameras.stereo import make_matcher, stereo_depth
 from perception_proc.cameras.tof import frame_generator
 from perception_proc.estimates.rim import FOV_EDGE, border_beams
@@ -141,15 +143,19 @@ class CameraPipeline:
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The strided pixels of ``depth_m`` (H, W) m back-projected: (level points (M, 3) float64, ranges (M,)
         float32 m from the camera, border flags (M,) uint8, camera-frame record (M, 4) float32 x y z range);
-        NaN rows where the depth is invalid or its expected 1-sigma exceeds
-        :data:`~perception_proc.cameras.expected.GATE_SIGMA_M`. ``level_from_parent`` (4, 4) maps the camera's parent body frame
+        NaN rows where the depth is invalid, its expected 1-sigma exceeds
+        :data:`~perception_proc.cameras.expected.GATE_SIGMA_M`, or (a depth camera's) the pixel is a flying pixel
+        between two surfaces (:func:`perception_proc.cameras.jump_edges.flying_pixels`). ``level_from_parent`` (4, 4) maps the camera's parent body frame
         into the level frame (identity when they are the same body)."""
         if depth_m is None:
             empty = np.zeros((0, 3))
             return empty, np.zeros(0, np.float32), np.zeros(0, np.uint8), np.zeros((0, 4), np.float32)
         z = np.asarray(depth_m)[np.ix_(self.rows, self.cols)].reshape(-1).astype(np.float64)
+        sigma = point_sigma_m(self.spec, self.pin.f, z)
+        if isinstance(self.spec, DepthCamera):                                 # between two surfaces: flying
+            z[flying_pixels(depth_m, sigma.reshape(self.grid_shape), self.rows, self.cols).reshape(-1)] = np.nan
         with np.errstate(invalid="ignore"):
-            z[point_sigma_m(self.spec, self.pin.f, z) > GATE_SIGMA_M] = np.nan    # gated by its own error
+            z[sigma > GATE_SIGMA_M] = np.nan                                   # gated by its own error
         cam = self.unit_points * z[:, None]                                    # camera frame, m
         rng = np.linalg.norm(cam, axis=1)
         level_from_camera = level_from_parent @ self.parent_from_camera

@@ -2,7 +2,11 @@
 
 Points go from the level frame to the cart grid frame through the perceived pose (``CartEstimate``); the
 height above the floor is z in that frame. Points within :data:`WALL_CLEAR_M` (plus 3 sigma of range noise) of
-an inner wall are dropped: they may lie on the wall, not on the grain, given the pose error.
+an inner wall are dropped: they may lie on the wall, not on the grain, given the pose error. A depth camera's
+error grows with the square of its depth and lies along its ray, so each of its points takes 3 sigma of its own
+error's component across the wall (``wall_sigma_xy``): a far wall's face seen head-on, whose noisy points reach
+tens of cm into the cart at a few metres, no longer reads as grain at the wall's height, while a camera looking
+down keeps the cells beside the walls.
 
 Per cell the statistic is the *median of the lower cluster*: the median of the returns within
 :data:`CLUSTER_GAP_M` of the cell's lowest return. Why: the grain surface is single-valued, and the only
@@ -88,10 +92,11 @@ def _gather(a: np.ndarray, idx: np.ndarray) -> np.ndarray:
 
 
 def _interior_points(p: np.ndarray, level_from_grid: np.ndarray, z_lo: float, z_hi: float,
-                     xy_box: tuple[float, float, float, float]) -> np.ndarray:
+                     xy_box: tuple[float, float, float, float], index: bool = False):
     """Level-frame points (N, 3) into the grid frame, R^T (p - t), keeping those with grid z in (z_lo, z_hi)
     and grid x, y strictly inside ``xy_box`` (x_lo, x_hi, y_lo, y_hi), m. Returns (3, M) float64 C-contiguous
-    coordinate rows in the order of ``p``; NaN rows never pass.
+    coordinate rows in the order of ``p``; NaN rows never pass. With ``index``, also the rows of ``p`` kept
+    (M,) int64.
 
     Written out per component on contiguous coordinate rows (a 3 x 3 BLAS product on tall arrays is slower
     than nine multiply-adds). When the grid's z axis is the level frame's (a cart pose is a yaw: the third row
@@ -112,15 +117,17 @@ def _interior_points(p: np.ndarray, level_from_grid: np.ndarray, z_lo: float, z_
             np.multiply(dx, r[0, 1], out=gy)
             gy += r[1, 1] * dy
             np.subtract(p[:, 2], t[2], out=gz)
-            keep = (gz > z_lo) & (gz < z_hi) & (gx > x_lo) & (gx < x_hi) & (gy > y_lo) & (gy < y_hi)
-            return np.take(rows, np.flatnonzero(keep), axis=1, mode=_IN_RANGE)
+            keep = np.flatnonzero((gz > z_lo) & (gz < z_hi) & (gx > x_lo) & (gx < x_hi) & (gy > y_lo) & (gy < y_hi))
+            out = np.take(rows, keep, axis=1, mode=_IN_RANGE)
+            return (out, keep) if index else out
         gz = r[0, 2] * (p[:, 0] - t[0]) + r[1, 2] * (p[:, 1] - t[1]) + r[2, 2] * (p[:, 2] - t[2])
         sel = np.flatnonzero((gz > z_lo) & (gz < z_hi))
         x, y, z = (p[:, k][sel] - t[k] for k in range(3))
         gx = r[0, 0] * x + r[1, 0] * y + r[2, 0] * z
         gy = r[0, 1] * x + r[1, 1] * y + r[2, 1] * z
         inside = (gx > x_lo) & (gx < x_hi) & (gy > y_lo) & (gy < y_hi)
-        return np.stack([gx[inside], gy[inside], gz[sel][inside]])
+        out = np.stack([gx[inside], gy[inside], gz[sel][inside]])
+        return (out, sel[inside]) if index else out
 
 
 def _lower_quartile(heights: np.ndarray, cells: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
@@ -177,17 +184,30 @@ def grid_shape(cart: Cart, cell_m: float) -> tuple[int, int]:
 
 
 def height_map(points_level: np.ndarray, level_from_grid: np.ndarray, cart: Cart, cell_m: float,
-               min_points: int = 1, noise_sigma_m: float = 0.0, out: np.ndarray | None = None) -> HeightMap:
+               min_points: int = 1, noise_sigma_m: float = 0.0, out: np.ndarray | None = None,
+               wall_sigma_xy: np.ndarray | None = None) -> HeightMap:
     """Height map from level-frame points (N, 3) float (NaN rows invalid) and the perceived 4 x 4 pose.
 
     ``out``: optional (nx, ny) float32 destination for the heights (filled and returned inside the result).
+    ``wall_sigma_xy``: optional (N, 2) m, each point's 1-sigma position error along grid x and y
+    (:func:`perception_proc.estimates.pointsigma.wall_sigma_xy`); a point is then kept only
+    :data:`WALL_CLEAR_M` plus 3 of these inside each wall. Without it every point keeps 3 ``noise_sigma_m``.
     """
     nx, ny = grid_shape(cart, cell_m)
     L, W = cart.interior_length_m, cart.interior_width_m
     p = np.asarray(points_level, dtype=np.float64)              # invalid beams are whole NaN rows
     clear = WALL_CLEAR_M + 3.0 * noise_sigma_m
     top = cart.interior_depth_m + cart.rim_height_m
-    g = _interior_points(p, level_from_grid, -clear, top + STREAM_TOP_M, (clear, L - clear, clear, W - clear))
+    if wall_sigma_xy is None:
+        g = _interior_points(p, level_from_grid, -clear, top + STREAM_TOP_M, (clear, L - clear, clear, W - clear))
+    else:
+        c = WALL_CLEAR_M
+        g, kept = _interior_points(p, level_from_grid, -clear, top + STREAM_TOP_M, (c, L - c, c, W - c), index=True)
+        s = 3.0 * np.asarray(wall_sigma_xy, np.float64)[kept]
+        with np.errstate(invalid="ignore"):
+            inside = ((g[0] > c + s[:, 0]) & (g[0] < L - c - s[:, 0]) & (g[1] > c + s[:, 1])
+                      & (g[1] < W - c - s[:, 1]))
+        g = np.ascontiguousarray(g[:, inside])
     gx, gy, gz = g                                              # contiguous rows of the interior points
     g = g.T                                                     # column-major (M, 3): coordinates contiguous
     high = gz > top + HEAP_MAX_M                                # above any heap: stream (or spill) only
