@@ -10,6 +10,9 @@ from cosim.recording.encode import image_from_msg, points_from_cloud
 from cosim.recording.reader import read_recording
 from cosim.viewer.panels import panel_info, render_panel
 from cosim.viewer.replay import ReplaySource
+from cosim.world.sensors import camera_pinhole
+from perception_proc.cameras.depth_models import normal_sigma_m
+from perception_proc.cameras.jump_edges import flying_pixels, jump_threshold
 
 SCENARIO = """format_version: 1
 name: cams_recorded
@@ -45,7 +48,6 @@ def test_each_camera_has_its_topics_calibration_and_frames(recorded):
                           ("/cam_tof/points", "foxglove.PointCloud"),
                           ("/cam_tof/calibration", "foxglove.CameraCalibration")):
         assert rec.channels[topic].schema == schema and rec.messages[topic], topic
-    from cosim.world.sensors import camera_pinhole
 
     pin = camera_pinhole(scenario.cameras["tof"], scenario)
     cal = rec.messages["/cam_tof/calibration"][-1][1]
@@ -59,15 +61,21 @@ def test_each_camera_has_its_topics_calibration_and_frames(recorded):
 
 def test_depth_labels_and_points_come_back_whole(recorded):
     """The recorded depth is float32 planar depth of the camera's size; the labels are label codes; the points
-    of a frame are that frame's valid pixels (every pixel under the mock: the stride scales with the image)."""
-    rec, _, last, _ = recorded
+    of a frame are that frame's valid pixels but its flying ones (every pixel under the mock: the stride scales
+    with the image)."""
+    rec, _, last, scenario = recorded
     t, msg = rec.messages["/cam_tof/depth"][-1]
     depth = image_from_msg(msg)
     assert depth.dtype == np.float32 and depth.shape == last["cam_tof_measured"].shape
     labels = image_from_msg(rec.messages["/cam_tof/labels"][-1][1])
     assert labels.dtype == np.uint8 and set(np.unique(labels)) <= set(range(9))
     pts = dict(rec.messages["/cam_tof/points"])[t]
-    assert len(points_from_cloud(pts)) == np.isfinite(depth).sum() > 1000
+    spec = scenario.cameras["tof"]
+    z = np.nan_to_num(depth.astype(np.float64), nan=1.0)
+    jump = jump_threshold(z, normal_sigma_m(spec, z), camera_pinhole(spec, scenario).f, spec.max_incidence_deg)
+    flying = flying_pixels(depth, jump)
+    assert 0 < flying.sum() < 0.1 * np.isfinite(depth).sum()
+    assert len(points_from_cloud(pts)) == (np.isfinite(depth) & ~flying).sum() > 1000
 
 
 def test_the_replay_and_the_dashboard_show_the_camera(recorded):

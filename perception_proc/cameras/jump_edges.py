@@ -8,37 +8,49 @@ heights between the rim and the grain, and read as grain there.
 The built-in perception drops them as depth pipelines do (a jump-edge filter): a pixel counts as flying when its
 :data:`WINDOW` x :data:`WINDOW` neighbourhood holds a depth nearer than its own by more than a threshold *and* one
 farther by more than it (or an invalid one: the far surface may lie beyond the camera's range), i.e. it lies
-between two surfaces rather than on one. The threshold is
-max(:data:`JUMP_MIN_M`, :data:`JUMP_SIGMAS` sigma(z)), sigma the camera's own expected depth error at the pixel's
-depth, so the noise of one surface never reads as a jump. The pixels on each side of the edge (the rim, the grain
-behind it) are the nearest or the farthest of their neighbourhood and stay.
+between two surfaces rather than on one (:func:`jump_threshold`). The threshold is what one surface can span: its
+slope, a surface the camera reports at all (incidence below its ``max_incidence_deg``, theta) changing by at most
+z tan(theta) / f per pixel over the :data:`WINDOW` // 2 pixels to the window's edge, plus :data:`JUMP_SIGMAS` of
+the camera's own expected depth error sigma(z), so that neither a slope nor the noise reads as a jump. The pixels
+on each side of the edge (the rim, the grain behind it) are the nearest or the farthest of their neighbourhood and
+stay. The threshold scales with the pixel's footprint, so the filter means the same at any resolution.
 
-Where it stops being valid: a surface seen so obliquely that its depth changes by more than the threshold over
-:data:`WINDOW` // 2 pixels (about 78 deg of incidence for a Kinect-class camera at 5 m) loses its middle pixels
-too; a flying pixel drawn within the threshold of either surface stays (its error is then below the threshold).
+Where it stops being valid: a flying pixel drawn within the threshold of either surface stays (its error is then
+below the threshold: about 0.2 m along the ray for a Kinect-class camera at 5 m at full resolution, four times
+the slope term on the mock renderer's quarter-size image); a step smaller than the threshold (a thin ledge) is not
+a jump.
 """
 from __future__ import annotations
+
+import math
 
 import cv2
 import numpy as np
 
-__all__ = ["WINDOW", "JUMP_MIN_M", "JUMP_SIGMAS", "flying_pixels"]
+__all__ = ["WINDOW", "JUMP_SIGMAS", "jump_threshold", "flying_pixels"]
 
 #: side of the square neighbourhood searched for the two surfaces, px (5: a flying pixel's 3 x 3 neighbours
 #: may all be flying pixels or one surface; two pixels out, both surfaces are seen)
 WINDOW = 5
-#: the smallest depth jump that counts, m
-JUMP_MIN_M = 0.10
-#: the jump must also exceed this many of the camera's expected depth sigmas at the pixel's depth
+#: the jump must exceed this many of the camera's expected depth sigmas at the pixel's depth (besides the slope)
 JUMP_SIGMAS = 3.0
 _KERNEL = np.ones((WINDOW, WINDOW), np.uint8)
 
 
-def flying_pixels(z: np.ndarray, sigma_m: np.ndarray, rows: np.ndarray | None = None,
+def jump_threshold(z_m: np.ndarray, sigma_m: np.ndarray, focal_px: float, max_incidence_deg: float) -> np.ndarray:
+    """The depth step (m, shape of ``z_m``) beyond which a pixel at planar depth ``z_m`` (m) sees two surfaces: the
+    most one surface at incidence under ``max_incidence_deg`` spans over :data:`WINDOW` // 2 pixels of a camera of
+    focal length ``focal_px`` (px), (WINDOW // 2) z tan(theta) / f, plus :data:`JUMP_SIGMAS` ``sigma_m`` (m)."""
+    z = np.asarray(z_m, np.float64)
+    slope = (WINDOW // 2) * z * math.tan(math.radians(max_incidence_deg)) / focal_px
+    return slope + JUMP_SIGMAS * np.asarray(sigma_m, np.float64)
+
+
+def flying_pixels(z: np.ndarray, jump_m: np.ndarray, rows: np.ndarray | None = None,
                   cols: np.ndarray | None = None) -> np.ndarray:
     """Which pixels of the depth image ``z`` (H, W) m (NaN invalid) lie between two surfaces (module docstring),
-    tested at the pixels ``rows`` x ``cols`` (index arrays; None: every pixel) whose expected depth sigmas
-    ``sigma_m`` (len(rows), len(cols)) m are given. Returns bool of that shape; False where z is NaN."""
+    tested at the pixels ``rows`` x ``cols`` (index arrays; None: every pixel) with their thresholds ``jump_m``
+    (len(rows), len(cols)) m (:func:`jump_threshold`). Returns bool of that shape; False where z is NaN."""
     z = np.asarray(z, np.float32)
     invalid = np.isnan(z)
     near = cv2.erode(np.where(invalid, np.float32(np.inf), z), _KERNEL, borderType=cv2.BORDER_REPLICATE)
@@ -47,6 +59,6 @@ def flying_pixels(z: np.ndarray, sigma_m: np.ndarray, rows: np.ndarray | None = 
     if rows is not None:
         pick = np.ix_(rows, cols)
         z, near, far = z[pick], near[pick], far[pick]
-    jump = np.maximum(JUMP_MIN_M, JUMP_SIGMAS * np.asarray(sigma_m, np.float64))
+    jump = np.asarray(jump_m, np.float64)
     with np.errstate(invalid="ignore"):
         return (near < z - jump) & (far > z + jump)

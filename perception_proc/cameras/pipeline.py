@@ -39,7 +39,7 @@ from perception_proc.cameras.effects import camera_effects
 from perception_proc.cameras.expected import GATE_SIGMA_M, point_sigma_m
 from perception_proc.cameras.images import SIGMA_DISTANCE_M, CameraImages
 from perception_proc.cameras.imaging import ImageFormation
-from perception_proc.cameras.jump_edges import flying_pixels
+from perception_proc.cameras.jump_edges import flying_pixels, jump_threshold
 from perception_proc.cameras.stereo import make_matcher, stereo_depth
 from perception_proc.cameras.tof import frame_generator
 from perception_proc.estimates.rim import FOV_EDGE, border_beams
@@ -153,7 +153,8 @@ class CameraPipeline:
         z = np.asarray(depth_m)[np.ix_(self.rows, self.cols)].reshape(-1).astype(np.float64)
         sigma = point_sigma_m(self.spec, self.pin.f, z)
         if isinstance(self.spec, DepthCamera):                                 # between two surfaces: flying
-            z[flying_pixels(depth_m, sigma.reshape(self.grid_shape), self.rows, self.cols).reshape(-1)] = np.nan
+            jump = jump_threshold(z, sigma, self.pin.f, self.spec.max_incidence_deg).reshape(self.grid_shape)
+            z[flying_pixels(depth_m, jump, self.rows, self.cols).reshape(-1)] = np.nan
         with np.errstate(invalid="ignore"):
             z[sigma > GATE_SIGMA_M] = np.nan                                   # gated by its own error
         cam = self.unit_points * z[:, None]                                    # camera frame, m
