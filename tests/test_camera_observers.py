@@ -25,6 +25,7 @@ sensors:
     rgb: true
     labels: true
     range_max_m: 8.0
+    points_stride: 1
     mount: {parent: combine, xyz_m: [-3.5, 5.0, 6.0], rpy_deg: [0.0, 52.0, 116.0]}
 """
 
@@ -61,8 +62,8 @@ def test_each_camera_has_its_topics_calibration_and_frames(recorded):
 
 def test_depth_labels_and_points_come_back_whole(recorded):
     """The recorded depth is float32 planar depth of the camera's size; the labels are label codes; the points
-    of a frame are that frame's valid pixels but its flying ones (every pixel under the mock: the stride scales
-    with the image)."""
+    of a frame are that frame's valid pixels but its flying ones (``points_stride: 1``; a depth camera keeps its
+    own size under the mock)."""
     rec, _, last, scenario = recorded
     t, msg = rec.messages["/cam_tof/depth"][-1]
     depth = image_from_msg(msg)

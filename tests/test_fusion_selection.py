@@ -9,6 +9,8 @@ import pytest
 
 from cosim.runtime.inprocess import simulate
 from cosim.scenario.loader import load_scenario_text
+from cosim.world.sensors import camera_pinhole, points_stride
+from perception_proc.cameras.expected import cell_sigma_m
 from perception_proc.selection import CameraFit, FusionSelection, judge
 
 TOL = 0.05
@@ -89,7 +91,12 @@ def test_a_lidar_fills_beside_an_unfit_camera_whose_figure_the_summary_names(fus
     assert np.all(ser["sensor_mast.fused"] == 1) and np.all(ser["sensor_tof.unfit"] == 1)
     assert np.any(ser["dyn_state.auger_on"] == 1), "the LiDAR's map starts the auger"
     sigma = ser["sensor_tof.cart_sigma_m"]
-    assert np.all((0.04 < sigma) & (sigma < 0.07)), sigma
+    # the closed form of a cell's sigma at the depth it sees the cart, and unfit (over 2.5 cm) by it
+    cam = s.cameras["tof"]
+    expect = [cell_sigma_m(cam, camera_pinhole(cam, s).f, points_stride(cam, s), s.controller.grid_cell_m, z)
+              for z in ser["sensor_tof.cart_depth_m"]]
+    np.testing.assert_allclose(sigma, expect, rtol=1e-9)
+    assert np.all(sigma > 0.025), sigma
     assert fitness(s, ser)["reason"] is None
     fit = camera_fitness(s, ser)["tof"]
     assert fit["left_out_frames"] == fit["frames_at_cart"] == len(sigma)

@@ -122,14 +122,19 @@ def test_only_the_parts_a_camera_needs_get_blocks():
                 "sensor_eye", "lidar_points", "beams_depth"} & names, "nothing that no one reads"
 
 
-def test_the_mock_scales_camera_images_and_keeps_the_field_of_view():
-    from cosim.world.sensors import camera_pinhole
+def test_the_mock_scales_colour_cameras_keeps_depth_cameras_whole_and_keeps_the_field_of_view():
+    from cosim.world.sensors import camera_pinhole, points_stride
 
-    s = load_scenario_text(text(f"  tof:\n    kind: depth_camera\n    mount: {MOUNT}\n", "renderer: mock\n"))
-    pin = camera_pinhole(s.cameras["tof"], s)
+    s = load_scenario_text(text(f"  rgb:\n    kind: rgb_camera\n    mount: {MOUNT}\n"
+                                f"  tof:\n    kind: depth_camera\n    points_stride: 3\n    mount: {MOUNT}\n",
+                                "renderer: mock\n"))
+    pin = camera_pinhole(s.cameras["rgb"], s)
     assert (pin.width, pin.height) == (160, 120) and pin.hfov_rad == pytest.approx(1.0471975511965976)
+    # a depth camera's error model is per pixel of the device: its own size and stride under the mock too
+    tof = camera_pinhole(s.cameras["tof"], s)
+    assert (tof.width, tof.height, points_stride(s.cameras["tof"], s)) == (640, 480, 3)
     gl = Scenario.model_validate_json(s.model_copy(update={"renderer": "gl"}).model_dump_json())
-    assert (camera_pinhole(gl.cameras["tof"], gl).width, camera_pinhole(gl.cameras["tof"], gl).height) == (640, 480)
+    assert (camera_pinhole(gl.cameras["rgb"], gl).width, camera_pinhole(gl.cameras["rgb"], gl).height) == (640, 480)
 
 
 def test_compare_sets_the_method_of_a_named_lidar_and_keeps_cameras():

@@ -8,8 +8,9 @@ perception, the plausibility checks and the observers all use them, so they agre
   same without the parent's pose: the sensor in its parent's body frame (the *level frame* of perception).
 * A stereo camera's left camera is the mount; the right camera sits ``baseline_m`` along the left camera's +X
   (to its right), with the same axes: ``left_from_right`` is a pure translation.
-* Pinhole: ``width_px`` x ``height_px``, ``hfov_deg``; with the mock renderer every side is scaled by
-  ``render.mock_scale`` (the ray caster costs microseconds per pixel), the field of view kept.
+* Pinhole: ``width_px`` x ``height_px``, ``hfov_deg``; with the mock renderer every side of a colour or stereo
+  camera is scaled by ``render.mock_scale`` (the ray caster costs microseconds per pixel, its shading more), the
+  field of view kept; a depth camera keeps its own size (:func:`mock_scaled`).
   ``K = [[f, 0, w/2], [0, f, h/2], [0, 0, 1]]`` maps camera-frame (X, -Y, Z) to pixels (u right, v down).
 """
 from __future__ import annotations
@@ -18,12 +19,12 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from cosim.scenario.config.cameras import Camera, StereoCamera
+from cosim.scenario.config.cameras import Camera, DepthCamera, StereoCamera
 from cosim.scenario.config.scenario import Scenario
 from cosim.world.camera import Pinhole
 from cosim.world.geometry import body_from_camera_axes, entity_pose, make_transform, mount_transform
 
-__all__ = ["MIN_SIDE_PX", "BLOCK_PREFIX", "camera_pinhole", "points_stride", "intrinsics_matrix", "level_from_sensor",
+__all__ = ["MIN_SIDE_PX", "BLOCK_PREFIX", "mock_scaled", "camera_pinhole", "points_stride", "intrinsics_matrix", "level_from_sensor",
            "world_from_parent", "world_from_sensor", "left_from_right", "camera_block", "camera_views", "camera_parts"]
 
 #: smallest image side after the mock's scaling, px
@@ -32,20 +33,28 @@ MIN_SIDE_PX = 8
 BLOCK_PREFIX = "cam_"
 
 
+def mock_scaled(cam: Camera, scenario: Scenario) -> bool:
+    """Whether ``cam`` renders at ``render.mock_scale`` of its size: under the mock renderer, every camera but a
+    depth camera. A depth camera keeps its own pixels: its error model (lateral displacement and mixed pixels at
+    edges) is per pixel of the device, so a coarser image is another, worse sensor; its rays cost the ray caster
+    microseconds each, with no shading."""
+    return scenario.renderer == "mock" and not isinstance(cam, DepthCamera)
+
+
 def camera_pinhole(cam: Camera, scenario: Scenario) -> Pinhole:
-    """The pinhole the run renders ``cam`` with: its own size, or scaled by ``render.mock_scale`` under the mock
-    renderer (same horizontal field of view)."""
+    """The pinhole the run renders ``cam`` with: its own size, or scaled by ``render.mock_scale`` where
+    :func:`mock_scaled` (same horizontal field of view)."""
     w, h = cam.width_px, cam.height_px
-    if scenario.renderer == "mock":
+    if mock_scaled(cam, scenario):
         k = scenario.render.mock_scale
         w, h = max(MIN_SIDE_PX, round(w * k)), max(MIN_SIDE_PX, round(h * k))
     return Pinhole(w, h, float(np.radians(cam.hfov_deg)))
 
 
 def points_stride(cam: Camera, scenario: Scenario) -> int:
-    """The pixel stride of the camera's points for perception: ``points_stride``, scaled like the image under the
-    mock renderer (at least 1), so that a camera gives about the same points whichever renderer draws it."""
-    if scenario.renderer == "mock":
+    """The pixel stride of the camera's points for perception: ``points_stride``, scaled like the image where
+    :func:`mock_scaled` (at least 1), so that a camera gives about the same points whichever renderer draws it."""
+    if mock_scaled(cam, scenario):
         return max(1, round(cam.points_stride * scenario.render.mock_scale))
     return cam.points_stride
 

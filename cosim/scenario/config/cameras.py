@@ -89,9 +89,9 @@ class Camera(Model):
     mount: Mount
     """Where the camera is: parent body, position and roll, pitch, yaw; the optical axis is the mount's x axis."""
     width_px: int = Field(default=640, ge=16, le=4096)
-    """Image width, px (scaled by render.mock_scale under the mock renderer)."""
+    """Image width, px (a colour or stereo camera's scaled by render.mock_scale under the mock renderer)."""
     height_px: int = Field(default=480, ge=16, le=4096)
-    """Image height, px (scaled by render.mock_scale under the mock renderer)."""
+    """Image height, px (a colour or stereo camera's scaled by render.mock_scale under the mock renderer)."""
     hfov_deg: float = Field(default=60.0, gt=1.0, lt=170.0, allow_inf_nan=False)
     """Horizontal field of view, deg (square pixels, principal point at the image centre)."""
     range_min_m: NonNegFloat = 0.3

@@ -54,9 +54,10 @@ class Render(Model):
     * ``rgb``: ``auto`` renders the shaded image only when something consumes it (a viewer); ``on`` always;
       ``off`` never.
     * ``float_depth``: also write each camera's exact float32 planar depth (``<cam>_zf``).
-    * ``mock_scale``: resolution factor of the rig when ``renderer`` is ``mock`` (the numpy ray caster costs
-      about 5 us per pixel: the default rig at full size would take seconds per frame). The image blocks and
-      perception follow the scaled rig.
+    * ``mock_scale``: resolution factor of the rig, and of colour and stereo cameras, when ``renderer`` is ``mock``
+      (the numpy ray caster costs about 5 us per pixel: the default rig at full size would take seconds per
+      frame). The image blocks and perception follow the scaled rig. A depth camera keeps its own size (its
+      error model is per pixel of the device).
     * ``ground_size_m``: side of the square ground plane, centred under the combine.
     * ``lighting``: the sun (or night and a work light) for the cameras' colour images (:class:`Lighting`).
     """
@@ -77,7 +78,8 @@ class Render(Model):
     float_depth: bool = False
     """Also write each camera's exact float32 planar depth."""
     mock_scale: float = Field(default=0.25, gt=0.0, le=1.0, allow_inf_nan=False)
-    """Resolution factor of the rig with the mock renderer (0-1]; images and perception follow the scaled rig."""
+    """Resolution factor of the rig, and of colour and stereo cameras, with the mock renderer (0-1]; images and
+    perception follow the scaled rig; a depth camera keeps its own size."""
     ground_size_m: PosFloat = 400.0
     """Side of the square ground plane, centred under the combine, m."""
     lighting: Lighting = Lighting()
