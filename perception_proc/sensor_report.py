@@ -27,14 +27,14 @@ __all__ = ["sensor_values", "record_of"]
 def _own_map(pipe: Perception, points: np.ndarray, res: FrameResult, camera=None,
              lfp: np.ndarray | None = None) -> np.ndarray | None:
     """The height map (nx, ny) the level-frame ``points`` (N, 3) alone give in the frame's perceived cart (None
-    without a cart); ``camera``: the depth-giving camera's ``SensorFrame`` they come from (its points kept clear
-    of the walls by their own error, as in the fused map), ``lfp`` the frame's level_from_parent."""
+    without a cart); ``camera``: the depth-giving camera's ``SensorFrame`` they come from (a depth camera's points
+    kept clear of the walls by their own error, as in the fused map), ``lfp`` the frame's level_from_parent."""
     if not res.cart.valid:
         return None
     sc = pipe.scenario
     lfg = res.cart.level_from_grid
     walls = None
-    if camera is not None and camera.level_from_camera is not None:
+    if camera is not None and camera.kind == "depth_camera" and camera.level_from_camera is not None:
         origin = _levelled(camera.level_from_camera[None, :3, 3], lfp)[0]
         walls = wall_sigma_xy(points, origin, camera_sigmas(sc.cameras[camera.name], camera), lfg)
     return height_map(points, lfg, sc.cart, sc.controller.grid_cell_m,
