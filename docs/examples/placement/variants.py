@@ -1,6 +1,6 @@
 """Held-out variants of the packaged camera scenarios (docs/cameras.md): another matcher, profile, mount height,
-mount pose and depth-camera profile, each run with perception feedback on the GL renderer (the mock's
-``render.mock_scale`` would shrink the depth cameras' images) and tabled: the outcome, the frames with a
+mount pose and depth-camera profile, each run with perception feedback on the GL renderer (the stereo matchers
+need its textures; one renderer draws every row) and tabled: the outcome, the frames with a
 cart, the fill-height error, the largest overfill, the spill and the expected error at the cart.
 
     python docs/examples/placement/variants.py --out runs/variants                    # whole runs (slow: GL stereo)
