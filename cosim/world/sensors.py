@@ -24,8 +24,8 @@ from cosim.scenario.config.scenario import Scenario
 from cosim.world.camera import Pinhole
 from cosim.world.geometry import body_from_camera_axes, entity_pose, make_transform, mount_transform
 
-__all__ = ["MIN_SIDE_PX", "BLOCK_PREFIX", "mock_scaled", "camera_pinhole", "points_stride", "intrinsics_matrix", "level_from_sensor",
-           "world_from_parent", "world_from_sensor", "left_from_right", "camera_block", "camera_views", "camera_parts"]
+__all__ = ["MIN_SIDE_PX", "BLOCK_PREFIX", "mock_scaled", "camera_pinhole", "points_stride", "intrinsics_matrix",
+           "level_from_sensor", "world_from_parent", "world_from_sensor", "left_from_right", "camera_block", "camera_views", "camera_parts"]
 
 #: smallest image side after the mock's scaling, px
 MIN_SIDE_PX = 8

@@ -145,8 +145,8 @@ class CameraPipeline:
         float32 m from the camera, border flags (M,) uint8, camera-frame record (M, 4) float32 x y z range);
         NaN rows where the depth is invalid, its expected 1-sigma exceeds
         :data:`~perception_proc.cameras.expected.GATE_SIGMA_M`, or (a depth camera's) the pixel is a flying pixel
-        between two surfaces (:func:`perception_proc.cameras.jump_edges.flying_pixels`). ``level_from_parent`` (4, 4) maps the camera's parent body frame
-        into the level frame (identity when they are the same body)."""
+        between two surfaces (:func:`perception_proc.cameras.jump_edges.flying_pixels`). ``level_from_parent``
+        (4, 4) maps the camera's parent body frame into the level frame (identity when they are the same body)."""
         if depth_m is None:
             empty = np.zeros((0, 3))
             return empty, np.zeros(0, np.float32), np.zeros(0, np.uint8), np.zeros((0, 4), np.float32)
