@@ -10,9 +10,10 @@ import pytest
 from scipy.integrate import quad
 
 from cosim.scenario.config import Scenario
+from perception_proc.atmosphere.crossings import beam_crossings
 from perception_proc.atmosphere.dust import C_MPS, dust_model, hard_power, overlap, soft_power
 from perception_proc.atmosphere.lidar import lidar_atmosphere, stream_row_time
-from perception_proc.atmosphere.stream import beam_crossings, disk_overlap, kernel_density, occlude
+from perception_proc.atmosphere.stream import disk_overlap, kernel_density, occlude
 
 TAU = 20e-9
 R1, R2 = 0.9, 1.0

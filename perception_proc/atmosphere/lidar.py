@@ -15,8 +15,9 @@ from typing import Mapping
 import numpy as np
 
 from cosim.scenario.config import Scenario
+from perception_proc.atmosphere.crossings import beam_crossings
 from perception_proc.atmosphere.dust import DustModel, dust_blows, dust_model, hard_power
-from perception_proc.atmosphere.stream import STREAM_PARTICLES, beam_crossings, kernel_density, occlude
+from perception_proc.atmosphere.stream import STREAM_PARTICLES, kernel_density, occlude
 
 __all__ = ["LidarAtmosphere", "lidar_atmosphere", "stream_row_time"]
 

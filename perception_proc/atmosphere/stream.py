@@ -20,12 +20,10 @@ import math
 
 import numpy as np
 
-__all__ = ["STREAM_PARTICLES", "beam_crossings", "beam_range_order", "disk_overlap", "kernel_density", "occlude"]
+__all__ = ["STREAM_PARTICLES", "beam_range_order", "disk_overlap", "kernel_share", "kernel_density", "occlude"]
 
 #: the random stream of the kernels' draws (apart from the other seeded streams)
 STREAM_PARTICLES = 3
-#: segments per bounding sphere of the beam cull
-GROUP = 8
 #: at most this many kernels are drawn per crossing: a kernel takes about (d / w)^2 of a beam, so after 200 the
 #: transmission through even the coarsest footprint (w = 3 mrad x 15 m) is below 1e-3
 MAX_KERNELS = 200
@@ -47,61 +45,24 @@ def disk_overlap(d: np.ndarray, r1: np.ndarray, r2: float | np.ndarray) -> np.nd
     return out
 
 
-def beam_crossings(origin: np.ndarray, directions: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Where beams from ``origin`` (3,) along unit ``directions`` (N, 3) (world) cross the stream's segments
-    between consecutive ``rows`` (M, 4) [x, y, z, radius] (world, m): (beam index (K,), segment index (K,),
-    range of the crossing's middle (K,) m, chord length (K,) m), from the closest approach of the beam to each
-    segment's axis (the segment taken as a cylinder of its rows' mean radius, the crossing kept when the
-    closest point lies on the segment)."""
-    p0, p1 = rows[:-1, :3].astype(np.float64), rows[1:, :3].astype(np.float64)
-    radius = 0.5 * (rows[:-1, 3] + rows[1:, 3]).astype(np.float64)
-    axis = p1 - p0
-    length = np.linalg.norm(axis, axis=1)
-    keep = length > 0.0
-    p0, axis, length, radius = p0[keep], axis[keep], length[keep], radius[keep]
-    seg_ids = np.flatnonzero(keep)
-    u = axis / length[:, None]
-    # cull: a beam must pass within the bounding sphere of a group of segments, then within the segment's
-    mid = p0 + 0.5 * axis
-    seg_r = 0.5 * length + radius
-    to_m = mid - origin                                              # (S, 3)
-    empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0))
-    pairs_b, pairs_s = [], []
-    for g0 in range(0, len(p0), GROUP):
-        g = slice(g0, g0 + GROUP)
-        lo, hi = (mid[g] - seg_r[g, None]).min(0), (mid[g] + seg_r[g, None]).max(0)
-        to_c = 0.5 * (lo + hi) - origin
-        rad = 0.5 * float(np.linalg.norm(hi - lo))
-        along = directions @ to_c
-        cand = np.flatnonzero((along > -rad) & (float(to_c @ to_c) - along * along <= rad * rad))
-        if cand.size == 0:
-            continue
-        a_m = directions[cand] @ to_m[g].T                           # (C, G)
-        near = (a_m > -seg_r[None, g]) & (np.einsum("sk,sk->s", to_m[g], to_m[g])[None, :] - a_m * a_m
-                                          <= seg_r[None, g] ** 2)
-        ci, si = np.nonzero(near)
-        pairs_b.append(cand[ci])
-        pairs_s.append(si + g0)
-    if not pairs_b:
-        return empty
-    beam_of, si = np.concatenate(pairs_b), np.concatenate(pairs_s)
-    if beam_of.size == 0:
-        return empty
-    d, w0, us = directions[beam_of], origin[None, :] - p0[si], u[si]
-    b = np.einsum("kj,kj->k", d, us)                                 # cos of the angle between them
-    dd = np.einsum("kj,kj->k", d, w0)
-    e = np.einsum("kj,kj->k", us, w0)
-    den = 1.0 - b * b
+def kernel_share(off: np.ndarray, kernel_d_m: float, w: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Share (M,) of its beam's footprint each kernel covers, at most 1: kernel m, ``off[m]`` m from the axis of
+    crossing ``k[m]``, whose footprint is ``w`` (K,) m across. The same bits as the readable
+    ``np.minimum(disk_overlap(off, kernel_d_m / 2, w[k] / 2) / (pi w[k]^2 / 4), 1)``, in fewer passes: the
+    kernel's radius a scalar, what depends on the crossing alone made per crossing, the lens formula evaluated on
+    every kernel and chosen by ``np.where`` (no masked copies)."""
+    a, b_k = 0.5 * kernel_d_m, 0.5 * w
+    b, bb = b_k[k], (b_k * b_k)[k]
+    inside = off <= np.abs(a - b_k)[k]
+    met = off < (a + b_k)[k]
+    dd = off * off
     with np.errstate(divide="ignore", invalid="ignore"):
-        t_beam = (b * e - dd) / den                                  # closest point: along the beam
-        t_seg = (e - b * dd) / den                                   # along the segment's axis
-    dist = np.linalg.norm(w0 + t_beam[:, None] * d - t_seg[:, None] * us, axis=1)
-    hit = (den > 1e-12) & (t_beam > 0.0) & (t_seg >= 0.0) & (t_seg <= length[si]) & (dist < radius[si])
-    beam_of, si, t_beam, dist, den = beam_of[hit], si[hit], t_beam[hit], dist[hit], den[hit]
-    sin_a = np.sqrt(den)
-    chord = 2.0 * np.sqrt(radius[si] ** 2 - dist ** 2) / sin_a
-    return beam_of, seg_ids[si], t_beam, np.minimum(chord, length[si] / sin_a + 2.0 * radius[si])
-
+        c1 = np.clip((dd + a * a - bb) / (2 * off * a), -1.0, 1.0)
+        c2 = np.clip((dd + bb - a * a) / (2 * off * b), -1.0, 1.0)
+        q = (-off + a + b) * (off + a - b) * (off - a + b) * (off + a + b)
+        lens = a * a * np.arccos(c1) + bb * np.arccos(c2) - 0.5 * np.sqrt(np.maximum(q, 0.0))
+    area = np.where(inside, (math.pi * np.minimum(a, b_k) ** 2)[k], np.where(met, lens, 0.0))
+    return np.minimum(area / (math.pi * 0.25 * w ** 2)[k], 1.0)
 
 def kernel_density(rows: np.ndarray, flow_m3ps: float, packing: float, kernel_d_m: float,
                    dt_row_s: float) -> np.ndarray:
@@ -155,7 +116,7 @@ def occlude(ranges: np.ndarray, beams: np.ndarray, mids: np.ndarray, chords: np.
     target = ranges[beam]
     front = np.flatnonzero(~(np.isfinite(target) & (r >= target)))  # kernels behind the target are never met
     k, beam, r, off = k[front], beam[front], r[front], off[front]
-    share = np.minimum(disk_overlap(off, 0.5 * kernel_d_m, 0.5 * w[k]) / (math.pi * 0.25 * w[k] ** 2), 1.0)
+    share = kernel_share(off, kernel_d_m, w, k)
     order = beam_range_order(beam, r)
     beam, r, share = beam[order], r[order], share[order]
     starts = np.concatenate([[True], beam[1:] != beam[:-1]]) if beam.size else np.zeros(0, bool)
