@@ -2,7 +2,8 @@
 ``beam_crossings`` against ``beam_crossings_reference`` (perception_proc.atmosphere.crossings) on parabolic streams
 seen from outside and from inside their bounding sphere, with repeated rows, a stream along the beams, one segment
 and a partial group; ``kernel_share`` against the disk overlap it stands for (perception_proc.atmosphere.stream)
-with kernels inside, across and outside the footprint."""
+with kernels inside, across and outside the footprint; ``DustModel.returns`` against ``returns_reference``
+(perception_proc.atmosphere.dust) in both return modes on every kind of range."""
 from __future__ import annotations
 
 import math
@@ -11,6 +12,7 @@ import numpy as np
 import pytest
 
 from perception_proc.atmosphere.crossings import GROUP, beam_crossings, beam_crossings_reference
+from perception_proc.atmosphere.dust import DustModel, _table, hard_power
 from perception_proc.atmosphere.stream import disk_overlap, kernel_share
 
 
@@ -95,3 +97,23 @@ def test_kernel_share_is_the_disk_overlap_bit_for_bit(kernel_d_m):
     got = kernel_share(off, kernel_d_m, w, k)
     assert (ref == 0.0).any() and (ref == 1.0).any() and ((ref > 0.0) & (ref < 1.0)).sum() > 1000
     np.testing.assert_array_equal(got, ref)
+
+
+@pytest.mark.parametrize("last", [False, True])
+@pytest.mark.parametrize("alpha", [0.03, 0.15])
+def test_returns_are_the_references_bit_for_bit(last, alpha):
+    r_max = 60.0
+    grid, peak, at = _table(alpha, alpha / 40.0, 4e-9, 0.5, 2.0, r_max)
+    p_min = float(hard_power(r_max, 0.0, 0.1, 0.0, 0.0))
+    model = DustModel(alpha, alpha / 40.0, 0.3, 0.5, 2.0, p_min, last, grid, peak, at)
+    rng = np.random.default_rng(int(alpha * 100) + last)
+    ranges = np.concatenate([rng.uniform(-1.0, r_max + 20.0, 20000), rng.uniform(0.0, 3.0, 5000),
+                             grid[::7], [np.nan, np.inf, -np.inf, 0.0, -0.0, 1e-30]]).astype(np.float32)
+    ref = model.returns_reference(ranges)
+    got = model.returns(ranges)
+    assert got.dtype == ref.dtype == np.float32
+    assert np.isnan(ref).any() and (ref == ranges).sum() > 1000 and ((ref != ranges) & np.isfinite(ref)).any()
+    np.testing.assert_array_equal(got, ref)
+    np.testing.assert_array_equal(model.returns(ranges.reshape(-1, 8)), ref.reshape(-1, 8))
+    as64 = ranges.astype(np.float64)                                 # not float32: the reference answers
+    np.testing.assert_array_equal(model.returns(as64), model.returns_reference(as64))
