@@ -30,6 +30,20 @@ def test_ties_empty_and_nonfinite_fall_back_to_lexsort():
     np.testing.assert_array_equal(beam_range_order(one, np.array([3.0, -1.0, 2.0, 0.0])), [1, 3, 2, 0])
 
 
+def test_ranges_closer_than_the_keys_resolution_and_wide_spreads_keep_lexsorts_order():
+    rng = np.random.default_rng(11)
+    beam = rng.integers(0, 50, 3000)
+    r = rng.uniform(2.0, 9.0, beam.size)
+    r[1::2] = np.nextafter(r[::2], np.inf)[: r[1::2].size]           # pairs one ulp apart: equal fixed-point keys
+    beam[1::2] = beam[::2][: beam[1::2].size]
+    np.testing.assert_array_equal(beam_range_order(beam, r), np.lexsort((r, beam)))
+    wide = rng.uniform(0.0, 2.0 ** 40, beam.size)                    # too wide for the fixed-point bits
+    np.testing.assert_array_equal(beam_range_order(beam, wide), np.lexsort((wide, beam)))
+    many = rng.integers(0, 60000, 200000)                             # many beams, many kernels
+    rr = rng.uniform(0.0, 30.0, many.size)
+    np.testing.assert_array_equal(beam_range_order(many, rr), np.lexsort((rr, many)))
+
+
 def _occlude_plain(ranges, beams, mids, chords, density, kernel_d_m, divergence_rad, rng):
     """``occlude`` as first written: the shares of every kernel, then the ones before the target, by lexsort."""
     w = divergence_rad * np.maximum(mids, 1e-3)

@@ -20,13 +20,15 @@ import math
 
 import numpy as np
 
-__all__ = ["STREAM_PARTICLES", "beam_range_order", "disk_overlap", "kernel_share", "kernel_density", "occlude"]
+__all__ = ["STREAM_PARTICLES", "MAX_KERNELS", "ORDER_MIN_FRACTION_BITS", "beam_range_order", "disk_overlap", "kernel_share", "kernel_density", "occlude"]
 
 #: the random stream of the kernels' draws (apart from the other seeded streams)
 STREAM_PARTICLES = 3
 #: at most this many kernels are drawn per crossing: a kernel takes about (d / w)^2 of a beam, so after 200 the
 #: transmission through even the coarsest footprint (w = 3 mrad x 15 m) is below 1e-3
 MAX_KERNELS = 200
+#: the kernels' order by range keeps at least this many fractional bits of a metre (2^-20 m: a micrometre)
+ORDER_MIN_FRACTION_BITS = 20
 
 
 def disk_overlap(d: np.ndarray, r1: np.ndarray, r2: float | np.ndarray) -> np.ndarray:
@@ -77,26 +79,36 @@ def kernel_density(rows: np.ndarray, flow_m3ps: float, packing: float, kernel_d_
     return phi / (math.pi * kernel_d_m ** 3 / 6.0)
 
 
-def beam_range_order(beam: np.ndarray, r: np.ndarray) -> np.ndarray:
+def beam_range_order(beam: np.ndarray, r: np.ndarray, rank: np.ndarray | None = None) -> np.ndarray:
     """The permutation (M,) that sorts kernels by ``beam`` (M,) int, then by range ``r`` (M,) m: the order of
-    ``np.lexsort((r, beam))``, found by one sort of a float key, each beam's rank times a power of two above the
-    spread of ``r`` plus ``r`` (rounding keeps the order within a beam and never reaches the next beam's keys);
-    where two keys come out equal the order is left to ``np.lexsort`` itself."""
-    if beam.size == 0:
+    ``np.lexsort((r, beam))``, found by one sort of int64 keys (a sort of values, several times faster than an
+    argsort): each beam's rank in the top bits, ``r - min(r)`` in fixed point with :data:`ORDER_MIN_FRACTION_BITS`
+    or more fractional bits below it (monotone in ``r``), the kernel's index in the lowest bits, read back from
+    the sorted keys. Where two kernels of a beam share their fixed-point range (or the bits do not suffice, or a
+    range is not finite) the order is left to ``np.lexsort`` itself. ``rank`` (M,) int64: the beams numbered
+    0, 1, ... in their order (any numbering that keeps it; None: their rank among the beams present)."""
+    n = beam.size
+    if n == 0:
         return np.zeros(0, np.intp)
-    present = np.zeros(int(beam.max()) + 1, np.int64)
-    present[beam] = 1
-    rank = np.take(np.cumsum(present) - 1, beam)                     # np.unique(beam, return_inverse=True)[1]
+    if rank is None:
+        present = np.zeros(int(beam.max()) + 1, np.int64)
+        present[beam] = 1
+        rank = np.take(np.cumsum(present) - 1, beam)                 # np.unique(beam, return_inverse=True)[1]
     lo, hi = float(r.min()), float(r.max())
-    if not (math.isfinite(lo) and math.isfinite(hi)) or (int(rank.max()) + 1) * (hi - lo + 1.0) >= 2.0 ** 51:
+    if not (math.isfinite(lo) and math.isfinite(hi)):
         return np.lexsort((r, beam))
-    span = 2.0 ** math.ceil(math.log2(hi - lo + 1.0))
-    key = rank * span + (r - lo)
-    order = np.argsort(key)
-    sorted_key = key[order]
-    if (sorted_key[1:] == sorted_key[:-1]).any():
+    index_bits, rank_bits = (n - 1).bit_length(), int(rank.max()).bit_length()
+    whole_bits = math.ceil(math.log2(hi - lo + 1.0))
+    fraction_bits = 63 - index_bits - rank_bits - whole_bits
+    if fraction_bits < ORDER_MIN_FRACTION_BITS:
         return np.lexsort((r, beam))
-    return order
+    fixed = np.floor((r - lo) * 2.0 ** fraction_bits).astype(np.int64)   # < 2^(whole + fraction bits)
+    key = (rank << (63 - rank_bits)) | (fixed << index_bits) | np.arange(n, dtype=np.int64)
+    key.sort()
+    head = key >> index_bits                                         # rank and fixed-point range
+    if (head[1:] == head[:-1]).any():
+        return np.lexsort((r, beam))
+    return (key & ((1 << index_bits) - 1)).astype(np.intp)
 
 
 def occlude(ranges: np.ndarray, beams: np.ndarray, mids: np.ndarray, chords: np.ndarray, density: np.ndarray,
@@ -117,7 +129,7 @@ def occlude(ranges: np.ndarray, beams: np.ndarray, mids: np.ndarray, chords: np.
     front = np.flatnonzero(~(np.isfinite(target) & (r >= target)))  # kernels behind the target are never met
     k, beam, r, off = k[front], beam[front], r[front], off[front]
     share = kernel_share(off, kernel_d_m, w, k)
-    order = beam_range_order(beam, r)
+    order = beam_range_order(beam, r, np.unique(beams, return_inverse=True)[1].take(k))
     beam, r, share = beam[order], r[order], share[order]
     starts = np.concatenate([[True], beam[1:] != beam[:-1]]) if beam.size else np.zeros(0, bool)
     first = np.flatnonzero(starts)                                  # each beam's first kernel (beam is sorted)
