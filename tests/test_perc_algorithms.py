@@ -365,6 +365,30 @@ def test_neighbour_pairs_and_grid_agree(seed):
     assert 0.1 < np.mean(np.concatenate(flags)) < 0.9          # both answers well represented
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_neighbour_grid_shortcuts_give_the_plain_searchs_answers(seed):
+    """The grid kernel's half-cell shortcut and early exit against its plain form and every pair, on dense clouds
+    (a dust cloud's returns: thousands of points in a few cells), sparse ones, and points on the cell lines."""
+    from perception_proc.estimates.neighbours import near_in_grid, near_in_grid_plain, near_pairs
+
+    rng = np.random.default_rng(seed)
+    flags = []
+    for trial in range(12):
+        radius = (0.25, 0.1, 0.5)[trial % 3]
+        spread = (0.3, 3.0)[trial % 2]
+        others = rng.normal(0.0, spread, (int(rng.integers(500, 1500)), 2))
+        q = rng.normal(0.2, spread * 1.5, (int(rng.integers(500, 2000)), 2))
+        if trial % 4 == 3:                                           # on the cell lines, exact radii apart
+            q, others = np.round(q * 8) / 8, np.round(others * 8) / 8
+        lo = others.min(axis=0) - radius
+        q = q[np.all((q >= lo) & (q <= others.max(axis=0) + radius), axis=1)]
+        want = near_pairs(q, others, radius)
+        np.testing.assert_array_equal(near_in_grid(q, others, lo, radius), want)
+        np.testing.assert_array_equal(near_in_grid_plain(q, others, lo, radius), want)
+        flags.append(want)
+    assert 0.1 < np.mean(np.concatenate(flags)) < 0.95              # both answers well represented
+
+
 @pytest.mark.parametrize("seed", range(2))
 def test_roof_cell_bound_holds_and_changes_no_answer(seed):
     """The bound on the roof cells that points above the rim can cover (their bounding box grown by a cell
