@@ -1,7 +1,7 @@
 """The optimised kernels of the dusty LiDAR frame against their readable references, bit for bit:
 ``beam_crossings`` against ``beam_crossings_reference`` (perception_proc.atmosphere.crossings) on parabolic streams
 seen from outside and from inside their bounding sphere, with repeated rows, a stream along the beams, one segment
-and a partial group; ``kernel_share`` against the disk overlap it stands for (perception_proc.atmosphere.stream)
+and a partial group, and with the beams in a rotated sensor frame; ``kernel_share`` against the disk overlap it stands for (perception_proc.atmosphere.stream)
 with kernels inside, across and outside the footprint; ``DustModel.returns`` against ``returns_reference``
 (perception_proc.atmosphere.dust) in both return modes on every kind of range."""
 from __future__ import annotations
@@ -48,6 +48,22 @@ def test_crossings_are_the_references_bit_for_bit(seed):
     ref = beam_crossings_reference(origin, d, rows)
     assert ref[0].size > 1000 and len(np.unique(ref[1] // GROUP)) > 3   # many crossings, over several groups
     _same(beam_crossings(origin, d, rows), ref)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_crossings_of_sensor_frame_beams_turned_by_a_rotation(seed):
+    """The beams in the sensor's frame with the sensor's rotation give the reference's crossings of the world
+    directions ``directions @ rotation.T`` (the cull in the sensor's frame; the passing rows turned alone)."""
+    rng = np.random.default_rng(seed + 20)
+    rows = _stream(rng, 64)
+    origin = np.array([rng.uniform(-4.0, 0.0), rng.uniform(0.0, 3.0), rng.uniform(3.0, 5.0)])
+    rotation = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    rotation *= np.sign(np.linalg.det(rotation))                     # a proper rotation
+    world = _beams_at(rng, origin, rows, 30000, 0.25)
+    sensor = world @ rotation                                        # the same beams in the sensor's frame
+    ref = beam_crossings_reference(origin, sensor @ rotation.T, rows)
+    assert ref[0].size > 1000
+    _same(beam_crossings(origin, sensor, rows, rotation), ref)
 
 
 def test_crossings_seen_from_inside_the_stream_and_along_it():

@@ -4,23 +4,27 @@ The stream is a polyline of short segments (the ``stream`` block's rows [x, y, z
 as a cylinder of its rows' mean radius. A beam crosses a segment where its closest approach to the segment's axis
 lies on the segment, ahead of the sensor and inside the radius (:func:`closest_approach`, the one exact test).
 
-Two culls choose the (beam, segment) pairs that test, and either gives the same crossings to the bit: a crossing's
-closest point lies inside its segment's bounding sphere by at least ``radius + L / 2 - sqrt(radius^2 + L^2 / 4)``
-(L the segment's length; centimetres for the stream's segments), so no cull that keeps every pair whose beam passes
-within a sphere around that one drops it, and the exact test decides the rest.
+Culls choose the (beam, segment) pairs that take the exact test, and every cull below gives the same crossings
+to the bit: a crossing's closest point lies inside its segment's bounding sphere by at least
+``radius + L / 2 - sqrt(radius^2 + L^2 / 4)`` (L the segment's length; centimetres for the stream's segments), so
+no cull that keeps every pair whose beam passes within a sphere around that one drops it; and a cull on the foot
+of the closest approach along the axis that allows for more than the rounding between its arithmetic and the
+exact test's keeps every pair whose foot the exact test finds on the segment.
 
 * :func:`beam_crossings_reference`: every beam against the bounding sphere of each group of :data:`GROUP`
   segments, then against each segment's sphere (the readable form).
-* :func:`beam_crossings`: every beam against one sphere around the whole stream, only the few beams that pass it
-  against the groups and segments (the stream fills a small part of the LiDAR's view: a few thousand of its tens
-  of thousands of beams pass the first cull). The crossings come in the reference's order (group, beam,
-  segment), which the kernels' random draws follow.
+* :func:`beam_crossings`: every beam against one sphere around the whole stream (the stream fills a small part
+  of the LiDAR's view: a few thousand of its tens of thousands of beams pass), those against every group's sphere
+  at once, then each group's segments' spheres, then the foot; a tenth of the reference's pairs take the exact
+  test. The crossings come in the reference's order (group, beam, segment), which the kernels' random draws
+  follow.
 """
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["GROUP", "CULL_MARGIN_M", "FOOT_SLACK_M", "ROUNDING", "PARALLEL_DEN", "beam_crossings", "beam_crossings_reference", "closest_approach"]
+__all__ = ["GROUP", "CULL_MARGIN_M", "FOOT_SLACK_M", "ROUNDING", "PARALLEL_DEN", "beam_crossings",
+           "beam_crossings_reference", "closest_approach"]
 
 #: segments per bounding sphere of the beam cull
 GROUP = 8
@@ -55,8 +59,12 @@ def _segments(rows: np.ndarray) -> tuple[np.ndarray, ...]:
 def _sphere_cull(origin: np.ndarray, directions: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Indices (C,) of the ``directions`` (N, 3) whose beams from ``origin`` pass through the sphere around the
     box [``lo``, ``hi``] (3,) m (its half diagonal the radius), ahead of the sensor or within that radius behind."""
-    to_c = 0.5 * (lo + hi) - origin
-    rad = 0.5 * float(np.linalg.norm(hi - lo))
+    return _ball_cull(directions, 0.5 * (lo + hi) - origin, 0.5 * float(np.linalg.norm(hi - lo)))
+
+
+def _ball_cull(directions: np.ndarray, to_c: np.ndarray, rad: float) -> np.ndarray:
+    """Indices (C,) of the ``directions`` (N, 3) whose beams pass through the sphere of radius ``rad`` m centred
+    ``to_c`` (3,) m from their origin (in the directions' frame), ahead or within that radius behind."""
     along = directions @ to_c
     return np.flatnonzero((along > -rad) & (float(to_c @ to_c) - along * along <= rad * rad))
 
@@ -154,23 +162,33 @@ def _group_pairs(origin: np.ndarray, d_c: np.ndarray, mid: np.ndarray, seg_r: np
     return np.concatenate(pairs_b), np.concatenate(pairs_s)
 
 
-def beam_crossings(origin: np.ndarray, directions: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, ...]:
-    """:func:`beam_crossings_reference` (same arguments, the same bits): every beam tested once against a sphere
-    around the whole stream, only those that pass it against the groups and segments (spheres
-    :data:`CULL_MARGIN_M` larger, :func:`_group_pairs`), and of those pairs only the ones whose closest approach
-    may lie on the segment (:func:`_on_segment`) given the exact test, in the reference's order."""
+def beam_crossings(origin: np.ndarray, directions: np.ndarray, rows: np.ndarray,
+                   rotation: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+    """:func:`beam_crossings_reference` (the same bits) for unit ``directions`` (N, 3) in the frame that
+    the rotation ``rotation`` (3, 3, orthonormal) turns into the world's (None: world directions), the reference's directions being
+    ``directions @ rotation.T``: every beam tested once against a sphere around the whole stream (in the
+    directions' own frame, so only the few beams that pass are turned into the world's: the same rows of the
+    product), those against the groups and segments (spheres :data:`CULL_MARGIN_M` larger, :func:`_group_pairs`),
+    and of those pairs only the ones whose closest approach may lie on the segment (:func:`_on_segment`) given the
+    exact test, in the reference's order."""
     segments = _segments(rows)
     mid, seg_r = segments[4], segments[5]
     if len(mid) == 0:
         return _empty()
     seg_r = seg_r + CULL_MARGIN_M
     lo, hi = mid - seg_r[:, None], mid + seg_r[:, None]
-    cand = _sphere_cull(origin, directions, lo.min(0), hi.max(0))
+    if rotation is None:
+        cand = _sphere_cull(origin, directions, lo.min(0), hi.max(0))
+        d_c = directions.take(cand, axis=0)
+    else:                                                            # the sphere's centre into the beams' frame
+        rad = 0.5 * float(np.linalg.norm(hi.max(0) - lo.min(0))) + CULL_MARGIN_M
+        cand = _ball_cull(directions, rotation.T @ (0.5 * (lo.min(0) + hi.max(0)) - origin), rad)
+        d_c = directions.take(cand, axis=0) @ rotation.T
     if cand.size == 0:
         return _empty()
-    d_c = directions.take(cand, axis=0)
     ci, si = _group_pairs(origin, d_c, mid, seg_r, lo, hi)
     on = np.flatnonzero(_on_segment(origin, np.ascontiguousarray(d_c.T).take(ci, axis=1), si, segments))
     if on.size == 0:
         return _empty()
-    return closest_approach(origin, directions, cand.take(ci.take(on)), si.take(on), segments)
+    beam_of, seg, t_beam, chord = closest_approach(origin, d_c, ci.take(on), si.take(on), segments)
+    return cand.take(beam_of), seg, t_beam, chord

@@ -60,8 +60,7 @@ class LidarAtmosphere:
         a, sc = self.scenario.atmosphere, self.scenario
         rows = np.asarray(stream[:n_rows], np.float64)
         origin = world_from_sensor[:3, 3]
-        d_world = self.directions @ world_from_sensor[:3, :3].T
-        beams, seg, mids, chords = beam_crossings(origin, d_world, rows)
+        beams, seg, mids, chords = beam_crossings(origin, self.directions, rows, world_from_sensor[:3, :3])
         if beams.size == 0:
             return out
         dt = stream_row_time(rows, sc.auger.exit_speed_mps, math.radians(sc.auger.exit_down_deg))
