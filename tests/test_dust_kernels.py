@@ -1,9 +1,10 @@
 """The optimised kernels of the dusty LiDAR frame against their readable references, bit for bit:
 ``beam_crossings`` against ``beam_crossings_reference`` (perception_proc.atmosphere.crossings) on parabolic streams
 seen from outside and from inside their bounding sphere, with repeated rows, a stream along the beams, one segment
-and a partial group, and with the beams in a rotated sensor frame; ``kernel_share`` against the disk overlap it stands for (perception_proc.atmosphere.stream)
-with kernels inside, across and outside the footprint; ``DustModel.returns`` against ``returns_reference``
-(perception_proc.atmosphere.dust) in both return modes on every kind of range."""
+and a partial group, and with the beams in a rotated sensor frame; ``kernel_share`` against the disk overlap it
+stands for (perception_proc.atmosphere.stream) with kernels inside, across and outside the footprint;
+``DustModel.returns`` against ``returns_reference`` (perception_proc.atmosphere.dust) in both return modes on every
+kind of range."""
 from __future__ import annotations
 
 import math

@@ -164,9 +164,9 @@ def _group_pairs(origin: np.ndarray, d_c: np.ndarray, mid: np.ndarray, seg_r: np
 
 def beam_crossings(origin: np.ndarray, directions: np.ndarray, rows: np.ndarray,
                    rotation: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
-    """:func:`beam_crossings_reference` (the same bits) for unit ``directions`` (N, 3) in the frame that
-    the rotation ``rotation`` (3, 3, orthonormal) turns into the world's (None: world directions), the reference's directions being
-    ``directions @ rotation.T``: every beam tested once against a sphere around the whole stream (in the
+    """:func:`beam_crossings_reference` (the same bits) for unit ``directions`` (N, 3) in the frame that the
+    orthonormal ``rotation`` (3, 3) turns into the world's (None: world directions), the reference's directions
+    being ``directions @ rotation.T``: every beam tested once against a sphere around the whole stream (in the
     directions' own frame, so only the few beams that pass are turned into the world's: the same rows of the
     product), those against the groups and segments (spheres :data:`CULL_MARGIN_M` larger, :func:`_group_pairs`),
     and of those pairs only the ones whose closest approach may lie on the segment (:func:`_on_segment`) given the

@@ -20,7 +20,8 @@ import math
 
 import numpy as np
 
-__all__ = ["STREAM_PARTICLES", "MAX_KERNELS", "ORDER_MIN_FRACTION_BITS", "beam_range_order", "disk_overlap", "kernel_share", "kernel_density", "occlude"]
+__all__ = ["STREAM_PARTICLES", "MAX_KERNELS", "ORDER_MIN_FRACTION_BITS", "beam_range_order", "disk_overlap",
+           "kernel_share", "kernel_density", "occlude"]
 
 #: the random stream of the kernels' draws (apart from the other seeded streams)
 STREAM_PARTICLES = 3

@@ -44,7 +44,8 @@ def near_pairs(q: np.ndarray, others: np.ndarray, radius: float) -> np.ndarray:
 
 def _cell_keys(pts: np.ndarray, origin: np.ndarray, side: float) -> tuple[np.ndarray, np.ndarray]:
     """Cell indices (P, 2) int64 >= 0 of points ``pts`` (P, 2) at or beyond ``origin`` in a grid of ``side`` m."""
-    return np.floor((pts[:, 0] - origin[0]) / side).astype(np.int64), np.floor((pts[:, 1] - origin[1]) / side).astype(np.int64)
+    return (np.floor((pts[:, 0] - origin[0]) / side).astype(np.int64),
+            np.floor((pts[:, 1] - origin[1]) / side).astype(np.int64))
 
 
 def _shares_half_cell(q: np.ndarray, others: np.ndarray, origin: np.ndarray, radius: float) -> np.ndarray:
