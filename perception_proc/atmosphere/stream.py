@@ -67,6 +67,7 @@ def kernel_share(off: np.ndarray, kernel_d_m: float, w: np.ndarray, k: np.ndarra
     area = np.where(inside, (math.pi * np.minimum(a, b_k) ** 2)[k], np.where(met, lens, 0.0))
     return np.minimum(area / (math.pi * 0.25 * w ** 2)[k], 1.0)
 
+
 def kernel_density(rows: np.ndarray, flow_m3ps: float, packing: float, kernel_d_m: float,
                    dt_row_s: float) -> np.ndarray:
     """Kernels per m^3 (M - 1,) in each segment between ``rows`` (M, 4) (equal times ``dt_row_s`` apart): the

@@ -3,8 +3,8 @@
 Depth and labels are exact: each pixel centre's ray is cast through the :class:`~cosim.world.scene.Scene`
 (``cosim.world.labelcast``, the numpy ray caster's intersectors grouped by label, when labels or colour are
 wanted; else the run's exact caster from ``cosim.world.fastcast.make_caster``: the rigid bodies built once in
-Embree when installed and ``parts`` are given, else the scene cast per frame), planar depth Z = t cos(angle to the optical
-axis), NaN where the ray meets nothing. The colour image is plain: each label's flat colour (the scene's
+Embree when installed and ``parts`` are given, else the scene cast per frame), planar depth Z = t cos(angle to
+the optical axis), NaN where the ray meets nothing. The colour image is plain: each label's flat colour (the scene's
 colours), lit by ``render.lighting`` (cosim.world.lighting) with normals estimated from the depth image, no
 texture. A stereo matcher has nothing to match on it, so a stereo camera is refused with the mock at
 validation (cosim.scenario.config.scenario).
