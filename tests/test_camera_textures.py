@@ -1,6 +1,7 @@
 """The camera shader's noise (renderer_proc/shaders/textures.glsl): ``value_noise``, which shares hash work across a
-cell's corners, and ``fbm``, which scales instead of dividing per octave, give the bits of their readable forms
-``value_noise_reference`` and ``fbm_reference`` on the GPU path the camera renderer uses (llvmpipe)."""
+cell's corners, and ``fbm``, which scales instead of dividing per octave and stops at the first octave faded whole,
+give the bits of their readable forms ``value_noise_reference`` and ``fbm_reference`` on the GPU path the camera
+renderer uses (llvmpipe)."""
 from __future__ import annotations
 
 import numpy as np

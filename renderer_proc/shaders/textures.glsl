@@ -71,12 +71,13 @@ float fbm_reference(vec3 p, float w0, int n, float gain, float footprint) {
 
 // fbm_reference with its bits and without its divisions per octave: w = w0 / 2^k, so p / w is (p / w0) * 2^k
 // and w / (PIXELS_PER_WAVE footprint) is its first octave's value / 2^k, exactly (scaling by a power of two
-// rounds alike)
+// rounds alike); the octaves after the first one faded whole are not evaluated (each adds amp * 0 * (v - 0.5),
+// a zero that leaves the sum's bits as they are)
 float fbm(vec3 p, float w0, int n, float gain, float footprint) {
     float sum = 0.0, amp = 1.0;
     vec3 q = p / w0;
     float waves = w0 / (PIXELS_PER_WAVE * footprint);
-    for (int k = 0; k < n; ++k) {
+    for (int k = 0; k < n && waves > 1.0; ++k) {
         float fade = clamp(waves - 1.0, 0.0, 1.0);
         sum += amp * fade * (value_noise(q + float(k) * 17.0) - 0.5);
         amp *= gain;
