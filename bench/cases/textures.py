@@ -221,3 +221,132 @@ def texture_cost(ctx: Context) -> dict:
                 out}
     finally:
         gl.release()
+
+
+#: texture_scene's arms: how each ``fbm(`` call in ``albedo`` is replaced (None: kept, the shader's own)
+SCENE_ARMS = {"hashed": None,
+              "lookup": "fbm_lookup(",          # one mipmapped lookup of a 2D texture (a baked texture's cost)
+              "none": "fbm_none("}              # no noise: what the octaves cost altogether
+#: the stand-ins, inserted before ``albedo``; u_baked: a 2048 x 2048 half-float texture, mipmapped, on unit 6
+STAND_INS = """
+uniform sampler2D u_baked;
+float fbm_lookup(vec3 p, float w0, int n, float gain, float footprint) {
+    return texture(u_baked, p.xy / (32.0 * w0)).r - 0.5;
+}
+float fbm_none(vec3 p, float w0, int n, float gain, float footprint) {
+    return 1e-9 * (p.x + w0 + float(n) + gain + footprint);
+}
+"""
+
+
+def scene_textures(arm: str) -> str:
+    """``textures.glsl`` with ``albedo``'s noise as arm ``arm`` of :data:`SCENE_ARMS` has it."""
+    from renderer_proc.gl.backend import SHADER_DIR
+
+    text = (SHADER_DIR / "textures.glsl").read_text()
+    if SCENE_ARMS[arm] is None:
+        return text
+    head, sep, tail = text.partition("vec3 albedo(")
+    return head + STAND_INS + sep + tail.replace("fbm(", SCENE_ARMS[arm])
+
+
+def _captured_frames(scenario, frames: int):
+    """(the camera renderer's pins, lighting and context, [(scene, light, [(view, pose)])]) of the first ``frames``
+    frames of ``scenario`` that draw every camera view, run in-process (the session is left open: it owns the GL
+    context)."""
+    import copy
+
+    import renderer_proc.gl.camera as gc
+    from cosim.runtime.inprocess import InProcessSession
+
+    caps, pending = [], {}
+    set_scene, draw = gc.GLCameraRenderer.set_scene, gc.GLCameraRenderer.draw
+
+    def record_scene(self, scene, light=None):
+        pending.update(scene=copy.deepcopy(scene), light=None if light is None else np.array(light), draws=[])
+        return set_scene(self, scene, light)
+
+    def record_draw(self, k, pose):
+        pending["draws"].append((k, np.array(pose)))
+        if len(pending["draws"]) == len(self.views):
+            caps.append((pending["scene"], pending["light"], list(pending["draws"])))
+        return draw(self, k, pose)
+
+    gc.GLCameraRenderer.set_scene, gc.GLCameraRenderer.draw = record_scene, record_draw
+    try:
+        sess = InProcessSession(scenario)
+        while len(caps) < frames and not sess.done:
+            sess.step()
+    finally:
+        gc.GLCameraRenderer.set_scene, gc.GLCameraRenderer.draw = set_scene, draw
+    return sess, caps
+
+
+def _scene_renderers(backend, arms: list[str]) -> list:
+    """A camera renderer per arm on ``backend``'s views and context, its shader's noise as the arm has it."""
+    import moderngl
+
+    import renderer_proc.gl.camera as gc
+    from renderer_proc.gl.backend import SHADER_DIR
+
+    baked = backend.ctx.texture((2048, 2048), 1, np.random.default_rng(0).random((2048, 2048)).astype(
+        np.float16).tobytes(), dtype="f2")
+    baked.repeat_x = baked.repeat_y = True
+    baked.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+    baked.build_mipmaps()
+    baked.use(6)
+    source, out = gc.camera_fragment_source, []
+    head, body = (SHADER_DIR / "camera.frag").read_text().split("\n", 1)
+    try:
+        for arm in arms:
+            gc.camera_fragment_source = lambda arm=arm: "\n".join([head, scene_textures(arm), body])
+            r = gc.GLCameraRenderer(backend.pins, backend.lighting, context=backend.ctx)
+            for prog in (r.prog_inst, r.prog_hf):
+                if "u_baked" in prog:
+                    prog["u_baked"].value = 6
+            out.append(r)
+    finally:
+        gc.camera_fragment_source = source
+    return out
+
+
+@case("texture_scene", "the camera shader on a scenario's captured frames with its noise hashed (the shader's), "
+      "each fbm one mipmapped texture lookup (a baked texture's cost), or none (the octaves' share)",
+      options={"scenario": "stereo_spout", "frames": 4, "repeats": 3, "arms": ",".join(SCENE_ARMS)},
+      quick={"frames": 1, "repeats": 1})
+def texture_scene(ctx: Context) -> dict:
+    """Thread CPU ms per frame (upload, draw and read of every camera view; llvmpipe in the calling thread) of each
+    arm on the same captured frames, arms interleaved frame by frame ``repeats`` times: medians, and each frame's
+    ratio to ``hashed`` (median over frames of the median over repeats)."""
+    import statistics
+
+    os.environ.setdefault("LP_NUM_THREADS", "0")                  # before GL loads: llvmpipe in the calling thread
+    arms = [a for a in ctx["arms"].split(",") if a]
+    if not set(arms) <= set(SCENE_ARMS):
+        raise ValueError(f"texture_scene: arms are {', '.join(SCENE_ARMS)}, got {ctx['arms']}")
+    sess, caps = _captured_frames(ctx.scenario(ctx["scenario"]), ctx["frames"])
+    try:
+        rens = _scene_renderers(sess.participants["renderer"].cameras.backend, arms)
+        times = {a: [[] for _ in caps] for a in arms}
+        for rep in range(ctx["repeats"] + 1):                     # the first compiles the shaders: not timed
+            for f, (scene, light, draws) in enumerate(caps):
+                for arm, r in zip(arms, rens):
+                    c = time.thread_time()
+                    r.set_scene(scene, light)
+                    for k, pose in draws:
+                        r.draw(k, pose)
+                        w, h = r.views[k].size
+                        r.read_rgb(k, np.empty((h, w, 4), np.uint8))
+                    if rep:
+                        times[arm][f].append(time.thread_time() - c)
+    finally:
+        sess.close()
+    out = {}
+    for arm in arms:
+        per = [statistics.median(t) for t in times[arm]]
+        row = {"ms per frame": 1e3 * statistics.median(per)}
+        if "hashed" in arms:
+            base = [statistics.median(t) for t in times["hashed"]]
+            row["/ hashed"] = statistics.median(p / b for p, b in zip(per, base))
+        out[arm] = row
+    return {f"{ctx['scenario']}: the camera views' thread CPU per frame, {len(caps)} frames": out}
