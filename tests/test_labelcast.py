@@ -105,3 +105,34 @@ def test_the_depth_only_view_with_the_rigid_bodies_built_once_is_the_per_frame_c
         r.close()
     assert np.array_equal(np.isfinite(z[0]), np.isfinite(z[1])) and np.isfinite(z[0]).mean() > 0.9
     np.testing.assert_allclose(z[0], z[1], rtol=0, atol=1e-9, equal_nan=True)
+
+
+def _frame(name: str):
+    s = load_scenario(resolve_scenario_arg(name))
+    state, heights = _initial_state(s)
+    return state, scene_from_state(s, state, heights, np.zeros((64, 4), np.float32))
+
+
+@pytest.mark.parametrize(("name", "xyz", "rpy", "size"), [
+    ("default", (-2.0, 6.0, 4.2), (0.0, 80.0, 90.0), (160, 120)),          # grain, walls, rims, ground
+    ("default", (-2.0, 7.45, 6.0), (0.0, 90.0, -90.0), (160, 120)),        # from the spout: the combine, the auger
+    ("default", (-8.0, 14.0, 5.0), (0.0, 25.0, 0.0), (160, 120)),          # the tractor, the sky
+    ("rough_terrain", (-8.0, 14.0, 5.0), (0.0, 25.0, 0.0), (40, 30)),      # the terrain patch: a mesh
+])
+def test_the_embree_label_cast_gives_the_numpy_label_cast(name, xyz, rpy, size):
+    """The labelled cast through the scene's triangles in Embree (the mock's, where Embree is installed) gives the
+    numpy label cast's labels pixel for pixel, the same pixels hit and the ranges to 1e-9 m."""
+    pytest.importorskip("embreex")
+    from cosim.world.fastcast import embree_cast_labels, make_caster
+
+    state, scene = _frame(name)
+    w = world_from_sensor(camera(xyz, rpy), state)
+    d = Pinhole(*size, np.radians(90.0)).ray_directions().reshape(-1, 3) @ w[:3, :3].T
+    t0, lab0 = cast_labels(scene, w[:3, 3], d)
+    t1, lab1 = embree_cast_labels(scene, w[:3, 3], d)
+    assert len(set(np.unique(lab0).tolist())) >= 4                        # several parts in view
+    np.testing.assert_array_equal(lab1, lab0)
+    np.testing.assert_array_equal(np.isfinite(t1), np.isfinite(t0))
+    hit = np.isfinite(t0)
+    np.testing.assert_allclose(t1[hit], t0[hit], rtol=0, atol=1e-9)
+    assert make_caster(None).label_name == "embree" and make_caster(None, "numpy").label_name == "numpy"

@@ -21,14 +21,17 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
+from .labelcast import cast_labels
+from .labels import NONE
 from .raycast import T_MIN_M, raycast
 from .scene import Scene
-from .triangles import scene_triangles
+from .triangles import face_labels, scene_triangles
 
 if TYPE_CHECKING:
     from .parts import EntityParts
 
-__all__ = ["BACKENDS", "CASTERS", "Backend", "Caster", "cast_from", "embree_available", "embree_cast", "make_caster"]
+__all__ = ["BACKENDS", "CASTERS", "Backend", "Caster", "cast_from", "embree_available", "embree_cast",
+           "embree_cast_labels", "make_caster"]
 
 Backend = Literal["auto", "embree", "numpy"]
 #: the accepted backend names: auto is Embree when it is installed, else numpy
@@ -48,10 +51,10 @@ def embree_available() -> bool:
     return importlib.util.find_spec("embreex") is not None
 
 
-def embree_cast(scene: Scene, origin: np.ndarray, directions: np.ndarray) -> np.ndarray:
-    """Rays from ``origin`` (3,) along ``directions`` (N, 3) through ``scene`` with Embree: (N,) float64 m,
-    inf on a miss (first hit with t > ``T_MIN_M``; hits behind are never reported by Embree's tnear = 0).
-    Raises ImportError when embreex is not installed."""
+def _embree_first_hits(scene: Scene, origin: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rays from ``origin`` (3,) along ``directions`` (N, 3) through ``scene``'s triangles (one BVH built for the
+    call): (t (N,) float64 m, inf on a miss; the face of :func:`~cosim.world.triangles.scene_triangles` each ray
+    hits first (N,) int64, -1 on a miss). Raises ImportError when embreex is not installed."""
     from embreex import rtcore_scene
     from embreex.mesh_construction import TriangleMesh
 
@@ -63,9 +66,10 @@ def embree_cast(scene: Scene, origin: np.ndarray, directions: np.ndarray) -> np.
     out = emb.run(np.zeros(d.shape, np.float32), d.astype(np.float32), output=True)
     prim = out["primID"]
     t = np.full(len(d), np.inf)
+    face = np.full(len(d), -1, np.int64)
     hit = np.flatnonzero((prim >= 0) & (out["tfar"] < _MISS_M))
     if hit.size == 0:
-        return t
+        return t, face
     # exact range: the ray against the hit triangle's plane in float64 (origin at 0: t = n . v0 / n . d), the
     # planes computed once per triangle
     tri = verts[faces]                                                    # (F, 3, 3)
@@ -78,7 +82,26 @@ def embree_cast(scene: Scene, origin: np.ndarray, directions: np.ndarray) -> np.
         t64 = offsets[prim[hit]] / nd
     t_hit = np.where(ok, t64, out["tfar"][hit].astype(np.float64))
     t[hit] = np.where(t_hit > T_MIN_M, t_hit, np.inf)
-    return t
+    face[hit] = np.where(t_hit > T_MIN_M, prim[hit], -1)
+    return t, face
+
+
+def embree_cast(scene: Scene, origin: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Rays from ``origin`` (3,) along ``directions`` (N, 3) through ``scene`` with Embree: (N,) float64 m,
+    inf on a miss (first hit with t > ``T_MIN_M``; hits behind are never reported by Embree's tnear = 0).
+    Raises ImportError when embreex is not installed."""
+    return _embree_first_hits(scene, origin, directions)[0]
+
+
+def embree_cast_labels(scene: Scene, origin: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`embree_cast` with the label of what each ray meets first: (t (N,) float64 m, inf on a miss; label
+    (N,) uint8, ``NONE`` on a miss), as :func:`cosim.world.labelcast.cast_labels` gives them (the grain is its
+    surface here, not the solid under it: the cart's walls hide the difference from outside the cart)."""
+    t, face = _embree_first_hits(scene, origin, directions)
+    label = np.full(len(t), NONE, np.uint8)
+    hit = face >= 0
+    label[hit] = face_labels(scene)[face[hit]]
+    return t, label
 
 
 def cast_from(scene: Scene, origin: np.ndarray, directions: np.ndarray, backend: Backend = "auto") -> np.ndarray:
@@ -110,6 +133,21 @@ class Caster:
         if self._static is not None and scene.poses is not None:
             return self._static.cast(scene, origin, directions)
         return cast_from(scene, origin, directions, "embree" if self._static is not None else self._backend)
+
+    def cast_labels(self, scene: Scene, origin: np.ndarray, directions: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+        """Exact ranges (N,) float64 m (inf on a miss) and the label (N,) uint8 of what each ray meets first
+        (``NONE`` on a miss): :func:`embree_cast_labels` where Embree runs (the scene's triangles built for the
+        call: the rigid bodies built once carry no labels), else the numpy label cast
+        (:func:`cosim.world.labelcast.cast_labels`). ``label_name`` says which."""
+        if self.label_name == "embree":
+            return embree_cast_labels(scene, origin, directions)
+        return cast_labels(scene, origin, directions)
+
+    @property
+    def label_name(self) -> str:
+        """The ray caster of :meth:`cast_labels`: ``embree`` or ``numpy``."""
+        return "numpy" if self.name == "numpy" else "embree"
 
     def close(self) -> None:
         if self._static is not None:

@@ -26,10 +26,11 @@ import functools
 import numpy as np
 
 from .heightfield import grid_triangles, grid_vertices, padded_heights
+from .labels import GRAIN, NONE, mesh_label
 from .meshes import CYLINDER_SIDES, orthonormal_frames, unit_cube, unit_cylinder
 from .scene import Scene
 
-__all__ = ["scene_triangles"]
+__all__ = ["face_labels", "scene_triangles"]
 
 
 @functools.lru_cache(maxsize=1)
@@ -81,3 +82,18 @@ def scene_triangles(scene: Scene, origin: np.ndarray) -> tuple[np.ndarray, np.nd
         faces.append(f + base)
         base += len(v)
     return np.concatenate(verts), np.concatenate(faces)
+
+
+def face_labels(scene: Scene) -> np.ndarray:
+    """(F,) uint8: the label (``cosim.world.labels``) of each face of :func:`scene_triangles` ``(scene, ...)``, in
+    its order: a box's or a cylinder's own (``NONE`` where the scene's boxes or cylinders carry none), ``GRAIN`` on
+    the grain surface, a mesh its entity's (:func:`~cosim.world.labels.mesh_label`)."""
+    _, cf, _, yf = _unit_meshes()
+    b, c, hf = scene.boxes, scene.cylinders, scene.heightfield
+    box = b.label if b.label is not None else np.full(len(b), NONE, np.uint8)
+    cyl = c.label if c.label is not None else np.full(len(c), NONE, np.uint8)
+    nx, ny = hf.heights.shape
+    parts = [np.repeat(np.asarray(box, np.uint8), len(cf)), np.repeat(np.asarray(cyl, np.uint8), len(yf)),
+             np.full(len(grid_triangles(nx, ny)), GRAIN, np.uint8)]
+    parts += [np.full(len(m.faces), mesh_label(m.name), np.uint8) for m in scene.meshes]
+    return np.concatenate(parts)

@@ -1,10 +1,10 @@
 """The mock camera renderer: every camera view by exact ray cast, no OpenGL (docs/cameras.md).
 
-Depth and labels are exact: each pixel centre's ray is cast through the :class:`~cosim.world.scene.Scene`
-(``cosim.world.labelcast``, the numpy ray caster's intersectors grouped by label, when labels or colour are
-wanted; else the run's exact caster from ``cosim.world.fastcast.make_caster``: the rigid bodies built once in
-Embree when installed and ``parts`` are given, else the scene cast per frame), planar depth Z = t cos(angle to
-the optical axis), NaN where the ray meets nothing. The colour image is plain: each label's flat colour (the scene's
+Depth and labels are exact: each pixel centre's ray is cast through the :class:`~cosim.world.scene.Scene` by the
+run's exact caster from ``cosim.world.fastcast.make_caster``. Where labels or colour are wanted, the scene's
+triangles with their labels built in Embree every frame (the numpy label cast, ``cosim.world.labelcast``, without
+Embree); else the rigid bodies built once in Embree when installed and ``parts`` are given, else the scene cast
+per frame. Planar depth Z = t cos(angle to the optical axis), NaN where the ray meets nothing. The colour image is plain: each label's flat colour (the scene's
 colours), lit by ``render.lighting`` (cosim.world.lighting) with normals estimated from the depth image, no
 texture. A stereo matcher has nothing to match on it, so a stereo camera is refused with the mock at
 validation (cosim.scenario.config.scenario).
@@ -16,7 +16,6 @@ import numpy as np
 from cosim.scenario.config.rendering import Lighting
 from cosim.world.camera import Pinhole
 from cosim.world.fastcast import make_caster
-from cosim.world.labelcast import cast_labels
 from cosim.world.labels import AUGER, CART_RIM, CART_WALL, COMBINE, GRAIN, GROUND, STREAM, TRACTOR
 from cosim.world.lighting import irradiance, sun_direction
 from cosim.world.parts import CART_COLOUR, COMBINE_COLOUR, TRACTOR_COLOUR
@@ -71,7 +70,7 @@ class MockCameraRenderer:
         d = d_cam.reshape(-1, 3) @ world_from_camera[:3, :3].T
         origin = world_from_camera[:3, 3]
         if self.labelled[k]:
-            t, lab = cast_labels(self._scene, origin, d)
+            t, lab = self.caster.cast_labels(self._scene, origin, d)
             self._labels[k] = lab.reshape(pin.height, pin.width)
         else:
             t = self.caster.cast(self._scene, origin, d)
