@@ -9,7 +9,7 @@ octave faded), the point p = (x, y) px * 4 mm on the plane z = 0.37 m. Arms:
 * ``volume``: each octave one trilinear lookup in a baked volume of the same value noise (32 cells a period, 4
   texels a cell: 128^3 half floats, 4 MiB), with ``textureLod`` at the octave's level 0;
 * ``volume_mip``: the same volume mipmapped, each octave at its own level of detail (trilinear between levels);
-* ``plane``: each octave one lookup in a 2D texture of the noise on one lattice plane (512 x 512 half floats);
+* ``plane``: each octave one lookup in a 2D texture of the noise on one lattice plane (128 x 128 half floats);
 * ``plane_fbm``: the whole sum of octaves baked into one mipmapped 2D texture (2048 x 2048 half floats, 8 MiB
   and its levels): one lookup a pixel. A surface textured this way needs a 2D parametrisation (a plane per face
   or three planes blended), which a heightfield's slopes and a cylinder's side do not have exactly.
