@@ -44,7 +44,7 @@ from perception_proc.cameras.stereo import make_matcher, stereo_depth
 from perception_proc.cameras.tof import frame_generator
 from perception_proc.estimates.rim import FOV_EDGE, border_beams
 
-__all__ = ["CameraImages", "CameraPipeline", "SIGMA_DISTANCE_M", "STEREO_DISPARITY_SIGMA_PX"]
+__all__ = ["CameraImages", "CameraPipeline", "SIGMA_DISTANCE_M", "STEREO_DISPARITY_SIGMA_PX", "ranges_of"]
 
 #: disparity 1-sigma assumed for that typical figure, px (a matcher on textured images does about this well)
 STEREO_DISPARITY_SIGMA_PX = 0.25
@@ -52,6 +52,14 @@ STEREO_DISPARITY_SIGMA_PX = 0.25
 #: (``rim.FOV_EDGE``), rad: a camera's points are far denser than a LiDAR's beams, so the rim finder's test of an
 #: end cut by the field (a share of its end strip on the edge) needs a band, not one row of points
 EDGE_BAND_RAD = 0.02
+
+
+def ranges_of(points: np.ndarray) -> np.ndarray:
+    """Euclidean norm (M,) float64 of each row of ``points`` (M, 3) float64: ``np.linalg.norm(points, axis=1)``
+    to the bit (the squares summed in the same order, x + y then + z) without its reduction over rows of three,
+    which costs five times more."""
+    x, y, z = points[:, 0], points[:, 1], points[:, 2]
+    return np.sqrt(x * x + y * y + z * z)
 
 
 class CameraPipeline:
@@ -150,7 +158,8 @@ class CameraPipeline:
         if depth_m is None:
             empty = np.zeros((0, 3))
             return empty, np.zeros(0, np.float32), np.zeros(0, np.uint8), np.zeros((0, 4), np.float32)
-        z = np.asarray(depth_m)[np.ix_(self.rows, self.cols)].reshape(-1).astype(np.float64)
+        s = self.stride                                                        # the strided pixels, as a view
+        z = np.asarray(depth_m)[s // 2::s, s // 2::s].astype(np.float64).reshape(-1)
         sigma = point_sigma_m(self.spec, self.pin.f, z)
         if isinstance(self.spec, DepthCamera):                                 # between two surfaces: flying
             jump = jump_threshold(z, sigma, self.pin.f, self.spec.max_incidence_deg).reshape(self.grid_shape)
@@ -158,12 +167,13 @@ class CameraPipeline:
         with np.errstate(invalid="ignore"):
             z[sigma > GATE_SIGMA_M] = np.nan                                   # gated by its own error
         cam = self.unit_points * z[:, None]                                    # camera frame, m
-        rng = np.linalg.norm(cam, axis=1)
+        rng = ranges_of(cam)
         level_from_camera = level_from_parent @ self.parent_from_camera
         level = cam @ level_from_camera[:3, :3].T + level_from_camera[:3, 3]
         record = np.empty((len(z), 4), np.float32)
         record[:, :3] = cam
         record[:, 3] = rng
-        flags = border_beams(rng.astype(np.float32), self.grid_shape)
+        rng32 = record[:, 3].copy()                                            # the ranges as float32
+        flags = border_beams(rng32, self.grid_shape)
         flags[self.edge] |= FOV_EDGE
-        return level, rng.astype(np.float32), flags, record
+        return level, rng32, flags, record

@@ -11,17 +11,29 @@ is invalid, and so is a disparity of 0 (a point at infinity). Then (``perception
 without texture are invalid (``texture_threshold``) and, with ``subpixel: refine``, each disparity is refined by
 Gauss-Newton on the intensity difference instead of OpenCV's parabola, which locks to whole pixels. Nothing is
 added to the images: the depth error is the matcher's, on the renderer's textured images.
+
+:func:`stereo_depth_reference` is the readable composition of these steps; :func:`stereo_depth` gives the same
+bits with the invalid pixels gathered in one mask (the matcher's fixed-point output checked against one integer
+range, :func:`kept_raw_range`) and written once, at the end (tests/test_stereo_kernels.py).
 """
 from __future__ import annotations
+
+import math
 
 import cv2
 import numpy as np
 
 from cosim.scenario.config.cameras import SEARCH_EDGE_PX, StereoCamera
-from perception_proc.cameras.subpixel import refine_disparity, texture_mask
+from perception_proc.cameras.subpixel import (
+    MAX_STEP_PX,
+    refine_disparity,
+    refine_steps,
+    step_too_large,
+    texture_mask,
+)
 
 __all__ = ["FIXED_POINT", "SGBM_MODES", "make_matcher", "grey", "disparity", "camera_disparity", "depth_from_disparity",
-           "stereo_depth"]
+           "kept_raw_range", "stereo_depth", "stereo_depth_reference"]
 
 #: OpenCV's disparity fixed point: 16 steps per pixel
 FIXED_POINT = 16.0
@@ -87,12 +99,48 @@ def depth_from_disparity(d: np.ndarray, focal_px: float, baseline_m: float) -> n
     return np.divide(np.float32(focal_px * baseline_m), d, dtype=np.float32)
 
 
-def stereo_depth(matcher, cam: StereoCamera, focal_px: float, left_rgba: np.ndarray, right_rgba: np.ndarray
-                 ) -> np.ndarray:
+def stereo_depth_reference(matcher, cam: StereoCamera, focal_px: float, left_rgba: np.ndarray,
+                           right_rgba: np.ndarray) -> np.ndarray:
     """The stereo camera's planar depth (H, W) float32 m, NaN invalid or outside ``range_min_m`` ..
-    ``range_max_m``, from its left and right (H, W, 4) uint8 images."""
+    ``range_max_m``, from its left and right (H, W, 4) uint8 images: the readable form of :func:`stereo_depth`."""
     z = depth_from_disparity(camera_disparity(matcher, cam, grey(left_rgba), grey(right_rgba)), focal_px,
                              cam.baseline_m)
     with np.errstate(invalid="ignore"):
         z[(z < cam.range_min_m) | (z > cam.range_max_m)] = np.nan
+    return z
+
+
+def kept_raw_range(cam: StereoCamera) -> tuple[int, int]:
+    """(lowest, highest) fixed-point disparity (1/16 px) of OpenCV's output that :func:`camera_disparity` keeps:
+    above the search's invalid value and 0 (:func:`disparity`) and :data:`SEARCH_EDGE_PX` inside the search. The
+    float32 thresholds are compared as :func:`camera_disparity` compares them (d = raw / 16 is exact)."""
+    lo, hi = cam.disparity_range_px
+    floor = max((cam.min_disparity_px - 1) * FIXED_POINT, 0)
+    low = float(np.float32(lo + SEARCH_EDGE_PX)) * FIXED_POINT                # d < low / 16 is invalid
+    high = float(np.float32(hi - SEARCH_EDGE_PX)) * FIXED_POINT               # d > high / 16 is invalid
+    return max(math.floor(floor) + 1, math.ceil(low)), math.floor(high)
+
+
+def stereo_depth(matcher, cam: StereoCamera, focal_px: float, left_rgba: np.ndarray, right_rgba: np.ndarray
+                 ) -> np.ndarray:
+    """The stereo camera's planar depth (H, W) float32 m, NaN invalid or outside ``range_min_m`` ..
+    ``range_max_m``, from its left and right (H, W, 4) uint8 images: :func:`stereo_depth_reference`'s bits with
+    every invalid pixel gathered in one mask and written once."""
+    left, right = grey(left_rgba), grey(right_rgba)
+    raw = matcher.compute(left, right)
+    invalid = cv2.inRange(raw, *kept_raw_range(cam)) == 0
+    if cam.texture_threshold > 0:
+        invalid |= texture_mask(left, cam.block_size, cam.texture_threshold)
+    d = np.divide(raw, np.float32(FIXED_POINT), dtype=np.float32)
+    if cam.subpixel == "refine":
+        np.copyto(d, np.float32(0.0), where=invalid)                          # the refinement's start
+        start = d
+        d, flat = refine_steps(left, right, start, window_px=cam.block_size)
+        invalid |= step_too_large(d, start, MAX_STEP_PX)
+        invalid |= flat                 # d <= 0 (camera_disparity's test) gives z <= 0 or inf: out of range below
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.divide(np.float32(focal_px * cam.baseline_m), d, dtype=np.float32)
+        invalid |= z < cam.range_min_m
+        invalid |= z > cam.range_max_m
+    np.copyto(z, np.float32(np.nan), where=invalid)
     return z

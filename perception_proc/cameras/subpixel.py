@@ -17,7 +17,8 @@ Two pure functions on the rectified grey pair and the matcher's disparity:
   about -0.4 and +0.45 px); the continuous step has no preferred fraction. A pixel whose step leaves
   ``max_step_px`` of the matcher's disparity, or whose window has no gradient, is invalid.
   :func:`refine_disparity_reference` is its readable form; :func:`refine_disparity` gives the same bits with its
-  pixel grid made once per image size and its products in reused buffers (tests/test_stereo_kernels.py).
+  pixel grid made once per image size, its products in reused buffers and each pass made once
+  (:func:`refine_steps`, which the camera's fused depth path calls on its own; tests/test_stereo_kernels.py).
 """
 from __future__ import annotations
 
@@ -26,12 +27,17 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-__all__ = ["SOBEL_WEIGHT", "texture_mask", "refine_disparity", "refine_disparity_reference"]
+__all__ = ["ITERATIONS", "MAX_STEP_PX", "SOBEL_WEIGHT", "texture_mask", "refine_disparity", "refine_disparity_reference", "refine_steps",
+           "step_too_large"]
 
 #: the 3 x 3 Sobel x derivative of a unit ramp (1 grey level per px): its response is 8
 SOBEL_WEIGHT = 8.0
 #: a window's summed squared gradient below this, (grey levels / px)^2, gives no step (no texture to align)
 MIN_GRADIENT_ENERGY = 1e-3
+#: Gauss-Newton iterations of the refinement
+ITERATIONS = 2
+#: a refined disparity further than this from the matcher's is invalid, px
+MAX_STEP_PX = 1.0
 
 
 def texture_mask(left: np.ndarray, block_px: int, threshold: float) -> np.ndarray:
@@ -43,7 +49,7 @@ def texture_mask(left: np.ndarray, block_px: int, threshold: float) -> np.ndarra
 
 
 def refine_disparity_reference(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, window_px: int = 5,
-                               iterations: int = 2, max_step_px: float = 1.0) -> np.ndarray:
+                               iterations: int = ITERATIONS, max_step_px: float = MAX_STEP_PX) -> np.ndarray:
     """Sub-pixel refined disparity (H, W) float32 px of ``disparity`` (H, W) float32 px, NaN invalid, for the
     rectified grey pair ``left``, ``right`` (H, W) uint8 (a point at disparity d in the left image is d px
     further left in the right image): ``iterations`` Gauss-Newton steps over a ``window_px`` square window; NaN
@@ -82,35 +88,51 @@ def _pixel_grid(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
     return cols, rows
 
 
-def refine_disparity(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, window_px: int = 5,
-                     iterations: int = 2, max_step_px: float = 1.0) -> np.ndarray:
-    """:func:`refine_disparity_reference` (same arguments, the same bits) with the pixel grid made once per
-    image size and each iteration's products in reused buffers."""
+def refine_steps(left: np.ndarray, right: np.ndarray, start: np.ndarray, window_px: int = 5, iterations: int = ITERATIONS
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The Gauss-Newton iterations of :func:`refine_disparity_reference` from ``start`` (H, W) float32 px, finite
+    (0 where the matcher gave nothing), for the grey pair ``left``, ``right`` (H, W) uint8: (the iterate (H, W)
+    float32 px, nothing made invalid yet; flat (H, W) bool, the last iteration's windows without gradient). The
+    pixel grid is made once per image size, each iteration's products go to reused buffers and a flat window's
+    zero step is left out rather than written (the same bits)."""
     lft = left.astype(np.float32)
     rgt = right.astype(np.float32)
     h, w = lft.shape
     grad = cv2.Sobel(rgt, cv2.CV_32F, 1, 0, ksize=3, scale=1.0 / SOBEL_WEIGHT)
     cols, rows = _pixel_grid(h, w)
-    finite = np.isfinite(disparity)
-    start = np.where(finite, disparity, np.float32(0.0)).astype(np.float32, copy=False)
     d = start.copy()
-    flat = np.zeros((h, w), bool)
+    flat, moves = np.zeros((h, w), bool), np.empty((h, w), bool)
     win = (window_px, window_px)
-    map_x, prod, num, den = (np.empty((h, w), np.float32) for _ in range(4))
+    map_x, warped, g, prod, num, den = (np.empty((h, w), np.float32) for _ in range(6))
     floor = np.float32(MIN_GRADIENT_ENERGY)
     for _ in range(iterations):
         np.subtract(cols, d, out=map_x)
-        warped = cv2.remap(rgt, map_x, rows, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        g = cv2.remap(grad, map_x, rows, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        cv2.remap(rgt, map_x, rows, cv2.INTER_LINEAR, dst=warped, borderMode=cv2.BORDER_REPLICATE)
+        cv2.remap(grad, map_x, rows, cv2.INTER_LINEAR, dst=g, borderMode=cv2.BORDER_REPLICATE)
         np.subtract(lft, warped, out=prod)
         np.multiply(prod, g, out=prod)
         cv2.boxFilter(prod, -1, win, dst=num, normalize=False, borderType=cv2.BORDER_REPLICATE)
         np.multiply(g, g, out=prod)
         cv2.boxFilter(prod, -1, win, dst=den, normalize=False, borderType=cv2.BORDER_REPLICATE)
-        flat = den < floor
-        np.maximum(den, floor, out=den)
-        np.divide(num, den, out=num)
-        num[flat] = 0.0
-        d -= num
-    d[~finite | flat | (np.abs(d - start) > max_step_px)] = np.nan
+        np.less(den, floor, out=flat)
+        np.logical_not(flat, out=moves)             # den >= floor there (or NaN, as the reference's maximum)
+        np.divide(num, den, out=num, where=moves)
+        np.subtract(d, num, out=d, where=moves)     # a flat window's step is +0: d - 0 is d, bit for bit
+    return d, flat
+
+
+def refine_disparity(left: np.ndarray, right: np.ndarray, disparity: np.ndarray, window_px: int = 5,
+                     iterations: int = ITERATIONS, max_step_px: float = MAX_STEP_PX) -> np.ndarray:
+    """:func:`refine_disparity_reference` (same arguments, the same bits) by :func:`refine_steps`, with the
+    invalid pixels written once."""
+    finite = np.isfinite(disparity)
+    start = np.where(finite, disparity, np.float32(0.0)).astype(np.float32, copy=False)
+    d, flat = refine_steps(left, right, start, window_px, iterations)
+    np.copyto(d, np.float32(np.nan), where=step_too_large(d, start, max_step_px) | flat | ~finite)
     return d
+
+
+def step_too_large(d: np.ndarray, start: np.ndarray, max_step_px: float) -> np.ndarray:
+    """(H, W) bool: ``|d - start| > max_step_px`` (``d``, ``start`` (H, W) float32 px), in one buffer."""
+    step = np.subtract(d, start)
+    return np.abs(step, out=step) > max_step_px
