@@ -26,6 +26,7 @@ import numpy as np
 from cosim.scenario.config.cameras import SEARCH_EDGE_PX, StereoCamera
 from perception_proc.cameras.subpixel import (
     MAX_STEP_PX,
+    fill_where,
     refine_disparity,
     refine_steps,
     step_too_large,
@@ -133,7 +134,7 @@ def stereo_depth(matcher, cam: StereoCamera, focal_px: float, left_rgba: np.ndar
         invalid |= texture_mask(left, cam.block_size, cam.texture_threshold)
     d = np.divide(raw, np.float32(FIXED_POINT), dtype=np.float32)
     if cam.subpixel == "refine":
-        np.copyto(d, np.float32(0.0), where=invalid)                          # the refinement's start
+        fill_where(d, invalid, 0.0)                                           # the refinement's start
         start = d
         d, flat = refine_steps(left, right, start, window_px=cam.block_size)
         invalid |= step_too_large(d, start, MAX_STEP_PX)
@@ -142,5 +143,5 @@ def stereo_depth(matcher, cam: StereoCamera, focal_px: float, left_rgba: np.ndar
         z = np.divide(np.float32(focal_px * cam.baseline_m), d, dtype=np.float32)
         invalid |= z < cam.range_min_m
         invalid |= z > cam.range_max_m
-    np.copyto(z, np.float32(np.nan), where=invalid)
+    fill_where(z, invalid, np.nan)
     return z

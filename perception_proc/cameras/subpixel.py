@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 __all__ = ["ITERATIONS", "MAX_STEP_PX", "SOBEL_WEIGHT", "texture_mask", "refine_disparity", "refine_disparity_reference", "refine_steps",
-           "step_too_large"]
+           "step_too_large", "fill_where"]
 
 #: the 3 x 3 Sobel x derivative of a unit ramp (1 grey level per px): its response is 8
 SOBEL_WEIGHT = 8.0
@@ -79,45 +79,66 @@ def refine_disparity_reference(left: np.ndarray, right: np.ndarray, disparity: n
 
 @lru_cache(maxsize=4)
 def _pixel_grid(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
-    """(column index (W,) float32, row index (H, W) float32 C-contiguous) of an H x W image, read-only: the
-    x offset and the y map of the warp."""
-    cols = np.arange(w, dtype=np.float32)
+    """(column index, row index), each (H, W) float32 C-contiguous and read-only, of an H x W image: the x offset
+    and the y map of the warp."""
+    cols = np.ascontiguousarray(np.broadcast_to(np.arange(w, dtype=np.float32), (h, w)))
     rows = np.ascontiguousarray(np.broadcast_to(np.arange(h, dtype=np.float32)[:, None], (h, w)))
     cols.setflags(write=False)
     rows.setflags(write=False)
     return cols, rows
 
 
-def refine_steps(left: np.ndarray, right: np.ndarray, start: np.ndarray, window_px: int = 5, iterations: int = ITERATIONS
-                 ) -> tuple[np.ndarray, np.ndarray]:
+@lru_cache(maxsize=8)
+def _plane(h: int, w: int, value: float) -> np.ndarray:
+    """(H, W) float32 filled with ``value``, read-only: the source of :func:`fill_where`."""
+    out = np.full((h, w), value, np.float32)
+    out.setflags(write=False)
+    return out
+
+
+def fill_where(a: np.ndarray, mask: np.ndarray, value: float) -> None:
+    """``a[mask] = value`` for ``a`` (H, W) float32 and ``mask`` (H, W) bool, in place, by OpenCV's masked copy
+    (numpy's masked assignment costs several times more)."""
+    cv2.copyTo(_plane(*a.shape, value), mask.view(np.uint8), a)
+
+
+def refine_steps(left: np.ndarray, right: np.ndarray, start: np.ndarray, window_px: int = 5,
+                 iterations: int = ITERATIONS) -> tuple[np.ndarray, np.ndarray]:
     """The Gauss-Newton iterations of :func:`refine_disparity_reference` from ``start`` (H, W) float32 px, finite
     (0 where the matcher gave nothing), for the grey pair ``left``, ``right`` (H, W) uint8: (the iterate (H, W)
-    float32 px, nothing made invalid yet; flat (H, W) bool, the last iteration's windows without gradient). The
-    pixel grid is made once per image size, each iteration's products go to reused buffers and a flat window's
-    zero step is left out rather than written (the same bits)."""
+    float32 px, nothing made invalid yet; flat (H, W) bool, the last iteration's windows without gradient).
+
+    The same bits as the reference: the pixel grid is made once per image size, each iteration's products go to
+    reused buffers, and the element-wise arithmetic is OpenCV's (IEEE float32 subtract, multiply, divide and
+    max, as numpy's, at a fraction of numpy's cost here). A flat window's pixel keeps its disparity (the
+    reference subtracts a step of +0, which leaves every finite value as it is); the gradient energy is never
+    NaN (finite images, maps and steps), so OpenCV's max, which differs from numpy's only on NaN, gives the
+    reference's floor."""
     lft = left.astype(np.float32)
     rgt = right.astype(np.float32)
     h, w = lft.shape
     grad = cv2.Sobel(rgt, cv2.CV_32F, 1, 0, ksize=3, scale=1.0 / SOBEL_WEIGHT)
     cols, rows = _pixel_grid(h, w)
-    d = start.copy()
-    flat, moves = np.zeros((h, w), bool), np.empty((h, w), bool)
+    d, moved = start.copy(), np.empty((h, w), np.float32)
+    flat = np.zeros((h, w), bool)
     win = (window_px, window_px)
     map_x, warped, g, prod, num, den = (np.empty((h, w), np.float32) for _ in range(6))
     floor = np.float32(MIN_GRADIENT_ENERGY)
     for _ in range(iterations):
-        np.subtract(cols, d, out=map_x)
+        cv2.subtract(cols, d, dst=map_x)
         cv2.remap(rgt, map_x, rows, cv2.INTER_LINEAR, dst=warped, borderMode=cv2.BORDER_REPLICATE)
         cv2.remap(grad, map_x, rows, cv2.INTER_LINEAR, dst=g, borderMode=cv2.BORDER_REPLICATE)
-        np.subtract(lft, warped, out=prod)
-        np.multiply(prod, g, out=prod)
+        cv2.subtract(lft, warped, dst=prod)
+        cv2.multiply(prod, g, dst=prod)
         cv2.boxFilter(prod, -1, win, dst=num, normalize=False, borderType=cv2.BORDER_REPLICATE)
-        np.multiply(g, g, out=prod)
+        cv2.multiply(g, g, dst=prod)
         cv2.boxFilter(prod, -1, win, dst=den, normalize=False, borderType=cv2.BORDER_REPLICATE)
         np.less(den, floor, out=flat)
-        np.logical_not(flat, out=moves)             # den >= floor there (or NaN, as the reference's maximum)
-        np.divide(num, den, out=num, where=moves)
-        np.subtract(d, num, out=d, where=moves)     # a flat window's step is +0: d - 0 is d, bit for bit
+        cv2.max(den, float(floor), dst=den)
+        cv2.divide(num, den, dst=num)
+        cv2.subtract(d, num, dst=moved)
+        cv2.copyTo(d, flat.view(np.uint8), moved)            # a flat window's pixel stays
+        d, moved = moved, d
     return d, flat
 
 
@@ -128,11 +149,10 @@ def refine_disparity(left: np.ndarray, right: np.ndarray, disparity: np.ndarray,
     finite = np.isfinite(disparity)
     start = np.where(finite, disparity, np.float32(0.0)).astype(np.float32, copy=False)
     d, flat = refine_steps(left, right, start, window_px, iterations)
-    np.copyto(d, np.float32(np.nan), where=step_too_large(d, start, max_step_px) | flat | ~finite)
+    fill_where(d, step_too_large(d, start, max_step_px) | flat | ~finite, np.nan)
     return d
 
 
 def step_too_large(d: np.ndarray, start: np.ndarray, max_step_px: float) -> np.ndarray:
-    """(H, W) bool: ``|d - start| > max_step_px`` (``d``, ``start`` (H, W) float32 px), in one buffer."""
-    step = np.subtract(d, start)
-    return np.abs(step, out=step) > max_step_px
+    """(H, W) bool: ``|d - start| > max_step_px`` (``d``, ``start`` (H, W) float32 px)."""
+    return cv2.absdiff(d, start) > max_step_px
