@@ -138,7 +138,7 @@ def stereo_depth(matcher, cam: StereoCamera, focal_px: float, left_rgba: np.ndar
         start = d
         d, flat = refine_steps(left, right, start, window_px=cam.block_size)
         invalid |= step_too_large(d, start, MAX_STEP_PX)
-        invalid |= flat                 # d <= 0 (camera_disparity's test) gives z <= 0 or inf: out of range below
+        invalid |= flat                 # d <= 0 (camera_disparity's test) gives z <= 0 or +inf: out of range
     with np.errstate(divide="ignore", invalid="ignore"):
         z = np.divide(np.float32(focal_px * cam.baseline_m), d, dtype=np.float32)
         invalid |= z < cam.range_min_m
