@@ -23,7 +23,8 @@ from cosim.world.camera import Pinhole
 from perception_proc.accuracy.stage import ABOVE_M, P99, sample_beams
 from perception_proc.orderstats import median_sorted, percentile_sorted
 
-__all__ = ["sample_pixels", "ray_directions_at", "exact_depths", "depth_error_stats", "fill_error", "NAN_STATS", "NAN_FILL"]
+__all__ = ["sample_pixels", "ray_directions_at", "exact_depths", "depth_error_stats", "fill_error", "NAN_STATS",
+           "NAN_FILL"]
 
 #: the depth-error fields when nothing is evaluated
 NAN_STATS = {"depth_pixels": math.nan, "depth_err_mean_m": math.nan, "depth_err_median_m": math.nan,
