@@ -27,8 +27,8 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-__all__ = ["ITERATIONS", "MAX_STEP_PX", "SOBEL_WEIGHT", "texture_mask", "refine_disparity", "refine_disparity_reference",
-           "refine_steps", "step_too_large", "fill_where"]
+__all__ = ["ITERATIONS", "MAX_STEP_PX", "SOBEL_WEIGHT", "texture_mask", "refine_disparity",
+           "refine_disparity_reference", "refine_steps", "step_too_large", "fill_where"]
 
 #: the 3 x 3 Sobel x derivative of a unit ramp (1 grey level per px): its response is 8
 SOBEL_WEIGHT = 8.0
