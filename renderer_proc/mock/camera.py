@@ -4,9 +4,9 @@ Depth and labels are exact: each pixel centre's ray is cast through the :class:`
 run's exact caster from ``cosim.world.fastcast.make_caster``. Where labels or colour are wanted, the scene's
 triangles with their labels built in Embree every frame (the numpy label cast, ``cosim.world.labelcast``, without
 Embree); else the rigid bodies built once in Embree when installed and ``parts`` are given, else the scene cast
-per frame. Planar depth Z = t cos(angle to the optical axis), NaN where the ray meets nothing. The colour image is plain: each label's flat colour (the scene's
-colours), lit by ``render.lighting`` (cosim.world.lighting) with normals estimated from the depth image, no
-texture. A stereo matcher has nothing to match on it, so a stereo camera is refused with the mock at
+per frame. Planar depth Z = t cos(angle to the optical axis), NaN where the ray meets nothing. The colour image is
+plain: each label's flat colour (the scene's colours), lit by ``render.lighting`` (cosim.world.lighting) with
+normals estimated from the depth image, no texture. A stereo matcher has nothing to match on it, so a stereo camera is refused with the mock at
 validation (cosim.scenario.config.scenario).
 """
 from __future__ import annotations
