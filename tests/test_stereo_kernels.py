@@ -12,7 +12,7 @@ import pytest
 
 from cosim.scenario.config.cameras import StereoCamera
 from cosim.world.camera import Pinhole
-from perception_proc.accuracy.sensors import ray_directions_at, sample_pixels
+from perception_proc.accuracy.sensors import sample_pixels
 from perception_proc.cameras import stereo
 from perception_proc.cameras.pipeline import ranges_of
 from perception_proc.cameras.stereo import (
@@ -169,6 +169,6 @@ def test_ray_directions_at_some_pixels_are_rows_of_the_whole_grid(width, height,
     pin = Pinhole(width, height, math.radians(hfov_deg))
     pixels = sample_pixels(pin, 4096, 0, 7)
     whole = pin.ray_directions().reshape(-1, 3)
-    np.testing.assert_array_equal(ray_directions_at(pin, pixels).view(np.uint64), whole[pixels].view(np.uint64))
-    np.testing.assert_array_equal(ray_directions_at(pin, np.arange(width * height)).view(np.uint64),
+    np.testing.assert_array_equal(pin.ray_directions_at(pixels).view(np.uint64), whole[pixels].view(np.uint64))
+    np.testing.assert_array_equal(pin.ray_directions_at(np.arange(width * height)).view(np.uint64),
                                   whole.view(np.uint64))

@@ -61,11 +61,21 @@ class Pinhole:
         uu, vv = np.meshgrid(u, v)
         return uu, vv
 
+    def rays_through(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Unit ray direction through the image points ``u``, ``v`` (px, float64, one shape), (..., 3) float64,
+        camera frame."""
+        d = np.stack([u - self.width / 2.0, self.height / 2.0 - v, np.full_like(u, self.f)], axis=-1)
+        return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
     def ray_directions(self) -> np.ndarray:
         """Unit ray direction through every pixel centre, (height, width, 3) float64, camera frame."""
-        uu, vv = self.pixel_centres()
-        d = np.stack([uu - self.width / 2.0, self.height / 2.0 - vv, np.full_like(uu, self.f)], axis=-1)
-        return d / np.linalg.norm(d, axis=-1, keepdims=True)
+        return self.rays_through(*self.pixel_centres())
+
+    def ray_directions_at(self, pixels: np.ndarray) -> np.ndarray:
+        """Unit ray directions (K, 3) float64, camera frame, through the centres of ``pixels`` (K,) (flat,
+        row-major): the rows ``pixels`` of :meth:`ray_directions`, bit for bit, made for those pixels alone."""
+        v, u = np.divmod(np.asarray(pixels, np.int64), self.width)
+        return self.rays_through(u + 0.5, v + 0.5)
 
 
 def beam_directions(elevation_rad: np.ndarray, azimuth_rad: np.ndarray) -> np.ndarray:

@@ -23,8 +23,7 @@ from cosim.world.camera import Pinhole
 from perception_proc.accuracy.stage import ABOVE_M, P99, sample_beams
 from perception_proc.orderstats import median_sorted, percentile_sorted
 
-__all__ = ["sample_pixels", "ray_directions_at", "exact_depths", "depth_error_stats", "fill_error", "NAN_STATS",
-           "NAN_FILL"]
+__all__ = ["sample_pixels", "exact_depths", "depth_error_stats", "fill_error", "NAN_STATS", "NAN_FILL"]
 
 #: the depth-error fields when nothing is evaluated
 NAN_STATS = {"depth_pixels": math.nan, "depth_err_mean_m": math.nan, "depth_err_median_m": math.nan,
@@ -40,22 +39,12 @@ def sample_pixels(pin: Pinhole, count: int, seed: int, frame: int) -> np.ndarray
     return sample_beams(pin.width * pin.height, count, seed, frame)
 
 
-def ray_directions_at(pin: Pinhole, pixels: np.ndarray) -> np.ndarray:
-    """Unit ray directions (K, 3) float64, camera frame, through the centres of the pixels ``pixels`` (K,) (flat,
-    row-major): the rows ``pixels`` of ``pin.ray_directions()`` (the same arithmetic per pixel, the same bits),
-    made for those pixels only rather than for the whole image."""
-    v, u = np.divmod(np.asarray(pixels, np.int64), pin.width)
-    d = np.stack([(u + 0.5) - pin.width / 2.0, pin.height / 2.0 - (v + 0.5), np.full(u.shape, float(pin.f))],
-                 axis=-1)
-    return d / np.linalg.norm(d, axis=-1, keepdims=True)
-
-
 def exact_depths(scene, world_from_camera: np.ndarray, pin: Pinhole, pixels: np.ndarray) -> np.ndarray:
     """Exact planar depth (K,) float64 m (inf on a miss) of the pixel centres ``pixels`` (K,) (flat, row-major)
     of a camera at ``world_from_camera`` (4, 4), by the exact ray cast (``cosim.world.fastcast``)."""
     from cosim.world.fastcast import cast_from  # lazily: only evaluated frames build the scene
 
-    d_cam = ray_directions_at(pin, pixels)
+    d_cam = pin.ray_directions_at(pixels)
     t = cast_from(scene, world_from_camera[:3, 3], d_cam @ world_from_camera[:3, :3].T)
     return t * d_cam[:, 2]
 
