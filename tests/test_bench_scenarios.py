@@ -51,3 +51,12 @@ def test_section_replaces_its_own_and_run_all_keeps_every_written_section(tmp_pa
     kept = run_all.kept_suite_section(md)
     assert sc.SECTION in kept and "## Under load" in kept and "## Field-conditions suite" in kept
     assert "headline" not in kept
+
+
+def test_a_later_rounds_table_says_it_is_that_rounds_own(tmp_path):
+    md = tmp_path / "results.md"
+    tables = {"packaged scenarios": {"default": {"wall s": 10.0, "targets": "RT >= 3: met"}}}
+    sc.put_section(md, tables, 60.0, 1)
+    assert "round" not in md.read_text()
+    sc.put_section(md, tables, 60.0, 1, round_index=1)
+    assert "round 2, its own table" in md.read_text()

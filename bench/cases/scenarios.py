@@ -12,7 +12,9 @@ wall time on a shared machine), and the targets of the wall ratio where one is s
 real-time factor (:data:`RT_TARGET`).
 
 ``results=PATH`` writes the table, with the machine's load average before and after, as the section
-:data:`SECTION` of PATH (bench/results.md; ``run_all.py`` keeps it)::
+:data:`SECTION` of PATH (bench/results.md; ``run_all.py`` keeps it). Each round writes its own table over the last
+one's, and the section names the round: with ``--rounds N`` the medians over the rounds are in the printed output
+only, so a table of medians in results.md comes from the repeats of one round (``--opt repeats=N``)::
 
     python bench/run.py scenarios --opt results=bench/results.md                 # every scenario, 60 s, 2 repeats
     python bench/run.py scenarios --opt scenarios=default,tof_mast --opt duration=5
@@ -110,7 +112,7 @@ def scenarios(ctx: Context) -> dict:
     out = {title: rows, "load": {"machine": {"cores": os.cpu_count(), "load average (1 min) at start": load0,
                                              "at end": load_average(), "minutes": (time.time() - t0) / 60.0}}}
     if ctx["results"] and not ctx.quick:
-        put_section(ctx.path(ctx["results"]), out, ctx["duration"], int(ctx["repeats"]))
+        put_section(ctx.path(ctx["results"]), out, ctx["duration"], int(ctx["repeats"]), ctx.round)
     return out
 
 
@@ -120,11 +122,14 @@ def _cell(v) -> str:
     return "-" if v is None else str(v)
 
 
-def put_section(results_md: Path, tables: dict, duration: float, repeats: int) -> None:
-    """Write ``tables`` as the section :data:`SECTION` of ``results_md``, replacing the one there."""
+def put_section(results_md: Path, tables: dict, duration: float, repeats: int, round_index: int = 0) -> None:
+    """Write ``tables`` (round ``round_index``'s, from 0) as the section :data:`SECTION` of ``results_md``,
+    replacing the one there."""
     lines = [SECTION, "", f"Written by `python bench/run.py scenarios --opt duration={duration:g} --opt "
              f"repeats={repeats} --opt results=bench/results.md` "
-             f"({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}). Targets: wall against the default run "
+             f"({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}"
+             + (f"; round {round_index + 1}, its own table: the medians over the rounds are in the run's output"
+                if round_index else "") + "). Targets: wall against the default run "
              + ", ".join(f"`{n}` <= {v:g}x" for n, v in TARGETS.items())
              + f"; every scenario >= {RT_TARGET:g}x real time (ring). CPU per frame is the steadier figure on a "
              "shared machine.", ""]
