@@ -317,7 +317,9 @@ def _scene_renderers(backend, arms: list[str]) -> list:
 def texture_scene(ctx: Context) -> dict:
     """Thread CPU ms per frame (upload, draw and read of every camera view; llvmpipe in the calling thread) of each
     arm on the same captured frames, arms interleaved frame by frame ``repeats`` times: medians, and each frame's
-    ratio to ``hashed`` (median over frames of the median over repeats)."""
+    ratio to ``hashed`` (median over frames of the median over repeats). With ``hashed`` among the arms, each stereo
+    camera's matcher on its rendered pairs too (:func:`_matcher_times`): what a map costs perception's matcher
+    beside what its pair costs the renderer."""
     import statistics
 
     os.environ.setdefault("LP_NUM_THREADS", "0")                  # before GL loads: llvmpipe in the calling thread
@@ -326,8 +328,10 @@ def texture_scene(ctx: Context) -> dict:
         raise ValueError(f"texture_scene: arms are {', '.join(SCENE_ARMS)}, got {ctx['arms']}")
     sess, caps = _captured_frames(ctx.scenario(ctx["scenario"]), ctx["frames"])
     try:
+        views = sess.participants["renderer"].cameras.views
         rens = _scene_renderers(sess.participants["renderer"].cameras.backend, arms)
         times = {a: [[] for _ in caps] for a in arms}
+        images = [{} for _ in caps]                                # the hashed arm's views, for the matcher
         for rep in range(ctx["repeats"] + 1):                     # the first compiles the shaders: not timed
             for f, (scene, light, draws) in enumerate(caps):
                 for arm, r in zip(arms, rens):
@@ -336,7 +340,10 @@ def texture_scene(ctx: Context) -> dict:
                     for k, pose in draws:
                         r.draw(k, pose)
                         w, h = r.views[k].size
-                        r.read_rgb(k, np.empty((h, w, 4), np.uint8))
+                        img = np.empty((h, w, 4), np.uint8)
+                        r.read_rgb(k, img)
+                        if arm == "hashed":
+                            images[f][k] = img
                     if rep:
                         times[arm][f].append(time.thread_time() - c)
     finally:
@@ -349,4 +356,35 @@ def texture_scene(ctx: Context) -> dict:
             base = [statistics.median(t) for t in times["hashed"]]
             row["/ hashed"] = statistics.median(p / b for p, b in zip(per, base))
         out[arm] = row
+    if "hashed" in arms:
+        out.update(_matcher_times(views, images, ctx["repeats"]))
     return {f"{ctx['scenario']}: the camera views' thread CPU per frame, {len(caps)} frames": out}
+
+
+def _matcher_times(views, images: list[dict], repeats: int) -> dict:
+    """Per stereo camera among ``views`` (``renderer_proc.cameras.View``): its matcher's thread CPU ms per pair
+    on the hashed arm's rendered pairs ``images`` (per frame: view index -> (H, W, 4) uint8), OpenCV on one thread
+    as in a run (``cosim.runtime.threadpools``), the median over the frames of the least of ``repeats`` calls."""
+    import statistics
+
+    import cv2
+
+    from perception_proc.cameras.stereo import grey, make_matcher
+
+    cv2.setNumThreads(1)
+    out = {}
+    for k, v in enumerate(views):
+        if "rgb" not in v.parts or getattr(v.spec, "kind", "") != "stereo_camera":
+            continue
+        right = next(j for j, u in enumerate(views) if u.camera == v.camera and "right" in u.parts)
+        matcher, per = make_matcher(v.spec), []
+        for imgs in images:
+            left_g, right_g = grey(imgs[k]), grey(imgs[right])
+            best = []
+            for _ in range(max(repeats, 1)):
+                c = time.thread_time()
+                matcher.compute(left_g, right_g)
+                best.append(time.thread_time() - c)
+            per.append(min(best))
+        out[f"{v.camera}: its matcher a pair (one thread)"] = {"ms per frame": 1e3 * statistics.median(per)}
+    return out
