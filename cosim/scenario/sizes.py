@@ -10,8 +10,8 @@ runs these first).
 
 The pixel budget is a start-up and frame budget, derived from measurements on a 2-core laptop (reproduced by
 ``python bench/camera_pixel_cost.py``): the depth camera's noise model, the costliest per-pixel stage, takes about
-300 ns and 176 B of working memory a pixel; 2^23 pixels (27 VGA views, two 2048 x 2048 ones) are then about 2.5 s
-and 1.5 GB a frame in perception, which a start-up of ``timing.startup_timeout_s`` (120 s) and a short run still
+300-430 ns and 200 B of working memory a pixel; 2^23 pixels (27 VGA views, two 2048 x 2048 ones) are then about
+2.5-3.6 s and 1.6 GiB a frame in perception, which a start-up of ``timing.startup_timeout_s`` (120 s) and a short run still
 absorb. More is refused with the figures, not found out 40 s into the run.
 """
 from __future__ import annotations
@@ -26,9 +26,10 @@ __all__ = ["CAMERA_PIXEL_BUDGET", "CAMERA_PROCESS_BYTES_PER_PIXEL", "camera_pixe
 
 #: most camera pixels rendered in one frame, over every view of every camera (see the module docstring)
 CAMERA_PIXEL_BUDGET = 1 << 23
-#: working memory a camera pixel costs in the processes, bytes: the depth camera's noise model's peak (176 B,
-#: measured with tracemalloc on perception_proc.cameras.tof.tof_depth for a 1280 x 960 image)
-CAMERA_PROCESS_BYTES_PER_PIXEL = 176
+#: working memory a camera pixel costs in the processes, bytes: the depth camera's noise model's peak (200 B,
+#: measured with tracemalloc on perception_proc.cameras.tof.tof_depth for a 1280 x 960 image;
+#: tests/test_input_surfaces.py holds the model to it)
+CAMERA_PROCESS_BYTES_PER_PIXEL = 200
 #: shared bytes a pixel of each camera part costs (renderer's blocks, cosim.world.sensors.camera_parts)
 _PART_BYTES = {"rgb": 4, "right": 4, "depth": 4, "labels": 1}
 #: perception's shared bytes per pixel of a depth-giving camera: ``cam_<name>_measured`` float32
