@@ -193,3 +193,12 @@ def test_retired_scripts_are_reachable_at_the_commit_history_names():
         assert not (BENCH / s).exists(), f"bench/{s} is listed as retired but still here"
         got = subprocess.run(["git", "cat-file", "-e", f"{commit}:bench/{s}"], cwd=ROOT)
         assert got.returncode == 0, f"bench/{s} is not in commit {commit}"
+
+
+def test_a_worker_runs_with_single_threaded_pools_unless_the_caller_sized_them(tmp_path):
+    from harness.arms import worker_env
+
+    env = worker_env(tmp_path, {"PATH": "/bin", "OPENBLAS_NUM_THREADS": "4"})
+    assert env["PYTHONPATH"] == str(tmp_path) and env["PATH"] == "/bin"
+    assert env["OPENBLAS_NUM_THREADS"] == "4"                       # the caller's choice is kept
+    assert env["OMP_NUM_THREADS"] == env["MKL_NUM_THREADS"] == env["OPENCV_FOR_THREADS_NUM"] == "1"

@@ -4,7 +4,10 @@ of a case for one arm, taken in a fresh process that imports the arm's tree.
 The measuring code is always the harness's (``bench/cases`` of the checkout that runs ``bench/run.py``); what it
 measures is the arm's tree: the worker process runs with the tree as its working directory and first on
 ``PYTHONPATH``, so ``import cosim`` (and ``launch.py``) come from the tree. Every arm is measured the same way, in
-a worker of its own, so that no arm inherits another's imports, GL context or heap."""
+a worker of its own, so that no arm inherits another's imports, GL context or heap. Like a run's processes, the
+worker starts with numpy's BLAS, OpenMP, MKL and OpenCV pools single-threaded unless the caller's environment sizes
+them (``cosim.runtime.threadpools``): an idle pool thread spins after each small product, and its CPU would be
+counted in a figure that a run does not pay."""
 from __future__ import annotations
 
 import contextlib
@@ -16,9 +19,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
+from cosim.runtime.threadpools import POOL_VARIABLES
+
 from .registry import Case, Context, OptionError, get
 
-__all__ = ["ROOT", "Arm", "SampleFailed", "parse_arms", "sample", "shown_path", "worker_main"]
+__all__ = ["ROOT", "Arm", "SampleFailed", "parse_arms", "sample", "shown_path", "worker_env", "worker_main"]
 
 #: the checkout whose bench/ is running
 ROOT = Path(__file__).resolve().parents[2]
@@ -78,6 +83,15 @@ def _context(case: Case, arm: Arm, opts: dict, quick: bool, round_index: int, se
     return Context(arm.tree, (*settings, *arm.settings), opts, quick, round_index, arm.label, Path.cwd())
 
 
+def worker_env(tree: Path, environ: dict | None = None) -> dict:
+    """The environment of a worker measuring ``tree``: ``environ`` (default this process's) with the tree first on
+    ``PYTHONPATH`` and every unset numerical pool single-threaded (the module docstring)."""
+    env = dict(os.environ if environ is None else environ, PYTHONPATH=str(tree))
+    for name in POOL_VARIABLES:
+        env.setdefault(name, "1")
+    return env
+
+
 def sample(case: Case, arm: Arm, opts: dict, quick: bool, round_index: int, settings: Sequence[str] = (),
            in_process: bool = False) -> dict:
     """One sample of ``case`` for ``arm``: in this process where ``in_process`` (tests, debugging), else in a
@@ -89,9 +103,8 @@ def sample(case: Case, arm: Arm, opts: dict, quick: bool, round_index: int, sett
     payload = json.dumps({"case": case.name, "tree": str(arm.tree), "settings": [*settings, *arm.settings],
                           "opts": opts, "quick": quick, "round": round_index, "arm": arm.label,
                           "cwd": str(Path.cwd())})
-    env = dict(os.environ, PYTHONPATH=str(arm.tree))
     proc = subprocess.run([sys.executable, str(ROOT / "bench" / "run.py"), "--worker", payload], cwd=arm.tree,
-                          env=env, stdout=subprocess.PIPE, text=True)
+                          env=worker_env(arm.tree), stdout=subprocess.PIPE, text=True)
     lines = [line for line in proc.stdout.splitlines() if line.startswith(_MARK)]
     if proc.returncode != 0 or not lines:
         raise SampleFailed(f"case {case.name}, arm {arm.label} ({arm.tree}), round {round_index + 1}: the worker "
