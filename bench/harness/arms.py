@@ -19,8 +19,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
-from cosim.runtime.threadpools import POOL_VARIABLES
-
 from .registry import Case, Context, OptionError, get
 
 __all__ = ["ROOT", "Arm", "SampleFailed", "parse_arms", "sample", "shown_path", "worker_env", "worker_main"]
@@ -86,6 +84,8 @@ def _context(case: Case, arm: Arm, opts: dict, quick: bool, round_index: int, se
 def worker_env(tree: Path, environ: dict | None = None) -> dict:
     """The environment of a worker measuring ``tree``: ``environ`` (default this process's) with the tree first on
     ``PYTHONPATH`` and every unset numerical pool single-threaded (the module docstring)."""
+    from cosim.runtime.threadpools import POOL_VARIABLES  # this checkout's: bench/run.py puts it on sys.path
+
     env = dict(os.environ if environ is None else environ, PYTHONPATH=str(tree))
     for name in POOL_VARIABLES:
         env.setdefault(name, "1")
