@@ -84,7 +84,7 @@ def _context(case: Case, arm: Arm, opts: dict, quick: bool, round_index: int, se
 def worker_env(tree: Path, environ: dict | None = None) -> dict:
     """The environment of a worker measuring ``tree``: ``environ`` (default this process's) with the tree first on
     ``PYTHONPATH`` and every unset numerical pool single-threaded (the module docstring)."""
-    from cosim.runtime.threadpools import POOL_VARIABLES  # this checkout's: bench/run.py puts it on sys.path
+    from cosim.runtime.threadpools import POOL_VARIABLES  # this checkout's, on sys.path from run.py's main
 
     env = dict(os.environ if environ is None else environ, PYTHONPATH=str(tree))
     for name in POOL_VARIABLES:
