@@ -57,10 +57,12 @@ def draw(ctx, pin, lighting, scene, pose, light=None):
     return rgb, z, lab
 
 
-def test_labels_and_depth_match_the_exact_ray_cast(ctx):
+def test_labels_and_depth_match_the_exact_ray_cast(ctx, cpu_gl):
     """Every pixel whose label differs from the exact cast's lies on a label edge (its 3 x 3 neighbourhood in the
     exact labels holds the GL label: a silhouette decided the other way in float32); elsewhere the planar depth
-    agrees to the float32 rounding of the view."""
+    agrees to the float32 rounding of the view (0.1 mm where faces of a part meet) on a CPU rasteriser, and to 1 mm
+    on a GPU, whose hardware interpolation is coarser (0.8 mm at most on an NVIDIA H200, 0.24 % of the pixels
+    beyond 0.1 mm)."""
     s, state, scene = frame0(TOF)
     cam = s.cameras["tof"]
     pin = camera_pinhole(cam, s)
@@ -77,7 +79,7 @@ def test_labels_and_depth_match_the_exact_ray_cast(ctx):
     for j, i in zip(*np.nonzero(differ)):
         assert lab[j, i] in pad[j:j + 3, i:i + 3], (j, i, lab[j, i], exact[j, i])
     same = ~differ & np.isfinite(zx)
-    np.testing.assert_allclose(z[same], zx[same], rtol=2e-6, atol=1e-4)       # 0.1 mm where faces of a part meet
+    np.testing.assert_allclose(z[same], zx[same], rtol=2e-6, atol=1e-4 if cpu_gl else 1e-3)
 
 
 def test_a_camera_and_the_lidar_at_the_same_pose_agree_on_what_both_see(ctx):

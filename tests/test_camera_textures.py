@@ -1,7 +1,7 @@
 """The camera shader's noise (renderer_proc/shaders/textures.glsl): ``value_noise``, which shares hash work across a
 cell's corners, and ``fbm``, which scales instead of dividing per octave and stops at the first octave faded whole,
 give the bits of their readable forms ``value_noise_reference`` and ``fbm_reference`` on the GPU path the camera
-renderer uses (llvmpipe)."""
+renderer uses (llvmpipe); on a GPU, whose division is approximate, ``fbm`` holds to 1e-6 of its reference."""
 from __future__ import annotations
 
 import numpy as np
@@ -70,11 +70,14 @@ def test_value_noise_gives_the_bits_of_its_reference(ctx, scale, offset):
 
 
 @pytest.mark.parametrize(("scale", "offset"), [(0.0021, (-0.7, 1.3, 0.2)), (0.05, (-300.0, 120.0, 0.0))])
-def test_fbm_gives_the_bits_of_its_reference(ctx, scale, offset):
+def test_fbm_gives_the_bits_of_its_reference(ctx, cpu_gl, scale, offset):
     fast = _noise(ctx, "dust", scale, offset)
     ref = _noise(ctx, "dust_reference", scale, offset)
     assert ref.std() > 0.01
-    np.testing.assert_array_equal(fast.view(np.uint32), ref.view(np.uint32))
+    if cpu_gl:                                     # IEEE float32: scaling by 2^k and dividing by it are exact alike
+        np.testing.assert_array_equal(fast.view(np.uint32), ref.view(np.uint32))
+    else:                                          # a GPU divides approximately: a few ulps of the noise's sum
+        np.testing.assert_allclose(fast, ref, rtol=0.0, atol=1e-6)
 
 
 def test_the_comparison_sees_a_one_cell_shift(ctx):

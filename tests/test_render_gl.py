@@ -265,9 +265,10 @@ def looking_down(tilt_rad: float, position) -> np.ndarray:
     return pose
 
 
-def test_rough_grain_surface_same_triangles_as_ray_caster(ctx):
+def test_rough_grain_surface_same_triangles_as_ray_caster(ctx, cpu_gl):
     """Random heights seen obliquely from above: GL and the exact cast agree to float precision almost
-    everywhere, which holds only if both split every quad along the same diagonal and clamp the edge ring."""
+    everywhere (0.1 mm on a CPU rasteriser, 1 mm on a GPU's coarser hardware interpolation), which holds only if
+    both split every quad along the same diagonal and clamp the edge ring."""
     rng = np.random.default_rng(11)
     h = rng.uniform(0.0, 1.5, (60, 30)).astype(np.float32)
     hf = HeightField(np.eye(4), h, 0.1, 6.0, 3.0)
@@ -287,7 +288,7 @@ def test_rough_grain_surface_same_triangles_as_ray_caster(ctx):
     both = np.isfinite(za) & np.isfinite(zb)
     assert both.mean() > 0.6
     err = np.abs(za - zb)[both]
-    assert np.mean(err < 1e-4) > 0.97
+    assert np.mean(err < (1e-4 if cpu_gl else 1e-3)) > 0.97
     assert np.mean(err < 0.01) > 0.99
 
 
