@@ -71,6 +71,6 @@ def cpu_gl(ctx) -> bool:
     """Whether ``ctx`` is a CPU rasteriser (llvmpipe, softpipe, swr): IEEE float32 arithmetic and interpolation,
     where the GL tests hold bits. A GPU's hardware interpolation and approximate division hold to a tolerance
     instead (each test says which)."""
-    from renderer_proc.gl.beam import CPU_RASTERISERS
+    from renderer_proc.gl.beam import cpu_rasteriser
 
-    return any(name in ctx.info["GL_RENDERER"].lower() for name in CPU_RASTERISERS)
+    return cpu_rasteriser(ctx.info["GL_RENDERER"])

@@ -61,7 +61,7 @@ def test_labels_and_depth_match_the_exact_ray_cast(ctx, cpu_gl):
     """Every pixel whose label differs from the exact cast's lies on a label edge (its 3 x 3 neighbourhood in the
     exact labels holds the GL label: a silhouette decided the other way in float32); elsewhere the planar depth
     agrees to the float32 rounding of the view (0.1 mm where faces of a part meet) on a CPU rasteriser, and to 1 mm
-    on a GPU, whose hardware interpolation is coarser (0.8 mm at most on an NVIDIA H200, 0.24 % of the pixels
+    on a GPU, whose hardware interpolation is coarser (0.80 mm at most on an NVIDIA H200, 0.29 % of the pixels
     beyond 0.1 mm)."""
     s, state, scene = frame0(TOF)
     cam = s.cameras["tof"]

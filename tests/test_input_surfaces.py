@@ -121,25 +121,16 @@ def test_camera_memory_is_checked_against_what_the_machine_has(tmp_path):
 
 
 def test_the_memory_check_counts_at_least_what_the_depth_noise_model_takes_a_pixel():
-    import tracemalloc
+    import importlib.util
 
-    from cosim.scenario.config.cameras import DepthCamera
     from cosim.scenario.sizes import CAMERA_PROCESS_BYTES_PER_PIXEL
-    from cosim.world.camera import Pinhole
-    from perception_proc.cameras.tof import frame_generator, tof_depth
 
-    cam = DepthCamera(kind="depth_camera", mount={"parent": "combine"}, width_px=640, height_px=480)
-    z = np.random.default_rng(0).uniform(2.0, 8.0, (480, 640)).astype(np.float32)
-    pin = Pinhole(640, 480, float(np.radians(60.0)))
-    tof_depth(z, pin, cam, frame_generator(0, 0, 0))
-    tracemalloc.start()
-    try:
-        tof_depth(z, pin, cam, frame_generator(0, 1, 0))
-        peak = tracemalloc.get_traced_memory()[1]
-    finally:
-        tracemalloc.stop()
-    per_pixel = CAMERA_PROCESS_BYTES_PER_PIXEL * z.size
-    assert 0.8 * per_pixel <= peak <= per_pixel + 64 * 1024       # the arrays a pixel, and a few small ones a frame
+    spec = importlib.util.spec_from_file_location("camera_pixel_cost", ROOT / "bench" / "camera_pixel_cost.py")
+    cost = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(cost)
+    z, pin, cam = cost.noise_model_input(640, 480)
+    counted = CAMERA_PROCESS_BYTES_PER_PIXEL * z.size
+    assert 0.8 * counted <= cost.peak_bytes(z, pin, cam) <= counted + 64 * 1024   # + a few small arrays a frame
 
 
 def test_a_stereo_baseline_below_a_millimetre_is_refused(tmp_path):

@@ -10,9 +10,9 @@ runs these first).
 
 The pixel budget is a start-up and frame budget, derived from measurements on a 2-core laptop (reproduced by
 ``python bench/camera_pixel_cost.py``): the depth camera's noise model, the costliest per-pixel stage, takes about
-300-430 ns and 200 B of working memory a pixel; 2^23 pixels (27 VGA views, two 2048 x 2048 ones) are then about
-2.5-3.6 s and 1.6 GiB a frame in perception, which a start-up of ``timing.startup_timeout_s`` (120 s) and a short run still
-absorb. More is refused with the figures, not found out 40 s into the run.
+300-460 ns and 200 B of working memory a pixel; 2^23 pixels (27 VGA views, two 2048 x 2048 ones) are then about
+2.5-3.9 s and 1.6 GiB a frame in perception, which a start-up of ``timing.startup_timeout_s`` (120 s) and a short
+run still absorb. More is refused with the figures, not found out 40 s into the run.
 """
 from __future__ import annotations
 

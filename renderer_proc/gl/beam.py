@@ -52,8 +52,8 @@ from renderer_proc.gl.surface import mat_bytes as _mat
 from renderer_proc.mock.beam import check_target
 from renderer_proc.projection import far_plane_m
 
-__all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "ROW_BINS", "GLBeamRenderer", "ground_key", "max_rects", "row_bounds",
-           "slicing_pays"]
+__all__ = ["ANGLE_SLACK_RAD", "EDGE_SLACK", "ROW_BINS", "GLBeamRenderer", "cpu_rasteriser", "ground_key", "max_rects",
+           "row_bounds", "slicing_pays"]
 
 #: slack of every angular bound in the geometry shader, rad (every angle there is an atan: llvmpipe's is within
 #: 3.5e-6 rad, its asin off by up to 3.9e-4 rad, so none is used; a beam pitch is ~5e-3 rad): only widens the
@@ -116,13 +116,19 @@ def max_rects(rgb: bool) -> int:
     return GEOMETRY_OUTPUT_COMPONENTS // components // RECT_VERTICES
 
 
+def cpu_rasteriser(gl_renderer: str) -> bool:
+    """Whether the GL implementation named ``gl_renderer`` (GL_RENDERER) rasterises on the CPU
+    (:data:`CPU_RASTERISERS`): fragments are dear there, and its float32 arithmetic and interpolation are IEEE."""
+    name = gl_renderer.lower()
+    return any(cpu in name for cpu in CPU_RASTERISERS)
+
+
 def slicing_pays(gl_renderer: str) -> bool:
     """Whether the boxes are bounded in slices (up to :func:`max_rects` rectangles) on the GL implementation named
     ``gl_renderer`` (GL_RENDERER): on a CPU rasteriser, where a fragment costs more than bounding one more slice;
     a GPU shades the few thousand extra fragments for nothing, and NVIDIA's GLSL compiler (driver 580) crashes
     on the slicing loop. The image is the same either way (solid.frag clips every beam against the whole solid)."""
-    name = gl_renderer.lower()
-    return any(cpu in name for cpu in CPU_RASTERISERS)
+    return cpu_rasteriser(gl_renderer)
 
 
 def _solid_geom(defines: tuple[str, ...], rects: int) -> str:

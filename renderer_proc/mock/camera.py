@@ -6,8 +6,8 @@ triangles with their labels built in Embree every frame (the numpy label cast, `
 Embree); else the rigid bodies built once in Embree when installed and ``parts`` are given, else the scene cast
 per frame. Planar depth Z = t cos(angle to the optical axis), NaN where the ray meets nothing. The colour image is
 plain: each label's flat colour (the scene's colours), lit by ``render.lighting`` (cosim.world.lighting) with
-normals estimated from the depth image, no texture. A stereo matcher has nothing to match on it, so a stereo camera is refused with the mock at
-validation (cosim.scenario.config.scenario).
+normals estimated from the depth image, no texture. A stereo matcher has nothing to match on it, so a stereo
+camera is refused with the mock at validation (cosim.scenario.config.scenario).
 """
 from __future__ import annotations
 
